@@ -1,0 +1,118 @@
+"""Typed, frozen configs; YAML only at the edge.
+
+:func:`build` turns a plain mapping into a frozen dataclass, rejecting unknown keys and values
+of the wrong type with one message that names the field, the value and what is allowed.
+A run config file is flat YAML: ``task: chain-v0`` plus any overrides that
+:func:`proteo_env.make` accepts, for example::
+
+    task: chain-v0
+    n_modules: 50
+    motion_model: sphere
+    max_cycles: 3000
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from pathlib import Path
+
+from .core.world import Physics
+
+
+class ConfigError(ValueError):
+    """A config value or key that is not allowed (the message names field, value and allowed)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Environment settings shared by every task.
+
+    Attributes:
+        max_cycles: cycle limit; reaching it sets ``truncated``.
+        obs_radius: 1 (12 neighbour sites) or 2 (54 sites) in observations.
+        physics: :class:`~proteo_env.core.world.Physics` (motion model, connectivity, scents).
+    """
+
+    max_cycles: int = 1000
+    obs_radius: int = 1
+    physics: Physics = dataclasses.field(default_factory=Physics)
+
+    def __post_init__(self):
+        if self.max_cycles < 1:
+            raise ConfigError(f"max_cycles={self.max_cycles!r} is not allowed; allowed: an integer >= 1")
+        if self.obs_radius not in (1, 2):
+            raise ConfigError(f"obs_radius={self.obs_radius!r} is not allowed; allowed: 1 or 2")
+
+
+ENV_KEYS = tuple(f.name for f in dataclasses.fields(EnvConfig) if f.name != "physics")
+PHYSICS_KEYS = tuple(f.name for f in dataclasses.fields(Physics))
+
+
+def _type_ok(value, annotation) -> bool:
+    origin = typing.get_origin(annotation)
+    if origin is typing.Union or origin is getattr(__import__("types"), "UnionType", None):
+        return any(_type_ok(value, a) for a in typing.get_args(annotation))
+    if annotation is type(None):
+        return value is None
+    if origin is tuple:
+        return isinstance(value, (tuple, list))
+    if annotation is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if annotation is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(annotation, type):
+        return isinstance(value, annotation)
+    return True
+
+
+def build(cls, values: dict, *, where: str = ""):
+    """Build dataclass ``cls`` from ``values``; unknown keys and wrong types raise :class:`ConfigError`."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    for key, value in values.items():
+        if key not in fields:
+            raise ConfigError(f"{where}unknown key {key!r}; allowed: {', '.join(sorted(fields))}")
+        if not _type_ok(value, hints[key]):
+            raise ConfigError(f"{where}{key}={value!r} is not allowed; allowed: a value of type "
+                              f"{getattr(hints[key], '__name__', hints[key])}")
+        if typing.get_origin(hints[key]) is tuple and isinstance(value, list):
+            values = {**values, key: tuple(value)}
+    try:
+        return cls(**values)
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(f"{where}{err}") from None
+
+
+def split_overrides(overrides: dict, task_params_cls, *, task_name: str):
+    """Split flat overrides into an :class:`EnvConfig` and the task's params dataclass."""
+    task_keys = {f.name for f in dataclasses.fields(task_params_cls)}
+    allowed = sorted(set(ENV_KEYS) | set(PHYSICS_KEYS) | task_keys)
+    unknown = [k for k in overrides if k not in allowed]
+    if unknown:
+        raise ConfigError(f"unknown key {unknown[0]!r} for task {task_name!r}; allowed: {', '.join(allowed)}")
+    physics = build(Physics, {k: v for k, v in overrides.items() if k in PHYSICS_KEYS})
+    env = build(EnvConfig, {k: v for k, v in overrides.items() if k in ENV_KEYS})
+    env = dataclasses.replace(env, physics=physics)
+    params = build(task_params_cls, {k: v for k, v in overrides.items() if k in task_keys},
+                   where=f"task {task_name!r}: ")
+    return env, params
+
+
+def load_run_config(path) -> tuple[str, dict]:
+    """Read a flat YAML run config; return ``(task_id, overrides)``."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {str(path)!r} does not exist; allowed: a path to a YAML file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config file {str(path)!r} is not valid YAML: {err}") from None
+    if not isinstance(data, dict) or "task" not in data:
+        raise ConfigError(f"config file {str(path)!r}: a mapping with a 'task' key is required")
+    data = dict(data)
+    return str(data.pop("task")), data

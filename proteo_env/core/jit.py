@@ -1,0 +1,14 @@
+"""The one place where JIT flags are set.
+
+Every kernel is compiled with :func:`kernel`. Compiled code is cached on disk next to the
+sources, so only the first run on a machine pays the compile time. Setting the environment
+variable ``NUMBA_DISABLE_JIT=1`` runs the same kernels as plain Python (the tests do this
+to check kernels line by line).
+"""
+
+from __future__ import annotations
+
+import numba
+
+kernel = numba.njit(cache=True, nogil=True, boundscheck=False)
+"""Decorator for the compute kernels: nopython, cached, GIL released."""

@@ -1,0 +1,404 @@
+"""Numba kernels of one cycle: random numbers, roll legality, connectivity, scents, observations.
+
+All state lives in plain arrays (see :class:`proteo_env.core.world.World` for their shapes);
+kernels index the padded flat grid directly. These functions are internal: call them through
+:mod:`proteo_env.core.world`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import kernel
+from .lattice import EMPTY, OBJECT, SOLID
+
+SILENT, RELAY, EMIT = 0, 1, 2
+KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
+LABEL_BITS = 16  # connectivity search: mark = epoch * LABEL_BITS + label
+REMOVED_LABEL = 15
+
+
+# ---------------------------------------------------------------- random numbers
+@kernel
+def rng_next(state):
+    """xorshift64 (13, 7, 17): advance ``state[0]`` and return it."""
+    x = state[0]
+    x ^= x << np.uint64(13)
+    x ^= x >> np.uint64(7)
+    x ^= x << np.uint64(17)
+    state[0] = x
+    return x
+
+
+@kernel
+def rng_below(state, n):
+    """Uniform integer in ``[0, n)`` for ``n < 2**31`` (multiply-high of the top 32 bits)."""
+    return np.int64(((rng_next(state) >> np.uint64(32)) * np.uint64(n)) >> np.uint64(32))
+
+
+@kernel
+def shuffle(items, count, state):
+    """Fisher-Yates shuffle of ``items[:count]`` in place."""
+    for i in range(count - 1, 0, -1):
+        j = rng_below(state, i + 1)
+        items[i], items[j] = items[j], items[i]
+
+
+# ---------------------------------------------------------------- rolls
+@kernel
+def roll_is_legal(grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count):
+    """Whether the body at cell ``c`` may roll towards direction ``k`` (geometry only)."""
+    if grid[c + dir_delta[k]] != EMPTY:
+        return False
+    for j in range(4):
+        if grid[c + pivot_delta[k, j]] < 0:
+            continue
+        clear = True
+        for i in range(sweep_count[k, j]):
+            if grid[c + sweep_delta[k, j, i]] != EMPTY:
+                clear = False
+                break
+        if clear:
+            return True
+    return False
+
+
+# ---------------------------------------------------------------- connectivity
+@kernel
+def _find(parent, a):
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@kernel
+def detach_keeps_connected(grid, cell, m, dir_delta, dir_adjacent, mark, queue, epoch):
+    """Whether the other modules stay connected when module ``m`` leaves its cell.
+
+    First a local test: if ``m``'s neighbours are connected to each other through ``m``'s
+    other neighbours, the answer is yes. Otherwise one breadth-first search per group of
+    neighbours runs in lockstep over the module graph (``m`` removed); it stops when all
+    fronts have met (connected) or one front runs out (disconnected), so it costs about the
+    size of the smallest piece. ``mark`` (N,) and ``queue`` (N,) are scratch; ``epoch`` (1,)
+    is bumped so that ``mark`` never needs clearing.
+    """
+    c = cell[m]
+    slot_parent = np.arange(12)
+    occupied = np.zeros(12, dtype=np.bool_)
+    n_occupied = 0
+    for k in range(12):
+        if grid[c + dir_delta[k]] >= 0:
+            occupied[k] = True
+            n_occupied += 1
+    if n_occupied <= 1:
+        return True
+    for k in range(12):
+        if occupied[k]:
+            for a in range(4):
+                j = dir_adjacent[k, a]
+                if occupied[j]:
+                    rk, rj = _find(slot_parent, k), _find(slot_parent, j)
+                    if rk != rj:
+                        slot_parent[rj] = rk
+    n_groups = 0
+    for k in range(12):
+        if occupied[k] and _find(slot_parent, k) == k:
+            n_groups += 1
+    if n_groups == 1:
+        return True
+
+    epoch[0] += 1
+    base = epoch[0] * LABEL_BITS
+    mark[m] = base + REMOVED_LABEL
+    label_parent = np.arange(12)
+    pending = np.zeros(12, dtype=np.int64)
+    tail = 0
+    for k in range(12):
+        if occupied[k] and _find(slot_parent, k) == k:
+            seed = grid[c + dir_delta[k]]
+            mark[seed] = base + k
+            pending[k] = 1
+            queue[tail] = seed
+            tail += 1
+    groups_left = n_groups
+    head = 0
+    while head < tail:
+        n = queue[head]
+        head += 1
+        label = _find(label_parent, mark[n] - base)
+        pending[label] -= 1
+        cn = cell[n]
+        for k in range(12):
+            nb = grid[cn + dir_delta[k]]
+            if nb < 0:
+                continue
+            if mark[nb] >= base:
+                other = mark[nb] - base
+                if other == REMOVED_LABEL:
+                    continue
+                other = _find(label_parent, other)
+                if other != label:
+                    label_parent[other] = label
+                    pending[label] += pending[other]
+                    groups_left -= 1
+                    if groups_left == 1:
+                        return True
+            else:
+                mark[nb] = base + label
+                queue[tail] = nb
+                tail += 1
+                pending[label] += 1
+        if pending[label] == 0:
+            return False
+    return groups_left == 1
+
+
+@kernel
+def articulation_points(grid, cell, n_modules, dir_delta, is_cut, disc, low, stack_node, stack_k):
+    """Mark in ``is_cut`` (N,) the modules whose removal disconnects the module graph.
+
+    Iterative Tarjan depth-first search over every component; ``disc``, ``low``,
+    ``stack_node`` and ``stack_k`` are (N,) scratch arrays.
+    """
+    for n in range(n_modules):
+        disc[n] = -1
+        is_cut[n] = False
+    timer = 0
+    for root in range(n_modules):
+        if disc[root] >= 0:
+            continue
+        disc[root] = low[root] = timer
+        timer += 1
+        top = 0
+        stack_node[0] = root
+        stack_k[0] = 0
+        root_children = 0
+        while top >= 0:
+            n = stack_node[top]
+            k = stack_k[top]
+            if k < 12:
+                stack_k[top] = k + 1
+                nb = grid[cell[n] + dir_delta[k]]
+                if nb < 0:
+                    continue
+                if disc[nb] < 0:
+                    disc[nb] = low[nb] = timer
+                    timer += 1
+                    if n == root:
+                        root_children += 1
+                    top += 1
+                    stack_node[top] = nb
+                    stack_k[top] = 0
+                elif top == 0 or nb != stack_node[top - 1]:
+                    low[n] = min(low[n], disc[nb])
+            else:
+                top -= 1
+                if top >= 0:
+                    parent = stack_node[top]
+                    low[parent] = min(low[parent], low[n])
+                    if parent != root and low[n] >= disc[parent]:
+                        is_cut[parent] = True
+        if root_children > 1:
+            is_cut[root] = True
+
+
+@kernel
+def count_components(grid, cell, n_modules, dir_delta, mark, queue):
+    """Number of connected components of the module graph (``mark``/``queue`` (N,) scratch)."""
+    for n in range(n_modules):
+        mark[n] = 0
+    components = 0
+    for root in range(n_modules):
+        if mark[root]:
+            continue
+        components += 1
+        mark[root] = 1
+        queue[0] = root
+        head, tail = 0, 1
+        while head < tail:
+            n = queue[head]
+            head += 1
+            for k in range(12):
+                nb = grid[cell[n] + dir_delta[k]]
+                if nb >= 0 and not mark[nb]:
+                    mark[nb] = 1
+                    queue[tail] = nb
+                    tail += 1
+    return components
+
+
+# ---------------------------------------------------------------- the cycle
+@kernel
+def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opposite, inbox):
+    """Clear ``inbox`` (N, 12) and deliver this cycle's messages, in agent order.
+
+    ``msg_target[a]`` is a direction ``0..11`` or ``12`` for all neighbours; a value of 0 sends
+    nothing. The receiver finds the value in the slot of the direction it came from.
+    """
+    inbox[:] = 0
+    for a in range(n_agents):
+        value = msg_value[a]
+        if value == 0:
+            continue
+        c = cell[a]
+        for k in range(12):
+            if msg_target[a] != 12 and msg_target[a] != k:
+                continue
+            receiver = grid[c + dir_delta[k]]
+            if receiver >= 0:
+                inbox[receiver, opposite[k]] = value
+
+
+@kernel
+def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
+                  dir_delta, dir_adjacent, pivot_delta, sweep_delta, sweep_count,
+                  movers, moved, mark, queue, epoch):
+    """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
+
+    ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
+    against the occupancy at the moment it is tried. Returns the number of modules moved.
+    """
+    n_movers = 0
+    for a in range(n_agents):
+        moved[a] = False
+        if move[a] > 0 and not anchored[a]:
+            movers[n_movers] = a
+            n_movers += 1
+    shuffle(movers, n_movers, rng_state)
+    n_moved = 0
+    for i in range(n_movers):
+        a = movers[i]
+        k = move[a] - 1
+        c = cell[a]
+        if not roll_is_legal(grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count):
+            continue
+        if keep_connected and not detach_keeps_connected(
+            grid, cell, a, dir_delta, dir_adjacent, mark, queue, epoch
+        ):
+            continue
+        grid[c] = EMPTY
+        grid[c + dir_delta[k]] = a
+        cell[a] = c + dir_delta[k]
+        moved[a] = True
+        n_moved += 1
+    return n_moved
+
+
+@kernel
+def _has_empty_neighbour(grid, c, dir_delta):
+    for k in range(12):
+        if grid[c + dir_delta[k]] == EMPTY:
+            return True
+    return False
+
+
+@kernel
+def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, scent_max, dir_delta):
+    """``sweeps`` Jacobi sweeps of one scent channel; ``values``/``buffer`` (N,), ``role`` (N,).
+
+    Emitters hold 0, silent modules ``scent_max``; a relay takes one more than the smallest
+    neighbour value of the previous sweep (saturating at ``scent_max``). On a surface channel
+    a relay with no empty neighbour relays nothing.
+    """
+    for _ in range(sweeps):
+        for n in range(n_modules):
+            r = role[n]
+            if r == EMIT:
+                buffer[n] = 0
+            elif r == SILENT or (surface and not _has_empty_neighbour(grid, cell[n], dir_delta)):
+                buffer[n] = scent_max
+            else:
+                best = scent_max
+                cn = cell[n]
+                for k in range(12):
+                    nb = grid[cn + dir_delta[k]]
+                    if nb >= 0 and values[nb] < best:
+                        best = values[nb]
+                buffer[n] = min(best + 1, scent_max)
+        values[:n_modules] = buffer[:n_modules]
+
+
+@kernel
+def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, dir_delta):
+    """True hop distances from the emitters through relaying modules (multi-source BFS)."""
+    tail = 0
+    for n in range(n_modules):
+        if role[n] == EMIT:
+            values[n] = 0
+            queue[tail] = n
+            tail += 1
+        else:
+            values[n] = scent_max
+    head = 0
+    while head < tail:
+        n = queue[head]
+        head += 1
+        if values[n] + 1 >= scent_max:
+            continue
+        cn = cell[n]
+        for k in range(12):
+            nb = grid[cn + dir_delta[k]]
+            if nb < 0 or role[nb] != RELAY or values[nb] != scent_max:
+                continue
+            if surface and not _has_empty_neighbour(grid, cell[nb], dir_delta):
+                continue
+            values[nb] = values[n] + 1
+            queue[tail] = nb
+            tail += 1
+
+
+# ---------------------------------------------------------------- observations
+@kernel
+def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
+            nb_delta, dir_delta, pivot_delta, sweep_delta, sweep_count, scent_max,
+            neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
+            messages, contact, action_mask):
+    """Fill the per-agent observation arrays (first axis: agent) from the world state.
+
+    Shapes: ``neighbour_kind``/``neighbour_mode`` (A, K), ``neighbour_scent`` (A, K, C),
+    ``own_mode`` (A, 1), ``own_scent`` (A, C), ``messages`` (A, 12), ``contact`` (A, 2)
+    (ground, object) and ``action_mask`` (A, 13).
+    """
+    n_channels = scent.shape[0]
+    n_sites = nb_delta.shape[0]
+    for a in range(n_agents):
+        c = cell[a]
+        for s in range(n_sites):
+            v = grid[c + nb_delta[s]]
+            if v >= 0:
+                neighbour_kind[a, s] = KIND_MODULE
+                neighbour_mode[a, s] = mode[v]
+                for ch in range(n_channels):
+                    neighbour_scent[a, s, ch] = scent[ch, v]
+            else:
+                neighbour_mode[a, s] = -1
+                for ch in range(n_channels):
+                    neighbour_scent[a, s, ch] = scent_max
+                if v == EMPTY:
+                    neighbour_kind[a, s] = KIND_EMPTY
+                elif v == OBJECT:
+                    neighbour_kind[a, s] = KIND_OBJECT
+                else:
+                    neighbour_kind[a, s] = KIND_SOLID
+        own_mode[a, 0] = mode[a]
+        for ch in range(n_channels):
+            own_scent[a, ch] = scent[ch, a]
+        ground = 0
+        touching = 0
+        for k in range(12):
+            messages[a, k] = inbox[a, k]
+            v = grid[c + dir_delta[k]]
+            if v == SOLID:
+                ground = 1
+            elif v == OBJECT:
+                touching = 1
+        contact[a, 0] = ground
+        contact[a, 1] = touching
+        action_mask[a, 0] = 1
+        can_leave = not anchored[a] and not (keep_connected and is_cut[a])
+        for k in range(12):
+            legal = can_leave and roll_is_legal(
+                grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count
+            )
+            action_mask[a, k + 1] = 1 if legal else 0

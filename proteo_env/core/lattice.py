@@ -1,0 +1,121 @@
+"""FCC lattice geometry: directions, cell codes and the padded occupancy grid.
+
+Sites are integer points ``(x, y, z)`` with ``x + y + z`` even; ``z`` is up. The 12 face
+neighbours of a site are the permutations of ``(+-1, +-1, 0)``; :data:`DIRECTIONS` fixes
+their order, which is also the order of the move actions (action ``k + 1`` rolls towards
+``DIRECTIONS[k]``; action 0 stays).
+
+The engine keeps occupancy in a dense, flat ``int32`` grid covering the box plus a margin
+of :data:`PAD` cells on every side, so that every cell a kernel looks at (neighbours,
+cells swept by a roll, a radius-2 neighbourhood) has a valid index without bounds checks.
+A grid cell holds a module index (``>= 0``) or one of the negative codes below.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+EMPTY = -1
+"""An empty site inside the box."""
+WALL = -2
+"""A site outside the box: modules never enter it and rolls never sweep through it."""
+SOLID = -3
+"""Ground (every site with ``z < 0`` when the task has a floor) or an obstacle."""
+OBJECT = -4
+"""A site of the object to grasp."""
+
+PAD = 2
+"""Margin of grid cells around the box; covers sweeps and radius-2 neighbourhoods."""
+
+
+def _face_directions() -> np.ndarray:
+    dirs = []
+    for axes in ((0, 1), (0, 2), (1, 2)):
+        for sa, sb in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            d = [0, 0, 0]
+            d[axes[0]], d[axes[1]] = sa, sb
+            dirs.append(d)
+    return np.array(dirs, dtype=np.int64)
+
+
+DIRECTIONS: np.ndarray = _face_directions()
+"""``(12, 3)`` int64: the face-neighbour offsets in action order (move ``k + 1``)."""
+DIRECTIONS.setflags(write=False)
+
+N_DIRECTIONS = 12
+
+OPPOSITE: np.ndarray = np.array(
+    [int(np.flatnonzero((DIRECTIONS == -d).all(axis=1))[0]) for d in DIRECTIONS], dtype=np.int64
+)
+"""``(12,)``: index of the direction opposite to each direction."""
+OPPOSITE.setflags(write=False)
+
+
+def direction_index(offset) -> int:
+    """Index in :data:`DIRECTIONS` of a face-neighbour offset; ``ValueError`` otherwise."""
+    hits = np.flatnonzero((DIRECTIONS == np.asarray(offset)).all(axis=1))
+    if hits.size != 1:
+        raise ValueError(f"offset {tuple(offset)} is not one of the 12 FCC face directions")
+    return int(hits[0])
+
+
+def neighbourhood_offsets(radius: int) -> np.ndarray:
+    """Offsets of the sites within ``radius`` hops of a site, the site itself excluded.
+
+    Radius 1 gives exactly :data:`DIRECTIONS` (same order); radius 2 appends the 42 sites
+    two hops away in lexicographic order. Returns ``(K, 3)`` int64 with ``K = 12`` or ``54``.
+    """
+    if radius not in (1, 2):
+        raise ValueError(f"obs_radius={radius!r} is not allowed; allowed: 1 or 2")
+    offsets = [tuple(d) for d in DIRECTIONS]
+    if radius == 2:
+        ring = {
+            tuple(a + b)
+            for a, b in itertools.product(DIRECTIONS, DIRECTIONS)
+            if (a + b).any()
+        } - set(offsets)
+        offsets += sorted(ring)
+    return np.array(offsets, dtype=np.int64)
+
+
+def is_site(point) -> bool:
+    """True when ``point`` is an FCC site (integer coordinates with an even sum)."""
+    return int(np.sum(point)) % 2 == 0
+
+
+class GridShape:
+    """Box of sites ``0 <= x < size[0]`` (etc.) embedded in a padded flat grid.
+
+    ``index(p) = ((x + PAD) * sy + (y + PAD)) * sz + (z + PAD)`` with ``(sx, sy, sz)`` the
+    padded extents; :attr:`strides` turns an offset into a flat index delta.
+    """
+
+    def __init__(self, size):
+        self.size = tuple(int(s) for s in size)
+        self.padded = tuple(s + 2 * PAD for s in self.size)
+        sx, sy, sz = self.padded
+        self.strides = np.array([sy * sz, sz, 1], dtype=np.int64)
+        self.n_cells = sx * sy * sz
+
+    def deltas(self, offsets: np.ndarray) -> np.ndarray:
+        """Flat index deltas of ``(..., 3)`` offsets."""
+        return np.asarray(offsets, dtype=np.int64) @ self.strides
+
+    def index(self, points: np.ndarray) -> np.ndarray:
+        """Flat grid indices of ``(..., 3)`` box coordinates."""
+        return (np.asarray(points, dtype=np.int64) + PAD) @ self.strides
+
+    def point(self, index: np.ndarray) -> np.ndarray:
+        """Box coordinates ``(..., 3)`` of flat grid indices."""
+        index = np.asarray(index, dtype=np.int64)
+        sx, sy, sz = self.padded
+        x, rest = np.divmod(index, sy * sz)
+        y, z = np.divmod(rest, sz)
+        return np.stack([x, y, z], axis=-1) - PAD
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """``(...,)`` bool: which ``(..., 3)`` points lie inside the box."""
+        points = np.asarray(points)
+        return ((points >= 0) & (points < np.array(self.size))).all(axis=-1)

@@ -1,0 +1,106 @@
+"""The four motion models: which cells a 120 degree roll about a pivot must find empty.
+
+A module M at ``p`` rolls to ``t = p + d`` about a pivot module P at ``q``, one of the 4 sites
+adjacent to both ``p`` and ``t``. In the canonical frame ``M = (0,0,0)``, ``P = (0,1,1)``,
+``T = (1,1,0)`` each model lists the cells, besides ``T``, that the rolling body sweeps
+through. The other 47 (direction, pivot) cases follow by the signed axis permutation that
+maps the canonical ``P`` and ``T`` onto them; :func:`swept_cells` builds all 48 and checks
+that each case is reached exactly once.
+"""
+
+from __future__ import annotations
+
+import itertools
+from functools import lru_cache
+
+import numpy as np
+
+from .lattice import DIRECTIONS
+
+CANONICAL_PIVOT = (0, 1, 1)
+CANONICAL_TARGET = (1, 1, 0)
+
+CANONICAL_SWEEPS: dict[str, tuple[tuple[int, int, int], ...]] = {
+    # exact rhombic dodecahedron swept through the turn
+    "rhombic": (
+        (1, 0, -1), (0, 1, -1), (2, 0, 0), (1, -1, 0), (0, -1, -1),
+        (2, 1, -1), (1, 0, 1), (-1, 0, -1), (1, 2, -1),
+    ),
+    # the same body shrunk to 90 % of its cell
+    "rounded": (
+        (1, 0, -1), (0, 1, -1), (2, 0, 0), (1, -1, 0), (0, -1, -1),
+        (2, 1, -1), (1, 0, 1),
+    ),
+    # equal spheres rolling about the pivot
+    "sphere": ((1, 0, 1), (1, 0, -1), (0, 1, -1), (1, -1, 0), (2, 0, 0)),
+    # only the cell the body's centre passes closest to: 2p + d - q
+    "minimal": ((1, 0, -1),),
+}
+
+MOTION_MODELS: tuple[str, ...] = tuple(CANONICAL_SWEEPS)
+MAX_SWEPT = max(len(cells) for cells in CANONICAL_SWEEPS.values())
+
+
+def check_motion_model(name: str) -> str:
+    """Return ``name`` if it is a motion model, else raise a ``ValueError`` listing them."""
+    if name not in CANONICAL_SWEEPS:
+        raise ValueError(f"motion_model={name!r} is not known; allowed: {', '.join(MOTION_MODELS)}")
+    return name
+
+
+def signed_permutations() -> list[np.ndarray]:
+    """The 48 signed permutation matrices (the symmetry group of the cube), as ``(3, 3)`` ints."""
+    mats = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1, -1), repeat=3):
+            m = np.zeros((3, 3), dtype=np.int64)
+            for row, (col, sign) in enumerate(zip(perm, signs)):
+                m[row, col] = sign
+            mats.append(m)
+    return mats
+
+
+def common_neighbours(direction) -> np.ndarray:
+    """``(4, 3)``: the sites adjacent to both ``0`` and ``direction``, in :data:`DIRECTIONS` order."""
+    d = np.asarray(direction)
+    return np.array([q for q in DIRECTIONS if tuple(d - q) in {tuple(x) for x in DIRECTIONS}])
+
+
+@lru_cache(maxsize=None)
+def swept_cells(model: str) -> dict[tuple[tuple[int, ...], tuple[int, ...]], frozenset]:
+    """All 48 cases of a model: ``{(direction, pivot): frozenset of swept cells}``.
+
+    Cells and pivot are offsets from the moving module; the target itself is not listed.
+    Raises ``AssertionError`` if a case is reached twice with different cells or not at all.
+    """
+    check_motion_model(model)
+    canonical = np.array(CANONICAL_SWEEPS[model])
+    cases: dict = {}
+    for m in signed_permutations():
+        key = (tuple(m @ CANONICAL_TARGET), tuple(m @ CANONICAL_PIVOT))
+        cells = frozenset(tuple(c) for c in canonical @ m.T)
+        assert key not in cases or cases[key] == cells, f"{model}: mappings disagree on {key}"
+        cases[key] = cells
+    expected = {(tuple(d), tuple(q)) for d in DIRECTIONS for q in common_neighbours(d)}
+    assert set(cases) == expected, f"{model}: cases reached are not the 48 (direction, pivot) pairs"
+    return cases
+
+
+def motion_tables(model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dense tables of a model for the kernels.
+
+    Returns ``pivots (12, 4, 3)``, ``sweeps (12, 4, MAX_SWEPT, 3)`` and ``counts (12, 4)``:
+    for direction ``k`` and pivot slot ``j``, the pivot offset, the swept-cell offsets
+    (first ``counts[k, j]`` rows valid, the rest zero) and their number.
+    """
+    cases = swept_cells(model)
+    pivots = np.zeros((12, 4, 3), dtype=np.int64)
+    sweeps = np.zeros((12, 4, MAX_SWEPT, 3), dtype=np.int64)
+    counts = np.zeros((12, 4), dtype=np.int64)
+    for k, d in enumerate(DIRECTIONS):
+        for j, q in enumerate(common_neighbours(d)):
+            cells = sorted(cases[(tuple(d), tuple(q))])
+            pivots[k, j] = q
+            sweeps[k, j, : len(cells)] = cells
+            counts[k, j] = len(cells)
+    return pivots, sweeps, counts

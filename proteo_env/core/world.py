@@ -1,0 +1,278 @@
+"""The lattice world: state arrays and the cycle, behind a small keyword-only API.
+
+This module is the compute core's front door; it imports nothing from gymnasium or
+pettingzoo. A :class:`World` owns plain NumPy arrays:
+
+============== ============ ==================================================================
+array          shape        meaning
+============== ============ ==================================================================
+``grid``       (cells,)     padded flat occupancy: module index, or EMPTY/WALL/SOLID/OBJECT
+``cell``       (N,)         flat grid index of each module (the truth about positions)
+``anchored``   (N,)         module never moves (board modules and roots)
+``mode``       (N,)         each module's mode (FSM state) as shown to its neighbours
+``scent``      (C, N)       scent value per channel; ``scent_max`` means "no scent"
+``inbox``      (N, 12)      message received from each direction last cycle (0: none)
+============== ============ ==================================================================
+
+Modules ``0 .. n_agents - 1`` are agents; the rest are passive board modules that keep their
+mode and play a fixed scent role (``passive_role``).
+
+One call of :meth:`World.step` is the paper's cycle (SPEC section 4), given every agent's
+action: (1) modes are set; (2) messages are delivered, in agent order, to the module in the
+target direction now; (3) requested moves are shuffled with the world's own xorshift64
+generator (Fisher-Yates, ``j = rng_below(i + 1)`` for ``i = M-1 .. 1``) and tried one at a
+time against the occupancy of that moment, geometry first, then connectivity; (4) scents are
+relaxed with this cycle's roles. Same seed and actions give the same trajectory, bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import kernels
+from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
+from .motion import check_motion_model, common_neighbours, motion_tables
+
+SCENT_ROLES = ("silent", "relay", "emit")
+"""Scent roles in action order: 0 silent, 1 relay, 2 emit."""
+
+MESSAGE_TO_ALL = 12
+"""Message target meaning "every neighbour" (targets 0..11 are directions)."""
+
+
+class LayoutError(ValueError):
+    """A start layout that the world cannot hold (names the field, value and what is allowed)."""
+
+
+@dataclass(frozen=True)
+class Physics:
+    """How the lattice behaves; the same for every task.
+
+    Attributes:
+        motion_model: ``rhombic``, ``rounded``, ``sphere`` or ``minimal`` (SPEC section 2).
+        keep_connected: deny a move that would disconnect the other modules.
+        scent_sweeps: relaxation sweeps per cycle (1: the paper's slow propagation).
+        exact_scent: compute true hop distances every cycle instead of sweeping.
+        scent_max: saturating value that means "no scent".
+    """
+
+    motion_model: str = "sphere"
+    keep_connected: bool = True
+    scent_sweeps: int = 1
+    exact_scent: bool = False
+    scent_max: int = 65535
+
+    def __post_init__(self):
+        check_motion_model(self.motion_model)
+        if not isinstance(self.scent_sweeps, int) or self.scent_sweeps < 1:
+            raise ValueError(f"scent_sweeps={self.scent_sweeps!r} is not allowed; allowed: an integer >= 1")
+        if not isinstance(self.scent_max, int) or not 1 <= self.scent_max <= 2**31 - 2:
+            raise ValueError(f"scent_max={self.scent_max!r} is not allowed; allowed: an integer in [1, 2**31 - 2]")
+
+
+def _direction_adjacency() -> np.ndarray:
+    """``(12, 4)``: for each direction, the 4 directions whose sites touch it."""
+    index = {tuple(d): k for k, d in enumerate(DIRECTIONS)}
+    return np.array([[index[tuple(q)] for q in common_neighbours(d)] for d in DIRECTIONS], dtype=np.int64)
+
+
+DIRECTION_ADJACENCY = _direction_adjacency()
+
+
+class World:
+    """Mutable state of one lattice world and the cycle that advances it.
+
+    Args:
+        size: box extent ``(X, Y, Z)``; module centres stay in ``[0, X) x [0, Y) x [0, Z)``.
+        positions: ``(N, 3)`` int start sites of the modules (FCC sites, distinct, in the box).
+        n_agents: modules ``0 .. n_agents-1`` act; the others are passive board modules.
+        anchored: ``(N,)`` bool, modules that never move (default: none).
+        solid: ``(S, 3)`` obstacle sites; ``floor=True`` adds every site with ``z < 0``.
+        object_sites: ``(O, 3)`` sites of the object (grasp task).
+        n_channels: number of scent channels ``C``.
+        surface_channels: ``(C,)`` bool, channels that relay only through surface modules.
+        passive_role: ``(C,)`` scent role of the passive modules on each channel.
+        modes: ``(N,)`` start modes (default 0).
+        physics: :class:`Physics`.
+        obs_radius: neighbourhood radius of observations (1: 12 sites, 2: 54 sites).
+    """
+
+    def __init__(self, *, size, positions, n_agents, physics, anchored=None, solid=None,
+                 object_sites=None, floor=False, n_channels=1, surface_channels=None,
+                 passive_role=None, modes=None, obs_radius=1):
+        self.shape = GridShape(size)
+        self.physics = physics
+        positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
+        self.n_modules = n = len(positions)
+        if not 0 <= n_agents <= n:
+            raise LayoutError(f"n_agents={n_agents} is not allowed; allowed: 0..{n} (the number of modules)")
+        self.n_agents = int(n_agents)
+        self.n_channels = int(n_channels)
+        self.floor = bool(floor)
+        self.surface_channels = np.zeros(n_channels, dtype=np.bool_) if surface_channels is None \
+            else np.asarray(surface_channels, dtype=np.bool_)
+        self.passive_role = np.full(n_channels, kernels.RELAY, dtype=np.int8) if passive_role is None \
+            else np.asarray(passive_role, dtype=np.int8)
+        self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.asarray(anchored, dtype=np.bool_)
+        self.solid_sites = _sites(solid)
+        self.object_sites = _sites(object_sites)
+
+        self.grid = self._static_grid()
+        self._check_sites(positions)
+        self.cell = self.shape.index(positions)
+        self.grid[self.cell] = np.arange(n, dtype=np.int32)
+        self.mode = np.zeros(n, dtype=np.int32) if modes is None else np.array(modes, dtype=np.int32)
+        self.scent = np.full((n_channels, n), physics.scent_max, dtype=np.int32)
+        self.inbox = np.zeros((n, 12), dtype=np.int32)
+        self.rng_state = np.ones(1, dtype=np.uint64)
+
+        self.dir_delta = self.shape.deltas(DIRECTIONS)
+        self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
+        pivots, sweeps, self.sweep_count = motion_tables(physics.motion_model)
+        self.pivot_delta = self.shape.deltas(pivots)
+        self.sweep_delta = self.shape.deltas(sweeps)
+        self._scratch = {name: np.zeros(n, dtype=np.int64) for name in
+                         ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k")}
+        self._scratch["mark"][:] = -1
+        self._epoch = np.zeros(1, dtype=np.int64)
+        self._scent_buffer = np.zeros(n, dtype=np.int32)
+        self._is_cut = np.zeros(n, dtype=np.bool_)
+
+        if physics.keep_connected and n > 0 and self.n_components() != 1:
+            raise LayoutError(
+                f"positions form {self.n_components()} connected pieces; allowed: one connected "
+                "whole when keep_connected=True")
+
+    # ------------------------------------------------------------------ building
+    def _static_grid(self) -> np.ndarray:
+        shape = self.shape
+        grid = np.full(shape.padded, WALL, dtype=np.int32)
+        box = tuple(slice(PAD, PAD + s) for s in shape.size)
+        grid[box] = EMPTY
+        if self.floor:
+            grid[PAD:PAD + shape.size[0], PAD:PAD + shape.size[1], :PAD] = SOLID
+        grid = grid.reshape(-1)
+        for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
+            inside = shape.inside(sites)
+            if not inside.all():
+                bad = tuple(sites[~inside][0])
+                raise LayoutError(f"{field} site {bad} is outside the box {shape.size}; allowed: 0 <= site < size")
+            grid[shape.index(sites)] = code
+        return grid
+
+    def _check_sites(self, positions: np.ndarray) -> None:
+        shape = self.shape
+        odd = positions.sum(axis=1) % 2 != 0
+        if odd.any():
+            raise LayoutError(f"module site {tuple(positions[odd][0])} is not an FCC site; "
+                              "allowed: integer sites with x + y + z even")
+        inside = shape.inside(positions)
+        if not inside.all():
+            raise LayoutError(f"module site {tuple(positions[~inside][0])} is outside the box {shape.size}; "
+                              "allowed: 0 <= site < size")
+        index = shape.index(positions)
+        occupied = self.grid[index]
+        if (occupied != EMPTY).any():
+            p = tuple(positions[occupied != EMPTY][0])
+            what = {SOLID: "a solid site", OBJECT: "an object site"}[int(occupied[occupied != EMPTY][0])]
+            raise LayoutError(f"module site {p} is {what}; allowed: empty sites only")
+        unique, counts = np.unique(index, return_counts=True)
+        if (counts > 1).any():
+            p = tuple(shape.point(unique[counts > 1][0]))
+            raise LayoutError(f"two modules at site {p}; allowed: at most one module per site")
+
+    # ------------------------------------------------------------------ reading
+    @property
+    def positions(self) -> np.ndarray:
+        """``(N, 3)`` int64 box coordinates of the modules (a fresh array)."""
+        return self.shape.point(self.cell)
+
+    def n_components(self) -> int:
+        """Number of connected pieces of the module graph (board modules included)."""
+        return int(kernels.count_components(self.grid, self.cell, self.n_modules, self.dir_delta,
+                                            self._scratch["mark"].copy(), self._scratch["queue"]))
+
+    def cut_modules(self) -> np.ndarray:
+        """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
+        s = self._scratch
+        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, self._is_cut,
+                                    s["disc"], s["low"], s["stack_node"], s["stack_k"])
+        return self._is_cut
+
+    def roll_is_legal(self, module: int, direction: int) -> bool:
+        """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
+        return bool(kernels.roll_is_legal(self.grid, self.cell[module], direction, self.dir_delta,
+                                          self.pivot_delta, self.sweep_delta, self.sweep_count))
+
+    def can_detach(self, module: int) -> bool:
+        """Do the other modules stay connected if ``module`` leaves its site?"""
+        return bool(kernels.detach_keeps_connected(
+            self.grid, self.cell, module, self.dir_delta, DIRECTION_ADJACENCY,
+            self._scratch["mark"], self._scratch["queue"], self._epoch))
+
+    # ------------------------------------------------------------------ the cycle
+    def seed(self, seed: int) -> None:
+        """Set the move-order generator from a non-negative integer."""
+        self.rng_state[0] = np.uint64((int(seed) % (2**64 - 1)) + 1)
+
+    def step(self, *, move, mode, scent_role, message_target, message_value) -> np.ndarray:
+        """Advance one cycle with every agent's action; return ``(A,)`` bool, who moved.
+
+        Args (A = ``n_agents``, C = ``n_channels``; validated by the caller):
+            move: ``(A,)`` 0 to stay or ``k + 1`` to roll towards ``DIRECTIONS[k]``.
+            mode: ``(A,)`` each agent's new mode.
+            scent_role: ``(A, C)`` 0 silent, 1 relay, 2 emit.
+            message_target: ``(A,)`` direction 0..11, or 12 for all neighbours.
+            message_value: ``(A,)`` value to send, 0 for none.
+        """
+        a = self.n_agents
+        self.mode[:a] = mode
+        kernels.deliver_messages(self.grid, self.cell, a, message_target, message_value,
+                                 self.dir_delta, OPPOSITE, self.inbox)
+        moved = np.zeros(a, dtype=np.bool_)
+        s = self._scratch
+        kernels.execute_moves(self.grid, self.cell, a, move, self.anchored, self.physics.keep_connected,
+                              self.rng_state, self.dir_delta, DIRECTION_ADJACENCY, self.pivot_delta,
+                              self.sweep_delta, self.sweep_count, s["movers"], moved, s["mark"],
+                              s["queue"], self._epoch)
+        self.update_scents(scent_role)
+        return moved
+
+    def update_scents(self, agent_roles) -> None:
+        """Relax every channel with the agents' ``(A, C)`` roles and the passive modules' roles."""
+        role = np.empty((self.n_channels, self.n_modules), dtype=np.int8)
+        role[:, : self.n_agents] = np.asarray(agent_roles).T
+        role[:, self.n_agents:] = self.passive_role[:, None]
+        p = self.physics
+        for ch in range(self.n_channels):
+            if p.exact_scent:
+                kernels.exact_scent(self.grid, self.cell, self.n_modules, role[ch], self.surface_channels[ch],
+                                    self.scent[ch], self._scratch["queue"], p.scent_max, self.dir_delta)
+            else:
+                kernels.relax_scent(self.grid, self.cell, self.n_modules, role[ch], self.surface_channels[ch],
+                                    self.scent[ch], self._scent_buffer, p.scent_sweeps, p.scent_max,
+                                    self.dir_delta)
+
+    def observe(self, out) -> None:
+        """Fill an :class:`~proteo_env.observation.ObservationBuffers`-like ``out`` for all agents."""
+        keep = self.physics.keep_connected
+        is_cut = self.cut_modules() if keep else self._is_cut
+        kernels.observe(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
+                        self.anchored, is_cut, keep, self.neighbourhood_delta, self.dir_delta,
+                        self.pivot_delta, self.sweep_delta, self.sweep_count, self.physics.scent_max,
+                        out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
+                        out.own_scent, out.messages, out.contact, out.action_mask)
+
+    # ------------------------------------------------------------------ snapshots
+    def snapshot(self) -> dict:
+        """Copies of the mutable state (for checks and restore)."""
+        return {"cell": self.cell.copy(), "mode": self.mode.copy(), "scent": self.scent.copy(),
+                "inbox": self.inbox.copy(), "rng_state": self.rng_state.copy()}
+
+
+def _sites(sites) -> np.ndarray:
+    if sites is None:
+        return np.zeros((0, 3), dtype=np.int64)
+    return np.asarray(sites, dtype=np.int64).reshape(-1, 3)

@@ -1,0 +1,237 @@
+"""The PettingZoo parallel environment over the lattice world."""
+
+from __future__ import annotations
+
+import dataclasses
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from .config import EnvConfig
+from .core.world import World
+from .spaces import ActionLayout, ObservationBuffers, observation_space
+from .tasks.base import Task
+
+
+@dataclasses.dataclass(frozen=True)
+class WorldView:
+    """Read-only snapshot of the world for tools and users (arrays are read-only copies).
+
+    Attributes:
+        positions: ``(N, 3)`` int64 module sites, agents first (``module_i`` is row ``i``).
+        modes: ``(N,)`` int32 modes; ``mode_names[m]`` names mode ``m``.
+        scents: ``(C, N)`` int32 scent values (``scent_max``: no scent).
+        anchored: ``(N,)`` bool, modules that never move.
+        n_agents: number of agents (the first rows).
+        solid_sites: ``(S, 3)`` obstacle sites (the floor is ``z < 0`` when ``floor``).
+        object_sites: ``(O, 3)`` object sites.
+        box: ``(X, Y, Z)`` box size.
+        floor: ground below ``z = 0``.
+        motion_model, keep_connected, scent_max: the physics in force.
+        mode_names: the task's mode names.
+        cycle: cycles run since reset.
+    """
+
+    positions: np.ndarray
+    modes: np.ndarray
+    scents: np.ndarray
+    anchored: np.ndarray
+    n_agents: int
+    solid_sites: np.ndarray
+    object_sites: np.ndarray
+    box: tuple
+    floor: bool
+    motion_model: str
+    keep_connected: bool
+    scent_max: int
+    mode_names: tuple
+    cycle: int
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+class ProteoEnv(ParallelEnv):
+    """Modules of a Proteo lattice robot as agents of a PettingZoo parallel environment.
+
+    Each cycle every agent sends one action, the world runs the paper's cycle (modes and
+    messages applied, moves tried one by one in a fresh random order, scents relaxed), and
+    every agent gets its local observation back.
+
+    Args:
+        task: a :class:`~proteo_env.tasks.base.Task` instance (start layout, rules, reward).
+        config: :class:`~proteo_env.config.EnvConfig` (cycle limit, radius, physics).
+        render_mode: ``None`` or ``"ansi"`` (text layers).
+
+    Spaces (the same objects on every call):
+        observation ``Dict`` and action ``MultiDiscrete``, documented in :mod:`proteo_env.spaces`;
+        ``action_layout`` names the action fields.
+
+    Returns of :meth:`step` (dicts keyed by agent name):
+        observations, rewards (the task's team reward: the sum of its terms), terminations
+        (task success), truncations (``max_cycles`` reached), infos (one shared dict per
+        cycle with ``reward/<term>``, ``metric/<name>``, ``cycle`` and ``moved``, the number
+        of modules that moved).
+
+    ``env.world`` is a read-only :class:`WorldView`; ``env.engine`` is the underlying
+    :class:`~proteo_env.core.world.World`. The array API (no per-agent dicts) is
+    :meth:`step_arrays` / :meth:`observe_arrays`.
+    """
+
+    metadata = {"name": "proteo_v0", "render_modes": ["ansi"], "render_fps": 10, "is_parallelizable": True}
+
+    def __init__(self, task: Task, config: EnvConfig | None = None, render_mode: str | None = None):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r} is not allowed; allowed: None or "
+                             f"{', '.join(self.metadata['render_modes'])}")
+        self.task = task
+        self.config = config or EnvConfig()
+        self.render_mode = render_mode
+        self.max_cycles = self.config.max_cycles
+        self._rng = np.random.default_rng()
+        probe = task.build_layout(np.random.default_rng(0))
+        self._n_agents = probe.n_agents
+        self.possible_agents = [f"module_{i}" for i in range(self._n_agents)]
+        self.agents: list[str] = []
+        self.action_layout = ActionLayout(len(task.modes), task.n_channels, task.n_message_values)
+        self._action_space = self.action_layout.space()
+        n_sites = 12 if self.config.obs_radius == 1 else 54
+        self._n_sites = n_sites
+        self._observation_space = observation_space(
+            n_sites=n_sites, n_channels=task.n_channels, n_modes=len(task.modes),
+            n_message_values=task.n_message_values, scent_max=self.config.physics.scent_max)
+        n_state = probe.positions.shape[0] * (4 + task.n_channels)
+        self.state_space = spaces.Box(low=-1, high=np.iinfo(np.int32).max, shape=(n_state,), dtype=np.int32)
+        self.engine: World | None = None
+        self.cycle = 0
+        self.last_moved = np.zeros(self._n_agents, dtype=np.bool_)
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent):
+        return self._observation_space
+
+    def action_space(self, agent):
+        return self._action_space
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed=None, options=None):
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        layout = self.task.build_layout(self._rng)
+        if layout.n_agents != self._n_agents:
+            raise ValueError(f"task {self.task.task_id()} built {layout.n_agents} agents after "
+                             f"{self._n_agents} at construction; the agent count must stay fixed")
+        t = self.task
+        world = World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
+                      anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
+                      floor=layout.floor, n_channels=t.n_channels, surface_channels=t.surface_channels,
+                      passive_role=t.passive_role, modes=t.initial_modes(layout), physics=self.config.physics,
+                      obs_radius=self.config.obs_radius)
+        world.seed(int(self._rng.integers(2**63)))
+        self.engine = world
+        t.reset(world, self._rng)
+        self.cycle = 0
+        self.last_moved = np.zeros(self._n_agents, dtype=np.bool_)
+        self.agents = list(self.possible_agents)
+        buffers = self.observe_arrays()
+        info = {"cycle": 0, **{f"metric/{k}": v for k, v in t.metrics(world).items()}}
+        return self._per_agent(buffers), {a: info for a in self.agents}
+
+    def step(self, actions):
+        if not self.agents:
+            raise RuntimeError("step() called after the episode ended; call reset() first")
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"actions missing for {len(missing)} agents (first: {missing[0]}); "
+                             "allowed: one action for every agent in env.agents")
+        batch = np.asarray([actions[a] for a in self.agents], dtype=np.int64)
+        rewards_terms = self.step_arrays(batch)
+        buffers = self.observe_arrays()
+        metrics = self.task.metrics(self.engine)
+        success = self.task.success(self.engine)
+        reward = float(sum(rewards_terms.values()))
+        info = {"cycle": self.cycle, "moved": int(self.last_moved.sum()),
+                **{f"reward/{k}": v for k, v in rewards_terms.items()},
+                **{f"metric/{k}": v for k, v in metrics.items()}}
+        truncated = self.cycle >= self.max_cycles and not success
+        agents = self.agents
+        observations = self._per_agent(buffers)
+        rewards = dict.fromkeys(agents, reward)
+        terminations = dict.fromkeys(agents, success)
+        truncations = dict.fromkeys(agents, truncated)
+        infos = dict.fromkeys(agents, info)
+        if success or truncated:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    # ------------------------------------------------------------------ array API
+    def step_arrays(self, actions: np.ndarray) -> dict[str, float]:
+        """One cycle from an ``(A, L)`` int array of actions (rows in agent order).
+
+        Checks the batch first (a bad one raises ``ValueError`` and changes nothing), runs
+        the cycle, and returns the task's reward terms. ``self.last_moved`` says who moved.
+        """
+        lay = self.action_layout
+        actions = np.asarray(actions)
+        if actions.shape[:1] != (self._n_agents,):
+            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: "
+                             f"({self._n_agents}, {lay.length}), one row per agent")
+        lay.check(actions, self.possible_agents)
+        self.last_moved = self.engine.step(
+            move=actions[:, lay.move], mode=actions[:, lay.mode].astype(np.int32),
+            scent_role=actions[:, lay.roles].astype(np.int8),
+            message_target=actions[:, lay.message_target],
+            message_value=actions[:, lay.message_value].astype(np.int32))
+        self.cycle += 1
+        self.task.after_cycle(self.engine, self.cycle)
+        return self.task.reward_terms(self.engine, self.last_moved)
+
+    def observe_arrays(self) -> ObservationBuffers:
+        """Fresh :class:`~proteo_env.spaces.ObservationBuffers` with every agent's observation."""
+        buffers = ObservationBuffers(self._n_agents, self._n_sites, self.task.n_channels)
+        self.engine.observe(buffers)
+        buffers.load[:, 0] = self.task.load(self.engine)
+        buffers.hint[:] = self.task.hint(self.engine)
+        return buffers
+
+    def _per_agent(self, buffers: ObservationBuffers) -> dict:
+        return {a: buffers.agent(i) for i, a in enumerate(self.agents)}
+
+    # ------------------------------------------------------------------ views
+    @property
+    def world(self) -> WorldView:
+        """A read-only :class:`WorldView` of the current world (after :meth:`reset`)."""
+        w = self.engine
+        if w is None:
+            raise RuntimeError("no world yet; call reset() first")
+        p = w.physics
+        return WorldView(positions=_read_only(w.positions), modes=_read_only(w.mode),
+                         scents=_read_only(w.scent), anchored=_read_only(w.anchored), n_agents=w.n_agents,
+                         solid_sites=_read_only(w.solid_sites), object_sites=_read_only(w.object_sites),
+                         box=w.shape.size, floor=w.floor, motion_model=p.motion_model,
+                         keep_connected=p.keep_connected, scent_max=p.scent_max,
+                         mode_names=tuple(self.task.modes), cycle=self.cycle)
+
+    def state(self) -> np.ndarray:
+        """Global state: per module ``x, y, z, mode, scent_0 .. scent_{C-1}``, flattened (int32)."""
+        w = self.engine
+        per_module = np.concatenate([w.positions, w.mode[:, None], w.scent.T], axis=1)
+        return per_module.astype(np.int32).reshape(-1)
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        from .layouts import Layout, format_layout
+
+        w = self.engine
+        pos = w.positions
+        text = format_layout(Layout(size=w.shape.size, modules=pos[~w.anchored], fixed=pos[w.anchored],
+                                    solid=w.solid_sites, object_sites=w.object_sites, floor=w.floor))
+        return f"cycle {self.cycle}\n{text}"
+
+    def close(self):
+        pass
+

@@ -1,0 +1,92 @@
+"""The task interface: what a task defines and when the environment calls it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..core.world import World
+from ..layouts import Layout
+
+
+class Task:
+    """Base class of every task (one file per task in this package).
+
+    Required class attributes:
+        name: short name, e.g. ``"chain"``; the registry id is ``f"{name}-v{version}"``.
+        version: integer, bumped when dynamics, reward or layout change.
+        modes: mode names; mode ``i`` is ``modes[i]``.
+        Params: a frozen dataclass of the task's parameters (all with defaults).
+
+    Optional class attributes: ``n_channels`` (scent channels, default 1),
+    ``surface_channels`` (which channels relay only over the surface), ``passive_role``
+    (scent role of passive board modules per channel, default relay), ``n_message_values``
+    (default 15), ``default_policy`` (name of the baseline ``proteo demo`` runs).
+
+    Required hook:
+        ``build_layout(rng) -> Layout``: the start layout for an episode.
+
+    Optional hooks (defaults do nothing / give zeros):
+        ``initial_modes(layout) -> (N,) int``: start modes of all modules (world order).
+        ``reset(world, rng)``: per-episode task state.
+        ``after_cycle(world, cycle)``: task-side changes after each cycle (weight schedule).
+        ``load(world) -> (A,) float32``: weight each agent carries (observation ``load``).
+        ``hint(world) -> (A, 3) float32``: the global hint of each agent (observation ``hint``).
+        ``reward_terms(world, moved) -> dict[str, float]``: named team reward terms; the reward
+        of every agent is their sum.
+        ``metrics(world) -> dict[str, float]``: named metrics reported in ``infos``.
+        ``success(world) -> bool``: sets ``terminated`` for every agent.
+    """
+
+    name: str = ""
+    version: int = 0
+    modes: tuple[str, ...] = ()
+    Params: type = None
+    n_channels: int = 1
+    surface_channels: tuple[bool, ...] = (False,)
+    passive_role: tuple[int, ...] = (1,)
+    n_message_values: int = 15
+    default_policy: str = "random"
+
+    def __init__(self, params=None):
+        self.params = params if params is not None else self.Params()
+
+    @classmethod
+    def task_id(cls) -> str:
+        return f"{cls.name}-v{cls.version}"
+
+    @classmethod
+    def param_names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls.Params)]
+
+    def mode_index(self, name: str) -> int:
+        return self.modes.index(name)
+
+    # ------------------------------------------------------------------ hooks
+    def build_layout(self, rng: np.random.Generator) -> Layout:
+        raise NotImplementedError
+
+    def initial_modes(self, layout: Layout) -> np.ndarray:
+        return np.zeros(len(layout.positions), dtype=np.int32)
+
+    def reset(self, world: World, rng: np.random.Generator) -> None:
+        pass
+
+    def after_cycle(self, world: World, cycle: int) -> None:
+        pass
+
+    def load(self, world: World) -> np.ndarray:
+        return np.zeros(world.n_agents, dtype=np.float32)
+
+    def hint(self, world: World) -> np.ndarray:
+        return np.zeros((world.n_agents, 3), dtype=np.float32)
+
+    def reward_terms(self, world: World, moved: np.ndarray) -> dict[str, float]:
+        return {}
+
+    def metrics(self, world: World) -> dict[str, float]:
+        return {}
+
+    def success(self, world: World) -> bool:
+        return False
