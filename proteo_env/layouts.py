@@ -188,15 +188,16 @@ def line_sites(n: int, direction=(1, 1, 0)) -> np.ndarray:
     return np.arange(n, dtype=np.int64)[:, None] * np.asarray(direction, dtype=np.int64)[None, :]
 
 
-def place_in_box(sites: np.ndarray, *, margin: int, floor: bool = False, size=None) -> tuple[np.ndarray, tuple]:
+def place_in_box(sites: np.ndarray, *, margin, floor: bool = False, size=None) -> tuple[np.ndarray, tuple]:
     """Shift ``sites`` into a box with ``margin`` free sites around them (none below if ``floor``).
 
-    The shift keeps FCC parity. Returns the shifted sites and the box size (``size`` if given).
+    ``margin`` is one integer or one per axis ``(mx, my, mz)``. The shift keeps FCC parity.
+    Returns the shifted sites and the box size (``size`` if given).
     """
-    lo = sites.min(axis=0)
-    shift = margin - lo
+    margin = np.broadcast_to(np.asarray(margin, dtype=np.int64), (3,))
+    shift = margin - sites.min(axis=0)
     if floor:
-        shift[2] = -lo[2]
+        shift[2] = -sites[:, 2].min()
     if shift.sum() % 2:
         shift[0] += 1
     placed = sites + shift

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from .config import split_overrides
 from .tasks.base import Task
+from .tasks.chain import Chain
 from .tasks.sandbox import Sandbox
 
-TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox,)}
+TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain)}
 """Registered task classes by id ``<name>-v<version>``."""
 
 

@@ -1,0 +1,116 @@
+"""Chain: turn an arbitrary connected blob into one straight, one-module-thick chain.
+
+Description
+    All modules start in SLEEP as a random connected blob, except one SEED picked by the
+    task (the module farthest from the blob's centre, the paper's "initial seed determined
+    centrally"). The seed emits scent; searching modules climb the scent gradient; a module
+    that arrives in the seed's growth direction becomes the new seed and the old one FINAL.
+Agents
+    Every module (``module_0`` ... ``module_{N-1}``).
+Observation
+    The common observation (:mod:`proteo_env.spaces`) with one scent channel.
+Actions
+    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL.
+Reward (team reward, the sum of these terms each cycle)
+    ``thin``    = ``(T_t - T_{t-1}) / N``, the change in the number ``T`` of modules with at
+                  most two neighbours (a potential-based shaping term);
+    ``success`` = 1 on the cycle the chain is complete;
+    ``time``    = ``-time_penalty`` (default 0.001).
+Metrics
+    ``chain_length`` (largest one-module-thick connected piece), ``thin_share`` (``T / N``),
+    ``max_degree``, ``components``, ``success``.
+Termination
+    Success: the module graph is one connected, one-module-thick chain (connected, ``N - 1``
+    contacts, every module with at most 2 neighbours). Truncation at ``max_cycles``.
+Parameters
+    See :class:`ChainParams`.
+Paper section
+    4.1 (A Chain).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.structure import StructureProbe
+from ..layouts import Layout, blob_sites, place_in_box
+from .base import Task
+
+SLEEP, SEARCH, SEED, FINAL = range(4)
+
+
+@dataclass(frozen=True)
+class ChainParams:
+    """Parameters of the chain task.
+
+    Attributes:
+        n_modules: number of modules in the start blob.
+        initial_seed: start with one SEED (paper: "determined centrally"); if False every
+            module starts in SLEEP and the policy must elect seeds itself.
+        margin: free sites around the blob besides the room the chain needs.
+        time_penalty: reward lost per cycle.
+    """
+
+    n_modules: int = 50
+    initial_seed: bool = True
+    margin: int = 3
+    time_penalty: float = 0.001
+
+    def __post_init__(self):
+        if self.n_modules < 2:
+            raise ValueError(f"n_modules={self.n_modules!r} is not allowed; allowed: an integer >= 2")
+        if self.margin < 1:
+            raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
+
+
+class Chain(Task):
+    name = "chain"
+    version = 0
+    modes = ("SLEEP", "SEARCH", "SEED", "FINAL")
+    Params = ChainParams
+    n_message_values = 15
+    default_policy = "chain"
+
+    def build_layout(self, rng):
+        p = self.params
+        room = p.n_modules + p.margin  # a straight chain fits along any horizontal direction
+        sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin))
+        return Layout(size=size, modules=sites)
+
+    def initial_modes(self, layout):
+        modes = np.full(len(layout.positions), SLEEP, dtype=np.int32)
+        if self.params.initial_seed:
+            centre = layout.modules.mean(axis=0)
+            modes[int(np.argmax(((layout.modules - centre) ** 2).sum(axis=1)))] = SEED
+        return modes
+
+    def reset(self, world, rng):
+        self._probe = StructureProbe(world.n_modules)
+        self._last = self._measure(world)
+
+    def _measure(self, world):
+        degree, edges, thin_piece = self._probe.measure(world)
+        n = world.n_modules
+        thin = int((degree <= 2).sum())
+        complete = edges == n - 1 and thin == n and thin_piece == n
+        return {"thin": thin, "max_degree": int(degree.max()), "chain_length": thin_piece,
+                "complete": complete}
+
+    def after_cycle(self, world, cycle):
+        self._previous, self._last = self._last, self._measure(world)
+
+    def reward_terms(self, world, moved):
+        n = world.n_modules
+        return {"thin": (self._last["thin"] - self._previous["thin"]) / n,
+                "success": 1.0 if self._last["complete"] else 0.0,
+                "time": -self.params.time_penalty}
+
+    def metrics(self, world):
+        m = self._last
+        return {"chain_length": float(m["chain_length"]), "thin_share": m["thin"] / world.n_modules,
+                "max_degree": float(m["max_degree"]), "success": float(m["complete"])}
+
+    def success(self, world):
+        return self._last["complete"]
