@@ -93,6 +93,7 @@ class ProteoEnv(ParallelEnv):
         self.max_cycles = self.config.max_cycles
         self._rng = np.random.default_rng()
         probe = task.build_layout(np.random.default_rng(0))
+        self._build_world(probe)  # checks the layout now, not at the first reset
         self._n_agents = probe.n_agents
         self.possible_agents = [f"module_{i}" for i in range(self._n_agents)]
         self.agents: list[str] = []
@@ -125,11 +126,7 @@ class ProteoEnv(ParallelEnv):
             raise ValueError(f"task {self.task.task_id()} built {layout.n_agents} agents after "
                              f"{self._n_agents} at construction; the agent count must stay fixed")
         t = self.task
-        world = World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
-                      anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
-                      floor=layout.floor, n_channels=t.n_channels, surface_channels=t.surface_channels,
-                      passive_role=t.passive_role, modes=t.initial_modes(layout), physics=self.config.physics,
-                      obs_radius=self.config.obs_radius)
+        world = self._build_world(layout)
         world.seed(int(self._rng.integers(2**63)))
         self.engine = world
         t.reset(world, self._rng)
@@ -140,14 +137,18 @@ class ProteoEnv(ParallelEnv):
         info = {"cycle": 0, **{f"metric/{k}": v for k, v in t.metrics(world).items()}}
         return self._per_agent(buffers), {a: info for a in self.agents}
 
+    def _build_world(self, layout) -> World:
+        t = self.task
+        return World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
+                     anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
+                     floor=layout.floor, n_channels=t.n_channels, surface_channels=t.surface_channels,
+                     passive_role=t.passive_role, modes=t.initial_modes(layout), physics=self.config.physics,
+                     obs_radius=self.config.obs_radius)
+
     def step(self, actions):
         if not self.agents:
             raise RuntimeError("step() called after the episode ended; call reset() first")
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"actions missing for {len(missing)} agents (first: {missing[0]}); "
-                             "allowed: one action for every agent in env.agents")
-        batch = np.asarray([actions[a] for a in self.agents], dtype=np.int64)
+        batch = self._action_batch(actions)
         rewards_terms = self.step_arrays(batch)
         buffers = self.observe_arrays()
         metrics = self.task.metrics(self.engine)
@@ -167,6 +168,31 @@ class ProteoEnv(ParallelEnv):
             self.agents = []
         return observations, rewards, terminations, truncations, infos
 
+    def _action_batch(self, actions: dict) -> np.ndarray:
+        """Stack the per-agent actions into ``(A, L)``; any problem raises a ``ValueError`` naming the agent."""
+        lay = self.action_layout
+        if len(actions) != len(self.agents) or not all(a in actions for a in self.agents):
+            missing = [a for a in self.agents if a not in actions]
+            if missing:
+                raise ValueError(f"actions missing for {len(missing)} agents (first: {missing[0]}); "
+                                 "allowed: one action for every agent in env.agents")
+            unknown = [a for a in actions if a not in set(self.agents)]
+            raise ValueError(f"actions for {len(unknown)} unknown agents (first: {unknown[0]!r}); "
+                             "allowed: the agents in env.agents")
+        try:
+            batch = np.asarray([actions[a] for a in self.agents])
+        except (ValueError, TypeError):
+            batch = None
+        if batch is None or batch.shape != (len(self.agents), lay.length) or batch.dtype.kind not in "iu":
+            for a in self.agents:
+                value = np.asarray(actions[a])
+                if value.shape != (lay.length,):
+                    raise ValueError(f"action of {a}: shape {value.shape} is not allowed; allowed: "
+                                     f"({lay.length},) = {lay.field_names}")
+                if value.dtype.kind not in "iu":
+                    raise ValueError(f"action of {a}: dtype {value.dtype} is not allowed; allowed: integers")
+        return batch.astype(np.int64, copy=False)
+
     # ------------------------------------------------------------------ array API
     def step_arrays(self, actions: np.ndarray) -> dict[str, float]:
         """One cycle from an ``(A, L)`` int array of actions (rows in agent order).
@@ -176,6 +202,8 @@ class ProteoEnv(ParallelEnv):
         """
         lay = self.action_layout
         actions = np.asarray(actions)
+        if actions.dtype.kind not in "iu":
+            raise ValueError(f"actions dtype {actions.dtype} is not allowed; allowed: integers")
         if actions.shape[:1] != (self._n_agents,):
             raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: "
                              f"({self._n_agents}, {lay.length}), one row per agent")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .config import split_overrides
+from .config import ConfigError, split_overrides
 from .tasks.base import Task
 from .tasks.chain import Chain
 from .tasks.sandbox import Sandbox
@@ -18,7 +18,7 @@ def task_class(task_id: str) -> type[Task]:
     versions = sorted((cls.version, tid) for tid, cls in TASKS.items() if cls.name == task_id)
     if versions:
         return TASKS[versions[-1][1]]
-    raise ValueError(f"unknown task {task_id!r}; allowed: {', '.join(sorted(TASKS))}")
+    raise ConfigError(f"unknown task {task_id!r}; allowed: {', '.join(sorted(TASKS))}")
 
 
 def make(task_id: str, *, render_mode: str | None = None, **overrides):

@@ -46,21 +46,38 @@ def shuffle(items, count, state):
 
 # ---------------------------------------------------------------- rolls
 @kernel
-def roll_is_legal(grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count):
-    """Whether the body at cell ``c`` may roll towards direction ``k`` (geometry only)."""
-    if grid[c + dir_delta[k]] != EMPTY:
-        return False
-    for j in range(4):
-        if grid[c + pivot_delta[k, j]] < 0:
+def legal_directions(grid, c, local_delta, sweep_bits, pivot_bit):
+    """Bit ``k`` set when the body at cell ``c`` may roll towards direction ``k`` (geometry only).
+
+    The 54 sites within two hops (``local_delta``, targets first) are read once into two bit
+    words, "not empty" and "holds a module"; a roll is legal when its target is empty and some
+    pivot holds a module whose swept cells (``sweep_bits``) are all empty.
+    """
+    blocked = 0
+    modules = 0
+    for i in range(12):
+        v = grid[c + local_delta[i]]
+        if v != EMPTY:
+            blocked |= 1 << i
+            if v >= 0:
+                modules |= 1 << i
+    if blocked == 0xFFF:
+        return 0
+    for i in range(12, local_delta.shape[0]):
+        v = grid[c + local_delta[i]]
+        if v != EMPTY:
+            blocked |= 1 << i
+            if v >= 0:
+                modules |= 1 << i
+    legal = 0
+    for k in range(12):
+        if blocked & (1 << k):
             continue
-        clear = True
-        for i in range(sweep_count[k, j]):
-            if grid[c + sweep_delta[k, j, i]] != EMPTY:
-                clear = False
+        for j in range(4):
+            if (modules >> pivot_bit[k, j]) & 1 and (blocked & sweep_bits[k, j]) == 0:
+                legal |= 1 << k
                 break
-        if clear:
-            return True
-    return False
+    return legal
 
 
 # ---------------------------------------------------------------- connectivity
@@ -252,7 +269,7 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 @kernel
 def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                  dir_delta, dir_adjacent, pivot_delta, sweep_delta, sweep_count,
+                  dir_delta, dir_adjacent, local_delta, sweep_bits, pivot_bit,
                   movers, moved, mark, queue, epoch):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
@@ -271,7 +288,7 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         a = movers[i]
         k = move[a] - 1
         c = cell[a]
-        if not roll_is_legal(grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count):
+        if not (legal_directions(grid, c, local_delta, sweep_bits, pivot_bit) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
             grid, cell, a, dir_delta, dir_adjacent, mark, queue, epoch
@@ -351,7 +368,7 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 # ---------------------------------------------------------------- observations
 @kernel
 def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, dir_delta, pivot_delta, sweep_delta, sweep_count, scent_max,
+            nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask):
     """Fill the per-agent observation arrays (first axis: agent) from the world state.
@@ -396,9 +413,8 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
         contact[a, 0] = ground
         contact[a, 1] = touching
         action_mask[a, 0] = 1
-        can_leave = not anchored[a] and not (keep_connected and is_cut[a])
+        legal = 0
+        if not anchored[a] and not (keep_connected and is_cut[a]):
+            legal = legal_directions(grid, c, local_delta, sweep_bits, pivot_bit)
         for k in range(12):
-            legal = can_leave and roll_is_legal(
-                grid, c, k, dir_delta, pivot_delta, sweep_delta, sweep_count
-            )
-            action_mask[a, k + 1] = 1 if legal else 0
+            action_mask[a, k + 1] = (legal >> k) & 1

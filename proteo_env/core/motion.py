@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .lattice import DIRECTIONS
+from .lattice import DIRECTIONS, neighbourhood_offsets
 
 CANONICAL_PIVOT = (0, 1, 1)
 CANONICAL_TARGET = (1, 1, 0)
@@ -38,7 +38,6 @@ CANONICAL_SWEEPS: dict[str, tuple[tuple[int, int, int], ...]] = {
 }
 
 MOTION_MODELS: tuple[str, ...] = tuple(CANONICAL_SWEEPS)
-MAX_SWEPT = max(len(cells) for cells in CANONICAL_SWEEPS.values())
 
 
 def check_motion_model(name: str) -> str:
@@ -86,21 +85,26 @@ def swept_cells(model: str) -> dict[tuple[tuple[int, ...], tuple[int, ...]], fro
     return cases
 
 
-def motion_tables(model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Dense tables of a model for the kernels.
+LOCAL_OFFSETS = neighbourhood_offsets(2)
+"""``(54, 3)``: every site a roll can involve (targets, pivots, swept cells) lies within 2 hops.
 
-    Returns ``pivots (12, 4, 3)``, ``sweeps (12, 4, MAX_SWEPT, 3)`` and ``counts (12, 4)``:
-    for direction ``k`` and pivot slot ``j``, the pivot offset, the swept-cell offsets
-    (first ``counts[k, j]`` rows valid, the rest zero) and their number.
+The first 12 are :data:`DIRECTIONS`, so bit ``k`` of a local occupancy word is the target of
+move ``k``."""
+
+
+def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
+    """The model's tables as bit masks over :data:`LOCAL_OFFSETS`, for the kernels.
+
+    Returns ``sweep_bits (12, 4)`` int64, the swept cells of direction ``k`` and pivot slot
+    ``j`` as bits, and ``pivot_bit (12, 4)`` int64, the bit index of that pivot.
     """
+    index = {tuple(o): i for i, o in enumerate(LOCAL_OFFSETS)}
     cases = swept_cells(model)
-    pivots = np.zeros((12, 4, 3), dtype=np.int64)
-    sweeps = np.zeros((12, 4, MAX_SWEPT, 3), dtype=np.int64)
-    counts = np.zeros((12, 4), dtype=np.int64)
+    sweep_bits = np.zeros((12, 4), dtype=np.int64)
+    pivot_bit = np.zeros((12, 4), dtype=np.int64)
     for k, d in enumerate(DIRECTIONS):
         for j, q in enumerate(common_neighbours(d)):
-            cells = sorted(cases[(tuple(d), tuple(q))])
-            pivots[k, j] = q
-            sweeps[k, j, : len(cells)] = cells
-            counts[k, j] = len(cells)
-    return pivots, sweeps, counts
+            pivot_bit[k, j] = index[tuple(q)]
+            for cell in cases[(tuple(d), tuple(q))]:
+                sweep_bits[k, j] |= 1 << index[cell]
+    return sweep_bits, pivot_bit

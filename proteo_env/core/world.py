@@ -33,7 +33,7 @@ import numpy as np
 
 from . import kernels
 from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
-from .motion import check_motion_model, common_neighbours, motion_tables
+from .motion import LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
 
 SCENT_ROLES = ("silent", "relay", "emit")
 """Scent roles in action order: 0 silent, 1 relay, 2 emit."""
@@ -130,9 +130,8 @@ class World:
 
         self.dir_delta = self.shape.deltas(DIRECTIONS)
         self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
-        pivots, sweeps, self.sweep_count = motion_tables(physics.motion_model)
-        self.pivot_delta = self.shape.deltas(pivots)
-        self.sweep_delta = self.shape.deltas(sweeps)
+        self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
+        self.sweep_bits, self.pivot_bit = motion_bits(physics.motion_model)
         self._scratch = {name: np.zeros(n, dtype=np.int64) for name in
                          ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k")}
         self._scratch["mark"][:] = -1
@@ -157,7 +156,7 @@ class World:
         for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
             inside = shape.inside(sites)
             if not inside.all():
-                bad = tuple(sites[~inside][0])
+                bad = tuple(sites[~inside][0].tolist())
                 raise LayoutError(f"{field} site {bad} is outside the box {shape.size}; allowed: 0 <= site < size")
             grid[shape.index(sites)] = code
         return grid
@@ -166,21 +165,21 @@ class World:
         shape = self.shape
         odd = positions.sum(axis=1) % 2 != 0
         if odd.any():
-            raise LayoutError(f"module site {tuple(positions[odd][0])} is not an FCC site; "
+            raise LayoutError(f"module site {tuple(positions[odd][0].tolist())} is not an FCC site; "
                               "allowed: integer sites with x + y + z even")
         inside = shape.inside(positions)
         if not inside.all():
-            raise LayoutError(f"module site {tuple(positions[~inside][0])} is outside the box {shape.size}; "
+            raise LayoutError(f"module site {tuple(positions[~inside][0].tolist())} is outside the box {shape.size}; "
                               "allowed: 0 <= site < size")
         index = shape.index(positions)
         occupied = self.grid[index]
         if (occupied != EMPTY).any():
-            p = tuple(positions[occupied != EMPTY][0])
+            p = tuple(positions[occupied != EMPTY][0].tolist())
             what = {SOLID: "a solid site", OBJECT: "an object site"}[int(occupied[occupied != EMPTY][0])]
             raise LayoutError(f"module site {p} is {what}; allowed: empty sites only")
         unique, counts = np.unique(index, return_counts=True)
         if (counts > 1).any():
-            p = tuple(shape.point(unique[counts > 1][0]))
+            p = tuple(shape.point(unique[counts > 1][0]).tolist())
             raise LayoutError(f"two modules at site {p}; allowed: at most one module per site")
 
     # ------------------------------------------------------------------ reading
@@ -203,8 +202,9 @@ class World:
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
-        return bool(kernels.roll_is_legal(self.grid, self.cell[module], direction, self.dir_delta,
-                                          self.pivot_delta, self.sweep_delta, self.sweep_count))
+        legal = kernels.legal_directions(self.grid, self.cell[module], self.local_delta, self.sweep_bits,
+                                         self.pivot_bit)
+        return bool((legal >> direction) & 1)
 
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
@@ -234,8 +234,8 @@ class World:
         moved = np.zeros(a, dtype=np.bool_)
         s = self._scratch
         kernels.execute_moves(self.grid, self.cell, a, move, self.anchored, self.physics.keep_connected,
-                              self.rng_state, self.dir_delta, DIRECTION_ADJACENCY, self.pivot_delta,
-                              self.sweep_delta, self.sweep_count, s["movers"], moved, s["mark"],
+                              self.rng_state, self.dir_delta, DIRECTION_ADJACENCY, self.local_delta,
+                              self.sweep_bits, self.pivot_bit, s["movers"], moved, s["mark"],
                               s["queue"], self._epoch)
         self.update_scents(scent_role)
         return moved
@@ -261,7 +261,7 @@ class World:
         is_cut = self.cut_modules() if keep else self._is_cut
         kernels.observe(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
                         self.anchored, is_cut, keep, self.neighbourhood_delta, self.dir_delta,
-                        self.pivot_delta, self.sweep_delta, self.sweep_count, self.physics.scent_max,
+                        self.local_delta, self.sweep_bits, self.pivot_bit, self.physics.scent_max,
                         out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
                         out.own_scent, out.messages, out.contact, out.action_mask)
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.world import LayoutError
 from ..layouts import Layout, ball_sites, blob_sites, line_sites, parse_layout, place_in_box
 from .base import Task
 
@@ -92,7 +93,7 @@ class Sandbox(Task):
 
             path = Path(p.layout)
             if not path.is_file():
-                raise ValueError(f"layout={p.layout!r}: no such file; allowed: a path to a layout text file")
+                raise LayoutError(f"layout={p.layout!r}: no such file; allowed: a path to a layout text file")
             return parse_layout(path.read_text())
         if p.layout == "blob":
             sites = blob_sites(p.n_modules, rng, flat=p.floor)

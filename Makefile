@@ -1,0 +1,22 @@
+# Set-up and the main commands. Every target creates .venv if needed and installs the
+# project with exactly the versions in constraints.txt.
+PY ?= python3
+BIN := .venv/bin
+
+.PHONY: install demo test bench
+
+$(BIN)/python:
+	$(PY) -m venv .venv
+
+install: $(BIN)/python
+	$(BIN)/pip install -q -c constraints.txt -e ".[test]"
+
+demo: install
+	$(BIN)/proteo demo
+
+test: install
+	$(BIN)/python -m pytest
+
+bench: install
+	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
+	$(BIN)/python benchmarks/mobility.py

@@ -1,0 +1,22 @@
+"""Baseline policies: the paper's hand-coded behaviours and the random floor.
+
+``POLICIES`` maps policy names to classes; :func:`make_policy` builds one for an env.
+"""
+
+from __future__ import annotations
+
+from .base import Policy
+from .chain import ChainPolicy
+from .random_policy import RandomPolicy
+
+POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy)}
+
+
+def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:
+    """Build policy ``name`` for ``env`` (from its static interface only)."""
+    if name not in POLICIES:
+        raise ValueError(f"unknown policy {name!r}; allowed: {', '.join(sorted(POLICIES))}")
+    return POLICIES[name].for_env(env, seed=seed, **params)
+
+
+__all__ = ["POLICIES", "Policy", "make_policy"]

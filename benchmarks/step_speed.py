@@ -1,0 +1,122 @@
+"""Environment step speed: module-cycles per second, JIT compile time reported apart.
+
+For each world size N (random connected blobs in the sandbox task) it measures
+
+* ``engine``: :meth:`ProteoEnv.step_arrays` plus :meth:`ProteoEnv.observe_arrays` (arrays in,
+  arrays out, observations and action masks built), with random legal moves drawn from the
+  previous observation's masks in a vectorised way;
+* ``pettingzoo``: the PettingZoo API (:meth:`ProteoEnv.step` with one action dict entry per
+  agent and per-agent observation dicts back), same actions.
+
+Compile time is the first cycle of the first world (numba caches compiled kernels on disk,
+so a second run of the script shows the cache-load time instead). Results go to stdout as a
+markdown table and, with ``--json``, to a file together with the machine description.
+
+Usage::
+
+    python benchmarks/step_speed.py --sizes 1000 10000 --cycles 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numpy as np
+
+
+def machine() -> dict:
+    import numba
+
+    import gymnasium
+    import pettingzoo
+
+    cpu = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": numba.config.NUMBA_NUM_THREADS,
+            "python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__,
+            "gymnasium": gymnasium.__version__, "pettingzoo": pettingzoo.__version__}
+
+
+def random_legal_moves(mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``(A,)`` one uniformly chosen legal move per row of an ``(A, 13)`` mask."""
+    return np.argmax(mask * rng.random(mask.shape), axis=1)
+
+
+def bench_size(n: int, cycles: int, motion_model: str, seed: int) -> dict:
+    import proteo_env
+
+    env = proteo_env.make("sandbox-v0", n_modules=n, margin=4, motion_model=motion_model,
+                          max_cycles=10 * cycles + 10)
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    layout = env.action_layout
+    actions = np.zeros((n, layout.length), dtype=np.int64)
+    actions[:, layout.roles] = 1
+    actions[0, layout.roles] = 2
+
+    started = time.perf_counter()
+    obs = env.observe_arrays()
+    actions[:, layout.move] = random_legal_moves(obs.action_mask, rng)
+    env.step_arrays(actions)
+    first_cycle = time.perf_counter() - started
+
+    started = time.perf_counter()
+    moved = 0
+    for _ in range(cycles):
+        obs = env.observe_arrays()
+        actions[:, layout.move] = random_legal_moves(obs.action_mask, rng)
+        env.step_arrays(actions)
+        moved += int(env.last_moved.sum())
+    engine_seconds = time.perf_counter() - started
+
+    agents = env.possible_agents
+    observations, _ = env.reset(seed=seed)
+    pz_cycles = max(cycles // 4, 5)
+    started = time.perf_counter()
+    for _ in range(pz_cycles):
+        mask = np.stack([observations[a]["action_mask"] for a in agents])
+        actions[:, layout.move] = random_legal_moves(mask, rng)
+        observations, *_ = env.step(dict(zip(agents, actions)))
+    pz_seconds = time.perf_counter() - started
+    return {"n_modules": n, "motion_model": motion_model, "cycles": cycles,
+            "first_cycle_s": first_cycle,
+            "engine_module_cycles_per_s": n * cycles / engine_seconds,
+            "engine_cycle_ms": 1e3 * engine_seconds / cycles,
+            "moves_per_cycle": moved / cycles,
+            "pettingzoo_agent_steps_per_s": n * pz_cycles / pz_seconds,
+            "pettingzoo_cycle_ms": 1e3 * pz_seconds / pz_cycles}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000])
+    parser.add_argument("--cycles", type=int, default=200)
+    parser.add_argument("--motion-model", default="sphere")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", default=None, help="write results and machine info to this file")
+    args = parser.parse_args()
+    info = machine()
+    rows = [bench_size(n, args.cycles, args.motion_model, args.seed) for n in args.sizes]
+    print(f"machine: {info}")
+    print("| N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "
+          "PettingZoo agent-steps/s | PettingZoo ms/cycle | moves/cycle |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['n_modules']:,} | {r['first_cycle_s']:.2f} | {r['engine_module_cycles_per_s']:,.0f} | "
+              f"{r['engine_cycle_ms']:.2f} | {r['pettingzoo_agent_steps_per_s']:,.0f} | "
+              f"{r['pettingzoo_cycle_ms']:.2f} | {r['moves_per_cycle']:.0f} |")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"machine": info, "args": vars(args), "results": rows}, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

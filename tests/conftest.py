@@ -1,0 +1,59 @@
+"""Shared helpers of the environment tests: small episodes of every registered task.
+
+``SMALL_OVERRIDES`` maps a task *name* (``Task.name``, not the versioned id) to the
+overrides that keep its episodes small and fast; a task without an entry runs with its
+defaults. When a task is registered, add its entry here if its defaults are large.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import proteo_env
+
+SMALL_OVERRIDES: dict[str, dict] = {
+    "sandbox": {"n_modules": 12},
+    "chain": {"n_modules": 12},
+}
+
+
+def small_overrides(task_id: str, **extra) -> dict:
+    """The small overrides of ``task_id`` (by its task name) updated with ``extra``."""
+    name = proteo_env.TASKS[task_id].name
+    return {**SMALL_OVERRIDES.get(name, {}), **extra}
+
+
+def make_small_env(task_id: str, **extra):
+    """``proteo_env.make(task_id)`` with the task's small overrides and ``extra``."""
+    return proteo_env.make(task_id, **small_overrides(task_id, **extra))
+
+
+def random_actions(env, observations, rng: np.random.Generator, *, p_unmasked: float = 0.0) -> dict:
+    """One random action per live agent from a numpy generator (reproducible).
+
+    The move is uniform over the legal moves of the observation's ``action_mask``; with
+    probability ``p_unmasked`` it is uniform over all 13 moves instead (denied moves too).
+    Every other field is uniform over its range.
+    """
+    actions = {}
+    for agent in env.agents:
+        nvec = env.action_space(agent).nvec
+        action = rng.integers(0, nvec).astype(np.int64)
+        if rng.random() >= p_unmasked:
+            legal = np.flatnonzero(observations[agent]["action_mask"])
+            action[0] = legal[rng.integers(len(legal))]
+        actions[agent] = action
+    return actions
+
+
+@pytest.fixture
+def make_small():
+    """Factory fixture: ``make_small(task_id, **extra)`` builds a small env of that task."""
+    return make_small_env
+
+
+@pytest.fixture
+def actions_from():
+    """Factory fixture: :func:`random_actions`."""
+    return random_actions
