@@ -90,85 +90,119 @@ def _find(parent, a):
 
 
 @kernel
-def detach_keeps_connected(grid, cell, m, dir_delta, dir_adjacent, mark, queue, epoch):
-    """Whether the other modules stay connected when module ``m`` leaves its cell.
+def _flood(start, allowed, local_adjacent):
+    """Bits of ``allowed`` local sites reachable from the ``start`` bits through ``allowed`` sites."""
+    reached = start
+    frontier = start
+    while frontier:
+        grown = 0
+        i = 0
+        f = frontier
+        while f:
+            if f & 1:
+                grown |= local_adjacent[i]
+            f >>= 1
+            i += 1
+        frontier = grown & allowed & ~reached
+        reached |= frontier
+    return reached
 
-    First a local test: if ``m``'s neighbours are connected to each other through ``m``'s
-    other neighbours, the answer is yes. Otherwise one breadth-first search per group of
-    neighbours runs in lockstep over the module graph (``m`` removed); it stops when all
-    fronts have met (connected) or one front runs out (disconnected), so it costs about the
-    size of the smallest piece. ``mark`` (N,) and ``queue`` (N,) are scratch; ``epoch`` (1,)
-    is bumped so that ``mark`` never needs clearing.
+
+@kernel
+def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent,
+                           mark, stacks, rel, epoch):
+    """Do the other modules stay connected when module ``m`` leaves its cell?
+
+    First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
+    neighbours, or else through the modules within two hops of ``m``, yes. Otherwise one
+    depth-first search per group of neighbours runs in lockstep over the module graph (``m``
+    removed), each stepping first towards the next group's seed. The searches stop when all
+    groups have met (connected) or one group's stacks run out (that piece is cut off), so the
+    cost is bounded by the size of the smallest piece. Scratch: ``mark`` (N,), ``stacks``
+    (12, N), ``rel`` (N, 3) positions relative to ``m``; ``epoch`` (1,) is bumped so that
+    ``mark`` never needs clearing.
     """
     c = cell[m]
-    slot_parent = np.arange(12)
-    occupied = np.zeros(12, dtype=np.bool_)
-    n_occupied = 0
-    for k in range(12):
-        if grid[c + dir_delta[k]] >= 0:
-            occupied[k] = True
-            n_occupied += 1
-    if n_occupied <= 1:
+    modules = 0
+    for i in range(local_delta.shape[0]):
+        if grid[c + local_delta[i]] >= 0:
+            modules |= 1 << i
+    touching = modules & 0xFFF
+    if touching & (touching - 1) == 0:
         return True
-    for k in range(12):
-        if occupied[k]:
-            for a in range(4):
-                j = dir_adjacent[k, a]
-                if occupied[j]:
-                    rk, rj = _find(slot_parent, k), _find(slot_parent, j)
-                    if rk != rj:
-                        slot_parent[rj] = rk
-    n_groups = 0
-    for k in range(12):
-        if occupied[k] and _find(slot_parent, k) == k:
-            n_groups += 1
-    if n_groups == 1:
+    first = touching & -touching
+    if touching & ~_flood(first, touching, local_adjacent) == 0:
+        return True
+    if touching & ~_flood(first, modules, local_adjacent) == 0:
         return True
 
     epoch[0] += 1
     base = epoch[0] * LABEL_BITS
     mark[m] = base + REMOVED_LABEL
-    label_parent = np.arange(12)
-    pending = np.zeros(12, dtype=np.int64)
-    tail = 0
-    for k in range(12):
-        if occupied[k] and _find(slot_parent, k) == k:
-            seed = grid[c + dir_delta[k]]
-            mark[seed] = base + k
-            pending[k] = 1
-            queue[tail] = seed
-            tail += 1
+    parent = np.arange(12)
+    depth = np.zeros(12, dtype=np.int64)
+    seed_slot = np.zeros(12, dtype=np.int64)
+    n_groups = 0
+    remaining = touching
+    while remaining:
+        bit = remaining & -remaining
+        remaining &= ~_flood(bit, modules, local_adjacent)
+        k = 0
+        while not (bit >> k) & 1:
+            k += 1
+        seed = grid[c + dir_delta[k]]
+        mark[seed] = base + n_groups
+        rel[seed] = directions[k]
+        stacks[n_groups, 0] = seed
+        depth[n_groups] = 1
+        seed_slot[n_groups] = k
+        n_groups += 1
     groups_left = n_groups
-    head = 0
-    while head < tail:
-        n = queue[head]
-        head += 1
-        label = _find(label_parent, mark[n] - base)
-        pending[label] -= 1
-        cn = cell[n]
-        for k in range(12):
-            nb = grid[cn + dir_delta[k]]
-            if nb < 0:
+    while True:
+        for g in range(n_groups):
+            if depth[g] == 0:
                 continue
-            if mark[nb] >= base:
-                other = mark[nb] - base
-                if other == REMOVED_LABEL:
+            depth[g] -= 1
+            n = stacks[g, depth[g]]
+            label = _find(parent, g)
+            target = directions[seed_slot[(g + 1) % n_groups]]
+            best_at, best_distance = -1, 1 << 62
+            cn = cell[n]
+            for k in range(12):
+                nb = grid[cn + dir_delta[k]]
+                if nb < 0:
                     continue
-                other = _find(label_parent, other)
-                if other != label:
-                    label_parent[other] = label
-                    pending[label] += pending[other]
-                    groups_left -= 1
-                    if groups_left == 1:
-                        return True
-            else:
-                mark[nb] = base + label
-                queue[tail] = nb
-                tail += 1
-                pending[label] += 1
-        if pending[label] == 0:
-            return False
-    return groups_left == 1
+                if mark[nb] >= base:
+                    other = mark[nb] - base
+                    if other == REMOVED_LABEL:
+                        continue
+                    other = _find(parent, other)
+                    if other != label:
+                        parent[other] = label
+                        groups_left -= 1
+                        if groups_left == 1:
+                            return True
+                    continue
+                mark[nb] = base + g
+                distance = 0
+                for axis in range(3):
+                    rel[nb, axis] = rel[n, axis] + directions[k, axis]
+                    distance += (rel[nb, axis] - target[axis]) ** 2
+                stacks[g, depth[g]] = nb
+                if distance < best_distance:
+                    best_at, best_distance = depth[g], distance
+                depth[g] += 1
+            if best_at >= 0:  # the neighbour nearest the target is explored next
+                top = depth[g] - 1
+                stacks[g, top], stacks[g, best_at] = stacks[g, best_at], stacks[g, top]
+        for g in range(n_groups):
+            root = _find(parent, g)
+            left = 0
+            for h in range(n_groups):
+                if _find(parent, h) == root:
+                    left += depth[h]
+            if left == 0:
+                return False
 
 
 @kernel
@@ -269,8 +303,8 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 @kernel
 def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                  dir_delta, dir_adjacent, local_delta, sweep_bits, pivot_bit,
-                  movers, moved, mark, queue, epoch):
+                  dir_delta, directions, local_delta, local_adjacent, sweep_bits, pivot_bit,
+                  movers, moved, mark, stacks, rel, epoch):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
     ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
@@ -291,7 +325,7 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         if not (legal_directions(grid, c, local_delta, sweep_bits, pivot_bit) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
-            grid, cell, a, dir_delta, dir_adjacent, mark, queue, epoch
+            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, rel, epoch
         ):
             continue
         grid[c] = EMPTY
@@ -372,6 +406,9 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask):
     """Fill the per-agent observation arrays (first axis: agent) from the world state.
+
+    A module's moves are masked out when it may not leave its site: anchored, or, with
+    ``keep_connected``, a cut module (``is_cut`` from :func:`articulation_points`).
 
     Shapes: ``neighbour_kind``/``neighbour_mode`` (A, K), ``neighbour_scent`` (A, K, C),
     ``own_mode`` (A, 1), ``own_scent`` (A, C), ``messages`` (A, 12), ``contact`` (A, 2)

@@ -81,6 +81,20 @@ def _direction_adjacency() -> np.ndarray:
 DIRECTION_ADJACENCY = _direction_adjacency()
 
 
+def _local_adjacency_bits() -> np.ndarray:
+    """``(54,)`` int64: for each site within two hops, the bits of the local sites adjacent to it."""
+    faces = {tuple(d) for d in DIRECTIONS}
+    bits = np.zeros(len(LOCAL_OFFSETS), dtype=np.int64)
+    for i, a in enumerate(LOCAL_OFFSETS):
+        for j, b in enumerate(LOCAL_OFFSETS):
+            if tuple(a - b) in faces:
+                bits[i] |= 1 << j
+    return bits
+
+
+LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
+
+
 class World:
     """Mutable state of one lattice world and the cycle that advances it.
 
@@ -116,6 +130,11 @@ class World:
         self.passive_role = np.full(n_channels, kernels.RELAY, dtype=np.int8) if passive_role is None \
             else np.asarray(passive_role, dtype=np.int8)
         self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.asarray(anchored, dtype=np.bool_)
+        for field, value, length in (("anchored", self.anchored, n), ("modes", modes, n),
+                                     ("surface_channels", self.surface_channels, n_channels),
+                                     ("passive_role", self.passive_role, n_channels)):
+            if value is not None and np.shape(value) != (length,):
+                raise LayoutError(f"{field} has shape {np.shape(value)}; allowed: ({length},)")
         self.solid_sites = _sites(solid)
         self.object_sites = _sites(object_sites)
 
@@ -135,6 +154,8 @@ class World:
         self._scratch = {name: np.zeros(n, dtype=np.int64) for name in
                          ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k")}
         self._scratch["mark"][:] = -1
+        self._stacks = np.zeros((12, n), dtype=np.int64)
+        self._rel = np.zeros((n, 3), dtype=np.int64)
         self._epoch = np.zeros(1, dtype=np.int64)
         self._scent_buffer = np.zeros(n, dtype=np.int32)
         self._is_cut = np.zeros(n, dtype=np.bool_)
@@ -151,7 +172,7 @@ class World:
         box = tuple(slice(PAD, PAD + s) for s in shape.size)
         grid[box] = EMPTY
         if self.floor:
-            grid[PAD:PAD + shape.size[0], PAD:PAD + shape.size[1], :PAD] = SOLID
+            grid[:, :, :PAD] = SOLID  # the ground is every site with z < 0
         grid = grid.reshape(-1)
         for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
             inside = shape.inside(sites)
@@ -209,8 +230,8 @@ class World:
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
         return bool(kernels.detach_keeps_connected(
-            self.grid, self.cell, module, self.dir_delta, DIRECTION_ADJACENCY,
-            self._scratch["mark"], self._scratch["queue"], self._epoch))
+            self.grid, self.cell, module, self.dir_delta, DIRECTIONS, self.local_delta, LOCAL_ADJACENCY_BITS,
+            self._scratch["mark"], self._stacks, self._rel, self._epoch))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -234,9 +255,9 @@ class World:
         moved = np.zeros(a, dtype=np.bool_)
         s = self._scratch
         kernels.execute_moves(self.grid, self.cell, a, move, self.anchored, self.physics.keep_connected,
-                              self.rng_state, self.dir_delta, DIRECTION_ADJACENCY, self.local_delta,
-                              self.sweep_bits, self.pivot_bit, s["movers"], moved, s["mark"],
-                              s["queue"], self._epoch)
+                              self.rng_state, self.dir_delta, DIRECTIONS, self.local_delta,
+                              LOCAL_ADJACENCY_BITS, self.sweep_bits, self.pivot_bit, s["movers"], moved,
+                              s["mark"], self._stacks, self._rel, self._epoch)
         self.update_scents(scent_role)
         return moved
 
@@ -256,7 +277,7 @@ class World:
                                     self.dir_delta)
 
     def observe(self, out) -> None:
-        """Fill an :class:`~proteo_env.observation.ObservationBuffers`-like ``out`` for all agents."""
+        """Fill an :class:`~proteo_env.spaces.ObservationBuffers`-like ``out`` for all agents."""
         keep = self.physics.keep_connected
         is_cut = self.cut_modules() if keep else self._is_cut
         kernels.observe(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
