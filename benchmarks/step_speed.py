@@ -3,10 +3,14 @@
 For each world size N (random connected blobs in the sandbox task) it measures
 
 * ``engine``: :meth:`ProteoEnv.step_arrays` plus :meth:`ProteoEnv.observe_arrays` (arrays in,
-  arrays out, observations and action masks built), with random legal moves drawn from the
-  previous observation's masks in a vectorised way;
+  arrays out, observations and action masks built);
 * ``pettingzoo``: the PettingZoo API (:meth:`ProteoEnv.step` with one action dict entry per
   agent and per-agent observation dicts back), same actions.
+
+Two action workloads: ``uniform`` draws every action field uniformly (most rolls are then
+illegal and denied, as in early RL exploration); ``legal`` draws each module's move
+uniformly among the moves its action mask allows (a stress case: about a fifth of the
+modules roll every cycle). Drawing the actions is not timed.
 
 Compile time is the first cycle of the first world (numba caches compiled kernels on disk,
 so a second run of the script shows the cache-load time instead). Results go to stdout as a
@@ -50,7 +54,13 @@ def random_legal_moves(mask: np.ndarray, rng: np.random.Generator) -> np.ndarray
     return np.argmax(mask * rng.random(mask.shape), axis=1)
 
 
-def bench_size(n: int, cycles: int, motion_model: str, seed: int) -> dict:
+def draw_moves(workload: str, mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    if workload == "legal":
+        return random_legal_moves(mask, rng)
+    return rng.integers(0, 13, size=len(mask))
+
+
+def bench_size(n: int, cycles: int, motion_model: str, seed: int, workload: str) -> dict:
     import proteo_env
 
     env = proteo_env.make("sandbox-v0", n_modules=n, margin=4, motion_model=motion_model,
@@ -64,29 +74,31 @@ def bench_size(n: int, cycles: int, motion_model: str, seed: int) -> dict:
 
     started = time.perf_counter()
     obs = env.observe_arrays()
-    actions[:, layout.move] = random_legal_moves(obs.action_mask, rng)
     env.step_arrays(actions)
     first_cycle = time.perf_counter() - started
 
-    started = time.perf_counter()
+    engine_seconds = 0.0
     moved = 0
     for _ in range(cycles):
-        obs = env.observe_arrays()
-        actions[:, layout.move] = random_legal_moves(obs.action_mask, rng)
+        actions[:, layout.move] = draw_moves(workload, obs.action_mask, rng)
+        started = time.perf_counter()
         env.step_arrays(actions)
+        obs = env.observe_arrays()
+        engine_seconds += time.perf_counter() - started
         moved += int(env.last_moved.sum())
-    engine_seconds = time.perf_counter() - started
 
     agents = env.possible_agents
     observations, _ = env.reset(seed=seed)
     pz_cycles = max(cycles // 4, 5)
-    started = time.perf_counter()
+    pz_seconds = 0.0
     for _ in range(pz_cycles):
         mask = np.stack([observations[a]["action_mask"] for a in agents])
-        actions[:, layout.move] = random_legal_moves(mask, rng)
-        observations, *_ = env.step(dict(zip(agents, actions)))
-    pz_seconds = time.perf_counter() - started
-    return {"n_modules": n, "motion_model": motion_model, "cycles": cycles,
+        actions[:, layout.move] = draw_moves(workload, mask, rng)
+        action_dict = dict(zip(agents, actions))
+        started = time.perf_counter()
+        observations, *_ = env.step(action_dict)
+        pz_seconds += time.perf_counter() - started
+    return {"n_modules": n, "motion_model": motion_model, "workload": workload, "cycles": cycles,
             "first_cycle_s": first_cycle,
             "engine_module_cycles_per_s": n * cycles / engine_seconds,
             "engine_cycle_ms": 1e3 * engine_seconds / cycles,
@@ -101,16 +113,18 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=200)
     parser.add_argument("--motion-model", default="sphere")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workloads", nargs="+", default=["uniform", "legal"], choices=["uniform", "legal"])
     parser.add_argument("--json", default=None, help="write results and machine info to this file")
     args = parser.parse_args()
     info = machine()
-    rows = [bench_size(n, args.cycles, args.motion_model, args.seed) for n in args.sizes]
+    rows = [bench_size(n, args.cycles, args.motion_model, args.seed, w) for w in args.workloads for n in args.sizes]
     print(f"machine: {info}")
-    print("| N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "
+    print("| actions | N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "
           "PettingZoo agent-steps/s | PettingZoo ms/cycle | moves/cycle |")
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['n_modules']:,} | {r['first_cycle_s']:.2f} | {r['engine_module_cycles_per_s']:,.0f} | "
+        print(f"| {r['workload']} | {r['n_modules']:,} | {r['first_cycle_s']:.2f} | "
+              f"{r['engine_module_cycles_per_s']:,.0f} | "
               f"{r['engine_cycle_ms']:.2f} | {r['pettingzoo_agent_steps_per_s']:,.0f} | "
               f"{r['pettingzoo_cycle_ms']:.2f} | {r['moves_per_cycle']:.0f} |")
     if args.json:

@@ -322,6 +322,8 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         a = movers[i]
         k = move[a] - 1
         c = cell[a]
+        if grid[c + dir_delta[k]] != EMPTY:  # the common denial, decided by one read
+            continue
         if not (legal_directions(grid, c, local_delta, sweep_bits, pivot_bit) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
