@@ -12,3 +12,8 @@ import numba
 
 kernel = numba.njit(cache=True, nogil=True, boundscheck=False)
 """Decorator for the compute kernels: nopython, cached, GIL released."""
+
+parallel_kernel = numba.njit(cache=True, nogil=True, boundscheck=False, parallel=True)
+"""Decorator for kernels that loop over worlds with ``prange`` (threads: ``NUMBA_NUM_THREADS``)."""
+
+prange = numba.prange

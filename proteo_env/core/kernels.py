@@ -457,3 +457,44 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
             legal = legal_directions(grid, c, local_delta, sweep_bits, pivot_bit)
         for k in range(12):
             action_mask[a, k + 1] = (legal >> k) & 1
+
+
+# ---------------------------------------------------------------- whole cycle, whole observation
+@kernel
+def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
+              keep_connected, exact, sweeps, scent_max,
+              move, new_mode, role, message_target, message_value, moved,
+              dir_delta, directions, opposite, local_delta, local_adjacent, sweep_bits, pivot_bit,
+              movers, mark, queue, stacks, rel, epoch, scent_buffer):
+    """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
+    n_modules = len(cell)
+    mode[:n_agents] = new_mode
+    deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
+    n_moved = execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
+                            dir_delta, directions, local_delta, local_adjacent, sweep_bits, pivot_bit,
+                            movers, moved, mark, stacks, rel, epoch)
+    channel_role = np.empty(n_modules, dtype=np.int8)
+    for ch in range(scent.shape[0]):
+        channel_role[:n_agents] = role[:, ch]
+        channel_role[n_agents:] = passive_role[ch]
+        if exact:
+            exact_scent(grid, cell, n_modules, channel_role, surface[ch], scent[ch], queue, scent_max, dir_delta)
+        else:
+            relax_scent(grid, cell, n_modules, channel_role, surface[ch], scent[ch], scent_buffer, sweeps,
+                        scent_max, dir_delta)
+    return n_moved
+
+
+@kernel
+def observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected,
+                  nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
+                  is_cut, disc, low, stack_node, stack_k,
+                  neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
+                  messages, contact, action_mask):
+    """Every agent's observation of one world (cut modules found first when connectivity is kept)."""
+    if keep_connected:
+        articulation_points(grid, cell, len(cell), dir_delta, is_cut, disc, low, stack_node, stack_k)
+    observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
+            nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
+            neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
+            messages, contact, action_mask)

@@ -88,13 +88,16 @@ def is_site(point) -> bool:
 class GridShape:
     """Box of sites ``0 <= x < size[0]`` (etc.) embedded in a padded flat grid.
 
+    The grid covers ``extent`` (at least ``size``; larger when worlds of different boxes share
+    one grid layout in a batch) plus :data:`PAD` cells on every side.
     ``index(p) = ((x + PAD) * sy + (y + PAD)) * sz + (z + PAD)`` with ``(sx, sy, sz)`` the
     padded extents; :attr:`strides` turns an offset into a flat index delta.
     """
 
-    def __init__(self, size):
+    def __init__(self, size, extent=None):
         self.size = tuple(int(s) for s in size)
-        self.padded = tuple(s + 2 * PAD for s in self.size)
+        self.extent = self.size if extent is None else tuple(max(int(e), s) for e, s in zip(extent, self.size))
+        self.padded = tuple(s + 2 * PAD for s in self.extent)
         sx, sy, sz = self.padded
         self.strides = np.array([sy * sz, sz, 1], dtype=np.int64)
         self.n_cells = sx * sy * sz

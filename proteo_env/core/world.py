@@ -95,6 +95,23 @@ def _local_adjacency_bits() -> np.ndarray:
 LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
 
 
+class Scratch:
+    """Work arrays of one world's kernels (never part of the state)."""
+
+    NAMES = ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k", "stacks", "rel",
+             "epoch", "scent_buffer", "is_cut")
+
+    def __init__(self, n: int):
+        for name in ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k"):
+            setattr(self, name, np.zeros(n, dtype=np.int64))
+        self.mark[:] = -1
+        self.stacks = np.zeros((12, n), dtype=np.int64)
+        self.rel = np.zeros((n, 3), dtype=np.int64)
+        self.epoch = np.zeros(1, dtype=np.int64)
+        self.scent_buffer = np.zeros(n, dtype=np.int32)
+        self.is_cut = np.zeros(n, dtype=np.bool_)
+
+
 class World:
     """Mutable state of one lattice world and the cycle that advances it.
 
@@ -111,12 +128,17 @@ class World:
         modes: ``(N,)`` start modes (default 0).
         physics: :class:`Physics`.
         obs_radius: neighbourhood radius of observations (1: 12 sites, 2: 54 sites).
+        extent: grid extent (at least ``size``) so that worlds can share one grid layout in a
+            :class:`~proteo_env.core.batch.WorldBatch`; default ``size``.
     """
+
+    STATE = ("grid", "cell", "anchored", "mode", "scent", "inbox", "rng_state")
+    """Names of the per-world state arrays (stacked by a batch)."""
 
     def __init__(self, *, size, positions, n_agents, physics, anchored=None, solid=None,
                  object_sites=None, floor=False, n_channels=1, surface_channels=None,
-                 passive_role=None, modes=None, obs_radius=1):
-        self.shape = GridShape(size)
+                 passive_role=None, modes=None, obs_radius=1, extent=None):
+        self.shape = GridShape(size, extent)
         self.physics = physics
         positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
         self.n_modules = n = len(positions)
@@ -125,11 +147,12 @@ class World:
         self.n_agents = int(n_agents)
         self.n_channels = int(n_channels)
         self.floor = bool(floor)
+        self.obs_radius = obs_radius
         self.surface_channels = np.zeros(n_channels, dtype=np.bool_) if surface_channels is None \
             else np.asarray(surface_channels, dtype=np.bool_)
         self.passive_role = np.full(n_channels, kernels.RELAY, dtype=np.int8) if passive_role is None \
             else np.asarray(passive_role, dtype=np.int8)
-        self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.asarray(anchored, dtype=np.bool_)
+        self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.array(anchored, dtype=np.bool_)
         for field, value, length in (("anchored", self.anchored, n), ("modes", modes, n),
                                      ("surface_channels", self.surface_channels, n_channels),
                                      ("passive_role", self.passive_role, n_channels)):
@@ -151,14 +174,7 @@ class World:
         self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
         self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
         self.sweep_bits, self.pivot_bit = motion_bits(physics.motion_model)
-        self._scratch = {name: np.zeros(n, dtype=np.int64) for name in
-                         ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k")}
-        self._scratch["mark"][:] = -1
-        self._stacks = np.zeros((12, n), dtype=np.int64)
-        self._rel = np.zeros((n, 3), dtype=np.int64)
-        self._epoch = np.zeros(1, dtype=np.int64)
-        self._scent_buffer = np.zeros(n, dtype=np.int32)
-        self._is_cut = np.zeros(n, dtype=np.bool_)
+        self.scratch = Scratch(n)
 
         if physics.keep_connected and n > 0 and self.n_components() != 1:
             raise LayoutError(
@@ -190,8 +206,8 @@ class World:
                               "allowed: integer sites with x + y + z even")
         inside = shape.inside(positions)
         if not inside.all():
-            raise LayoutError(f"module site {tuple(positions[~inside][0].tolist())} is outside the box {shape.size}; "
-                              "allowed: 0 <= site < size")
+            raise LayoutError(f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
+                              f"{shape.size}; allowed: 0 <= site < size")
         index = shape.index(positions)
         occupied = self.grid[index]
         if (occupied != EMPTY).any():
@@ -212,14 +228,14 @@ class World:
     def n_components(self) -> int:
         """Number of connected pieces of the module graph (board modules included)."""
         return int(kernels.count_components(self.grid, self.cell, self.n_modules, self.dir_delta,
-                                            self._scratch["mark"].copy(), self._scratch["queue"]))
+                                            self.scratch.mark.copy(), self.scratch.queue))
 
     def cut_modules(self) -> np.ndarray:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
-        s = self._scratch
-        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, self._is_cut,
-                                    s["disc"], s["low"], s["stack_node"], s["stack_k"])
-        return self._is_cut
+        s = self.scratch
+        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, s.is_cut,
+                                    s.disc, s.low, s.stack_node, s.stack_k)
+        return s.is_cut
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
@@ -229,9 +245,10 @@ class World:
 
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
+        s = self.scratch
         return bool(kernels.detach_keeps_connected(
             self.grid, self.cell, module, self.dir_delta, DIRECTIONS, self.local_delta, LOCAL_ADJACENCY_BITS,
-            self._scratch["mark"], self._stacks, self._rel, self._epoch))
+            s.mark, s.stacks, s.rel, s.epoch))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -248,48 +265,33 @@ class World:
             message_target: ``(A,)`` direction 0..11, or 12 for all neighbours.
             message_value: ``(A,)`` value to send, 0 for none.
         """
-        a = self.n_agents
-        self.mode[:a] = mode
-        kernels.deliver_messages(self.grid, self.cell, a, message_target, message_value,
-                                 self.dir_delta, OPPOSITE, self.inbox)
-        moved = np.zeros(a, dtype=np.bool_)
-        s = self._scratch
-        kernels.execute_moves(self.grid, self.cell, a, move, self.anchored, self.physics.keep_connected,
-                              self.rng_state, self.dir_delta, DIRECTIONS, self.local_delta,
-                              LOCAL_ADJACENCY_BITS, self.sweep_bits, self.pivot_bit, s["movers"], moved,
-                              s["mark"], self._stacks, self._rel, self._epoch)
-        self.update_scents(scent_role)
+        moved = np.zeros(self.n_agents, dtype=np.bool_)
+        p, s = self.physics, self.scratch
+        kernels.run_cycle(
+            self.grid, self.cell, self.n_agents, self.anchored, self.mode, self.scent, self.inbox,
+            self.rng_state, self.passive_role, self.surface_channels, p.keep_connected, p.exact_scent,
+            p.scent_sweeps, p.scent_max,
+            np.asarray(move, dtype=np.int64), np.asarray(mode, dtype=np.int32),
+            np.asarray(scent_role, dtype=np.int8), np.asarray(message_target, dtype=np.int64),
+            np.asarray(message_value, dtype=np.int32), moved,
+            self.dir_delta, DIRECTIONS, OPPOSITE, self.local_delta, LOCAL_ADJACENCY_BITS, self.sweep_bits,
+            self.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
         return moved
-
-    def update_scents(self, agent_roles) -> None:
-        """Relax every channel with the agents' ``(A, C)`` roles and the passive modules' roles."""
-        role = np.empty((self.n_channels, self.n_modules), dtype=np.int8)
-        role[:, : self.n_agents] = np.asarray(agent_roles).T
-        role[:, self.n_agents:] = self.passive_role[:, None]
-        p = self.physics
-        for ch in range(self.n_channels):
-            if p.exact_scent:
-                kernels.exact_scent(self.grid, self.cell, self.n_modules, role[ch], self.surface_channels[ch],
-                                    self.scent[ch], self._scratch["queue"], p.scent_max, self.dir_delta)
-            else:
-                kernels.relax_scent(self.grid, self.cell, self.n_modules, role[ch], self.surface_channels[ch],
-                                    self.scent[ch], self._scent_buffer, p.scent_sweeps, p.scent_max,
-                                    self.dir_delta)
 
     def observe(self, out) -> None:
         """Fill an :class:`~proteo_env.spaces.ObservationBuffers`-like ``out`` for all agents."""
-        keep = self.physics.keep_connected
-        is_cut = self.cut_modules() if keep else self._is_cut
-        kernels.observe(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
-                        self.anchored, is_cut, keep, self.neighbourhood_delta, self.dir_delta,
-                        self.local_delta, self.sweep_bits, self.pivot_bit, self.physics.scent_max,
-                        out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
-                        out.own_scent, out.messages, out.contact, out.action_mask)
+        s = self.scratch
+        kernels.observe_world(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
+                              self.anchored, self.physics.keep_connected, self.neighbourhood_delta,
+                              self.dir_delta, self.local_delta, self.sweep_bits, self.pivot_bit,
+                              self.physics.scent_max, s.is_cut, s.disc, s.low, s.stack_node, s.stack_k,
+                              out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
+                              out.own_scent, out.messages, out.contact, out.action_mask)
 
     # ------------------------------------------------------------------ snapshots
     def snapshot(self) -> dict:
-        """Copies of the mutable state (for checks and restore)."""
-        return {"cell": self.cell.copy(), "mode": self.mode.copy(), "scent": self.scent.copy(),
+        """Copies of the mutable state, independent of the grid layout (for checks)."""
+        return {"positions": self.positions, "mode": self.mode.copy(), "scent": self.scent.copy(),
                 "inbox": self.inbox.copy(), "rng_state": self.rng_state.copy()}
 
 
