@@ -10,6 +10,7 @@ from pettingzoo import ParallelEnv
 from .config import EnvConfig
 from .core.world import World
 from .spaces import ActionLayout, ObservationBuffers, observation_space
+from .batched import BatchedEnv
 from .tasks.base import Task
 
 
@@ -64,7 +65,10 @@ class ProteoEnv(ParallelEnv):
     Args:
         task: a :class:`~proteo_env.tasks.base.Task` instance (start layout, rules, reward).
         config: :class:`~proteo_env.config.EnvConfig` (cycle limit, radius, physics).
-        render_mode: ``None`` or ``"ansi"`` (text layers).
+        render_mode: ``None``, ``"ansi"`` (text layers), ``"rgb_array"`` (:meth:`render` returns an
+            ``(H, W, 3)`` uint8 picture) or ``"human"`` (a matplotlib window).
+        camera: settings of the pictures: a :class:`~proteo_env.render.camera.Camera` or a dict
+            of its fields (``azimuth``, ``elevation``, ``zoom``, ``follow``, ``width``, ``height``).
 
     Spaces (the same objects on every call):
         observation ``Dict`` and action ``MultiDiscrete``, documented in :mod:`proteo_env.spaces`;
@@ -81,34 +85,48 @@ class ProteoEnv(ParallelEnv):
     :meth:`step_arrays` / :meth:`observe_arrays`.
     """
 
-    metadata = {"name": "proteo_v0", "render_modes": ["ansi"], "render_fps": 10, "is_parallelizable": True}
+    metadata = {"name": "proteo_v0", "render_modes": ["ansi", "rgb_array", "human"], "render_fps": 10,
+                "is_parallelizable": True}
 
-    def __init__(self, task: Task, config: EnvConfig | None = None, render_mode: str | None = None):
+    def __init__(self, task: Task, config: EnvConfig | None = None, render_mode: str | None = None,
+                 camera=None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is not allowed; allowed: None or "
                              f"{', '.join(self.metadata['render_modes'])}")
         self.task = task
         self.config = config or EnvConfig()
         self.render_mode = render_mode
+        self.camera = camera
+        if render_mode in ("rgb_array", "human"):
+            from .render.camera import Camera
+
+            self.camera = Camera.from_options(camera)  # checked now, not at the first render
+        self._viewer = None
         self.max_cycles = self.config.max_cycles
-        self._rng = np.random.default_rng()
-        probe = task.build_layout(np.random.default_rng(0))
-        self._build_world(probe)  # checks the layout now, not at the first reset
-        self._n_agents = probe.n_agents
-        self.possible_agents = [f"module_{i}" for i in range(self._n_agents)]
+        self.batch = BatchedEnv([task], self.config)
+        self.action_layout = self.batch.action_layout
+        self.possible_agents = [f"module_{i}" for i in range(self.batch.n_agents)]
         self.agents: list[str] = []
-        self.action_layout = ActionLayout(len(task.modes), task.n_channels, task.n_message_values)
         self._action_space = self.action_layout.space()
-        n_sites = 12 if self.config.obs_radius == 1 else 54
-        self._n_sites = n_sites
         self._observation_space = observation_space(
-            n_sites=n_sites, n_channels=task.n_channels, n_modes=len(task.modes),
+            n_sites=self.batch.n_sites, n_channels=task.n_channels, n_modes=len(task.modes),
             n_message_values=task.n_message_values, scent_max=self.config.physics.scent_max)
-        n_state = probe.positions.shape[0] * (4 + task.n_channels)
+        n_state = self.batch.n_modules * (4 + task.n_channels)
         self.state_space = spaces.Box(low=-1, high=np.iinfo(np.int32).max, shape=(n_state,), dtype=np.int32)
-        self.engine: World | None = None
-        self.cycle = 0
-        self.last_moved = np.zeros(self._n_agents, dtype=np.bool_)
+
+    @property
+    def engine(self) -> World | None:
+        """The underlying :class:`~proteo_env.core.world.World` (``None`` before :meth:`reset`)."""
+        return None if self.batch.engine is None else self.batch.worlds[0]
+
+    @property
+    def cycle(self) -> int:
+        return self.batch.cycle
+
+    @property
+    def last_moved(self) -> np.ndarray:
+        """``(A,)`` bool: who moved in the last cycle."""
+        return self.batch.last_moved[0]
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent):
@@ -119,31 +137,10 @@ class ProteoEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed=None, options=None):
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
-        layout = self.task.build_layout(self._rng)
-        if layout.n_agents != self._n_agents:
-            raise ValueError(f"task {self.task.task_id()} built {layout.n_agents} agents after "
-                             f"{self._n_agents} at construction; the agent count must stay fixed")
-        t = self.task
-        world = self._build_world(layout)
-        world.seed(int(self._rng.integers(2**63)))
-        self.engine = world
-        t.reset(world, self._rng)
-        self.cycle = 0
-        self.last_moved = np.zeros(self._n_agents, dtype=np.bool_)
+        buffers = self.batch.reset(seed)
         self.agents = list(self.possible_agents)
-        buffers = self.observe_arrays()
-        info = {"cycle": 0, **{f"metric/{k}": v for k, v in t.metrics(world).items()}}
+        info = {"cycle": 0, **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()}}
         return self._per_agent(buffers), {a: info for a in self.agents}
-
-    def _build_world(self, layout) -> World:
-        t = self.task
-        return World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
-                     anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
-                     floor=layout.floor, n_channels=t.n_channels, surface_channels=t.surface_channels,
-                     passive_role=t.passive_role, modes=t.initial_modes(layout), physics=self.config.physics,
-                     obs_radius=self.config.obs_radius)
 
     def step(self, actions):
         if not self.agents:
@@ -151,8 +148,8 @@ class ProteoEnv(ParallelEnv):
         batch = self._action_batch(actions)
         rewards_terms = self.step_arrays(batch)
         buffers = self.observe_arrays()
-        metrics = self.task.metrics(self.engine)
-        success = self.task.success(self.engine)
+        metrics = self.batch.metrics()[0]
+        success = bool(self.batch.success()[0])
         reward = float(sum(rewards_terms.values()))
         info = {"cycle": self.cycle, "moved": int(self.last_moved.sum()),
                 **{f"reward/{k}": v for k, v in rewards_terms.items()},
@@ -200,30 +197,16 @@ class ProteoEnv(ParallelEnv):
         Checks the batch first (a bad one raises ``ValueError`` and changes nothing), runs
         the cycle, and returns the task's reward terms. ``self.last_moved`` says who moved.
         """
-        lay = self.action_layout
         actions = np.asarray(actions)
-        if actions.dtype.kind not in "iu":
-            raise ValueError(f"actions dtype {actions.dtype} is not allowed; allowed: integers")
-        if actions.shape[:1] != (self._n_agents,):
-            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: "
-                             f"({self._n_agents}, {lay.length}), one row per agent")
-        lay.check(actions, self.possible_agents)
-        self.last_moved = self.engine.step(
-            move=actions[:, lay.move], mode=actions[:, lay.mode].astype(np.int32),
-            scent_role=actions[:, lay.roles].astype(np.int8),
-            message_target=actions[:, lay.message_target],
-            message_value=actions[:, lay.message_value].astype(np.int32))
-        self.cycle += 1
-        self.task.after_cycle(self.engine, self.cycle)
-        return self.task.reward_terms(self.engine, self.last_moved)
+        expected = (self.batch.n_agents, self.action_layout.length)
+        if actions.shape != expected:
+            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: {expected}, "
+                             "one row per agent")
+        return self.batch.step_arrays(actions[None])[0]
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh :class:`~proteo_env.spaces.ObservationBuffers` with every agent's observation."""
-        buffers = ObservationBuffers(self._n_agents, self._n_sites, self.task.n_channels)
-        self.engine.observe(buffers)
-        buffers.load[:, 0] = self.task.load(self.engine)
-        buffers.hint[:] = self.task.hint(self.engine)
-        return buffers
+        return self.batch.observe_arrays()
 
     def _per_agent(self, buffers: ObservationBuffers) -> dict:
         return {a: buffers.agent(i) for i, a in enumerate(self.agents)}
@@ -250,8 +233,18 @@ class ProteoEnv(ParallelEnv):
         return per_module.astype(np.int32).reshape(-1)
 
     def render(self):
+        """The picture of the current world in ``render_mode`` (see :mod:`proteo_env.render`)."""
         if self.render_mode is None:
             return None
+        if self.engine is None:
+            raise RuntimeError("no world yet; call reset() first")
+        if self.render_mode != "ansi":
+            if self._viewer is None:
+                from .render.viewer import Viewer
+
+                self._viewer = Viewer(self.render_mode, self.camera, fps=self.metadata["render_fps"],
+                                      caption=self.task.task_id())
+            return self._viewer.render(self.world)
         from .layouts import Layout, format_layout
 
         w = self.engine
@@ -261,5 +254,7 @@ class ProteoEnv(ParallelEnv):
         return f"cycle {self.cycle}\n{text}"
 
     def close(self):
-        pass
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
 

@@ -24,11 +24,13 @@ class EpisodeResult:
     history: list = field(default_factory=list)
 
 
-def run_episode(env, policy, *, seed: int, progress=None) -> EpisodeResult:
+def run_episode(env, policy, *, seed: int, progress=None, observe=None) -> EpisodeResult:
     """Reset ``env`` and ``policy`` with ``seed`` and step until the episode ends.
 
     ``policy`` needs ``reset(seed)`` and ``act(observations) -> actions``. ``progress`` is an
     optional callable receiving each cycle's shared info dict (for progress bars).
+    ``observe`` is an optional callable ``observe(env, info)`` called after the reset and
+    after every cycle (a :class:`~proteo_env.recording.Recorder`, for example).
     """
     observations, infos = env.reset(seed=seed)
     policy.reset(seed)
@@ -36,6 +38,8 @@ def run_episode(env, policy, *, seed: int, progress=None) -> EpisodeResult:
     success = False
     history = []
     info = next(iter(infos.values()))
+    if observe is not None:
+        observe(env, info)
     while env.agents:
         observations, rewards, terminations, truncations, infos = env.step(policy.act(observations))
         reward = next(iter(rewards.values()))
@@ -44,6 +48,8 @@ def run_episode(env, policy, *, seed: int, progress=None) -> EpisodeResult:
         total += reward
         history.append({"cycle": info["cycle"], "reward": reward,
                         **{k: v for k, v in info.items() if k.startswith("metric/")}})
+        if observe is not None:
+            observe(env, info)
         if progress is not None:
             progress(info)
     metrics = {k.removeprefix("metric/"): v for k, v in info.items() if k.startswith("metric/")}

@@ -121,8 +121,8 @@ def test_config_value_out_of_range(task_id, key, value, match):
 
 @pytest.mark.parametrize("task_id", TASK_IDS)
 def test_bad_render_mode(task_id):
-    with pytest.raises(ValueError, match=r"render_mode='human' is not allowed; allowed: None or ansi"):
-        proteo_env.make(task_id, render_mode="human")
+    with pytest.raises(ValueError, match=r"render_mode='rgb' is not allowed; allowed: None or ansi, rgb_array, human"):
+        proteo_env.make(task_id, render_mode="rgb")
 
 
 def test_bad_task_parameter():
@@ -299,7 +299,7 @@ def test_wrong_batch_shape_in_the_array_api(running):
         (np.zeros((n_agents - 1, lay.length), dtype=np.int64),
          rf"actions shape \({n_agents - 1}, {lay.length}\) is not allowed; allowed: \({n_agents}, {lay.length}\)"),
         (np.zeros((n_agents, lay.length + 2), dtype=np.int64),
-         rf"action shape \({lay.length + 2},\) is not allowed; allowed: \({lay.length},\)"),
+         rf"actions shape \({n_agents}, {lay.length + 2}\) is not allowed; allowed: \({n_agents}, {lay.length}\)"),
     ):
         _raises_and_unchanged(env, obs, lambda b=batch: env.step_arrays(b), ValueError, match)
 

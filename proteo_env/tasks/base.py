@@ -22,7 +22,9 @@ class Task:
     Optional class attributes: ``n_channels`` (scent channels, default 1),
     ``surface_channels`` (which channels relay only over the surface), ``passive_role``
     (scent role of passive board modules per channel, default relay), ``n_message_values``
-    (default 15), ``default_policy`` (name of the baseline ``proteo demo`` runs).
+    (default 15), ``default_policy`` (name of the baseline ``proteo demo`` runs),
+    ``plot_groups`` (plot title -> metric names drawn together in one plot; metrics in no group
+    are plotted alone; default none).
 
     Required hook:
         ``build_layout(rng) -> Layout``: the start layout for an episode.
@@ -48,6 +50,7 @@ class Task:
     passive_role: tuple[int, ...] = (1,)
     n_message_values: int = 15
     default_policy: str = "random"
+    plot_groups: dict[str, list[str]] = {}
 
     def __init__(self, params=None):
         self.params = params if params is not None else self.Params()

@@ -1,0 +1,145 @@
+"""The batched environment: ``B`` copies of one task stepped together on arrays.
+
+:class:`BatchedEnv` is the array API of proteo: actions in as one ``(B, A, L)`` int array,
+observations out as :class:`~proteo_env.spaces.ObservationBuffers` with ``B * A`` rows
+(world-major: row ``b * A + i`` is agent ``module_i`` of world ``b``), rewards, success and
+metrics per world. The worlds run in parallel threads (``NUMBA_NUM_THREADS``).
+:class:`~proteo_env.env.ProteoEnv` is a view of a ``BatchedEnv`` with ``B = 1`` that adds
+PettingZoo's per-agent dicts.
+
+Seeding: ``reset(seed=s)`` seeds world ``b`` with ``s + b``, so world ``b`` follows exactly the
+trajectory of a single ``ProteoEnv`` reset with seed ``s + b`` and fed the same actions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import EnvConfig
+from .core.batch import WorldBatch
+from .core.world import World
+from .layouts import Layout
+from .spaces import ActionLayout, ObservationBuffers
+from .tasks.base import Task
+
+
+class BatchedEnv:
+    """``B`` worlds of one task (one task instance per world), stepped together.
+
+    Args:
+        tasks: ``B`` task instances of the same class and parameters.
+        config: :class:`~proteo_env.config.EnvConfig`.
+
+    Attributes:
+        action_layout: names the fields of an action row (:class:`~proteo_env.spaces.ActionLayout`).
+        n_envs, n_agents: ``B`` and ``A``.
+        engine: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
+        cycle: cycles since reset (all worlds step together).
+        last_moved: ``(B, A)`` bool, who moved in the last cycle.
+    """
+
+    def __init__(self, tasks: list[Task], config: EnvConfig | None = None):
+        if not tasks:
+            raise ValueError("n_envs=0 is not allowed; allowed: an integer >= 1")
+        self.tasks = list(tasks)
+        self.config = config or EnvConfig()
+        self.n_envs = len(tasks)
+        task = tasks[0]
+        self.action_layout = ActionLayout(len(task.modes), task.n_channels, task.n_message_values)
+        self.n_sites = 12 if self.config.obs_radius == 1 else 54
+        probe = task.build_layout(np.random.default_rng(0))
+        self.build_world(task, probe)  # checks the layout now, not at the first reset
+        self.n_agents = probe.n_agents
+        self.n_modules = len(probe.positions)
+        self.engine: WorldBatch | None = None
+        self.cycle = 0
+        self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
+        self._rngs = [np.random.default_rng() for _ in tasks]
+
+    def build_world(self, task: Task, layout: Layout, extent=None) -> World:
+        """The world of ``layout`` under this env's physics and the task's scent set-up."""
+        return World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
+                     anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
+                     floor=layout.floor, n_channels=task.n_channels, surface_channels=task.surface_channels,
+                     passive_role=task.passive_role, modes=task.initial_modes(layout),
+                     physics=self.config.physics, obs_radius=self.config.obs_radius, extent=extent)
+
+    @property
+    def worlds(self) -> list[World]:
+        return self.engine.worlds
+
+    def reset(self, seed: int | None = None) -> ObservationBuffers:
+        """New start layouts for every world; world ``b`` is seeded with ``seed + b``."""
+        if seed is not None:
+            self._rngs = [np.random.default_rng(seed + b) for b in range(self.n_envs)]
+        layouts = [task.build_layout(rng) for task, rng in zip(self.tasks, self._rngs)]
+        for layout in layouts:
+            if layout.n_agents != self.n_agents or len(layout.positions) != self.n_modules:
+                raise ValueError(f"task {self.tasks[0].task_id()} built {layout.n_agents} agents and "
+                                 f"{len(layout.positions)} modules after {self.n_agents} and "
+                                 f"{self.n_modules} at construction; the counts must stay fixed")
+        extent = tuple(np.max([layout.size for layout in layouts], axis=0))
+        worlds = [self.build_world(task, layout, extent) for task, layout in zip(self.tasks, layouts)]
+        for world, rng in zip(worlds, self._rngs):
+            world.seed(int(rng.integers(2**63)))
+        self.engine = WorldBatch(worlds)
+        for task, world, rng in zip(self.tasks, worlds, self._rngs):
+            task.reset(world, rng)
+        self.cycle = 0
+        self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
+        return self.observe_arrays()
+
+    def check_actions(self, actions) -> np.ndarray:
+        """Validate a ``(B, A, L)`` batch; a bad one raises ``ValueError`` naming world, agent and field."""
+        lay = self.action_layout
+        actions = np.asarray(actions)
+        if actions.dtype.kind not in "iu":
+            raise ValueError(f"actions dtype {actions.dtype} is not allowed; allowed: integers")
+        expected = (self.n_envs, self.n_agents, lay.length)
+        if actions.shape != expected:
+            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: {expected} "
+                             f"(worlds, agents, {lay.field_names})")
+        bad = (actions < 0) | (actions >= lay.nvec)
+        if bad.any():
+            b, a, f = np.argwhere(bad)[0]
+            where = f"world {b}, " if self.n_envs > 1 else ""
+            raise ValueError(f"action of {where}module_{a}: {lay.field_names[f]}={actions[b, a, f]} is not "
+                             f"allowed; allowed: 0..{lay.nvec[f] - 1}")
+        return actions.astype(np.int64, copy=False)
+
+    def step_arrays(self, actions) -> list[dict[str, float]]:
+        """One cycle of every world from a ``(B, A, L)`` action array; the reward terms per world.
+
+        A bad batch raises ``ValueError`` and changes nothing.
+        """
+        if self.engine is None:
+            raise RuntimeError("no world yet; call reset() first")
+        actions = self.check_actions(actions)
+        lay = self.action_layout
+        self.last_moved = self.engine.step(
+            move=actions[..., lay.move], mode=actions[..., lay.mode], scent_role=actions[..., lay.roles],
+            message_target=actions[..., lay.message_target], message_value=actions[..., lay.message_value])
+        self.cycle += 1
+        terms = []
+        for task, world, moved in zip(self.tasks, self.worlds, self.last_moved):
+            task.after_cycle(world, self.cycle)
+            terms.append(task.reward_terms(world, moved))
+        return terms
+
+    def observe_arrays(self) -> ObservationBuffers:
+        """Fresh observation arrays of every agent of every world (``B * A`` rows, world-major)."""
+        a = self.n_agents
+        buffers = ObservationBuffers(self.n_envs * a, self.n_sites, self.tasks[0].n_channels)
+        self.engine.observe(buffers)
+        for b, (task, world) in enumerate(zip(self.tasks, self.worlds)):
+            buffers.load[b * a:(b + 1) * a, 0] = task.load(world)
+            buffers.hint[b * a:(b + 1) * a] = task.hint(world)
+        return buffers
+
+    def metrics(self) -> list[dict[str, float]]:
+        """The task's metrics of every world."""
+        return [task.metrics(world) for task, world in zip(self.tasks, self.worlds)]
+
+    def success(self) -> np.ndarray:
+        """``(B,)`` bool: the task's success flag of every world."""
+        return np.array([task.success(world) for task, world in zip(self.tasks, self.worlds)])
