@@ -1,8 +1,15 @@
 """The paper's control primitives, read from one module's observation.
 
 Shared by the hand-coded behaviours: scent detection, climbing a scent gradient by rolling
-over neighbours, and the SEED hand-over handshake by messages. Everything here reads only
-the observation dict of one module (fields of :mod:`proteo_env.spaces`).
+over neighbours, picking a growth direction, and the SEED hand-over handshake by messages.
+Everything here reads only the observation dict of one module (fields of
+:mod:`proteo_env.spaces`) plus the fixed lattice geometry (:data:`DIRECTIONS`, which face
+sites touch which).
+
+Geometry a module can read from its own observation: the 12 face sites around it; for a move
+towards ``DIRECTIONS[k]`` the 4 sites adjacent to both here and the target are
+``DIRECTION_ADJACENCY[k]`` (face slots of this module), so the module sees 4 of the target's
+11 other neighbours (the rest are two hops away and not observed with ``obs_radius=1``).
 """
 
 from __future__ import annotations
@@ -19,6 +26,10 @@ GROWTH_BASE = 0
 """Message values ``1..12``: "I am a seed growing towards ``DIRECTIONS[value - 1]``"."""
 
 _FACE = {tuple(d): k for k, d in enumerate(DIRECTIONS)}
+_DOT = DIRECTIONS @ DIRECTIONS.T
+"""``(12, 12)`` dot products of the face directions (2 same, 1 at 60, 0 at 90, -1 at 120, -2 opposite)."""
+HORIZONTAL = DIRECTIONS[:, 2] == 0
+"""``(12,)`` bool: the 4 face directions in the horizontal plane."""
 
 
 def face_index(offset) -> int:
@@ -38,20 +49,40 @@ def scent_detected(obs, channel: int, scent_max: int) -> bool:
                 or (neighbour_scents(obs, channel, scent_max) < scent_max).any())
 
 
-def climb(obs, channel: int, scent_max: int, rng: np.random.Generator, p_random: float,
-          allowed: np.ndarray | None = None) -> int:
-    """A move along the scent gradient, or 0 to stay.
-
-    The value a module would take at a target site is one more than the smallest scent among
-    the modules it can see next to that site (the 4 sites adjacent to both here and there).
-    The module takes a legal move of lowest such value; if none improves on its value here, it
-    wanders among moves that keep that value (the paper's random search over a neighbour's
-    faces), and stays if every move would make it worse. With probability ``p_random`` it
-    makes a uniformly random legal move instead. ``allowed`` (13,) bool restricts the moves.
-    """
+def legal_moves(obs, allowed: np.ndarray | None = None) -> np.ndarray:
+    """Direction indices ``k`` (0..11) whose move ``k + 1`` the action mask allows."""
     legal = np.flatnonzero(obs["action_mask"][1:])
     if allowed is not None:
         legal = legal[allowed[1 + legal]]
+    return legal
+
+
+def climb(obs, channel: int, scent_max: int, rng: np.random.Generator, p_random: float,
+          allowed: np.ndarray | None = None, *, on_stuck: str = "stay", fewer_neighbours: bool = False,
+          bias: np.ndarray | None = None) -> int:
+    """A move along the scent gradient, or 0 to stay.
+
+    The value a module would take at a target site is one more than the smallest scent among
+    the modules it can see next to that site (with ``obs_radius=1`` these are the 4 sites
+    adjacent to both here and there; the target's other neighbours are out of sight). A
+    module's value here is one more than its smallest neighbour scent, so with radius-1
+    observations no single roll is seen to improve it: the best a module can see is a roll
+    that keeps touching its lowest neighbour. The rule is therefore the paper's:
+
+    - take a legal roll of lowest value; if it improves on the value here, take it;
+    - if the best rolls keep the value (they roll over the faces of the lowest neighbour),
+      take one of them at random (the paper's "moves randomly over the available faces of
+      its neighbour until it encounters" a lower one). With ``bias`` (a direction in space,
+      e.g. downhill plus the module's previous heading) only rolls with a positive dot
+      product with it are used when there are any (the paper's "directed random move");
+      ``fewer_neighbours`` further prefers targets with fewer modules seen around them;
+    - if every legal roll would lose the lowest neighbour, ``on_stuck`` decides: ``"stay"``
+      (wait for the structure to change) or ``"random"`` (a uniformly random legal roll).
+
+    With probability ``p_random`` it makes a uniformly random legal move instead.
+    ``allowed`` (13,) bool restricts the moves.
+    """
+    legal = legal_moves(obs, allowed)
     if legal.size == 0:
         return 0
     if rng.random() < p_random:
@@ -61,8 +92,30 @@ def climb(obs, channel: int, scent_max: int, rng: np.random.Generator, p_random:
     value_here = 1 + scents.min()
     best = value_there.min()
     if best > value_here:
-        return 0
-    return int(rng.choice(legal[value_there == best])) + 1
+        return int(rng.choice(legal)) + 1 if on_stuck == "random" else 0
+    pool = legal[value_there == best]
+    if bias is not None and pool.size > 1:
+        ahead = DIRECTIONS[pool] @ bias > 0
+        if ahead.any():
+            pool = pool[ahead]
+    if fewer_neighbours and pool.size > 1:
+        is_module = obs["neighbour_kind"][:12] == KIND_MODULE
+        crowd = is_module[DIRECTION_ADJACENCY[pool]].sum(axis=1)
+        pool = pool[crowd == crowd.min()]
+    return int(rng.choice(pool)) + 1
+
+
+def descent_direction(scents: np.ndarray, scent_max: int) -> np.ndarray:
+    """``(3,)`` rough direction of decreasing scent seen from here (zero when flat).
+
+    Sum of the neighbour directions weighted by how much lower than the neighbours' mean
+    each neighbour's scent is; only neighbours that carry scent count.
+    """
+    has = scents < scent_max
+    if has.sum() < 2:
+        return np.zeros(3)
+    s = scents[has].astype(np.float64)
+    return ((s.mean() - s)[:, None] * DIRECTIONS[has]).sum(axis=0)
 
 
 def received(obs, value: int) -> int:
@@ -72,7 +125,11 @@ def received(obs, value: int) -> int:
 
 
 def seed_growth_message(obs) -> tuple[int, int]:
-    """``(slot, growth)`` of a neighbouring seed's growth broadcast, or ``(-1, -1)``."""
+    """``(slot, growth)`` of a neighbouring seed's growth broadcast, or ``(-1, -1)``.
+
+    The slot is where the message came from when it was sent, at the start of last cycle's
+    moves; if this module moved since, the slot is stale (the growth value is not).
+    """
     msgs = obs["messages"]
     hits = np.flatnonzero((msgs >= 1) & (msgs <= 12))
     if hits.size == 0:
@@ -81,12 +138,19 @@ def seed_growth_message(obs) -> tuple[int, int]:
     return slot, int(msgs[slot]) - 1
 
 
-def approach_growth_spot(obs, slot: int, growth: int, rng: np.random.Generator) -> int:
+def neighbour_slots(obs, mode: int) -> np.ndarray:
+    """Face slots (0..11) whose neighbour shows ``mode`` now."""
+    return np.flatnonzero(obs["neighbour_mode"][:12] == mode)
+
+
+def approach_growth_spot(obs, slot: int, growth: int, rng: np.random.Generator,
+                         greedy: bool = False) -> int:
     """Move towards the site next to a seed in its growth direction; 0 when there (or stuck).
 
     The seed lies at ``DIRECTIONS[slot]`` from here and grows towards ``DIRECTIONS[growth]``.
-    If the spot is a neighbour site and the roll is legal, take it; otherwise roll randomly
-    over the seed's faces (moves that keep the seed as a neighbour).
+    If the spot is a neighbour site and the roll is legal, take it; otherwise roll over the
+    seed's faces (moves that keep the seed as a neighbour): uniformly at random, or with
+    ``greedy`` among those that end nearest the spot (random among ties).
     """
     spot = DIRECTIONS[slot] + DIRECTIONS[growth]
     if not spot.any():
@@ -98,7 +162,20 @@ def approach_growth_spot(obs, slot: int, growth: int, rng: np.random.Generator) 
     around_seed = np.zeros(13, dtype=bool)
     around_seed[1 + DIRECTION_ADJACENCY[slot]] = True
     legal = np.flatnonzero(mask[1:].astype(bool) & around_seed[1:])
-    return int(rng.choice(legal)) + 1 if legal.size else 0
+    if legal.size == 0:
+        return 0
+    if greedy:
+        dist = ((spot[None, :] - DIRECTIONS[legal]) ** 2).sum(axis=1)
+        legal = legal[dist == dist.min()]
+    return int(rng.choice(legal)) + 1
+
+
+def spot_touches(obs, direction: int, modes) -> int:
+    """How many of the sites this module sees next to the site ``DIRECTIONS[direction]``
+    (the 4 sites adjacent to both) hold a module in one of ``modes``."""
+    around = DIRECTION_ADJACENCY[direction]
+    shown = obs["neighbour_mode"][:12][around]
+    return int(np.isin(shown, list(modes)).sum())
 
 
 def outward_direction(obs, rng: np.random.Generator, horizontal: bool) -> int:
@@ -108,7 +185,157 @@ def outward_direction(obs, rng: np.random.Generator, horizontal: bool) -> int:
     kinds = obs["neighbour_kind"][:12]
     empty = kinds == KIND_EMPTY
     if horizontal:
-        empty &= DIRECTIONS[:, 2] == 0
+        empty &= HORIZONTAL
     outward = empty & (kinds[OPPOSITE] == KIND_MODULE)
     pool = np.flatnonzero(outward) if outward.any() else np.flatnonzero(empty)
     return int(rng.choice(pool)) if pool.size else -1
+
+
+def growth_direction(obs, rng: np.random.Generator, *, horizontal: bool, previous: int = -1,
+                     avoid_modes=(), clean: bool = True) -> int:
+    """A growth direction for a seed, from what it sees; -1 when there is none.
+
+    Candidates are the neighbour sites that are empty (horizontal ones only when
+    ``horizontal``) and whose seen neighbours (the 4 sites adjacent to both the seed and the
+    spot) hold no module in ``avoid_modes`` (e.g. FINAL, so a new chain site touches no
+    earlier chain module but the seed). With ``previous`` (the direction the chain came in)
+    a direction at more than 90 degrees to it is excluded (that spot would touch the
+    module before the seed) and the straight one is preferred. Among the rest the choice
+    prefers, in order: with ``clean``, spots that touch the fewest modules besides the seed
+    (the chain leaves the blob cleanly); spots whose opposite site holds a module (growth
+    away from the structure); then uniformly at random.
+    """
+    kinds = obs["neighbour_kind"][:12]
+    ok = kinds == KIND_EMPTY
+    if horizontal:
+        ok &= HORIZONTAL
+    if previous >= 0:
+        if ok[previous] and spot_touches(obs, previous, avoid_modes) == 0:
+            return previous
+        ok &= _DOT[previous] >= 0
+    pool = [k for k in np.flatnonzero(ok) if spot_touches(obs, k, avoid_modes) == 0]
+    if not pool:
+        return -1
+    pool = np.array(pool)
+    if clean:
+        crowd = (kinds[DIRECTION_ADJACENCY[pool]] == KIND_MODULE).sum(axis=1)
+        pool = pool[crowd == crowd.min()]
+    outward = kinds[OPPOSITE[pool]] == KIND_MODULE
+    if outward.any():
+        pool = pool[outward]
+    return int(rng.choice(pool))
+
+
+# ---------------------------------------------------------------------- batched forms
+# The same rules for many modules at once: each function takes stacked observation fields
+# (first axis: module) and returns one result per module. They exist for speed only; each
+# row is computed from that module's own observation.
+
+ADJACENT_TO = np.zeros((12, 12), dtype=bool)
+"""``ADJACENT_TO[s, k]``: after a roll towards ``DIRECTIONS[k]`` the site ``DIRECTIONS[s]``
+is still a face neighbour (the roll goes over the faces of the module at ``s``)."""
+ADJACENT_TO[np.arange(12)[:, None], DIRECTION_ADJACENCY] = True
+
+SPOT_FACE = np.full((12, 12), -1, dtype=np.int64)
+"""``SPOT_FACE[s, g]``: face index of ``DIRECTIONS[s] + DIRECTIONS[g]`` (the growth spot of a
+neighbour at ``s`` growing towards ``g``), -1 when that site is no face neighbour (or is
+here, ``g == OPPOSITE[s]``)."""
+SPOT_DISTANCE = np.zeros((12, 12, 12), dtype=np.int64)
+"""``SPOT_DISTANCE[s, g, k]``: squared distance from the site ``DIRECTIONS[k]`` to that spot."""
+for _s in range(12):
+    for _g in range(12):
+        _spot = DIRECTIONS[_s] + DIRECTIONS[_g]
+        if _spot.any():
+            SPOT_FACE[_s, _g] = face_index(_spot)
+        SPOT_DISTANCE[_s, _g] = ((_spot[None, :] - DIRECTIONS) ** 2).sum(axis=1)
+
+
+EQUATORS = np.array([np.flatnonzero(DIRECTIONS[:, axis] == sign) for axis in range(3) for sign in (1, -1)])
+"""``(6, 4)`` face slots around each of the 6 octahedral holes that touch a site: the hole at
+half a step along ``+x`` is surrounded by this module, the 4 face sites with ``x = +1`` (its
+"equator", all seen) and the site two steps along ``+x`` (not seen)."""
+
+
+def random_pick(pool: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``(Q,)`` one uniformly chosen True column per row of ``pool`` (Q, 12); -1 where none."""
+    keys = rng.random(pool.shape)
+    keys[~pool] = -1.0
+    pick = keys.argmax(axis=1)
+    return np.where(pool.any(axis=1), pick, -1)
+
+
+def first_slot(hits: np.ndarray) -> np.ndarray:
+    """``(Q,)`` first True column per row of ``hits`` (Q, 12); -1 where none."""
+    return np.where(hits.any(axis=1), hits.argmax(axis=1), -1)
+
+
+def descent_batch(scents: np.ndarray, scent_max: int) -> np.ndarray:
+    """:func:`descent_direction` for ``(Q, 12)`` neighbour scents; returns ``(Q, 3)``."""
+    has = scents < scent_max
+    count = has.sum(axis=1)
+    total = np.where(has, scents, 0).sum(axis=1)
+    mean = total / np.maximum(count, 1)
+    weight = np.where(has, mean[:, None] - scents, 0.0)
+    out = weight @ DIRECTIONS
+    out[count < 2] = 0.0
+    return out
+
+
+def climb_batch(scents: np.ndarray, kinds: np.ndarray, legal: np.ndarray, scent_max: int,
+                rng: np.random.Generator, p_random: float, *, on_stuck: str = "stay",
+                bias: np.ndarray | None = None, fewer_neighbours: bool = False) -> np.ndarray:
+    """:func:`climb` for ``Q`` modules at once: ``(Q,)`` moves (0 or ``k + 1``).
+
+    ``scents`` (Q, 12) neighbour scents (``scent_max`` where no module), ``kinds`` (Q, 12)
+    neighbour kinds, ``legal`` (Q, 12) bool legal rolls, ``bias`` (Q, 3) or None.
+    """
+    q = scents.shape[0]
+    scents = scents.astype(np.int64)
+    big = np.iinfo(np.int64).max
+    there = np.where(legal, 1 + scents[:, DIRECTION_ADJACENCY].min(axis=2), big)
+    here = 1 + scents.min(axis=1)
+    best = there.min(axis=1)
+    pool = legal & (there == best[:, None])
+    stuck = best > here
+    if bias is not None:
+        dots = np.where(pool, bias @ DIRECTIONS.T, 0.0)
+        ahead = pool & (dots > 0)
+        pool = np.where(ahead.any(axis=1)[:, None], ahead, pool)
+    if fewer_neighbours:
+        crowd = (kinds == KIND_MODULE)[:, DIRECTION_ADJACENCY].sum(axis=2)
+        crowd = np.where(pool, crowd, 99)
+        pool &= crowd == crowd.min(axis=1)[:, None]
+    if on_stuck == "random":
+        pool = np.where(stuck[:, None], legal, pool)
+    else:
+        pool &= ~stuck[:, None]
+    wild = rng.random(q) < p_random
+    pool = np.where(wild[:, None], legal, pool)
+    return random_pick(pool, rng) + 1
+
+
+def approach_batch(target: np.ndarray, pivot: np.ndarray, legal: np.ndarray, rng: np.random.Generator,
+                   *, greedy: bool = True, p_random: float = 0.0) -> np.ndarray:
+    """``(Q,)`` moves towards ``target`` (Q, 3) sites (offsets from each module, never 0).
+
+    The rule of :func:`approach_growth_spot` for many modules: roll straight into the target
+    when it is a face neighbour and the roll is legal; otherwise roll over the faces of the
+    neighbour at slot ``pivot`` (Q,) (moves that keep it as a neighbour), the ones ending
+    nearest the target with ``greedy`` (random among ties) or any of them; when there is no
+    such roll, a random legal roll with probability ``p_random``, else stay.
+    """
+    q = target.shape[0]
+    rows = np.arange(q)
+    face = first_slot((DIRECTIONS[None, :, :] == target[:, None, :]).all(axis=2))
+    direct = (face >= 0) & legal[rows, np.maximum(face, 0)]
+    pool = legal & ADJACENT_TO[pivot]
+    if greedy:
+        dist = ((target[:, None, :] - DIRECTIONS[None, :, :]) ** 2).sum(axis=2)
+        dist = np.where(pool, dist, np.iinfo(np.int64).max)
+        pool &= dist == dist.min(axis=1)[:, None]
+    roll = random_pick(pool, rng) + 1
+    stuck = roll == 0
+    if p_random > 0 and stuck.any():
+        wild = stuck & (rng.random(q) < p_random)
+        roll = np.where(wild, random_pick(legal, rng) + 1, roll)
+    return np.where(direct, face + 1, roll)
