@@ -1,0 +1,373 @@
+"""Table: a board held up by legs that grow where the weight is and move when it shifts.
+
+Description
+    A horizontal board of modules that never move (the table top) hangs ``depth`` layers
+    above a floor. Most board modules are FIXED and passive (they only relay scent); every
+    ``root_spacing`` sites a board module is a *root*, an agent that never moves but decides
+    when to grow or disband a leg below it. Weights ``W1`` (left half of the board) and
+    ``W2`` (right half) press on the board; a schedule shifts them during the episode (by
+    default the paper's sequences: most weight on the left, then on the right, then in the
+    centre). Spare modules hang under the middle of the board in SLEEP. Roots grow legs
+    (chains of modules down to the floor, one layer per module) and disband them,
+    probabilistically, so that the weight per active root of each region stays between
+    ``f_min`` and ``f_max``.
+Board geometry (the FCC reading of the paper's "30 by 30 board, roots every 3 sites")
+    The board is the FCC layer ``z = depth``: every site ``(x, y, depth)`` with
+    ``0 <= x, y < board_size`` and ``x + y + depth`` even (a checkerboard; in-plane face
+    neighbours are ``(+-1, +-1, 0)`` apart), ``board_size**2 / 2`` modules (450 for 30).
+    Roots are the board sites with ``x = o + root_spacing * i`` and ``y = o + root_spacing * j``
+    (``o`` centres the sub-grid on the board, 1 for 30 by 30); parity keeps half of these
+    points, so neighbouring roots are ``(+-3, +-3, 0)`` apart: 3 face hops along the layer's
+    two lattice rows, "separated by 3 modules in each direction" (50 roots for 30 by 30, 25
+    per half). The regions are the halves ``x < board_size / 2`` (left, weight ``W1``) and
+    the rest (right, ``W2``). The floor is ground below ``z = 0``, so a leg is ``depth``
+    modules, ``z = depth - 1 .. 0``, and its lowest module touches the ground. The box is
+    the board's square and ``depth + 1`` layers high: nothing climbs onto the board.
+Spare modules
+    ``n_spares`` movable modules in SLEEP, the sites nearest the point under the board's
+    centre (a half ball hanging from the board, straddling both halves; it reaches the floor
+    when it is large). They are connected to the board, so the whole robot is one piece.
+Agents
+    The spares (``module_0`` .. ``module_{n_spares-1}``), then the roots. FIXED board
+    modules are passive (not agents).
+Observation
+    The common observation (:mod:`proteo_env.spaces`), one scent channel. ``load`` of a root
+    is its load sensor (below); 0 for every other module (module weights are neglected, as in
+    the paper). ``contact[0]`` tells a module it touches the floor.
+Load sensor (the paper's model)
+    A root reads the weight per active root of its region: ``W_r / N_r`` with ``N_r`` the
+    roots of region ``r`` in ROOT or AROOT mode. The paper's roots sum their force readings
+    by signals through the fixed modules, "much faster than physical movements"; the task
+    computes that sum directly, every cycle, from the roots' modes (an environment-provided
+    sensor, not policy state). With no active root a region's weight rests on nothing and the
+    reading saturates at ``load_cap`` (0 when ``W_r = 0``).
+Actions
+    The common action. Modes: 0 FIXED, 1 ROOT, 2 IROOT, 3 AROOT, 4 SLEEP, 5 SEARCH, 6 SEED,
+    7 FINAL, 8 DISBAND. Board modules show FIXED, roots start IROOT, spares SLEEP.
+Legs (measured by the task, O(modules in legs) per cycle)
+    A root has a *grounded leg* when a chain of FINAL or SEED modules runs from it to the
+    floor going down one layer per module (each module a face neighbour below the previous
+    one). ``legs_left`` and ``legs_right`` count roots with a grounded leg per region.
+Stable configuration
+    The *signature* is the pair (set of active roots, set of roots with a grounded leg). It is
+    *complete* when both sets are equal (every active root stands on a grounded leg and no
+    other root does). A stable configuration starts at cycle ``c`` when the signature is
+    complete and stays unchanged for ``stable_window`` cycles from ``c``. For the shift at
+    cycle ``s_k`` (entry ``k`` of the schedule; entry 0 is the start), ``restabilise_k`` is
+    ``max(c, s_k) - s_k`` for the first such period that starts and lasts
+    ``stable_window`` cycles before the next shift; -1 while unknown or if there is none.
+Reward (team reward, the sum of these terms each cycle)
+    ``support`` = ``sum_r min(W_r, f_max * G_r) / sum_r W_r``: the share of the weight that
+                  the grounded legs ``G_r`` carry when each leg carries at most ``f_max``
+                  (the load per grounded leg within capacity); 0 when there is no weight;
+    ``legs``    = ``-leg_cost * (G_left + G_right)`` (few legs).
+Metrics
+    ``weight_left``, ``weight_right`` (current ``W1``, ``W2``; a change marks a shift),
+    ``legs_left``, ``legs_right``, ``grounded_legs``, ``active_left``, ``active_right``,
+    ``load_left``, ``load_right`` (the sensor reading per region), ``support``,
+    ``stable`` (1 while in a stable configuration), ``leg_creations`` and ``leg_disbands``
+    (cumulative counts of roots turning active and inactive), ``restabilise_0`` ..
+    ``restabilise_{K-1}`` (one per schedule entry), ``success``.
+Termination
+    Success: the configuration after the last scheduled shift is stable
+    (``restabilise_{K-1}`` is known). Truncation at ``max_cycles``: set it past the last
+    shift plus the time to re-stabilise and ``stable_window``. With the default schedule the
+    hand-coded policy succeeds after 920-1120 cycles (docs/table_evidence.md), so the env's
+    default of 1000 is too short; ``configs/table.yaml`` uses 1300.
+Motion model
+    Legs reach the floor only under ``minimal``. Under ``sphere``, ``rounded`` and
+    ``rhombic`` no single roll brings a module onto a floor site below a SEED one layer up
+    (the roll would sweep through the ground or the leg), so no leg ever grounds; the
+    configs set ``motion_model: minimal`` (docs/tasks/table.md has the numbers).
+Parameters
+    See :class:`TableParams`.
+Paper section
+    4.3 (Dynamically Adapting to External Forces).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lattice import DIRECTIONS
+from ..layouts import Layout
+from .base import Task
+
+FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
+MODES = ("FIXED", "ROOT", "IROOT", "AROOT", "SLEEP", "SEARCH", "SEED", "FINAL", "DISBAND")
+ACTIVE = (ROOT, AROOT)
+LEG_MODES = (SEED, FINAL)
+DOWN = np.flatnonzero(DIRECTIONS[:, 2] == -1)
+"""The 4 face directions that go down one layer."""
+
+PAPER_SCHEDULE = ((0, 8.0, 2.0), (400, 2.0, 8.0), (800, 5.0, 5.0))
+"""The paper's sequences: little weight on the right (one leg there), the weight shifted to
+the right half (sequence 1), then to the centre (sequence 2); ``W1 + W2 = 10``."""
+
+
+@dataclass(frozen=True)
+class TableParams:
+    """Parameters of the table task (the rule parameters are read by the hand-coded policy).
+
+    Attributes:
+        board_size: the board covers ``0 <= x, y < board_size`` (paper: 30).
+        root_spacing: roots every this many sites along x and y (paper: 3).
+        depth: layers between the board and the floor, the number of modules in a leg.
+        n_spares: spare modules hanging under the board's centre at the start.
+        schedule: ``((cycle, W1, W2), ...)``: from ``cycle`` on, weight ``W1`` on the left
+            half and ``W2`` on the right half. Cycles strictly increasing from 0; weights >= 0.
+        p_max: probability per cycle that an IROOT reading more than ``f_max`` goes AROOT.
+        p_min: probability per cycle that a ROOT reading less than ``f_min`` disbands its leg.
+        f_max: load per active root above which roots grow legs; also a leg's capacity in the
+            reward.
+        f_min: load per active root below which roots disband legs (``f_min <= f_max``).
+        load_cap: the sensor's saturation: the reading of a region with weight and no active
+            root.
+        stable_window: cycles a complete signature must stay unchanged to count as stable.
+        leg_cost: reward lost per grounded leg per cycle.
+    """
+
+    board_size: int = 30
+    root_spacing: int = 3
+    depth: int = 6
+    n_spares: int = 120
+    schedule: tuple[tuple[int, float, float], ...] = PAPER_SCHEDULE
+    p_max: float = 0.05
+    p_min: float = 0.05
+    f_max: float = 2.0
+    f_min: float = 1.0
+    load_cap: float = 100.0
+    stable_window: int = 100
+    leg_cost: float = 0.01
+
+    def __post_init__(self):
+        def bad(name, value, allowed):
+            raise ValueError(f"{name}={value!r} is not allowed; allowed: {allowed}")
+
+        if not isinstance(self.root_spacing, int) or self.root_spacing < 2:
+            bad("root_spacing", self.root_spacing, "an integer >= 2")
+        if not isinstance(self.board_size, int) or self.board_size < self.root_spacing + 1:
+            bad("board_size", self.board_size, f"an integer >= root_spacing + 1 = {self.root_spacing + 1}")
+        if not isinstance(self.depth, int) or self.depth < 1:
+            bad("depth", self.depth, "an integer >= 1")
+        room = (self.board_size ** 2 // 2) * self.depth
+        if not isinstance(self.n_spares, int) or not 1 <= self.n_spares <= room // 2:
+            bad("n_spares", self.n_spares, f"an integer in [1, {room // 2}] (half the room under the board)")
+        schedule = _check_schedule(self.schedule)
+        object.__setattr__(self, "schedule", schedule)
+        for name in ("p_max", "p_min"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                bad(name, value, "a probability in [0, 1]")
+        if not 0.0 <= self.f_min <= self.f_max:
+            bad("f_min", self.f_min, f"a number in [0, f_max = {self.f_max}]")
+        if self.f_max <= 0:
+            bad("f_max", self.f_max, "a number > 0")
+        if not self.load_cap > self.f_max:
+            bad("load_cap", self.load_cap, f"a number > f_max = {self.f_max}")
+        if not isinstance(self.stable_window, int) or self.stable_window < 1:
+            bad("stable_window", self.stable_window, "an integer >= 1")
+        if self.leg_cost < 0:
+            bad("leg_cost", self.leg_cost, "a number >= 0")
+
+    @property
+    def shift_cycles(self) -> tuple[int, ...]:
+        """The cycles at which the schedule's entries start (the first is 0)."""
+        return tuple(entry[0] for entry in self.schedule)
+
+    @property
+    def root_offset(self) -> int:
+        """First root row and column: centres the root sub-grid on the board."""
+        span = self.root_spacing * ((self.board_size - 1) // self.root_spacing)
+        return (self.board_size - 1 - span) // 2
+
+
+def _check_schedule(schedule) -> tuple:
+    allowed = "a non-empty sequence of (cycle, W1, W2) with cycles increasing from 0 and weights >= 0"
+    try:
+        entries = tuple((entry[0], entry[1], entry[2]) for entry in schedule if len(entry) == 3)
+        ok = len(entries) == len(schedule) and len(entries) > 0
+    except TypeError:
+        ok = False
+    if ok:
+        ok = all(isinstance(c, int) and not isinstance(c, bool) for c, _, _ in entries)
+        ok = ok and all(isinstance(w, (int, float)) and not isinstance(w, bool) and w >= 0
+                        for _, w1, w2 in entries for w in (w1, w2))
+        ok = ok and entries[0][0] == 0 and all(a[0] < b[0] for a, b in zip(entries, entries[1:]))
+    if not ok:
+        raise ValueError(f"schedule={schedule!r} is not allowed; allowed: {allowed}")
+    return tuple((int(c), float(w1), float(w2)) for c, w1, w2 in entries)
+
+
+def board_sites(p: TableParams) -> tuple[np.ndarray, np.ndarray]:
+    """``(roots, fixed)``: the board's root sites and its other sites, each ``(K, 3)`` int64."""
+    n, h = p.board_size, p.depth
+    x, y = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    x, y = x.ravel(), y.ravel()
+    on = (x + y + h) % 2 == 0
+    x, y = x[on], y[on]
+    o, s = p.root_offset, p.root_spacing
+    is_root = ((x - o) % s == 0) & ((y - o) % s == 0) & (x >= o) & (y >= o)
+    sites = np.stack([x, y, np.full_like(x, h)], axis=1).astype(np.int64)
+    return sites[is_root], sites[~is_root]
+
+
+def spare_sites(p: TableParams) -> np.ndarray:
+    """``(n_spares, 3)``: the sites under the board nearest the point below its centre."""
+    n, h = p.board_size, p.depth
+    g = np.mgrid[0:n, 0:n, 0:h].reshape(3, -1).T
+    g = g[g.sum(axis=1) % 2 == 0]
+    centre = np.array([(n - 1) / 2, (n - 1) / 2, h])
+    d2 = ((g - centre) ** 2).sum(axis=1)
+    order = np.lexsort((g[:, 1], g[:, 0], -g[:, 2], d2))
+    return g[order[: p.n_spares]].astype(np.int64)
+
+
+class Table(Task):
+    name = "table"
+    version = 0
+    modes = MODES
+    Params = TableParams
+    n_message_values = 15
+    default_policy = "table"
+    plot_groups = {
+        "legs and weight per region": ["legs_left", "legs_right", "weight_left", "weight_right"],
+        "active roots per region": ["active_left", "active_right"],
+        "leg decisions (cumulative)": ["leg_creations", "leg_disbands"],
+    }
+
+    # ------------------------------------------------------------------ layout
+    def build_layout(self, rng):
+        p = self.params
+        roots, fixed = board_sites(p)
+        return Layout(size=(p.board_size, p.board_size, p.depth + 1), modules=spare_sites(p), roots=roots,
+                      fixed=fixed, floor=True)
+
+    def initial_modes(self, layout):
+        modes = np.full(len(layout.positions), FIXED, dtype=np.int32)
+        n_spares, n_roots = len(layout.modules), len(layout.roots)
+        modes[:n_spares] = SLEEP
+        modes[n_spares:n_spares + n_roots] = IROOT
+        return modes
+
+    # ------------------------------------------------------------------ episode state
+    def reset(self, world, rng):
+        p = self.params
+        self._roots = np.arange(p.n_spares, world.n_agents)
+        x = world.positions[self._roots, 0]
+        self._left = x < p.board_size / 2
+        self._down_delta = world.dir_delta[DOWN]
+        self._shift = 0
+        self._weights = np.array(p.schedule[0][1:], dtype=np.float64)
+        self._cycle = 0
+        self._restabilise = np.full(len(p.schedule), -1.0)
+        self._creations = 0
+        self._disbands = 0
+        self._was_active = np.isin(world.mode[self._roots], ACTIVE)
+        self._measure(world)
+        self._signature = (self._active.copy(), self._grounded.copy())
+        self._since = 0
+
+    def _measure(self, world) -> None:
+        """Active roots and grounded legs now (cached for load, reward and metrics)."""
+        self._active = np.isin(world.mode[self._roots], ACTIVE)
+        self._grounded = self._grounded_legs(world)
+
+    def _grounded_legs(self, world) -> np.ndarray:
+        """``(R,)`` bool: roots with a chain of FINAL/SEED modules down to the floor."""
+        grid, mode, anchored = world.grid, world.mode, world.anchored
+        grounded = np.zeros(len(self._roots), dtype=np.bool_)
+        below = grid[world.cell[self._roots][:, None] + self._down_delta[None, :]]  # (R, 4)
+        safe = np.where(below >= 0, below, 0)
+        starts = (below >= 0) & np.isin(mode[safe], LEG_MODES) & ~anchored[safe]
+        for r in np.flatnonzero(starts.any(axis=1)):
+            level = {int(m) for m in below[r][starts[r]]}
+            for _ in range(self.params.depth - 1):
+                nxt = set()
+                for m in level:
+                    for d in self._down_delta:
+                        v = int(grid[world.cell[m] + d])
+                        if v >= 0 and mode[v] in LEG_MODES and not anchored[v]:
+                            nxt.add(v)
+                level = nxt
+                if not level:
+                    break
+            grounded[r] = bool(level)
+        return grounded
+
+    def after_cycle(self, world, cycle):
+        p = self.params
+        self._cycle = cycle
+        self._measure(world)
+        active = self._active
+        self._creations += int((active & ~self._was_active).sum())
+        self._disbands += int((~active & self._was_active).sum())
+        self._was_active = active
+        signature = (active, self._grounded)
+        if not all(np.array_equal(a, b) for a, b in zip(signature, self._signature)):
+            self._signature = (active.copy(), self._grounded.copy())
+            self._since = cycle
+        k = self._shift
+        start = max(self._since, p.shift_cycles[k])
+        if self._restabilise[k] < 0 and self._complete() and cycle - start >= p.stable_window:
+            self._restabilise[k] = start - p.shift_cycles[k]
+        if k + 1 < len(p.schedule) and cycle == p.shift_cycles[k + 1]:
+            self._shift = k + 1
+            self._weights = np.array(p.schedule[k + 1][1:], dtype=np.float64)
+
+    def _complete(self) -> bool:
+        return bool(np.array_equal(self._active, self._grounded))
+
+    # ------------------------------------------------------------------ sensors
+    def _region_loads(self) -> np.ndarray:
+        """``(2,)`` the reading of a root in the left and the right region."""
+        n_active = np.array([(self._active & self._left).sum(), (self._active & ~self._left).sum()])
+        cap = self.params.load_cap
+        loads = np.where(n_active > 0, self._weights / np.maximum(n_active, 1),
+                         np.where(self._weights > 0, cap, 0.0))
+        return np.minimum(loads, cap)
+
+    def load(self, world):
+        out = np.zeros(world.n_agents, dtype=np.float32)
+        left, right = self._region_loads()
+        out[self._roots] = np.where(self._left, left, right)
+        return out
+
+    # ------------------------------------------------------------------ reward, metrics, success
+    def _legs(self) -> tuple[int, int]:
+        g = self._grounded
+        return int((g & self._left).sum()), int((g & ~self._left).sum())
+
+    def _support(self) -> float:
+        total = self._weights.sum()
+        if total <= 0:
+            return 0.0
+        legs = np.array(self._legs(), dtype=np.float64)
+        return float(np.minimum(self._weights, self.params.f_max * legs).sum() / total)
+
+    def reward_terms(self, world, moved):
+        return {"support": self._support(), "legs": 0.0 - self.params.leg_cost * sum(self._legs())}
+
+    def metrics(self, world):
+        p = self.params
+        legs_left, legs_right = self._legs()
+        load_left, load_right = self._region_loads()
+        start = max(self._since, p.shift_cycles[self._shift])
+        stable = self._complete() and self._cycle - start >= p.stable_window
+        out = {"weight_left": float(self._weights[0]), "weight_right": float(self._weights[1]),
+               "legs_left": float(legs_left), "legs_right": float(legs_right),
+               "grounded_legs": float(legs_left + legs_right),
+               "active_left": float((self._active & self._left).sum()),
+               "active_right": float((self._active & ~self._left).sum()),
+               "load_left": float(load_left), "load_right": float(load_right),
+               "support": self._support(), "stable": float(stable),
+               "leg_creations": float(self._creations), "leg_disbands": float(self._disbands)}
+        for k, value in enumerate(self._restabilise):
+            out[f"restabilise_{k}"] = float(value)
+        out["success"] = float(self.success(world))
+        return out
+
+    def success(self, world):
+        return bool(self._restabilise[-1] >= 0)
