@@ -1,0 +1,392 @@
+"""Grasp: grow eight fingers towards an object of unknown shape and size and wrap it.
+
+Description
+    The robot starts as a connected lump of modules (the base: a random blob, new each
+    episode, or a compact ball), all in SLEEP except ``n_seeds`` (paper: eight) SEED modules
+    spread over the front of the base, the side that faces the object. The object is a
+    solid set of lattice sites (a discretised sphere, an axis-aligned box, or a random
+    connected blob, new each episode) placed about ``distance`` empty layers in front of
+    the base's foremost module along the true direction. The agents know only a rough
+    direction to it (the observation ``hint``, the same unit vector for every agent, drawn
+    within ``hint_noise_deg`` of the true direction); shape, size and distance are unknown
+    to them. A module's contact sensor (``contact[1]``) tells it when it touches the object.
+    The paper's rules grow fingers from the seeds towards the object; on contact the seeds
+    turn into TOUCHSEEDs and the fingers grow over the object's surface. There is no floor
+    (gravity is not modelled); the object is solid: modules can neither enter it nor roll
+    about it (a pivot must be a module), and it blocks the cells a roll sweeps through.
+Agents
+    Every module of the base (``module_0`` ... ``module_{N-1}``).
+Observation
+    The common observation (:mod:`proteo_env.spaces`) with two scent channels: 0, the seed
+    scent (the paper's scent, emitted by SEED and TOUCHSEED modules in the hand-coded
+    rules) and 1, the touch scent (emitted by TOUCHSEEDs only, so a searcher can tell that
+    the object has been reached and where); what emits or relays is up to the policy.
+    ``hint`` is the rough direction of the object (a unit vector); ``contact[1]`` is the
+    contact sensor.
+Actions
+    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, 4 TOUCHSEED, 5 TOUCH.
+Geometry the metrics use (fixed per episode, O(object surface) to read)
+    *Surface sites*: the sites inside the box, not part of the object, that are face
+    neighbours of an object site. A module touches the object exactly when it stands on a
+    surface site. *Sides*: each surface site is assigned to the nearest of the 12 lattice face
+    directions (largest cosine with the vector from the object's centroid to the site; a
+    site on a boundary between sectors goes to the one that faces the base most, so the
+    equator is never credited to the far side); the 12 sectors are congruent, a twelfth of
+    the sphere each. The sides that hold at least one
+    surface site are the object's sides (all 12 for a compact object).
+Metrics
+    ``gap``      hop distance from the nearest module to a surface site (0: in contact),
+                 through the empty box around the object;
+    ``contact``  number of modules touching the object;
+    ``coverage`` share of the surface sites that hold a module;
+    ``surround`` share of the object's sides with at least one module on them;
+    ``success``  1 when both thresholds are met.
+Reward (team reward, the sum of these terms each cycle; the first three are potential-based)
+    ``reach``    = ``(gap_{t-1} - gap_t) / gap_0`` (sums to 1 over the approach);
+    ``coverage`` = ``coverage_weight * (coverage_t - coverage_{t-1})``;
+    ``surround`` = ``surround_weight * (surround_t - surround_{t-1})``;
+    ``success``  = 1 on the cycle the grasp succeeds;
+    ``time``     = ``-time_penalty``.
+Termination
+    Success: ``coverage >= coverage_threshold`` and ``surround >= surround_threshold``.
+    Truncation at ``max_cycles``.
+Parameters
+    See :class:`GraspParams`.
+Paper section
+    4.4 (Grasping an Object).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.lattice import DIRECTIONS, EMPTY
+from ..layouts import Layout, ball_sites, blob_sites
+from .base import Task
+
+SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
+SHAPES = ("sphere", "box", "blob")
+BASES = ("blob", "ball")
+
+SIDES = DIRECTIONS / np.sqrt(2.0)
+"""``(12, 3)`` unit directions around the object's centroid (the 12 face directions of the
+lattice); side ``k`` is the set of surface sites whose direction from the centroid is nearest
+``SIDES[k]``. The 12 sectors are the faces of a rhombic dodecahedron seen from its centre:
+congruent, each a twelfth of the sphere."""
+
+
+@dataclass(frozen=True)
+class GraspParams:
+    """Parameters of the grasp task (lengths in lattice units: neighbours are ``sqrt(2)`` apart).
+
+    Attributes:
+        n_modules: modules in the base (all of them agents).
+        base: ``blob`` (a random connected blob, new each episode) or ``ball`` (the ``n_modules``
+            sites nearest a point: compact, and under the stricter motion models mostly jammed).
+        n_seeds: initial SEED modules on the side of the base facing the object (paper: 8).
+        seed_spread: the seeds are spread over the front of the base (modules with a line of
+            sight towards the object) within this lateral distance of the axis through the
+            base's centroid along the true direction.
+        shape: ``sphere``, ``box`` or ``blob`` (a random connected blob, new each episode).
+        object_size: sphere radius; box half side (times ``box_aspect`` per axis); for a blob the
+            radius of the sphere with the same number of sites.
+        box_aspect: per-axis factors of a box's half sides.
+        distance: empty lattice layers between the front of the base and the near side of the
+            object along the true direction (about the length a finger needs to touch it).
+        direction: nominal direction from the base to the object (normalised).
+        direction_spread_deg: the true direction is drawn per episode uniformly within this
+            angle of ``direction`` (0: always ``direction``).
+        hint_noise_deg: the hint the agents see is drawn per episode uniformly within this
+            angle of the true direction (0: exact).
+        margin: free sites around the base and the object inside the box.
+        coverage_threshold: share of the surface sites held for success.
+        surround_threshold: share of the object's sides held for success.
+        coverage_weight, surround_weight: weights of the reward terms.
+        time_penalty: reward lost per cycle.
+    """
+
+    n_modules: int = 160
+    base: str = "blob"
+    n_seeds: int = 8
+    seed_spread: float = 3.0
+    shape: str = "sphere"
+    object_size: float = 2.5
+    box_aspect: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    distance: int = 5
+    direction: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    direction_spread_deg: float = 0.0
+    hint_noise_deg: float = 10.0
+    margin: int = 4
+    coverage_threshold: float = 0.3
+    surround_threshold: float = 0.75
+    coverage_weight: float = 1.0
+    surround_weight: float = 1.0
+    time_penalty: float = 0.001
+
+    def __post_init__(self):
+        def bad(name, allowed):
+            raise ValueError(f"{name}={getattr(self, name)!r} is not allowed; allowed: {allowed}")
+
+        if self.n_modules < 2:
+            bad("n_modules", "an integer >= 2")
+        if self.base not in BASES:
+            bad("base", ", ".join(BASES))
+        if not 1 <= self.n_seeds <= self.n_modules // 2:
+            bad("n_seeds", f"an integer in 1..{self.n_modules // 2} (half of n_modules)")
+        if self.shape not in SHAPES:
+            bad("shape", ", ".join(SHAPES))
+        if not 0.5 <= self.object_size <= 20:
+            bad("object_size", "a number in [0.5, 20]")
+        if len(self.box_aspect) != 3 or not all(0.1 <= a <= 10 for a in self.box_aspect):
+            bad("box_aspect", "three numbers in [0.1, 10]")
+        if not 0 <= self.distance <= 100:
+            bad("distance", "an integer in 0..100")
+        if len(self.direction) != 3 or not np.isfinite(self.direction).all() or not np.any(self.direction):
+            bad("direction", "three finite numbers, not all zero")
+        if not 0 <= self.seed_spread <= 100:
+            bad("seed_spread", "a distance in [0, 100]")
+        for name in ("direction_spread_deg", "hint_noise_deg"):
+            if not 0 <= getattr(self, name) <= 90:
+                bad(name, "an angle in degrees in [0, 90]")
+        if self.margin < 2:
+            bad("margin", "an integer >= 2")
+        for name in ("coverage_threshold", "surround_threshold"):
+            if not 0 <= getattr(self, name) <= 1:
+                bad(name, "a share in [0, 1]")
+        for name in ("coverage_weight", "surround_weight", "time_penalty"):
+            if getattr(self, name) < 0:
+                bad(name, "a number >= 0")
+
+
+@dataclass(frozen=True)
+class GraspLayout(Layout):
+    """A grasp start layout: the common layout plus the episode's seeds and directions.
+
+    Attributes:
+        seed_mask: ``(N,)`` bool, the modules that start as SEED.
+        direction: ``(3,)`` the true unit direction from the base to the object.
+        hint: ``(3,)`` the rough direction the agents are given (unit vector).
+    """
+
+    seed_mask: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    direction: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    hint: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+
+
+# ---------------------------------------------------------------------- geometry helpers
+def _fcc_grid(r: float) -> np.ndarray:
+    """FCC sites of the cube ``[-r, r]^3`` around the origin."""
+    n = int(np.ceil(r)) + 1
+    g = np.mgrid[-n:n + 1, -n:n + 1, -n:n + 1].reshape(3, -1).T
+    return g[g.sum(axis=1) % 2 == 0]
+
+
+def object_offsets(shape: str, size: float, aspect, rng: np.random.Generator) -> np.ndarray:
+    """``(O, 3)`` object sites around the origin (an FCC site): a sphere, a box or a blob."""
+    if shape == "box":
+        half = size * np.asarray(aspect, dtype=np.float64)
+        g = _fcc_grid(float(half.max()))
+        return g[(np.abs(g) <= half + 1e-9).all(axis=1)]
+    g = _fcc_grid(size)
+    ball = g[(g ** 2).sum(axis=1) <= size * size + 1e-9]
+    if shape == "sphere":
+        return ball
+    return blob_sites(len(ball), rng)
+
+
+def random_in_cone(axis: np.ndarray, angle_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """A unit vector uniformly distributed on the spherical cap of ``angle_deg`` around ``axis``."""
+    axis = np.asarray(axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    if angle_deg <= 0:
+        return axis
+    cos_t = rng.uniform(np.cos(np.radians(angle_deg)), 1.0)
+    phi = rng.uniform(0.0, 2 * np.pi)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    sin_t = np.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    out = cos_t * axis + sin_t * (np.cos(phi) * u + np.sin(phi) * v)
+    return out / np.linalg.norm(out)
+
+
+def nearest_fcc_site(point) -> np.ndarray:
+    """The FCC site nearest ``point`` (round, then fix the parity on the worst-rounded axis)."""
+    p = np.asarray(point, dtype=np.float64)
+    q = np.round(p).astype(np.int64)
+    if q.sum() % 2:
+        err = p - q
+        k = int(np.argmax(np.abs(err)))
+        q[k] += 1 if err[k] > 0 else -1
+    return q
+
+
+def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seeds: int, spread: float) -> np.ndarray:
+    """Indices of ``n_seeds`` base sites on the front of the base, spread out across ``direction``.
+
+    A site is on the front when no other base site lies ahead of it along ``direction``
+    within a lateral distance of 1.5 (a clear line of sight towards the object). Among the front
+    sites within lateral distance ``spread`` of the axis through the base's centroid (all
+    front sites if too few), the first seed is the one nearest the axis and each next one the
+    site laterally farthest from the seeds chosen so far (farthest-point sampling).
+    """
+    rel = sites - sites.mean(axis=0)
+    ahead = rel @ direction
+    lateral = rel - ahead[:, None] * direction[None, :]
+    diff = sites[None, :, :] - sites[:, None, :]  # diff[i, j] = j - i
+    along = diff @ direction
+    across = np.linalg.norm(diff - along[..., None] * direction, axis=2)
+    blocked = ((along > 0) & (across < 1.5)).any(axis=1)
+    front = np.flatnonzero(~blocked)
+    radius = np.linalg.norm(lateral, axis=1)
+    pool = front[radius[front] <= spread]
+    if len(pool) < n_seeds:
+        pool = front[np.argsort(radius[front], kind="stable")[:n_seeds]]
+    if len(pool) < n_seeds:  # a tiny base: the foremost sites
+        pool = np.argsort(-ahead, kind="stable")[:n_seeds]
+    chosen = [int(pool[np.argmin(radius[pool])])]
+    dist = ((lateral[pool] - lateral[chosen[0]]) ** 2).sum(axis=1)
+    for _ in range(n_seeds - 1):
+        dist[np.isin(pool, chosen)] = -1.0
+        nxt = int(np.argmax(dist))
+        chosen.append(int(pool[nxt]))
+        dist = np.minimum(dist, ((lateral[pool] - lateral[pool[nxt]]) ** 2).sum(axis=1))
+    return np.array(chosen, dtype=np.int64)
+
+
+class Grasp(Task):
+    name = "grasp"
+    version = 0
+    modes = ("SLEEP", "SEARCH", "SEED", "FINAL", "TOUCHSEED", "TOUCH")
+    Params = GraspParams
+    n_channels = 2
+    surface_channels = (False, False)
+    passive_role = (1, 1)
+    n_message_values = 15
+    default_policy = "grasp"
+    plot_groups = {"coverage and surround": ["coverage", "surround"]}
+
+    # ------------------------------------------------------------------ layout
+    def build_layout(self, rng):
+        p = self.params
+        nominal = np.asarray(p.direction, dtype=np.float64)
+        direction = random_in_cone(nominal, p.direction_spread_deg, rng)
+        hint = random_in_cone(direction, p.hint_noise_deg, rng)
+        base = ball_sites(p.n_modules) if p.base == "ball" else blob_sites(p.n_modules, rng)
+        base = base - nearest_fcc_site(base.mean(axis=0))
+        obj = object_offsets(p.shape, p.object_size, p.box_aspect, rng)
+        obj = obj - nearest_fcc_site(obj.mean(axis=0))
+        front = float((base @ direction).max())
+        back = float((-(obj @ direction)).max())
+        centre = nearest_fcc_site(direction * (front + p.distance + 1 + back))
+        obj = obj + centre
+        seeds = spread_seeds(base, direction, p.n_seeds, p.seed_spread)
+        everything = np.concatenate([base, obj])
+        lo = everything.min(axis=0) - p.margin
+        hi = everything.max(axis=0) + p.margin
+        shift = -lo
+        if shift.sum() % 2:
+            shift[0] += 1
+            hi[0] += 1
+        size = tuple(int(v) for v in hi - lo + 1)
+        mask = np.zeros(len(base), dtype=bool)
+        mask[seeds] = True
+        self._built = GraspLayout(size=size, modules=base + shift, object_sites=obj + shift, seed_mask=mask,
+                                  direction=direction, hint=hint)
+        return self._built
+
+    def initial_modes(self, layout):
+        modes = np.full(len(layout.positions), SLEEP, dtype=np.int32)
+        mask = getattr(layout, "seed_mask", None)
+        if mask is not None and len(mask) == len(layout.modules):
+            modes[: len(mask)][mask] = SEED
+        return modes
+
+    # ------------------------------------------------------------------ episode state
+    def reset(self, world, rng):
+        layout = getattr(self, "_built", None)
+        if layout is None:
+            raise RuntimeError("grasp: reset() before build_layout()")
+        self._hint = np.asarray(layout.hint, dtype=np.float32)
+        obj = world.object_sites
+        shape = world.shape
+        grid = world.grid
+        # surface sites: in-box, non-object face neighbours of the object
+        cand = (obj[:, None, :] + DIRECTIONS[None, :, :]).reshape(-1, 3)
+        cand = np.unique(cand, axis=0)
+        cand = cand[shape.inside(cand)]
+        idx = shape.index(cand)
+        keep = grid[idx] >= EMPTY  # empty or a module (not object, solid or wall)
+        self._surface_sites = cand[keep]
+        self._surface_cell = idx[keep]
+        centroid = obj.mean(axis=0)
+        rel = self._surface_sites - centroid
+        rel = rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
+        # ties (a site on a sector boundary) go to the sector facing the base most, so a
+        # site on the object's equator is never credited to its far side
+        towards_base = -(SIDES @ np.asarray(layout.direction, dtype=np.float64))
+        self._side = np.argmax(rel @ SIDES.T + 1e-6 * towards_base[None, :], axis=1)
+        self._n_sides = len(np.unique(self._side))
+        self._gap_field = self._hop_field(world)
+        self._last = self._measure(world)
+        self._previous = self._last
+        self._gap0 = max(self._last["gap"], 1)
+
+    def _hop_field(self, world) -> np.ndarray:
+        """Hop distance of every grid cell to the nearest surface site through non-object cells."""
+        grid = world.grid
+        big = np.iinfo(np.int32).max
+        dist = np.full(grid.shape, big, dtype=np.int32)
+        frontier = self._surface_cell
+        dist[frontier] = 0
+        d = 0
+        passable = grid >= EMPTY
+        while frontier.size:
+            d += 1
+            nb = (frontier[:, None] + world.dir_delta[None, :]).reshape(-1)
+            nb = np.unique(nb[passable[nb] & (dist[nb] == big)])
+            dist[nb] = d
+            frontier = nb
+        return dist
+
+    def _measure(self, world) -> dict:
+        held = world.grid[self._surface_cell] >= 0
+        contact = int(held.sum())
+        sides = int(np.unique(self._side[held]).size) if contact else 0
+        gap = int(self._gap_field[world.cell[: world.n_agents]].min())
+        coverage = contact / max(len(self._surface_cell), 1)
+        surround = sides / max(self._n_sides, 1)
+        p = self.params
+        success = coverage >= p.coverage_threshold and surround >= p.surround_threshold and contact > 0
+        return {"gap": gap, "contact": contact, "coverage": coverage, "surround": surround, "success": success}
+
+    def after_cycle(self, world, cycle):
+        self._previous, self._last = self._last, self._measure(world)
+
+    # ------------------------------------------------------------------ hooks read by the env
+    def hint(self, world):
+        return np.broadcast_to(self._hint, (world.n_agents, 3))
+
+    def reward_terms(self, world, moved):
+        p, now, before = self.params, self._last, self._previous
+        return {"reach": (before["gap"] - now["gap"]) / self._gap0,
+                "coverage": p.coverage_weight * (now["coverage"] - before["coverage"]),
+                "surround": p.surround_weight * (now["surround"] - before["surround"]),
+                "success": 1.0 if now["success"] else 0.0,
+                "time": -p.time_penalty}
+
+    def metrics(self, world):
+        m = self._last
+        return {"gap": float(m["gap"]), "contact": float(m["contact"]), "coverage": float(m["coverage"]),
+                "surround": float(m["surround"]), "success": float(m["success"])}
+
+    def success(self, world):
+        return bool(self._last["success"])
+
+    @property
+    def surface_sites(self) -> np.ndarray:
+        """``(S, 3)`` the surface sites of this episode's object (after :meth:`reset`)."""
+        return self._surface_sites
