@@ -6,10 +6,13 @@
 from __future__ import annotations
 
 from .base import Policy
+from .branch import BranchPolicy
 from .chain import ChainPolicy
+from .grasp import GraspPolicy
 from .random_policy import RandomPolicy
+from .table import TablePolicy
 
-POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy)}
+POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy)}
 
 
 def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:

@@ -1,4 +1,9 @@
-"""The ``proteo`` command line: ``proteo demo`` (the main job) and ``proteo run CONFIG``."""
+"""The ``proteo`` command line.
+
+``proteo demo`` (the main job), ``proteo run TASK|CONFIG`` (run, record, render, plot),
+``proteo replay FILE`` (movie, still or plots of a recorded episode) and ``proteo figures``
+(the paper's figures into ``docs/figures``).
+"""
 
 from __future__ import annotations
 
@@ -10,35 +15,76 @@ from pathlib import Path
 DEMO_SETTINGS = {
     "sandbox": {"n_modules": 40, "max_cycles": 200},
     "chain": {"n_modules": 40, "max_cycles": 3000},
+    "branch": {"n_modules": 100, "max_cycles": 400, "target_levels": 99, "motion_model": "minimal"},
+    "grasp": {"n_modules": 120, "object_size": 2.0, "distance": 4, "max_cycles": 1500},
+    "table": {"board_size": 18, "depth": 4, "n_spares": 60, "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)), "motion_model": "minimal"},
 }
 """Per-task settings of ``proteo demo`` (tasks not listed run with their defaults)."""
 
+STILL_SUFFIXES = (".png", ".jpg", ".jpeg", ".svg", ".pdf")
 
-def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out: Path | None):
+
+def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out: Path | None, *,
+         record: Path | None = None, movie: Path | None = None, plots: Path | None = None, camera=None,
+         fps: float = 20.0, max_frames: int | None = 300):
     from baselines import make_policy
 
     from . import make
+    from .recording import Recorder
     from .rollout import run_episode
-    from .snapshot import save_snapshot
 
     from tqdm import tqdm
 
     env = make(task_id, **overrides)
     policy = make_policy(policy_name or env.task.default_policy, env, seed=seed)
     label = f"{env.task.task_id()} / {policy.name}"
+    wants_recording = any(x is not None for x in (out, record, movie, plots))
+    recorder = Recorder(env, task_id=env.task.task_id(), overrides=overrides, seed=seed,
+                        policy=policy.name) if wants_recording else None
     with tqdm(total=env.max_cycles, desc=label, unit="cycle", leave=False) as bar:
         started = time.perf_counter()
-        env.reset(seed=seed)
-        if out is not None:
-            save_snapshot(env.world, out / f"{env.task.name}_start.png", title=f"{label}: start")
-        result = run_episode(env, policy, seed=seed, progress=lambda info: bar.update(1))
+        result = run_episode(env, policy, seed=seed, progress=lambda info: bar.update(1), observe=recorder)
         seconds = time.perf_counter() - started
-    if out is not None:
-        save_snapshot(env.world, out / f"{env.task.name}_end.png",
-                      title=f"{label}: cycle {result.cycles}{' (success)' if result.success else ''}")
+    if recorder is not None:
+        recording = recorder.recording(success=result.success)
+        _outputs(recording, label=label, out=out, record=record, movie=movie, plots=plots, camera=camera, fps=fps,
+                 max_frames=max_frames)
     return {"task": env.task.task_id(), "policy": policy.name, "modules": env.engine.n_modules,
             "cycles": result.cycles, "success": result.success, "reward": result.total_reward,
             "seconds": seconds, "metrics": result.metrics}
+
+
+def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=None, camera=None, fps=20.0,
+             max_frames=300, still=None, still_frame=-1) -> None:
+    """Write what was asked for from a recording: the file, demo pictures, a movie, a still, plots."""
+    if record is not None:
+        recording.save(record)
+    if out is not None:
+        from .render.replay import render_still
+
+        name = recording.task_id.rsplit("-v", 1)[0]
+        render_still(recording, out / f"{name}_start.png", frame=0, camera=camera,
+                     caption=f"{label}: start")
+        end = f"{label}: cycle {int(recording.cycles[-1])}{' (success)' if recording.success else ''}"
+        render_still(recording, out / f"{name}_end.png", frame=-1, camera=camera, caption=end)
+        plots = plots if plots is not None else out / f"{name}_plots"
+    if movie is not None:
+        from tqdm import tqdm
+
+        from .render.replay import frame_indices, render_movie
+
+        total = len(frame_indices(recording.n_frames, max_frames))
+        with tqdm(total=total, desc=f"rendering {movie.name}", unit="frame", leave=False) as bar:
+            render_movie(recording, movie, camera=camera, fps=fps, max_frames=max_frames,
+                         progress=lambda: bar.update(1))
+    if still is not None:
+        from .render.replay import render_still
+
+        render_still(recording, still, frame=still_frame, camera=camera)
+    if plots is not None:
+        from .render.plots import plot_recording
+
+        plot_recording(recording, plots)
 
 
 def _table(rows: list[dict]) -> str:
@@ -62,20 +108,150 @@ def demo(args) -> int:
             overrides["motion_model"] = args.motion_model
         rows.append(_run(task_id, overrides, None, args.seed, out))
     print(_table(rows))
-    print(f"\npictures: {out.resolve()}")
+    print(f"\npictures and plots: {out.resolve()}")
     return 0
+
+
+# ---------------------------------------------------------------------- run
+def _parse_sets(items) -> dict:
+    """``["KEY=VALUE", ...]`` to a dict; values are read as YAML scalars (``40``, ``true``, ``sphere``)."""
+    import yaml
+
+    overrides = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set {item!r} is not allowed; allowed: KEY=VALUE, e.g. --set n_modules=40")
+        overrides[key.strip()] = yaml.safe_load(value) if value.strip() else ""
+    return overrides
+
+
+def _resolve_target(target: str, sets) -> tuple[str, dict]:
+    """A task id or a YAML config path to ``(task_id, overrides)``, with ``--set`` overrides applied."""
+    from .config import ConfigError, load_run_config
+    from .registry import task_class
+
+    path = Path(target)
+    if path.suffix in (".yaml", ".yml") or path.is_file():
+        task_id, overrides = load_run_config(path)
+    else:
+        try:
+            task_id, overrides = task_class(target).task_id(), {}
+        except ConfigError as err:
+            raise ConfigError(f"{err}, or a path to a YAML config (see configs/)") from None
+    return task_id, {**overrides, **_parse_sets(sets)}
+
+
+def _per_episode(path, seed: int, many: bool) -> Path | None:
+    """``path`` itself, or with ``-seed<N>`` before its suffix when several episodes run."""
+    if path is None:
+        return None
+    path = Path(path)
+    return path.with_name(f"{path.stem}-seed{seed}{path.suffix}") if many else path
+
+
+def _camera(args) -> dict | None:
+    """Camera settings given on the command line (checked by the renderer's Camera)."""
+    camera = {k: getattr(args, k) for k in ("azimuth", "elevation", "zoom", "follow") if getattr(args, k) is not None}
+    if args.size is not None:
+        width, sep, height = args.size.lower().partition("x")
+        if not (sep and width.isdigit() and height.isdigit()):
+            raise ValueError(f"--size {args.size!r} is not allowed; allowed: WIDTHxHEIGHT in pixels, e.g. 800x600")
+        camera.update(width=int(width), height=int(height))
+    if camera:
+        from .render.camera import Camera
+
+        Camera.from_options(camera)  # bad settings fail now, before the episode runs
+    return camera or None
+
+
+def _check_paths(record=None, movie=None) -> None:
+    if record is not None and Path(record).suffix != ".npz":
+        raise ValueError(f"--record {str(record)!r} is not allowed; allowed: a file name ending in .npz")
+    if movie is not None:
+        from .render.movie import check_movie_path
+
+        check_movie_path(movie)
 
 
 def run(args) -> int:
-    from .config import load_run_config
-
-    task_id, overrides = load_run_config(args.config)
-    rows = [_run(task_id, overrides, args.policy, seed, Path(args.out) if args.out else None)
-            for seed in range(args.seed, args.seed + args.episodes)]
+    task_id, overrides = _resolve_target(args.target, args.set)
+    _check_paths(args.record, args.render)
+    camera = _camera(args)
+    many = args.episodes > 1
+    rows = []
+    for seed in range(args.seed, args.seed + args.episodes):
+        rows.append(_run(task_id, overrides, args.policy, seed, Path(args.out) if args.out else None,
+                         record=_per_episode(args.record, seed, many), movie=_per_episode(args.render, seed, many),
+                         plots=_per_episode(args.plots, seed, many), camera=camera, fps=args.fps,
+                         max_frames=args.max_frames))
     print(_table(rows))
     successes = sum(r["success"] for r in rows)
     print(f"\nsuccess {successes}/{len(rows)}")
+    for what, path in (("recording", args.record), ("movie", args.render), ("plots", args.plots)):
+        if path is not None:
+            print(f"{what}: {path}" + (" (one per seed: -seed<N>)" if many else ""))
     return 0
+
+
+# ---------------------------------------------------------------------- replay
+def replay(args) -> int:
+    from . import __version__
+    from .recording import load
+
+    if args.out is None and args.plots is None:
+        raise ValueError("replay needs --out (a .gif/.mp4 movie or a .png still) or --plots DIR; "
+                         "allowed: either or both")
+    movie = still = None
+    if args.out is not None:
+        suffix = Path(args.out).suffix.lower()
+        if suffix in STILL_SUFFIXES:
+            still = Path(args.out)
+        else:
+            _check_paths(movie=args.out)
+            movie = Path(args.out)
+    camera = _camera(args)
+    recording = load(args.file)
+    frame = -1
+    if args.cycle is not None:
+        hits = (recording.cycles == args.cycle).nonzero()[0]
+        if not len(hits):
+            raise ValueError(f"--cycle {args.cycle} is not in the recording; allowed: "
+                             f"{int(recording.cycles[0])}..{int(recording.cycles[-1])}")
+        frame = int(hits[0])
+    print(f"{args.file}: {recording.task_id} / {recording.policy}, seed {recording.seed}, "
+          f"{recording.positions.shape[1]} modules, {int(recording.cycles[-1])} cycles, "
+          f"{'success' if recording.success else 'no success'}, written by proteo {recording.package_version}"
+          + ("" if recording.package_version == __version__ else f" (this is {__version__})"))
+    _outputs(recording, label=recording.task_id, movie=movie, plots=Path(args.plots) if args.plots else None,
+             camera=camera, fps=args.fps, max_frames=args.max_frames, still=still, still_frame=frame)
+    for what, path in (("movie", movie), ("picture", still), ("plots", args.plots)):
+        if path is not None:
+            print(f"{what}: {path}")
+    return 0
+
+
+def figures(args) -> int:
+    from .render.figures import make_figures
+
+    make_figures(Path(args.out), seed=args.seed, only=args.only, redraw=args.redraw)
+    return 0
+
+
+# ---------------------------------------------------------------------- parser
+def _picture_args(p, *, movie_default_frames: int = 300) -> None:
+    g = p.add_argument_group("pictures")
+    g.add_argument("--azimuth", type=float, default=None, help="camera azimuth in degrees (default -50)")
+    g.add_argument("--elevation", type=float, default=None, help="camera elevation in degrees (default 28; "
+                   "negative looks from underneath)")
+    g.add_argument("--zoom", type=float, default=None, help="magnification (default 1: fit)")
+    g.add_argument("--follow", action=argparse.BooleanOptionalAction, default=None,
+                   help="frame the modules of each frame instead of the whole episode")
+    g.add_argument("--size", default=None, help="image size WIDTHxHEIGHT (default 800x600)")
+    g.add_argument("--fps", type=float, default=20.0, help="movie frames per second (default 20)")
+    g.add_argument("--max-frames", type=int, default=movie_default_frames,
+                   help=f"movie frames at most, spread over the episode (default {movie_default_frames})")
+    g.add_argument("--plots", default=None, help="folder for the PNG plots of the metrics against cycles")
 
 
 def main(argv=None) -> int:
@@ -83,16 +259,48 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="run every registered task with its default policy")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="out/demo", help="folder for the pictures")
+    p.add_argument("--out", default="out/demo", help="folder for the pictures and plots")
     p.add_argument("--motion-model", default=None, help="override the motion model of every task")
     p.set_defaults(func=demo)
-    p = sub.add_parser("run", help="run a YAML config and report its metrics")
-    p.add_argument("config", help="path to a YAML run config (see configs/)")
+
+    p = sub.add_parser("run", help="run a task (or a YAML config); record, render and plot it")
+    p.add_argument("target", help="a registered task id (e.g. chain-v0) or a path to a YAML run config")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a setting (repeatable), e.g. --set n_modules=40 --set max_cycles=3000")
     p.add_argument("--policy", default=None, help="policy name (default: the task's hand-coded one)")
     p.add_argument("--seed", type=int, default=0, help="first seed")
     p.add_argument("--episodes", type=int, default=1)
-    p.add_argument("--out", default=None, help="folder for pictures (none if omitted)")
+    p.add_argument("--out", default=None, help="folder for start and end pictures (none if omitted)")
+    p.add_argument("--record", default=None, help="write the episode to this .npz file")
+    p.add_argument("--render", default=None, help="write a movie of the episode (.gif or .mp4)")
+    _picture_args(p)
     p.set_defaults(func=run)
+
+    p = sub.add_parser("replay", help="movie, picture or plots of a recorded episode")
+    p.add_argument("file", help="a recording written by proteo run --record")
+    p.add_argument("--out", default=None, help="movie (.gif, .mp4) or picture (.png, .jpg, .svg, .pdf)")
+    p.add_argument("--cycle", type=int, default=None, help="cycle drawn in a picture (default: the last)")
+    _picture_args(p)
+    p.set_defaults(func=replay)
+
+    p = sub.add_parser("figures", help="reproduce the paper's figures (pictures and plots) into docs/figures")
+    p.add_argument("--out", default="docs/figures")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--only", action="append", default=None, help="only this figure (repeatable): chain, branch, "
+                   "table, grasp")
+    p.add_argument("--redraw", action="store_true", help="draw again from the recordings in --out (no episodes run)")
+    p.set_defaults(func=figures)
+
+    p = sub.add_parser("eval", help="compare hand-coded, random, learned and evolved policies over seeds")
+    p.add_argument("--config", default=None, help="per-task settings and checkpoints (YAML; default: "
+                   "configs/eval.yaml when it exists)")
+    p.add_argument("--tasks", default=None, help="comma-separated task names (default: every task with a reward)")
+    p.add_argument("--seeds", type=int, default=None, help="episodes per policy (default: the config's)")
+    p.add_argument("--checkpoint", action="append", default=None, help="a checkpoint to add (repeatable)")
+    p.add_argument("--out", default="out/eval", help="folder for results.md, results.json and eval.png")
+    p.add_argument("--deterministic", action="store_true", help="neural policies take arg-max actions")
+    p.add_argument("--no-plots", action="store_true")
+    p.set_defaults(func=lambda a: __import__("training.evaluate", fromlist=["main"]).main(a))
     args = parser.parse_args(argv)
     try:
         return args.func(args)

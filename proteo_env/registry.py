@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from .config import ConfigError, split_overrides
 from .tasks.base import Task
+from .tasks.branch import Branch
 from .tasks.chain import Chain
+from .tasks.grasp import Grasp
 from .tasks.sandbox import Sandbox
+from .tasks.table import Table
 
-TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain)}
+TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, Grasp, Table, Branch)}
 """Registered task classes by id ``<name>-v<version>``."""
 
 
@@ -21,12 +24,15 @@ def task_class(task_id: str) -> type[Task]:
     raise ConfigError(f"unknown task {task_id!r}; allowed: {', '.join(sorted(TASKS))}")
 
 
-def make(task_id: str, *, render_mode: str | None = None, **overrides):
+def make(task_id: str, *, render_mode: str | None = None, camera=None, **overrides):
     """Build the environment of a registered task.
 
     Args:
         task_id: a registered id such as ``"sandbox-v0"`` (or a bare name for its newest version).
         render_mode: ``None`` or one of ``ProteoEnv.metadata["render_modes"]``.
+        camera: picture settings for ``rgb_array``/``human``: a dict of ``azimuth``,
+            ``elevation``, ``zoom``, ``follow``, ``width``, ``height`` (see
+            :class:`~proteo_env.render.camera.Camera`).
         **overrides: environment settings (``max_cycles``, ``obs_radius``), physics
             (``motion_model``, ``keep_connected``, ``scent_sweeps``, ``exact_scent``,
             ``scent_max``) and the task's own parameters. Unknown keys raise ``ValueError``
@@ -39,4 +45,21 @@ def make(task_id: str, *, render_mode: str | None = None, **overrides):
 
     cls = task_class(task_id)
     config, params = split_overrides(overrides, cls.Params, task_name=cls.task_id())
-    return ProteoEnv(cls(params), config, render_mode=render_mode)
+    return ProteoEnv(cls(params), config, render_mode=render_mode, camera=camera)
+
+
+def make_batched(task_id: str, n_envs: int, **overrides):
+    """Build ``n_envs`` copies of a registered task stepped together on arrays.
+
+    Same arguments as :func:`make` (no ``render_mode``). Returns a
+    :class:`~proteo_env.batched.BatchedEnv`; world ``b`` of ``reset(seed=s)`` follows the
+    trajectory of ``make(task_id, **overrides)`` reset with seed ``s + b``.
+    """
+    from .batched import BatchedEnv
+
+    if not isinstance(n_envs, int) or n_envs < 1:
+        raise ConfigError(f"n_envs={n_envs!r} is not allowed; allowed: an integer >= 1")
+    cls = task_class(task_id)
+    config, params = split_overrides(overrides, cls.Params, task_name=cls.task_id())
+    return BatchedEnv([cls(params) for _ in range(n_envs)], config)
+

@@ -15,6 +15,9 @@ import proteo_env
 SMALL_OVERRIDES: dict[str, dict] = {
     "sandbox": {"n_modules": 12},
     "chain": {"n_modules": 12},
+    "branch": {"n_modules": 12, "T": 3, "B": 2},
+    "table": {"board_size": 6, "depth": 2, "n_spares": 8},
+    "grasp": {"n_modules": 16, "n_seeds": 2, "object_size": 1.5, "distance": 1, "margin": 2},
 }
 
 

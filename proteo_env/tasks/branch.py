@@ -1,0 +1,298 @@
+"""Branch: grow a recursively branching tree from an arbitrary connected blob.
+
+Description
+    All modules start in SLEEP as a random connected blob, except one NODE picked by the task
+    (the module nearest the blob's centre: the paper's "a module randomly decides to switch to
+    the NODE mode", with the choice made centrally as in the chain task). A NODE emits both
+    scents and spawns up to ``B`` seeds; each seed grows a branch straight away from its node
+    like the chain's seed; a FINAL module whose node scent exceeds ``T`` (it is more than
+    ``T`` hops from the nearest node) becomes a NODE itself, so branches branch again about
+    every ``T + 1`` modules until the modules run out.
+Agents
+    Every module (``module_0`` ... ``module_{N-1}``).
+Observation
+    The common observation (:mod:`proteo_env.spaces`) with two scent channels: 0 the
+    *regular* scent (emitted by SEED and NODE, climbed by SEARCH modules), 1 the *node* scent
+    (emitted by NODE and INODE, read by FINAL modules to decide whether to become a node).
+Actions
+    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, 4 NODE, 5 INODE.
+Reward (team reward, the sum of these terms each cycle)
+    ``grown``   = ``(G_t - G_{t-1}) / N``, the change in the number ``G`` of modules in the
+                  grown tree (see Metrics; a potential-based shaping term);
+    ``levels``  = ``0.5 * (L_t - L_{t-1})``, the change in the number of branching levels;
+    ``success`` = 1 on the cycle of success;
+    ``time``    = ``-time_penalty`` (default 0.001).
+Metrics (exact, O(N) per cycle)
+    The *grown structure* is the connected piece, containing the first node (the root), of the
+    modules that have left the crowd: modes SEED, FINAL, NODE, INODE (SLEEP and SEARCH
+    modules are the unused blob and travellers). Which modules count is read from the modes;
+    everything else is measured from the sites alone. On it:
+
+    ``tree_size`` (``G``), ``tree`` (1 when the piece has ``G - 1`` contacts, i.e. no
+    cycles), ``branch_points`` (modules with at least 3 neighbours in the piece),
+    ``levels`` (branching levels: only *real* branching points count, those with at least
+    two child arms of at least ``min_gap`` modules (default 3; an arm runs from the point's
+    child down to the next branching point or leaf, both included); the topmost real point on
+    a path from the root is level 1, and each real point is one level more than the nearest
+    real point above it when it is at least ``min_gap`` hops below it, the same level when
+    closer; ``levels`` is the largest: a star with long arms is 1 level, a star whose arms
+    branch again further out is 2), ``branches_per_point`` (mean number of child branches of a
+    branching point: its degree, minus 1 unless it is the root), ``point_distance`` (mean
+    graph distance along the tree from each non-root branching point to the nearest
+    branching point on its path to the root; 0 when there is none), ``leaves`` (degree-1
+    modules of the piece), ``used_share`` (``G / N``); mode counts as extra information:
+    ``nodes`` (NODE + INODE), ``seeds``, ``searching`` (SLEEP + SEARCH).
+    Contacts are counted in the whole module graph restricted to the piece; when the piece
+    has cycles (``tree`` = 0) the levels and distances are those of a breadth-first
+    spanning tree from the root.
+Termination
+    Success: the grown structure is a tree (no cycles) with at least ``target_levels``
+    (default 2) levels of branching. Truncation at ``max_cycles``.
+Parameters
+    See :class:`BranchParams`.
+Paper section
+    4.2 (Recursive Branching for Locomotion and Manipulation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.jit import kernel
+from ..layouts import Layout, blob_sites, place_in_box
+from .base import Task
+
+SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
+REGULAR, NODE_SCENT = 0, 1
+GROWN_MODES = np.array([SEED, FINAL, NODE, INODE], dtype=np.int64)
+
+
+@kernel
+def measure_tree(grid, cell, mode, n_modules, dir_delta, root, min_gap, degree, parent, queue, arm, longc,
+                 real_up, real_d, any_d, level):
+    """Breadth-first search of the grown piece from ``root`` and its branching levels (O(N)).
+
+    A module is grown when its mode is SEED, FINAL, NODE or INODE. Scratch (N,) arrays are
+    filled for grown modules reached from the root: ``degree`` (neighbours in the piece),
+    ``parent`` (-2 when not reached, -1 for the root), ``arm`` (modules from here down the
+    branch to the next branching point or leaf, both included), ``longc`` (child arms of at
+    least ``min_gap`` modules), ``real_up``/``real_d`` (nearest *real* branching point above
+    and its distance), ``any_d`` (distance to the nearest branching point above, 0 if none),
+    ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
+    distance_sum, distance_count, leaves)``; see the module docstring for the definitions.
+    """
+    for n in range(n_modules):
+        parent[n] = -2
+        degree[n] = 0
+        arm[n] = 0
+        longc[n] = 0
+        level[n] = 0
+    m = mode[root]
+    if not (m == 2 or m == 3 or m == 4 or m == 5):
+        return 0, 0, 0, 0, 0, 0, 0, 0
+    parent[root] = -1
+    queue[0] = root
+    head, tail = 0, 1
+    while head < tail:
+        n = queue[head]
+        head += 1
+        for k in range(12):
+            nb = grid[cell[n] + dir_delta[k]]
+            if nb >= 0:
+                mb = mode[nb]
+                if mb == 2 or mb == 3 or mb == 4 or mb == 5:
+                    degree[n] += 1
+                    if parent[nb] == -2:
+                        parent[nb] = n
+                        queue[tail] = nb
+                        tail += 1
+    size = tail
+    # children before parents: arm lengths and long child arms
+    for i in range(size - 1, -1, -1):
+        n = queue[i]
+        if degree[n] == 2 and parent[n] >= 0:
+            arm[n] += 1  # arm[n] held the arm of its one child
+        else:
+            arm[n] = 1
+        p = parent[n]
+        if p >= 0:
+            if arm[n] >= min_gap:
+                longc[p] += 1
+            if degree[p] == 2 and parent[p] >= 0:
+                arm[p] = arm[n]
+    edges = 0
+    points = 0
+    levels = 0
+    children = 0
+    dist_sum = 0
+    dist_count = 0
+    leaves = 0
+    # parents before children: nearest branching points above, levels
+    for i in range(size):
+        n = queue[i]
+        edges += degree[n]
+        if degree[n] == 1:
+            leaves += 1
+        p = parent[n]
+        if p < 0:
+            real_up[n] = -1
+            real_d[n] = 0
+            any_d[n] = 0
+        else:
+            if degree[p] >= 3:
+                any_d[n] = 1
+            else:
+                any_d[n] = any_d[p] + 1 if any_d[p] > 0 else 0
+            if degree[p] >= 3 and longc[p] >= 2:
+                real_up[n] = p
+                real_d[n] = 1
+            else:
+                real_up[n] = real_up[p]
+                real_d[n] = real_d[p] + 1
+        if degree[n] < 3:
+            continue
+        points += 1
+        children += degree[n] if p < 0 else degree[n] - 1
+        if any_d[n] > 0:
+            dist_sum += any_d[n]
+            dist_count += 1
+        if longc[n] >= 2:
+            a = real_up[n]
+            if a < 0:
+                level[n] = 1
+            else:
+                level[n] = level[a] + (1 if real_d[n] >= min_gap else 0)
+            if level[n] > levels:
+                levels = level[n]
+    return size, edges // 2, points, levels, children, dist_sum, dist_count, leaves
+
+
+@dataclass(frozen=True)
+class BranchParams:
+    """Parameters of the branch task.
+
+    Attributes:
+        n_modules: number of modules in the start blob.
+        T: node-scent threshold: a FINAL module whose node scent exceeds ``T`` becomes a
+            NODE (paper: 12). Read by the policy from the environment's parameters.
+        B: number of seeds a NODE spawns before it goes INODE (paper: 6).
+        target_levels: levels of branching needed for success (a large value: never succeed,
+            to watch the tree grow until the modules run out).
+        min_gap: shortest arm, in modules, that counts as a branch for the ``levels`` metric,
+            and the least distance between two branching points of successive levels (so that
+            a clump of modules with 3 neighbours is not a tree of many levels).
+        initial_node: start with one NODE near the blob's centre; if False every module
+            starts in SLEEP and the policy must start growth itself.
+        margin: free sites around the blob (as in the chain task): horizontally the blob
+            gets ``n_modules // 2 + margin`` free sites on each side (a branch of more than
+            half the modules is possible but then the tree has at most one level), vertically
+            ``margin``.
+        time_penalty: reward lost per cycle.
+    """
+
+    n_modules: int = 100
+    T: int = 12
+    B: int = 6
+    target_levels: int = 2
+    min_gap: int = 3
+    initial_node: bool = True
+    margin: int = 6
+    time_penalty: float = 0.001
+
+    def __post_init__(self):
+        if self.n_modules < 2:
+            raise ValueError(f"n_modules={self.n_modules!r} is not allowed; allowed: an integer >= 2")
+        if self.T < 1:
+            raise ValueError(f"T={self.T!r} is not allowed; allowed: an integer >= 1")
+        if self.B < 1:
+            raise ValueError(f"B={self.B!r} is not allowed; allowed: an integer >= 1")
+        if self.target_levels < 1:
+            raise ValueError(f"target_levels={self.target_levels!r} is not allowed; allowed: an integer >= 1")
+        if self.min_gap < 1:
+            raise ValueError(f"min_gap={self.min_gap!r} is not allowed; allowed: an integer >= 1")
+        if self.margin < 1:
+            raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
+
+
+class Branch(Task):
+    name = "branch"
+    version = 0
+    modes = ("SLEEP", "SEARCH", "SEED", "FINAL", "NODE", "INODE")
+    Params = BranchParams
+    n_channels = 2
+    surface_channels = (False, False)
+    passive_role = (1, 1)
+    n_message_values = 15
+    default_policy = "branch"
+    plot_groups = {"tree": ["branch_points", "levels", "nodes"]}
+
+    def build_layout(self, rng):
+        p = self.params
+        room = p.n_modules // 2 + p.margin
+        sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin))
+        return Layout(size=size, modules=sites)
+
+    def root_of(self, layout) -> int:
+        """The first node: the module nearest the blob's centre (lowest index on ties)."""
+        centre = layout.modules.mean(axis=0)
+        return int(np.argmin(((layout.modules - centre) ** 2).sum(axis=1)))
+
+    def initial_modes(self, layout):
+        modes = np.full(len(layout.positions), SLEEP, dtype=np.int32)
+        self._root = self.root_of(layout)
+        if self.params.initial_node:
+            modes[self._root] = NODE
+        return modes
+
+    def reset(self, world, rng):
+        n = world.n_modules
+        self._scratch = [np.zeros(n, dtype=np.int64) for _ in range(9)]
+        if not hasattr(self, "_root") or self._root >= n:
+            self._root = 0
+        self._last = self._measure(world)
+
+    def _root_now(self, world) -> int:
+        """The root: the task's first node; without one (``initial_node=False``) the lowest-index
+        NODE or INODE module, else module 0."""
+        if self.params.initial_node:
+            return self._root
+        nodes = np.flatnonzero((world.mode == NODE) | (world.mode == INODE))
+        return int(nodes[0]) if nodes.size else 0
+
+    def _measure(self, world):
+        size, edges, points, levels, children, dsum, dcount, leaves = measure_tree(
+            world.grid, world.cell, world.mode, world.n_modules, world.dir_delta, self._root_now(world),
+            self.params.min_gap, *self._scratch)
+        tree = size > 0 and edges == size - 1
+        mode = world.mode
+        return {"size": int(size), "tree": bool(tree), "points": int(points), "levels": int(levels),
+                "branches_per_point": children / points if points else 0.0,
+                "point_distance": dsum / dcount if dcount else 0.0, "leaves": int(leaves),
+                "nodes": int(((mode == NODE) | (mode == INODE)).sum()), "seeds": int((mode == SEED).sum()),
+                "searching": int(((mode == SLEEP) | (mode == SEARCH)).sum()),
+                "complete": bool(tree and levels >= self.params.target_levels)}
+
+    def after_cycle(self, world, cycle):
+        self._previous, self._last = self._last, self._measure(world)
+
+    def reward_terms(self, world, moved):
+        n = world.n_modules
+        prev = getattr(self, "_previous", self._last)
+        return {"grown": (self._last["size"] - prev["size"]) / n,
+                "levels": 0.5 * (self._last["levels"] - prev["levels"]),
+                "success": 1.0 if self._last["complete"] else 0.0,
+                "time": -self.params.time_penalty}
+
+    def metrics(self, world):
+        m = self._last
+        return {"tree_size": float(m["size"]), "tree": float(m["tree"]), "branch_points": float(m["points"]),
+                "levels": float(m["levels"]), "branches_per_point": float(m["branches_per_point"]),
+                "point_distance": float(m["point_distance"]), "leaves": float(m["leaves"]),
+                "used_share": m["size"] / world.n_modules, "nodes": float(m["nodes"]),
+                "seeds": float(m["seeds"]), "searching": float(m["searching"]),
+                "success": float(m["complete"])}
+
+    def success(self, world):
+        return self._last["complete"]
