@@ -3,13 +3,14 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install demo test bench
+.PHONY: install demo test bench eval
 
 $(BIN)/python:
 	$(PY) -m venv .venv
 
 install: $(BIN)/python
-	$(BIN)/pip install -q -c constraints.txt -e ".[test]"
+	$(BIN)/pip install -q -c constraints.txt torch==2.13.0
+	$(BIN)/pip install -q -c constraints.txt -e ".[test,train]"
 
 demo: install
 	$(BIN)/proteo demo
@@ -20,3 +21,6 @@ test: install
 bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
+
+eval: install
+	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval

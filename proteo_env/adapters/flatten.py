@@ -1,0 +1,176 @@
+"""The ``Dict`` observation of one module as one float vector, block by named block.
+
+Learning libraries want a flat ``float32`` vector; this module builds it from the named
+observation fields of :mod:`proteo_env.spaces` (never from offsets into another vector) and
+names every block of the result, so a feature can be found again by name:
+``encoder.slices["neighbour_scent_delta"]``.
+
+Blocks, in order (``K`` sites, ``C`` channels, ``M`` modes, ``V`` message values):
+
+========================== ========= ========================================================
+block                      size      value
+========================== ========= ========================================================
+``neighbour_kind``         K * 4     one-hot of empty / module / solid / object, per site
+``neighbour_mode``         K * (M+1) one-hot of "no module" then mode ``0..M-1``, per site
+``neighbour_scent_present`` K * C    1 where that module carries scent (value < ``scent_max``)
+``neighbour_scent_value``  K * C     ``min(scent, scent_scale) / scent_scale``; 1 where none
+``neighbour_scent_delta``  K * C     ``clip(neighbour - own, -2, 2) / 2`` where both carry
+                                     scent, else 0 (the local gradient the rules climb)
+``own_mode``               M         one-hot
+``own_scent_present``      C         1 where this module carries scent
+``own_scent_value``        C         ``min(scent, scent_scale) / scent_scale``; 1 where none
+``messages``               12*(V+1)  one-hot of the value received from each direction
+``contact``                2         touching the ground, touching the object
+``load``                   1         ``log1p(load)``
+``hint``                   3         the task's global hint
+``action_mask``            13        the legal moves (stay, then the 12 directions)
+========================== ========= ========================================================
+
+Sites and channels are site-major: block ``neighbour_scent_delta`` holds site 0's channels,
+then site 1's, and so on. The encoder's :meth:`ObservationEncoder.spec` is stored with
+every checkpoint, so a policy is only ever fed the encoding it was trained on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Mapping
+
+import numpy as np
+
+from ..spaces import N_MOVES
+
+SCENT_SCALE = 16
+"""Scent values at or above this read as "far" (1.0) in the ``*_scent_value`` blocks."""
+
+
+@dataclass(frozen=True)
+class ObservationEncoder:
+    """Turns observation fields into ``(B, size)`` float32 features (blocks in the module docstring).
+
+    Args:
+        n_sites: neighbourhood sites ``K`` (12, or 54 with ``obs_radius=2``).
+        n_channels: scent channels ``C``.
+        n_modes: modes ``M`` of the task.
+        n_message_values: largest message value ``V``.
+        scent_max: the scent value meaning "no scent".
+        scent_scale: see :data:`SCENT_SCALE`.
+    """
+
+    n_sites: int
+    n_channels: int
+    n_modes: int
+    n_message_values: int
+    scent_max: int
+    scent_scale: int = SCENT_SCALE
+
+    @classmethod
+    def for_env(cls, env, *, scent_scale: int = SCENT_SCALE) -> "ObservationEncoder":
+        """The encoder of a :class:`~proteo_env.env.ProteoEnv` (from its static interface only)."""
+        space = env.observation_space(env.possible_agents[0])
+        return cls(n_sites=space["neighbour_kind"].shape[0], n_channels=env.task.n_channels,
+                   n_modes=len(env.task.modes), n_message_values=env.task.n_message_values,
+                   scent_max=env.config.physics.scent_max, scent_scale=scent_scale)
+
+    # ------------------------------------------------------------------ layout
+    @property
+    def blocks(self) -> tuple[tuple[str, int], ...]:
+        """``(name, size)`` of every block, in order."""
+        k, c, m, v = self.n_sites, self.n_channels, self.n_modes, self.n_message_values
+        return (("neighbour_kind", k * 4), ("neighbour_mode", k * (m + 1)),
+                ("neighbour_scent_present", k * c), ("neighbour_scent_value", k * c),
+                ("neighbour_scent_delta", k * c), ("own_mode", m), ("own_scent_present", c),
+                ("own_scent_value", c), ("messages", 12 * (v + 1)), ("contact", 2), ("load", 1),
+                ("hint", 3), ("action_mask", N_MOVES))
+
+    @property
+    def slices(self) -> dict[str, slice]:
+        """Block name to its slice of the feature vector."""
+        out, start = {}, 0
+        for name, size in self.blocks:
+            out[name] = slice(start, start + size)
+            start += size
+        return out
+
+    @property
+    def size(self) -> int:
+        """Length of the feature vector."""
+        return sum(size for _, size in self.blocks)
+
+    def spec(self) -> dict:
+        """Plain-dict description (stored in checkpoints and compared on load)."""
+        return {**asdict(self), "size": self.size}
+
+    # ------------------------------------------------------------------ encoding
+    def encode_buffers(self, buffers) -> np.ndarray:
+        """Features of every agent from :class:`~proteo_env.spaces.ObservationBuffers`: ``(A, size)``."""
+        return self.encode_fields({name: getattr(buffers, name) for name in _FIELDS})
+
+    def encode_observations(self, observations: Mapping[str, Mapping[str, np.ndarray]]) -> np.ndarray:
+        """Features from the per-agent dict that ``env.reset``/``env.step`` return: ``(len, size)``, in dict order."""
+        obs = list(observations.values())
+        return self.encode_fields({name: np.stack([o[name] for o in obs]) for name in _FIELDS})
+
+    def encode_fields(self, fields: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Features from observation fields that carry a leading batch axis ``B``: ``(B, size)``."""
+        kind = np.asarray(fields["neighbour_kind"])
+        b, k = kind.shape
+        if k != self.n_sites:
+            raise ValueError(f"observation has {k} neighbour sites; this encoder expects {self.n_sites}")
+        out = np.zeros((b, self.size), dtype=np.float32)
+        sl = self.slices
+        c, m, v = self.n_channels, self.n_modes, self.n_message_values
+        rows = np.arange(b)[:, None]
+        sites = np.arange(k)[None, :]
+
+        view = np.zeros((b, k, 4), dtype=np.float32)
+        view[rows, sites, np.clip(kind, 0, 3)] = 1.0
+        out[:, sl["neighbour_kind"]] = view.reshape(b, -1)
+
+        mode = np.asarray(fields["neighbour_mode"])
+        view = np.zeros((b, k, m + 1), dtype=np.float32)
+        view[rows, sites, np.clip(mode + 1, 0, m)] = 1.0
+        out[:, sl["neighbour_mode"]] = view.reshape(b, -1)
+
+        scent = np.asarray(fields["neighbour_scent"]).reshape(b, k, c).astype(np.int64)
+        own = np.asarray(fields["own_scent"]).reshape(b, 1, c).astype(np.int64)
+        present = scent < self.scent_max
+        own_present = own < self.scent_max
+        out[:, sl["neighbour_scent_present"]] = present.reshape(b, -1)
+        out[:, sl["neighbour_scent_value"]] = (np.minimum(scent, self.scent_scale) / self.scent_scale).reshape(b, -1)
+        delta = np.where(present & own_present, np.clip(scent - own, -2, 2) / 2.0, 0.0)
+        out[:, sl["neighbour_scent_delta"]] = delta.reshape(b, -1)
+
+        own_mode = np.clip(np.asarray(fields["own_mode"]).reshape(b), 0, m - 1)
+        out[np.arange(b), sl["own_mode"].start + own_mode] = 1.0
+        out[:, sl["own_scent_present"]] = own_present.reshape(b, c)
+        out[:, sl["own_scent_value"]] = (np.minimum(own, self.scent_scale) / self.scent_scale).reshape(b, c)
+
+        messages = np.clip(np.asarray(fields["messages"]), 0, v)
+        view = np.zeros((b, 12, v + 1), dtype=np.float32)
+        view[rows, np.arange(12)[None, :], messages] = 1.0
+        out[:, sl["messages"]] = view.reshape(b, -1)
+
+        out[:, sl["contact"]] = np.asarray(fields["contact"]).reshape(b, 2)
+        out[:, sl["load"]] = np.log1p(np.maximum(np.asarray(fields["load"]).reshape(b, 1), 0.0))
+        out[:, sl["hint"]] = np.asarray(fields["hint"]).reshape(b, 3)
+        out[:, sl["action_mask"]] = np.asarray(fields["action_mask"]).reshape(b, N_MOVES)
+        return out
+
+
+_FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent", "messages",
+           "contact", "load", "hint", "action_mask")
+
+
+def flat_action_mask(move_mask: np.ndarray, nvec: np.ndarray) -> np.ndarray:
+    """Mask over the concatenated choices of a ``MultiDiscrete`` action: ``(B, sum(nvec))`` bool.
+
+    The first ``nvec[0] = 13`` columns are the observation's move mask; every other action
+    field (mode, scent roles, message) is always allowed. This is the layout sb3-contrib's
+    ``MaskablePPO`` expects for ``MultiDiscrete`` spaces.
+    """
+    move_mask = np.asarray(move_mask, dtype=bool)
+    b = move_mask.shape[0]
+    out = np.ones((b, int(np.sum(nvec))), dtype=bool)
+    out[:, :N_MOVES] = move_mask
+    return out

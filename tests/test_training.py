@@ -1,0 +1,215 @@
+"""Adapters, training scripts, checkpoints and ``proteo eval``, each with tiny budgets (seconds).
+
+Every training script runs end to end and leaves a checkpoint that ``proteo eval`` loads;
+the SB3 adapter passes SB3's ``env_checker`` and the TorchRL env ``check_env_specs``;
+evaluation of the hand-coded and random policies is deterministic for a seed; a bad
+checkpoint gets one clear error.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+import proteo_env
+from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
+
+TINY = {"n_modules": 6, "max_cycles": 8}
+TINY_FLAG = "{n_modules: 6, max_cycles: 8}"
+
+
+# ---------------------------------------------------------------------- flatten (no torch needed)
+def test_encoder_blocks_are_named_and_match_both_inputs():
+    env = proteo_env.make("chain-v0", **TINY)
+    observations, _ = env.reset(seed=3)
+    enc = ObservationEncoder.for_env(env)
+    slices = enc.slices
+    assert list(slices) == [name for name, _ in enc.blocks]
+    assert sum(s.stop - s.start for s in slices.values()) == enc.size
+    a = enc.encode_buffers(env.observe_arrays())
+    b = enc.encode_observations(observations)
+    assert a.dtype == np.float32 and a.shape == (len(env.agents), enc.size)
+    np.testing.assert_array_equal(a, b)
+    assert a.min() >= -1.0 and a.max() <= 1.0
+    for i, agent in enumerate(env.agents):
+        np.testing.assert_array_equal(a[i, slices["action_mask"]], observations[agent]["action_mask"])
+        assert a[i, slices["own_mode"]].sum() == 1.0
+        assert a[i, slices["neighbour_kind"]].sum() == enc.n_sites  # one kind per site
+
+
+def test_flat_action_mask_layout():
+    move = np.zeros((2, 13), dtype=np.int8)
+    move[:, 0] = 1
+    move[1, 5] = 1
+    nvec = np.array([13, 4, 3, 13, 16])
+    mask = flat_action_mask(move, nvec)
+    assert mask.shape == (2, nvec.sum()) and mask.dtype == bool
+    assert mask[:, 13:].all() and mask[1, 5] and not mask[0, 5]
+
+
+# ---------------------------------------------------------------------- adapters
+def test_sb3_env_checker_and_vecenv():
+    pytest.importorskip("sb3_contrib")
+    from stable_baselines3.common.env_checker import check_env
+
+    from proteo_env.adapters.sb3 import ProteoAgentEnv, ProteoVecEnv
+
+    check_env(ProteoAgentEnv("chain-v0", **TINY), warn=True)
+    venv = ProteoVecEnv("chain-v0", n_copies=2, seed=0, **TINY)
+    obs = venv.reset()
+    assert obs.shape == (venv.num_envs, venv.encoder.size) and venv.observation_space.contains(obs[0])
+    rng = np.random.default_rng(0)
+    finished = 0
+    for _ in range(TINY["max_cycles"] + 1):
+        masks = venv.action_masks()
+        assert masks.shape == (venv.num_envs, int(venv.nvec.sum()))
+        actions = rng.integers(0, venv.nvec, size=(venv.num_envs, len(venv.nvec)))
+        actions[:, 0] = 0  # stay is always legal
+        obs, rewards, dones, infos = venv.step(actions)
+        assert np.all(rewards[:6] == rewards[0])  # the team reward, shared by a copy's modules
+        for i in np.flatnonzero(dones):
+            assert "terminal_observation" in infos[i]
+        finished += sum("episode" in info for info in infos)
+    assert finished >= 2  # each copy reported its episode once
+
+
+def test_torchrl_check_env_specs():
+    pytest.importorskip("torchrl")
+    from torchrl.envs.utils import check_env_specs
+
+    from proteo_env.adapters.torchrl import ProteoTorchRLEnv
+
+    env = ProteoTorchRLEnv("chain-v0", n_copies=2, seed=0, **TINY)
+    check_env_specs(env, seed=0)
+    td = env.rollout(TINY["max_cycles"] + 3, break_when_any_done=False)  # auto-reset inside rollout
+    assert td["agents", "observation"].shape[-2:] == (6, env.encoder.size)
+
+
+# ---------------------------------------------------------------------- training scripts -> checkpoints -> eval
+@pytest.fixture(scope="module")
+def checkpoints(tmp_path_factory):
+    """One tiny run of every training script; their final checkpoints."""
+    pytest.importorskip("sb3_contrib")
+    pytest.importorskip("torchrl")
+    pytest.importorskip("cma")
+    from training import cma_es, sb3_ppo, torchrl_ppo
+
+    root = tmp_path_factory.mktemp("runs")
+    common = ["--env", TINY_FLAG, "--tensorboard", "false"]
+    return {
+        "sb3": sb3_ppo.main(["--config", "configs/train/sb3_ppo_chain.yaml", "--total-steps", "192", "--n-steps", "8",
+                             "--n-copies", "2", "--batch-size", "48", "--n-epochs", "1", "--checkpoint-every", "96",
+                             "--time-limit-minutes", "0", "--run-dir", str(root / "sb3"), *common]),
+        "torchrl": torchrl_ppo.main(["--config", "configs/train/torchrl_ippo_chain.yaml", "--variant", "mappo",
+                                     "--total-steps", "192", "--n-steps", "8", "--n-copies", "2",
+                                     "--minibatch-size", "48", "--n-epochs", "1", "--checkpoint-every", "96",
+                                     "--time-limit-minutes", "0", "--run-dir", str(root / "torchrl"), *common]),
+        "cma_rules": cma_es.main(["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2",
+                                  "--popsize", "3", "--episodes-per-candidate", "1", "--checkpoint-every", "1",
+                                  "--time-limit-minutes", "0", "--run-dir", str(root / "cma_rules"), *common]),
+        "cma_neural": cma_es.main(["--config", "configs/train/cma_neural_chain.yaml", "--generations", "2",
+                                   "--popsize", "3", "--episodes-per-candidate", "1", "--hidden", "[4]",
+                                   "--checkpoint-every", "1", "--time-limit-minutes", "0",
+                                   "--run-dir", str(root / "cma_neural"), *common]),
+    }
+
+
+def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_path):
+    from training.evaluate import evaluate
+
+    for name, final in checkpoints.items():
+        meta = json.loads((final / "proteo.json").read_text())
+        assert meta["task"] == "chain-v0" and meta["agent_steps"] > 0, name
+        assert (final.parent / "progress.csv").is_file(), name
+        assert any((final.parent / "checkpoints").iterdir()), name
+    results = evaluate(tasks=["chain"], seeds=2, checkpoints=[str(p) for p in checkpoints.values()],
+                       out=tmp_path / "eval", progress=False, plots=True, config=None)
+    kinds = [r.kind for r in results]
+    assert kinds == ["hand-coded", "random", "learned", "learned", "evolved", "evolved"]
+    assert all(r.n == 2 for r in results)
+    assert (tmp_path / "eval" / "results.md").read_text().startswith("| task | policy |")
+    assert (tmp_path / "eval" / "eval.png").stat().st_size > 0
+
+
+def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
+    from training import cma_es, sb3_ppo
+
+    first = sorted((checkpoints["sb3"].parent / "checkpoints").iterdir())[0]
+    final = sb3_ppo.main(["--resume", str(first), "--total-steps", "288", "--n-steps", "8", "--n-copies", "2",
+                          "--env", TINY_FLAG, "--tensorboard", "false", "--run-dir", str(tmp_path / "sb3")])
+    assert json.loads((final / "proteo.json").read_text())["agent_steps"] >= 288
+    first = sorted((checkpoints["cma_rules"].parent / "checkpoints").iterdir())[0]
+    final = cma_es.main(["--config", "configs/train/cma_rules_chain.yaml", "--resume", str(first), "--generations", "3",
+                         "--popsize", "3", "--episodes-per-candidate", "1", "--env", TINY_FLAG,
+                         "--tensorboard", "false", "--run-dir", str(tmp_path / "cma")])
+    assert json.loads((final / "proteo.json").read_text())["generation"] == 3
+
+
+def test_learned_policy_is_deterministic_for_a_seed(checkpoints):
+    from proteo_env.rollout import run_episode
+    from training.checkpoints import load_policy
+
+    env = proteo_env.make("chain-v0", **TINY)
+    for path in checkpoints.values():
+        policy = load_policy(path, env, seed=0)
+        a, b = (run_episode(env, policy, seed=5) for _ in range(2))
+        assert (a.total_reward, a.cycles) == (b.total_reward, b.cycles), path
+
+
+# ---------------------------------------------------------------------- evaluation
+def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
+    pytest.importorskip("yaml")
+    from training.evaluate import evaluate
+
+    config = tmp_path / "eval.yaml"
+    config.write_text("seeds: 3\nfirst_seed: 7\ntasks:\n  chain:\n    env: {n_modules: 6, max_cycles: 40}\n")
+    runs = [evaluate(config=config, tasks=["chain"], out=tmp_path / f"e{i}", progress=False, plots=False)
+            for i in range(2)]
+    for a, b in zip(*runs):
+        assert (a.policy, a.returns, a.successes, a.cycles, a.seeds) == (b.policy, b.returns, b.successes,
+                                                                         b.cycles, b.seeds)
+    assert [r.kind for r in runs[0]] == ["hand-coded", "random"]
+    assert runs[0][0].seeds == [7, 8, 9]
+
+
+def test_eval_covers_every_task_with_a_reward():
+    from training.evaluate import EXCLUDED_TASKS
+
+    names = {cls.name for cls in proteo_env.TASKS.values()} - set(EXCLUDED_TASKS)
+    assert "chain" in names and "sandbox" not in names
+
+
+def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
+    from proteo_env.cli import main
+    from training.checkpoints import CheckpointError, load_policy
+
+    env = proteo_env.make("chain-v0", **TINY)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_policy(tmp_path / "nowhere", env)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(CheckpointError, match="not a proteo checkpoint"):
+        load_policy(tmp_path / "empty", env)
+    broken = tmp_path / "broken"
+    shutil.copytree(checkpoints["sb3"], broken)
+    (broken / "model.zip").write_bytes(b"not a zip")
+    with pytest.raises(CheckpointError, match="not a loadable MaskablePPO model"):
+        load_policy(broken, env)
+    bad_json = tmp_path / "bad_json"
+    shutil.copytree(checkpoints["cma_neural"], bad_json)
+    (bad_json / "proteo.json").write_text("{")
+    with pytest.raises(CheckpointError, match="not valid JSON"):
+        load_policy(bad_json, env)
+    wrong = tmp_path / "wrong_size"
+    shutil.copytree(checkpoints["cma_neural"], wrong)
+    np.save(wrong / "genome.npy", np.zeros(3, dtype=np.float32))
+    with pytest.raises(CheckpointError, match="not a genome"):
+        load_policy(wrong, env)
+    radius2 = proteo_env.make("chain-v0", obs_radius=2, **TINY)
+    with pytest.raises(CheckpointError, match="observation encoding does not match"):
+        load_policy(checkpoints["torchrl"], radius2)
+    assert main(["eval", "--tasks", "chain", "--seeds", "1", "--checkpoint", str(tmp_path / "empty"),
+                 "--out", str(tmp_path / "out")]) == 2
+    assert "not a proteo checkpoint" in capsys.readouterr().err

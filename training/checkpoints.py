@@ -1,0 +1,197 @@
+"""Load any checkpoint by path as a :class:`~baselines.base.Policy`.
+
+A checkpoint is a folder with ``proteo.json`` (written by :func:`training.common.write_checkpoint_meta`)
+and the algorithm's files:
+
+==================== ======================= ===========================================
+``algorithm``        files                   policy
+==================== ======================= ===========================================
+``sb3-maskable-ppo`` ``model.zip``           the SB3 policy network (MaskablePPO)
+``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
+``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
+``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
+==================== ======================= ===========================================
+
+``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
+``final/`` checkpoint is used). Anything wrong (no such path, not a checkpoint, a damaged
+file, a checkpoint of another task or observation encoding) raises :class:`CheckpointError`,
+one message naming the path, what was found and what is allowed.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from proteo_env.adapters.flatten import ObservationEncoder
+
+from .common import CHECKPOINT_FORMAT, CHECKPOINT_VERSION, META_FILE
+from .policies import LogitsPolicy, NumpyMLP, torch_mlp
+
+ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be loaded (the message names the path and the problem)."""
+
+
+def checkpoint_dir(path) -> Path:
+    """The checkpoint folder that ``path`` names (folder, file inside it, or run folder)."""
+    p = Path(path)
+    if not p.exists():
+        raise CheckpointError(f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
+                              f"(with {META_FILE}), a file in one, or a run folder with final/")
+    if p.is_file():
+        p = p.parent
+    if not (p / META_FILE).is_file() and (p / "final" / META_FILE).is_file():
+        p = p / "final"
+    if not (p / META_FILE).is_file():
+        raise CheckpointError(f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
+                              "allowed: a folder written by a script in training/")
+    return p
+
+
+def read_meta(path) -> dict:
+    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added)."""
+    folder = checkpoint_dir(path)
+    try:
+        meta = json.loads((folder / META_FILE).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
+    if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} has format "
+                              f"{meta.get('format') if isinstance(meta, dict) else None!r}; allowed: {CHECKPOINT_FORMAT!r}")
+    if meta.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; "
+                              f"allowed: {CHECKPOINT_VERSION}")
+    if meta.get("algorithm") not in ALGORITHMS:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "
+                              f"allowed: {', '.join(ALGORITHMS)}")
+    for key in ("task", "nvec"):
+        if key not in meta:
+            raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} lacks {key!r}")
+    return {**meta, "dir": str(folder)}
+
+
+def _check_compatible(meta: dict, env) -> ObservationEncoder:
+    """The env's encoder, after checking the checkpoint was made for this task and encoding."""
+    where = f"checkpoint {meta['dir']!r}"
+    task = env.task.task_id()
+    if meta["task"].split("-v")[0] != env.task.name:
+        raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
+    nvec = [int(n) for n in env.action_layout.nvec]
+    if meta["nvec"] != nvec:
+        raise CheckpointError(f"{where}: action nvec {meta['nvec']} does not match the environment's {nvec}")
+    encoder = ObservationEncoder.for_env(env, **({"scent_scale": meta["encoder"]["scent_scale"]}
+                                                 if meta.get("encoder") else {}))
+    if meta.get("encoder") is not None and meta["encoder"] != encoder.spec():
+        diff = {k: (meta["encoder"].get(k), v) for k, v in encoder.spec().items() if meta["encoder"].get(k) != v}
+        raise CheckpointError(f"{where}: observation encoding does not match the environment "
+                              f"(field: (checkpoint, env)) {diff}")
+    return encoder
+
+
+def load_policy(path, env, *, seed: int | None = None, deterministic: bool = False):
+    """The policy stored at ``path``, ready to act in ``env`` (same task and observation encoding)."""
+    meta = read_meta(path)
+    folder = Path(meta["dir"])
+    algorithm = meta["algorithm"]
+    if algorithm == "cma-rules":
+        import inspect
+
+        from baselines import POLICIES, make_policy
+
+        if meta.get("policy") not in POLICIES:
+            raise CheckpointError(f"checkpoint {str(folder)!r}: policy {meta.get('policy')!r} is not registered; "
+                                  f"allowed: {', '.join(sorted(POLICIES))}")
+        accepted = set(inspect.signature(POLICIES[meta["policy"]].__init__).parameters)
+        params = dict(meta.get("params", {}))
+        dropped = sorted(set(params) - accepted)
+        if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name
+            warnings.warn(f"checkpoint {str(folder)!r}: evolved parameters {dropped} are no longer parameters of "
+                          f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py")
+            params = {k: v for k, v in params.items() if k not in dropped}
+        try:
+            policy = make_policy(meta["policy"], env, seed=seed, **params)
+        except (KeyError, TypeError, ValueError) as err:
+            raise CheckpointError(f"checkpoint {str(folder)!r}: cannot build the evolved rules: {err}") from None
+        policy.name = f"{meta['policy']} (cma-rules{'; ignored: ' + ', '.join(dropped) if dropped else ''})"
+        return policy
+    encoder = _check_compatible(meta, env)
+    label = meta.get("label", algorithm)
+    if algorithm == "sb3-maskable-ppo":
+        logits_fn = _sb3_logits(folder / "model.zip", encoder)
+    elif algorithm == "torchrl-ppo":
+        logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
+    else:
+        logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
+    return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
+                        encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic)
+
+
+def _need(file: Path) -> Path:
+    if not file.is_file():
+        raise CheckpointError(f"checkpoint {str(file.parent)!r}: {file.name} is missing")
+    return file
+
+
+def _sb3_logits(file: Path, encoder: ObservationEncoder):
+    import torch
+    from sb3_contrib import MaskablePPO
+
+    try:
+        model = MaskablePPO.load(_need(file), device="cpu")
+    except CheckpointError:
+        raise
+    except Exception as err:  # a damaged zip raises many kinds of errors
+        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable MaskablePPO model: "
+                              f"{type(err).__name__}: {err}") from None
+    if model.observation_space.shape != (encoder.size,):
+        raise CheckpointError(f"checkpoint {str(file)!r}: observation size {model.observation_space.shape} "
+                              f"does not match the encoder's ({encoder.size},)")
+    policy = model.policy
+    policy.set_training_mode(False)
+
+    def logits_fn(features: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            dist = policy.get_distribution(torch.as_tensor(features))
+            return torch.cat([d.logits for d in dist.distributions], dim=1).numpy()
+
+    return logits_fn
+
+
+def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+    import torch
+
+    try:
+        state = torch.load(_need(file), map_location="cpu", weights_only=True)
+        net = torch_mlp(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
+        net.load_state_dict(state)
+    except CheckpointError:
+        raise
+    except Exception as err:
+        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable actor for layer sizes "
+                              f"{meta.get('hidden')}: {type(err).__name__}: {err}") from None
+    net.eval()
+
+    def logits_fn(features: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return net(torch.as_tensor(features)).numpy()
+
+    return logits_fn
+
+
+def _numpy_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+    net = NumpyMLP(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
+    try:
+        genome = np.load(_need(file), allow_pickle=False)
+        net.set_flat(genome)
+    except CheckpointError:
+        raise
+    except Exception as err:
+        raise CheckpointError(f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: "
+                              f"{type(err).__name__}: {err}") from None
+    return net

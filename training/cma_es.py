@@ -1,0 +1,255 @@
+"""CMA-ES against the task's own reward: the hand-coded rules' parameters, or a small neural controller.
+
+``controller: rules`` evolves the parameters of the task's hand-coded policy (the paper's own
+suggestion: seed probabilities, randomness of moves, thresholds such as ``T`` and ``B``). The
+parameters are read from the policy's constructor: floats named ``p_*`` range over [0, 1],
+other floats over [0, 2 * default] (at least [0, 1]), ints over [1, 2 * default + 1],
+booleans are "> 0.5", strings need their options in ``choices``. ``bounds`` and ``fixed``
+in the config override or drop any of them. CMA-ES works in the unit cube; the start point is
+the hand-coded defaults.
+
+``controller: neural`` evolves the weights of a :class:`~training.policies.NumpyMLP`
+(observation features -> hidden tanh layer -> logits of every action field) shared by all
+modules, with separable CMA-ES (diagonal covariance) since it has thousands of weights.
+
+Fitness of a candidate: the mean episode return over ``episodes_per_candidate`` seeds, the
+same seeds for every candidate of a generation (common random numbers), new seeds each
+generation. The checkpoint holds the distribution's mean (CMA-ES's best estimate under noise);
+``progress.csv`` logs the generation's mean and best return.
+
+    python -m training.cma_es --config configs/train/cma_rules_chain.yaml
+    python -m training.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
+    python -m training.cma_es --resume runs/cma_rules_chain_s0/checkpoints/step_0000123456 --generations 50
+"""
+
+from __future__ import annotations
+
+import inspect
+import pickle
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from training.common import (ProgressLog, checkpoint_folder, make_run_dir, parse_args, save_args, seed_everything,
+                             write_checkpoint_meta)
+
+
+@dataclass(frozen=True)
+class Args:
+    """CMA-ES over hand-coded rule parameters or a neural controller (arguments of training/cma_es.py)."""
+
+    task: str = "chain-v0"
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides passed to ``proteo_env.make``."""
+    controller: str = "rules"
+    """``rules`` (the hand-coded policy's parameters) or ``neural`` (a NumpyMLP's weights)."""
+    policy: str | None = None
+    """Hand-coded policy whose parameters evolve (default: the task's ``default_policy``)."""
+    bounds: dict = field(default_factory=dict)
+    """``{param: [low, high]}`` overriding the inferred ranges (rules)."""
+    choices: dict = field(default_factory=dict)
+    """``{param: [option, ...]}`` for string parameters (rules); others stay at their default."""
+    fixed: tuple[str, ...] = ()
+    """Parameters left at their defaults (rules)."""
+    hidden: tuple[int, ...] = (16,)
+    """Hidden layer sizes (neural)."""
+    seed: int = 0
+    generations: int = 100
+    popsize: int = 12
+    sigma0: float = 0.2
+    """Initial step size (unit cube for rules, weight scale for neural)."""
+    episodes_per_candidate: int = 3
+    checkpoint_every: int = 10
+    """Generations between checkpoints."""
+    time_limit_minutes: float = 0.0
+    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
+    run_dir: str | None = None
+    resume: str | None = None
+    threads: int = 1
+    tensorboard: bool = True
+
+
+# ---------------------------------------------------------------------- the rules' parameter space
+@dataclass(frozen=True)
+class Param:
+    """One evolved parameter: its kind, range and default (value = decode(x), x in [0, 1])."""
+
+    name: str
+    kind: str  # "float", "int", "bool" or "choice"
+    low: float = 0.0
+    high: float = 1.0
+    options: tuple = ()
+    default: object = None
+
+    def decode(self, x: float):
+        x = float(np.clip(x, 0.0, 1.0))
+        if self.kind == "bool":
+            return x > 0.5
+        if self.kind == "choice":
+            return self.options[min(int(x * len(self.options)), len(self.options) - 1)]
+        value = self.low + x * (self.high - self.low)
+        return int(round(value)) if self.kind == "int" else float(value)
+
+    def encode(self, value) -> float:
+        if self.kind == "bool":
+            return 0.75 if value else 0.25
+        if self.kind == "choice":
+            return (self.options.index(value) + 0.5) / len(self.options)
+        return float(np.clip((value - self.low) / (self.high - self.low), 0.0, 1.0))
+
+
+def rule_params(policy_cls, args: Args) -> list[Param]:
+    """The evolvable parameters of a hand-coded policy class (see the module docstring)."""
+    skip = {"self", "layout", "modes", "scent_max", "seed", *args.fixed}
+    out = []
+    for name, p in inspect.signature(policy_cls.__init__).parameters.items():
+        if name in skip or p.default is inspect.Parameter.empty or p.default is None:
+            continue
+        d = p.default
+        if name in args.choices:
+            out.append(Param(name, "choice", options=tuple(args.choices[name]), default=d))
+        elif isinstance(d, bool):
+            out.append(Param(name, "bool", default=d))
+        elif isinstance(d, float):
+            low, high = args.bounds.get(name, (0.0, 1.0 if name.startswith("p_") else max(2.0 * d, 1.0)))
+            out.append(Param(name, "float", float(low), float(high), default=d))
+        elif isinstance(d, int):
+            low, high = args.bounds.get(name, (1, 2 * d + 1))
+            out.append(Param(name, "int", float(low), float(high), default=d))
+    if not out:
+        raise ValueError(f"policy {policy_cls.name!r} has no numeric or boolean parameters to evolve")
+    return out
+
+
+# ---------------------------------------------------------------------- fitness
+def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
+    """Return, success and cycles of one episode (array API for neural controllers)."""
+    from training.policies import LogitsPolicy
+
+    if not isinstance(policy, LogitsPolicy):
+        from proteo_env.rollout import run_episode
+
+        result = run_episode(env, policy, seed=seed)
+        return result.total_reward, result.success, result.cycles
+    env.reset(seed=seed)
+    policy.reset(seed)
+    total, success = 0.0, False
+    while True:
+        buffers = env.observe_arrays()
+        features = policy.encoder.encode_buffers(buffers)
+        total += sum(env.step_arrays(policy.act_arrays(features, buffers.action_mask)).values())
+        success = bool(env.task.success(env.engine))
+        if success or env.cycle >= env.max_cycles:
+            return total, success, env.cycle
+
+
+def main(argv=None) -> Path:
+    args = parse_args(Args, argv)
+    if args.controller not in ("rules", "neural"):
+        from proteo_env.config import ConfigError
+
+        raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
+    seed_everything(args.seed, threads=args.threads)
+
+    import cma
+
+    import proteo_env
+    from baselines import POLICIES, make_policy
+    from proteo_env.adapters.flatten import ObservationEncoder
+    from training.checkpoints import read_meta
+    from training.policies import LogitsPolicy, NumpyMLP
+
+    env = proteo_env.make(args.task, **args.env)
+    encoder = ObservationEncoder.for_env(env)
+    nvec = env.action_layout.nvec
+    algorithm = f"cma-{args.controller}"
+    resume_meta = read_meta(args.resume) if args.resume else None
+    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
+                           f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}",
+                           resume=resume_meta is not None)
+    save_args(args, run_dir)
+
+    # ------------------------------------------------------------------ genome <-> policy
+    if args.controller == "rules":
+        policy_name = args.policy or env.task.default_policy
+        if policy_name not in POLICIES:
+            raise ValueError(f"policy {policy_name!r} is not registered; allowed: {', '.join(sorted(POLICIES))}")
+        params = rule_params(POLICIES[policy_name], args)
+
+        def decode(x):
+            return {p.name: p.decode(v) for p, v in zip(params, x)}
+
+        def build(x, seed):
+            return make_policy(policy_name, env, seed=seed, **decode(x))
+
+        x0 = np.array([p.encode(p.default) for p in params])
+        options = {"bounds": [0.0, 1.0], "popsize": args.popsize, "seed": args.seed + 1, "verbose": -9}
+    else:
+        net = NumpyMLP(encoder.size, int(nvec.sum()), args.hidden)
+
+        def build(x, seed):
+            return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
+                                encoder=encoder, logits_fn=NumpyMLP(encoder.size, int(nvec.sum()), args.hidden).set_flat(x),
+                                label="cma-neural")
+
+        x0 = net.init_genome(np.random.default_rng(args.seed))
+        options = {"popsize": args.popsize, "seed": args.seed + 1, "verbose": -9, "CMA_diagonal": True}
+
+    if resume_meta is not None:
+        es = pickle.loads((Path(resume_meta["dir"]) / "es.pkl").read_bytes())
+    else:
+        es = cma.CMAEvolutionStrategy(x0, args.sigma0, options)
+
+    def save(folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        mean = np.asarray(es.mean)
+        (folder / "es.pkl").write_bytes(pickle.dumps(es))  # for --resume only
+        extra = {"label": algorithm, "run_dir": str(run_dir), "generation": int(es.countiter), "args": asdict(args)}
+        if args.controller == "rules":
+            extra.update(policy=policy_name, params=decode(mean))
+        else:
+            np.save(folder / "genome.npy", mean.astype(np.float32))
+            extra.update(hidden=list(args.hidden))
+        write_checkpoint_meta(folder, algorithm=algorithm, task=env.task.task_id(), env_overrides=dict(args.env),
+                              encoder_spec=encoder.spec() if args.controller == "neural" else None, nvec=nvec,
+                              agent_steps=agent_steps, seed=args.seed, extra=extra)
+
+    # ------------------------------------------------------------------ evolve
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    agent_steps = int(resume_meta["agent_steps"]) if resume_meta else 0
+    n_agents = len(env.possible_agents)
+    rng = np.random.default_rng(args.seed)
+    bar = tqdm(total=args.generations, initial=es.countiter, unit="generation", desc=algorithm)
+    while es.countiter < args.generations:
+        seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
+        candidates = es.ask()
+        fitness, outcomes = [], []
+        for x in candidates:
+            results = [episode_return(env, build(x, s), s) for s in seeds]
+            agent_steps += sum(r[2] for r in results) * n_agents
+            outcomes += results
+            fitness.append(float(np.mean([r[0] for r in results])))
+        es.tell(candidates, [-f for f in fitness])  # CMA-ES minimises
+        bar.update(1)
+        values = {"episode/return": float(np.mean(fitness)), "episode/best_candidate_return": max(fitness),
+                  "episode/success": float(np.mean([r[1] for r in outcomes])),
+                  "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma)}
+        if args.controller == "rules":
+            values.update({f"param/{k}": float(v) for k, v in decode(es.mean).items() if not isinstance(v, str)})
+        log.log(agent_steps, values)
+        if es.countiter % args.checkpoint_every == 0:
+            save(checkpoint_folder(run_dir, agent_steps))
+        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+            break
+    bar.close()
+    save(run_dir / "final")
+    log.close()
+    print(f"final checkpoint: {run_dir / 'final'}  ({es.countiter} generations, {agent_steps} agent-steps, "
+          f"{log.seconds:.0f} s)")
+    return run_dir / "final"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""What every training script shares: typed args from YAML and the command line, seeding,
+the run folder, a progress log, and the checkpoint folder format.
+
+Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
+
+    args.yaml          the arguments the run was started with
+    progress.csv       one row per log step: agent_steps, seconds, episode return, success, ...
+    tb/                TensorBoard event files (``tensorboard --logdir runs``)
+    checkpoints/step_<N>/  a checkpoint every ``checkpoint_every`` agent-steps
+    final/             the checkpoint at the end
+
+Checkpoint folder: ``proteo.json`` (format, algorithm, task, env overrides, observation
+encoding, action ``nvec``, steps, seed) beside the algorithm's own files. Any checkpoint loads
+by path with :func:`training.checkpoints.load_policy`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import os
+import random
+import time
+import typing
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from proteo_env.config import ConfigError, build
+
+CHECKPOINT_FORMAT = "proteo-checkpoint"
+CHECKPOINT_VERSION = 1
+META_FILE = "proteo.json"
+
+
+# ---------------------------------------------------------------------- args
+def parse_args(args_cls, argv=None, *, description: str = ""):
+    """Build ``args_cls`` (a frozen dataclass) from ``--config FILE.yaml`` and ``--<field> VALUE`` flags.
+
+    Values on the command line are read as YAML (``--env "{n_modules: 16}"``, ``--total-steps
+    2e5`` needs ``200000``). The config file and flags may name only fields of ``args_cls``;
+    anything else is an error that lists the allowed keys.
+    """
+    parser = argparse.ArgumentParser(description=description or args_cls.__doc__.splitlines()[0])
+    parser.add_argument("--config", help="YAML file of arguments (see configs/train/)")
+    hints = typing.get_type_hints(args_cls)
+    for f in dataclasses.fields(args_cls):
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        parser.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, default=None, metavar="VALUE",
+                            help=f"{getattr(hints[f.name], '__name__', hints[f.name])} (default: {default!r})")
+    ns = parser.parse_args(argv)
+    values: dict = {}
+    if ns.config:
+        path = Path(ns.config)
+        if not path.is_file():
+            raise ConfigError(f"config file {str(path)!r} does not exist; allowed: a path to a YAML file")
+        loaded = yaml.safe_load(path.read_text()) or {}
+        if not isinstance(loaded, dict):
+            raise ConfigError(f"config file {str(path)!r}: a mapping of argument names is required")
+        values.update(loaded)
+    for f in dataclasses.fields(args_cls):
+        raw = getattr(ns, f.name)
+        if raw is not None:
+            values[f.name] = raw if hints[f.name] is str else yaml.safe_load(raw)
+    for key, value in list(values.items()):  # YAML reads 1e6 as a string; accept it for ints and floats
+        if isinstance(value, str) and key in hints and hints[key] in (int, float):
+            try:
+                values[key] = hints[key](float(value))
+            except ValueError:
+                pass
+    return build(args_cls, values, where=f"{args_cls.__name__}: ")
+
+
+def save_args(args, run_dir: Path) -> None:
+    (run_dir / "args.yaml").write_text(yaml.safe_dump(dataclasses.asdict(args), sort_keys=False))
+
+
+# ---------------------------------------------------------------------- seeding and threads
+def seed_everything(seed: int, *, threads: int | None = 1) -> None:
+    """Seed Python, NumPy and (if installed) torch; pin torch's and numba's thread counts.
+
+    One thread is the right default on these 2-core machines: with two, OpenMP (torch) and
+    numba worker threads spin against each other and against the other core's work; a small
+    MLP's forward pass measured 20 times slower, a 12-module environment step 100 times
+    slower (see docs/learning.md).
+    """
+    random.seed(seed)
+    np.random.seed(seed)
+    limit_threads(threads)
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.manual_seed(seed)
+
+
+def limit_threads(n: int | None = 1) -> None:
+    """Use at most ``n`` threads in numba's parallel kernels and in torch (``None``: leave them)."""
+    if not n:
+        return
+    import numba
+
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_num_threads(n)
+
+
+def make_run_dir(run_dir: str | None, default_name: str, *, resume: bool) -> Path:
+    path = Path(run_dir or Path("runs") / default_name)
+    if path.exists() and any(path.iterdir()) and not resume:
+        raise ConfigError(f"run_dir {str(path)!r} is not empty; allowed: a new folder, or resume=<checkpoint>")
+    (path / "checkpoints").mkdir(parents=True, exist_ok=True)
+    return path
+
+
+# ---------------------------------------------------------------------- progress log
+class ProgressLog:
+    """Appends rows to ``progress.csv`` (columns fixed by the first row) and to TensorBoard."""
+
+    def __init__(self, run_dir: Path, *, tensorboard: bool = True):
+        self.path = run_dir / "progress.csv"
+        self.started = time.perf_counter()
+        self.offset = 0.0
+        if self.path.exists():  # resumed: wall-clock continues from the last row
+            with self.path.open() as fh:
+                rows = list(csv.DictReader(fh))
+            if rows:
+                self.offset = float(rows[-1]["seconds"])
+        self.writer = None
+        if tensorboard:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+            except ImportError:  # pragma: no cover - torch is part of the train extra
+                SummaryWriter = None
+            if SummaryWriter is not None:
+                self.writer = SummaryWriter(str(run_dir / "tb"))
+
+    @property
+    def seconds(self) -> float:
+        return self.offset + time.perf_counter() - self.started
+
+    def log(self, agent_steps: int, values: dict) -> None:
+        row = {"agent_steps": agent_steps, "seconds": round(self.seconds, 3),
+               **{k: (float(v) if v is not None else "") for k, v in values.items()}}
+        new = not self.path.exists()
+        if not new:
+            with self.path.open() as fh:
+                header = next(csv.reader(fh), None)
+            row = {k: row.get(k, "") for k in header} if header else row
+        with self.path.open("a", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(row))
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+        if self.writer is not None:
+            for k, v in values.items():
+                if v is not None and np.isfinite(v):
+                    self.writer.add_scalar(k, float(v), agent_steps)
+            self.writer.flush()
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+# ---------------------------------------------------------------------- checkpoints
+def write_checkpoint_meta(folder: Path, *, algorithm: str, task: str, env_overrides: dict, encoder_spec: dict | None,
+                          nvec, agent_steps: int, seed: int, extra: dict | None = None) -> None:
+    """Write ``proteo.json`` into a checkpoint folder (its payload files are the caller's)."""
+    meta = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "algorithm": algorithm, "task": task,
+            "env": env_overrides, "encoder": encoder_spec, "nvec": [int(n) for n in nvec],
+            "agent_steps": int(agent_steps), "seed": seed, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            **(extra or {})}
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / (META_FILE + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
+    os.replace(tmp, folder / META_FILE)
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {value!r}")
+
+
+def checkpoint_folder(run_dir: Path, agent_steps: int) -> Path:
+    return run_dir / "checkpoints" / f"step_{agent_steps:010d}"
+
+
+def episode_stats(episodes: list[dict]) -> dict:
+    """Mean return, success rate and mean cycles of finished episodes (``None`` when there are none)."""
+    if not episodes:
+        return {"episode/return": None, "episode/success": None, "episode/cycles": None}
+    return {"episode/return": float(np.mean([e["r"] for e in episodes])),
+            "episode/success": float(np.mean([e["success"] for e in episodes])),
+            "episode/cycles": float(np.mean([e["l"] for e in episodes]))}

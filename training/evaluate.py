@@ -1,0 +1,285 @@
+"""``proteo eval``: hand-coded, random, learned and evolved policies on every task, over seeds.
+
+For each registered task with a reward (every task but ``sandbox``), the task's hand-coded
+policy (``default_policy``), the random policy and every checkpoint given for that task run
+one episode per seed (the same seeds for every policy: ``env.reset(seed=s)`` and
+``policy.reset(s)``). Reported per policy:
+
+- mean episode return with a 95 % confidence interval (Student t over seeds);
+- success rate (episodes ending in task success) with a 95 % Wilson interval;
+- cycles to success: mean over the successful episodes, with a 95 % t interval.
+
+Settings per task and the checkpoints to compare come from a YAML file (``configs/eval.yaml``)::
+
+    seeds: 10            # episodes per policy: seeds first_seed .. first_seed + seeds - 1
+    first_seed: 0
+    tasks:
+      chain:
+        env: {n_modules: 12, max_cycles: 300}
+        checkpoints: [checkpoints/chain/sb3_ppo, checkpoints/chain/cma_rules]
+
+A task not named there runs with its defaults and no checkpoints. ``--checkpoint PATH`` adds a
+checkpoint to the task it was trained on. Writes ``results.md`` (the table), ``results.json``
+(every episode) and ``eval.png`` (the three measures per task) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_CONFIG = "configs/eval.yaml"
+"""The config ``proteo eval`` reads when run from the repository root without ``--config``."""
+
+EXCLUDED_TASKS = ("sandbox",)
+"""Task names left out of the evaluation (no reward, no success)."""
+
+_T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228,
+          11: 2.201, 12: 2.179, 13: 2.160, 14: 2.145, 15: 2.131, 16: 2.120, 17: 2.110, 18: 2.101, 19: 2.093,
+          20: 2.086, 25: 2.060, 30: 2.042, 40: 2.021, 60: 2.000, 120: 1.980}
+
+
+def t_critical(df: int) -> float:
+    """Two-sided 95 % Student t quantile for ``df`` degrees of freedom (table, 1.96 beyond 120)."""
+    if df < 1:
+        return float("nan")
+    for k in sorted(_T_975):
+        if df <= k:
+            return _T_975[k]
+    return 1.96
+
+
+def mean_ci(values) -> tuple[float, float]:
+    """Mean and the half-width of its 95 % t interval (``nan`` half-width for fewer than 2 values)."""
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return float("nan"), float("nan")
+    if v.size == 1:
+        return float(v[0]), float("nan")
+    return float(v.mean()), float(t_critical(v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+
+
+def wilson(successes: int, n: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion."""
+    if n == 0:
+        return float("nan"), float("nan")
+    z, p = 1.96, successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass
+class PolicyResult:
+    """Every episode of one policy on one task, and the summary measures."""
+
+    task: str
+    policy: str
+    kind: str
+    source: str
+    returns: list = field(default_factory=list)
+    successes: list = field(default_factory=list)
+    cycles: list = field(default_factory=list)
+    seeds: list = field(default_factory=list)
+    metrics: list = field(default_factory=list)
+    """The task's metrics at the end of each episode."""
+    seconds: float = 0.0
+
+    @property
+    def n(self) -> int:
+        return len(self.returns)
+
+    def summary(self) -> dict:
+        mean, half = mean_ci(self.returns)
+        k = int(sum(self.successes))
+        lo, hi = wilson(k, self.n)
+        won = [c for c, s in zip(self.cycles, self.successes) if s]
+        c_mean, c_half = mean_ci(won)
+        return {"task": self.task, "policy": self.policy, "kind": self.kind, "episodes": self.n,
+                "return_mean": mean, "return_ci": half, "successes": k, "success_rate": k / self.n if self.n else 0.0,
+                "success_lo": lo, "success_hi": hi, "cycles_to_success": c_mean, "cycles_ci": c_half,
+                "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"), "seconds": self.seconds}
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def markdown_table(results: list[PolicyResult]) -> str:
+    """The results as one markdown table (one row per task and policy)."""
+    head = ["task", "policy", "kind", "episodes", "return (95 % CI)", "success (95 % CI)",
+            "cycles to success (95 % CI)", "seconds"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in results:
+        s = r.summary()
+        ret = f"{_fmt(s['return_mean'])} ± {_fmt(s['return_ci'])}"
+        succ = f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
+        cyc = "–" if not s["successes"] else f"{_fmt(s['cycles_to_success'], 0)} ± {_fmt(s['cycles_ci'], 0)}"
+        lines.append(f"| {s['task']} | {s['policy']} | {s['kind']} | {s['episodes']} | {ret} | {succ} | {cyc} | "
+                     f"{s['seconds']:.1f} |")
+    return "\n".join(lines)
+
+
+def plot(results: list[PolicyResult], path: Path) -> None:
+    """One row per task: mean return, success rate and cycles to success per policy, with 95 % intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(dict.fromkeys(r.task for r in results))
+    fig, axes = plt.subplots(len(tasks), 3, figsize=(13, 2.8 * len(tasks) + 0.6), squeeze=False)
+    for row, task in zip(axes, tasks):
+        rs = [r.summary() for r in results if r.task == task]
+        names = [s["policy"] for s in rs]
+        y = np.arange(len(rs))
+        colours = [{"hand-coded": "tab:green", "random": "tab:gray", "learned": "tab:blue",
+                    "evolved": "tab:orange"}.get(s["kind"], "tab:purple") for s in rs]
+        ret = [s["return_mean"] for s in rs]
+        row[0].barh(y, ret, xerr=[0 if not np.isfinite(s["return_ci"]) else s["return_ci"] for s in rs],
+                    color=colours)
+        row[0].set_title(f"{task}: mean return")
+        rate = np.array([s["success_rate"] for s in rs])
+        err = np.array([[r - s["success_lo"], s["success_hi"] - r] for r, s in zip(rate, rs)]).T
+        row[1].barh(y, rate, xerr=err, color=colours)
+        row[1].set_xlim(0, 1.05)
+        row[1].set_title(f"{task}: success rate")
+        cyc = [s["cycles_to_success"] if s["successes"] else 0.0 for s in rs]
+        half = [s["cycles_ci"] if s["successes"] > 1 else 0.0 for s in rs]
+        row[2].barh(y, cyc, xerr=[[min(h, c) for h, c in zip(half, cyc)], half], color=colours)  # no bar below 0
+        row[2].set_title(f"{task}: cycles to success (0: none)")
+        for ax in row:
+            ax.set_yticks(y, names if ax is row[0] else [""] * len(y))
+            ax.invert_yaxis()
+            ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def load_config(path) -> dict:
+    """The eval config as ``{"seeds", "first_seed", "tasks": {name: {"env", "checkpoints"}}}``."""
+    import yaml
+
+    from proteo_env.config import ConfigError
+
+    if path is None:
+        return {"seeds": 10, "first_seed": 0, "tasks": {}}
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"eval config {str(p)!r} does not exist; allowed: a YAML file such as configs/eval.yaml")
+    data = yaml.safe_load(p.read_text()) or {}
+    allowed = {"seeds", "first_seed", "tasks"}
+    unknown = sorted(set(data) - allowed) if isinstance(data, dict) else ["<not a mapping>"]
+    if unknown:
+        raise ConfigError(f"eval config {str(p)!r}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
+    tasks = data.get("tasks") or {}
+    for name, entry in tasks.items():
+        bad = sorted(set(entry or {}) - {"env", "checkpoints"})
+        if bad:
+            raise ConfigError(f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env")
+    return {"seeds": int(data.get("seeds", 10)), "first_seed": int(data.get("first_seed", 0)), "tasks": tasks}
+
+
+def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
+             deterministic: bool = False, progress: bool = True, plots: bool = True) -> list[PolicyResult]:
+    """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
+
+    Args:
+        config: path of the YAML settings (see the module docstring) or ``None``.
+        tasks: task names or ids to evaluate (default: every registered task but ``sandbox``).
+        seeds: episodes per policy (overrides the config's ``seeds``).
+        checkpoints: extra checkpoint paths; each goes to the task it was trained on.
+        out: output folder.
+        deterministic: learned and evolved neural policies take arg-max actions.
+    """
+    from tqdm import tqdm
+
+    import proteo_env
+    from baselines import make_policy
+    from proteo_env.config import ConfigError
+    from proteo_env.registry import task_class
+    from proteo_env.rollout import run_episode
+    from training.checkpoints import load_policy, read_meta
+    from training.common import limit_threads
+
+    limit_threads(1)
+    cfg = load_config(config)
+    n_seeds = seeds if seeds is not None else cfg["seeds"]
+    if n_seeds < 1:
+        raise ConfigError(f"seeds={n_seeds!r} is not allowed; allowed: an integer >= 1")
+    seed_list = list(range(cfg["first_seed"], cfg["first_seed"] + n_seeds))
+    if tasks:
+        classes = [task_class(t) for t in tasks]
+    else:
+        classes = [cls for _, cls in sorted(proteo_env.TASKS.items()) if cls.name not in EXCLUDED_TASKS]
+        classes = [c for c in classes if proteo_env.TASKS.get(f"{c.name}-v{c.version}") is task_class(c.name)]
+    by_task: dict[str, list[str]] = {c.name: list((cfg["tasks"].get(c.name) or {}).get("checkpoints") or [])
+                                     for c in classes}
+    for path in checkpoints:
+        name = read_meta(path)["task"].split("-v")[0]
+        if name not in by_task:
+            raise ConfigError(f"checkpoint {str(path)!r} was trained on task {name!r}, which is not evaluated; "
+                              f"allowed: checkpoints of {', '.join(by_task)}")
+        by_task[name].append(str(path))
+
+    results: list[PolicyResult] = []
+    for cls in classes:
+        overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
+        env = proteo_env.make(cls.task_id(), **overrides)
+        entries = [("hand-coded", env.task.default_policy, None), ("random", "random", None)]
+        entries += [(None, None, path) for path in by_task[cls.name]]
+        for kind, name, path in entries:
+            if path is None:
+                policy = make_policy(name, env, seed=seed_list[0])
+                source = f"baselines.{name}"
+            else:
+                meta = read_meta(path)
+                policy = load_policy(path, env, seed=seed_list[0], deterministic=deterministic)
+                kind = "evolved" if meta["algorithm"].startswith("cma") else "learned"
+                source = str(path)
+            result = PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source)
+            started = time.perf_counter()
+            for seed in tqdm(seed_list, desc=f"{cls.task_id()} / {policy.name}", unit="episode", leave=False,
+                             disable=not progress):
+                episode = run_episode(env, policy, seed=seed)
+                result.returns.append(float(episode.total_reward))
+                result.successes.append(bool(episode.success))
+                result.cycles.append(int(episode.cycles))
+                result.seeds.append(seed)
+                result.metrics.append({k: float(v) for k, v in episode.metrics.items()})
+            result.seconds = time.perf_counter() - started
+            results.append(result)
+        env.close()
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = markdown_table(results)
+    settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
+    (out / "results.md").write_text(f"{table}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: "
+                                    f"{json.dumps(settings)}\n")
+    (out / "results.json").write_text(json.dumps(
+        {"seeds": seed_list, "settings": settings, "deterministic": deterministic,
+         "results": [{**asdict(r), "summary": r.summary()} for r in results]}, indent=1, default=float))
+    if plots:
+        plot(results, out / "eval.png")
+    return results
+
+
+def main(args) -> int:
+    """Entry point of ``proteo eval`` (arguments parsed in :mod:`proteo_env.cli`)."""
+    config = args.config
+    if config is None and Path(DEFAULT_CONFIG).is_file():
+        config = DEFAULT_CONFIG
+    results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
+                       checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
+                       plots=not args.no_plots)
+    print(markdown_table(results))
+    print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
+    return 0

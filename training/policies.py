@@ -1,0 +1,149 @@
+"""Learned and evolved controllers behind the same :class:`~baselines.base.Policy` interface.
+
+Every neural controller here, whether trained by SB3, by TorchRL or evolved by CMA-ES, is
+one network shared by all modules that maps a module's flattened observation
+(:class:`~proteo_env.adapters.flatten.ObservationEncoder`) to one logit vector per action field
+(``move``, ``mode``, ``role_c``, ``message_target``, ``message_value``, concatenated). A
+:class:`LogitsPolicy` turns logits into actions the same way for all of them: illegal moves
+(``action_mask`` 0) get probability zero, and each field is sampled from its softmax with the
+policy's own NumPy generator (``reset(seed)`` makes an episode reproducible) or, with
+``deterministic=True``, its arg-max is taken.
+
+Networks (``hidden`` sizes, tanh activations):
+
+- :func:`torch_mlp` builds the TorchRL actor (``torch.nn.Sequential``);
+- :class:`NumpyMLP` is the CMA-ES controller, whose weights are one flat parameter vector.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from baselines.base import Policy
+from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.spaces import N_MOVES
+
+
+def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, rng: np.random.Generator, *,
+                   deterministic: bool = False) -> np.ndarray:
+    """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to ``move_mask``."""
+    logits = np.array(logits, dtype=np.float64, copy=True)
+    logits[:, :N_MOVES] = np.where(np.asarray(move_mask, dtype=bool), logits[:, :N_MOVES], -np.inf)
+    if not deterministic:
+        logits = logits + rng.gumbel(size=logits.shape)  # Gumbel-max: a sample from each softmax
+    out = np.empty((logits.shape[0], len(nvec)), dtype=np.int64)
+    start = 0
+    for k, n in enumerate(nvec):
+        out[:, k] = logits[:, start:start + n].argmax(axis=1)
+        start += n
+    return out
+
+
+class LogitsPolicy(Policy):
+    """A shared controller given by ``logits_fn(features (B, D)) -> logits (B, sum(nvec))``.
+
+    Args:
+        layout, modes, scent_max, seed: as for every :class:`~baselines.base.Policy`.
+        encoder: the observation encoding the network was trained on.
+        logits_fn: the network.
+        label: the name shown in tables (``"sb3-ppo"``, ``"cma-neural"``, ...).
+        deterministic: take each field's arg-max instead of sampling.
+    """
+
+    name = "learned"
+
+    def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
+                 encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
+                 deterministic: bool = False):
+        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        self.encoder = encoder
+        self.logits_fn = logits_fn
+        self.name = label
+        self.deterministic = deterministic
+
+    def act(self, observations):
+        if not observations:
+            return {}
+        features = self.encoder.encode_observations(observations)
+        mask = np.stack([o["action_mask"] for o in observations.values()])
+        actions = sample_actions(self.logits_fn(features), self.layout.nvec, mask, self.rng,
+                                 deterministic=self.deterministic)
+        return dict(zip(observations, actions))
+
+    def act_arrays(self, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
+        """Actions of a batch given encoded features and move masks (the array API's path)."""
+        return sample_actions(self.logits_fn(features), self.layout.nvec, move_mask, self.rng,
+                              deterministic=self.deterministic)
+
+
+# ---------------------------------------------------------------------- networks
+class NumpyMLP:
+    """A tanh MLP in NumPy whose weights are one flat vector (the CMA-ES genome).
+
+    Layers ``in_dim -> hidden[0] -> ... -> out_dim``; the genome is every layer's weight
+    matrix (row-major, ``(fan_in, fan_out)``) followed by its bias, layer by layer.
+    """
+
+    def __init__(self, in_dim: int, out_dim: int, hidden: tuple[int, ...] = (16,)):
+        self.sizes = (in_dim, *hidden, out_dim)
+        self.params: list[tuple[np.ndarray, np.ndarray]] = [
+            (np.zeros((a, b), dtype=np.float32), np.zeros(b, dtype=np.float32))
+            for a, b in zip(self.sizes[:-1], self.sizes[1:])]
+
+    @property
+    def n_params(self) -> int:
+        return sum(w.size + b.size for w, b in self.params)
+
+    def set_flat(self, genome: np.ndarray) -> "NumpyMLP":
+        genome = np.asarray(genome, dtype=np.float32)
+        if genome.shape != (self.n_params,):
+            raise ValueError(f"genome of shape {genome.shape} is not allowed; allowed: ({self.n_params},) "
+                             f"for layer sizes {self.sizes}")
+        start = 0
+        for w, b in self.params:
+            w[...] = genome[start:start + w.size].reshape(w.shape)
+            start += w.size
+            b[...] = genome[start:start + b.size]
+            start += b.size
+        return self
+
+    def get_flat(self) -> np.ndarray:
+        return np.concatenate([np.concatenate([w.ravel(), b]) for w, b in self.params])
+
+    def init_genome(self, rng: np.random.Generator) -> np.ndarray:
+        """A start genome: scaled normal weights (``1/sqrt(fan_in)``), zero biases, small output layer."""
+        parts = []
+        for i, (w, b) in enumerate(self.params):
+            scale = 1.0 / np.sqrt(w.shape[0]) * (0.1 if i == len(self.params) - 1 else 1.0)
+            parts += [rng.normal(0.0, scale, w.size), np.zeros(b.size)]
+        return np.concatenate(parts).astype(np.float32)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        h = np.asarray(x, dtype=np.float32)
+        for i, (w, b) in enumerate(self.params):
+            h = h @ w + b
+            if i < len(self.params) - 1:
+                h = np.tanh(h)
+        return h
+
+
+def torch_mlp(in_dim: int, out_dim: int, hidden: tuple[int, ...] = (64, 64), *, out_gain: float = 0.01):
+    """A tanh MLP in torch (the TorchRL actor and critic); orthogonal init, small output layer."""
+    import torch
+    from torch import nn
+
+    layers, last = [], in_dim
+    for h in hidden:
+        lin = nn.Linear(last, h)
+        nn.init.orthogonal_(lin.weight, gain=np.sqrt(2))
+        nn.init.zeros_(lin.bias)
+        layers += [lin, nn.Tanh()]
+        last = h
+    out = nn.Linear(last, out_dim)
+    nn.init.orthogonal_(out.weight, gain=out_gain)
+    nn.init.zeros_(out.bias)
+    layers.append(out)
+    del torch
+    return nn.Sequential(*layers)

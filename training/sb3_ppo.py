@@ -1,0 +1,155 @@
+"""MaskablePPO (sb3-contrib) with one policy shared by every module.
+
+Every module of ``n_copies`` copies of the task is one sub-env of
+:class:`~proteo_env.adapters.sb3.ProteoVecEnv`; the policy sees one module's flattened
+observation, illegal moves are masked out of its move distribution, and every module gets
+the team reward. ``total_steps`` counts agent-steps (module-cycles).
+
+    python -m training.sb3_ppo --config configs/train/sb3_ppo_chain.yaml
+    python -m training.sb3_ppo --config configs/train/sb3_ppo_chain.yaml --total-steps 20000 --run-dir runs/try
+    python -m training.sb3_ppo --resume runs/try/checkpoints/step_0000010240 --total-steps 40000
+    tensorboard --logdir runs
+
+Writes ``runs/<name>/`` (see :mod:`training.common`): ``progress.csv``, TensorBoard logs,
+checkpoints every ``checkpoint_every`` agent-steps and ``final/``; ``proteo eval --checkpoint
+runs/<name>`` evaluates the result.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from tqdm import tqdm
+
+from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
+                             seed_everything, write_checkpoint_meta)
+
+ALGORITHM = "sb3-maskable-ppo"
+
+
+@dataclass(frozen=True)
+class Args:
+    """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py)."""
+
+    task: str = "chain-v0"
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides passed to ``proteo_env.make`` (size, cycle limit, physics, task parameters)."""
+    seed: int = 0
+    total_steps: int = 200_000
+    """Agent-steps (module-cycles) to train for, counted across all copies."""
+    n_copies: int = 4
+    """Environment copies; sub-envs = n_copies * modules."""
+    n_steps: int = 128
+    """Cycles per copy in one rollout (rollout size = n_steps * n_copies * modules)."""
+    batch_size: int = 1024
+    n_epochs: int = 4
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    hidden: tuple[int, ...] = (64, 64)
+    checkpoint_every: int = 50_000
+    run_dir: str | None = None
+    resume: str | None = None
+    """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
+    time_limit_minutes: float = 0.0
+    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
+    threads: int = 1
+    """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
+    tensorboard: bool = True
+
+
+def main(argv=None) -> Path:
+    args = parse_args(Args, argv)
+    seed_everything(args.seed, threads=args.threads)
+
+    from sb3_contrib import MaskablePPO
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from proteo_env.adapters.sb3 import ProteoVecEnv
+    from training.checkpoints import read_meta
+
+    resume_meta = read_meta(args.resume) if args.resume else None
+    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
+                           f"sb3_ppo_{args.task.split('-v')[0]}_s{args.seed}", resume=resume_meta is not None)
+    save_args(args, run_dir)
+    venv = ProteoVecEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
+    tb_dir = str(run_dir / "tb") if args.tensorboard else None
+    if resume_meta is not None:
+        model = MaskablePPO.load(Path(resume_meta["dir"]) / "model.zip", env=venv, device="cpu",
+                                 tensorboard_log=tb_dir)
+    else:
+        model = MaskablePPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=args.batch_size,
+                            n_epochs=args.n_epochs, learning_rate=args.learning_rate, gamma=args.gamma,
+                            gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
+                            vf_coef=args.vf_coef, policy_kwargs={"net_arch": list(args.hidden)},
+                            tensorboard_log=tb_dir, seed=args.seed, device="cpu", verbose=0)
+    log = ProgressLog(run_dir, tensorboard=False)  # SB3 writes TensorBoard itself
+
+    def save(folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        model.save(folder / "model.zip")
+        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=venv.task_id, env_overrides=dict(args.env),
+                              encoder_spec=venv.encoder.spec(), nvec=venv.nvec, agent_steps=model.num_timesteps,
+                              seed=args.seed, extra={"label": "sb3-ppo", "hidden": list(args.hidden),
+                                                     "run_dir": str(run_dir), "args": asdict(args)})
+
+    class Progress(BaseCallback):
+        """Progress bar, episode statistics, the time split, and periodic checkpoints."""
+
+        def _on_training_start(self):
+            self.bar = tqdm(total=args.total_steps, initial=self.num_timesteps, unit="agent-step", desc=ALGORITHM)
+            self.episodes, self.next_checkpoint = [], (self.num_timesteps // args.checkpoint_every + 1) * args.checkpoint_every
+            self.rollout_started = self.rollout_ended = time.perf_counter()
+            self.env_seconds = venv.step_seconds
+
+        def _on_rollout_start(self):
+            now = time.perf_counter()
+            self.update_seconds = now - self.rollout_ended  # the PPO update between two rollouts
+            self.rollout_started = now
+            self.env_seconds = venv.step_seconds
+
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                if "episode" in info:
+                    self.episodes.append({**info["episode"], "success": info["is_success"]})
+            self.bar.update(venv.num_envs)
+            if self.num_timesteps >= self.next_checkpoint:
+                save(checkpoint_folder(run_dir, self.num_timesteps))
+                self.next_checkpoint += args.checkpoint_every
+            return not (args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes)
+
+        def _on_rollout_end(self):
+            self.rollout_ended = time.perf_counter()
+            collect = self.rollout_ended - self.rollout_started
+            env_s = venv.step_seconds - self.env_seconds
+            steps = args.n_steps * venv.num_envs
+            values = {**episode_stats(self.episodes),
+                      "time/env_seconds": env_s, "time/policy_seconds": collect - env_s,
+                      "time/update_seconds": getattr(self, "update_seconds", None),
+                      "throughput/collect_agent_steps_per_s": steps / collect,
+                      "throughput/env_agent_steps_per_s": steps / env_s if env_s else None}
+            for k, v in values.items():
+                if v is not None:
+                    self.logger.record(k, v)
+            log.log(self.num_timesteps, values)
+            self.episodes = []
+
+        def _on_training_end(self):
+            self.bar.close()
+
+    model.learn(total_timesteps=max(args.total_steps - model.num_timesteps, 1), callback=Progress(),
+                reset_num_timesteps=resume_meta is None, tb_log_name="sb3_ppo")
+    save(run_dir / "final")
+    log.close()
+    venv.close()
+    print(f"final checkpoint: {run_dir / 'final'}  ({model.num_timesteps} agent-steps, {log.seconds:.0f} s)")
+    return run_dir / "final"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,245 @@
+"""IPPO or MAPPO with TorchRL: one actor shared by every module, masked multi-discrete actions.
+
+The environment is :class:`~proteo_env.adapters.torchrl.ProteoTorchRLEnv`, a native TorchRL
+``EnvBase`` over the array API (``n_copies`` copies batched, the modules of a copy form the
+group ``"agents"``). The actor maps one module's flattened observation to logits of every
+action field; :class:`MaskedMultiCategorical` masks illegal moves. The critic is TorchRL's
+``MultiAgentMLP``: per module (``variant: ippo``) or over all modules' observations
+(``variant: mappo``, centralised). Losses: TorchRL's ``ClipPPOLoss`` with GAE.
+``total_steps`` counts agent-steps (module-cycles).
+
+    python -m training.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml
+    python -m training.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml --variant mappo --run-dir runs/mappo
+    python -m training.torchrl_ppo --resume runs/mappo/checkpoints/step_0000049152 --total-steps 100000
+
+Writes ``runs/<name>/`` (see :mod:`training.common`); ``proteo eval --checkpoint runs/<name>``
+evaluates the result.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
+                             seed_everything, write_checkpoint_meta)
+
+ALGORITHM = "torchrl-ppo"
+
+
+@dataclass(frozen=True)
+class Args:
+    """IPPO/MAPPO with TorchRL (arguments of training/torchrl_ppo.py)."""
+
+    task: str = "chain-v0"
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides passed to ``proteo_env.make``."""
+    variant: str = "ippo"
+    """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the copy)."""
+    seed: int = 0
+    total_steps: int = 200_000
+    """Agent-steps (module-cycles) to train for."""
+    n_copies: int = 4
+    n_steps: int = 128
+    """Cycles per copy in one batch (batch = n_steps * n_copies * modules agent-steps)."""
+    minibatch_size: int = 1024
+    """Agent-steps per minibatch."""
+    n_epochs: int = 4
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.01
+    max_grad_norm: float = 0.5
+    hidden: tuple[int, ...] = (64, 64)
+    checkpoint_every: int = 50_000
+    time_limit_minutes: float = 0.0
+    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
+    run_dir: str | None = None
+    resume: str | None = None
+    threads: int = 1
+    """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
+    tensorboard: bool = True
+
+
+def make_distribution_class(nvec):
+    """A torch ``Distribution`` over MultiDiscrete actions with a move mask (built lazily: torch import)."""
+    import torch
+    from torch.distributions import Categorical, Distribution
+
+    sizes = [int(n) for n in nvec]
+
+    class MaskedMultiCategorical(Distribution):
+        """Independent categoricals, one per action field; moves masked by ``mask[..., :13]``."""
+
+        arg_constraints = {}
+
+        def __init__(self, logits, mask):
+            logits = logits.masked_fill(~mask.bool(), -1e9)
+            self.heads = [Categorical(logits=part) for part in torch.split(logits, sizes, dim=-1)]
+            super().__init__(batch_shape=logits.shape[:-1], validate_args=False)
+
+        def sample(self, sample_shape=torch.Size()):
+            return torch.stack([h.sample(sample_shape) for h in self.heads], dim=-1)
+
+        def log_prob(self, value):
+            return sum(h.log_prob(value[..., k]) for k, h in enumerate(self.heads))
+
+        def entropy(self):
+            return sum(h.entropy() for h in self.heads)
+
+        @property
+        def deterministic_sample(self):
+            return torch.stack([h.probs.argmax(-1) for h in self.heads], dim=-1)
+
+        @property
+        def mode(self):
+            return self.deterministic_sample
+
+    return MaskedMultiCategorical
+
+
+def main(argv=None) -> Path:
+    args = parse_args(Args, argv)
+    if args.variant not in ("ippo", "mappo"):
+        from proteo_env.config import ConfigError
+
+        raise ConfigError(f"variant={args.variant!r} is not allowed; allowed: ippo, mappo")
+    seed_everything(args.seed, threads=args.threads)
+
+    import torch
+    from tensordict.nn import TensorDictModule
+    from torchrl.collectors import Collector
+    from torchrl.data import LazyTensorStorage, ReplayBuffer
+    from torchrl.data.replay_buffers.samplers import SamplerWithoutReplacement
+    from torchrl.modules import MultiAgentMLP, ProbabilisticActor
+    from torchrl.objectives import ClipPPOLoss, ValueEstimators
+
+    from proteo_env.adapters.torchrl import ProteoTorchRLEnv
+    from training.checkpoints import read_meta
+    from training.policies import torch_mlp
+
+    # ------------------------------------------------------------------ environment
+    resume_meta = read_meta(args.resume) if args.resume else None
+    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
+                           f"torchrl_{args.variant}_{args.task.split('-v')[0]}_s{args.seed}",
+                           resume=resume_meta is not None)
+    save_args(args, run_dir)
+    env = ProteoTorchRLEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
+    n_agents, obs_size, nvec = env.n_agents, env.encoder.size, env.nvec
+
+    # ------------------------------------------------------------------ actor and critic
+    actor_net = torch_mlp(obs_size, int(nvec.sum()), args.hidden)
+    actor = ProbabilisticActor(
+        TensorDictModule(actor_net, in_keys=[("agents", "observation")], out_keys=[("agents", "logits")]),
+        in_keys={"logits": ("agents", "logits"), "mask": ("agents", "action_mask")},
+        out_keys=[("agents", "action")], distribution_class=make_distribution_class(nvec),
+        return_log_prob=True, log_prob_key=("agents", "sample_log_prob"))
+    critic_net = MultiAgentMLP(n_agent_inputs=obs_size, n_agent_outputs=1, n_agents=n_agents,
+                               centralised=args.variant == "mappo", share_params=True, depth=len(args.hidden),
+                               num_cells=args.hidden[0], activation_class=torch.nn.Tanh)
+    critic = TensorDictModule(critic_net, in_keys=[("agents", "observation")], out_keys=[("agents", "state_value")])
+    loss = ClipPPOLoss(actor_network=actor, critic_network=critic, clip_epsilon=args.clip_range,
+                       entropy_coeff=args.ent_coef, normalize_advantage=True)
+    loss.set_keys(reward=("agents", "reward"), action=("agents", "action"), value=("agents", "state_value"),
+                  sample_log_prob=("agents", "sample_log_prob"), done=("agents", "done"),
+                  terminated=("agents", "terminated"))
+    loss.make_value_estimator(ValueEstimators.GAE, gamma=args.gamma, lmbda=args.gae_lambda)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=args.learning_rate)
+    agent_steps = 0
+    if resume_meta is not None:
+        state = torch.load(Path(resume_meta["dir"]) / "trainer.pt", map_location="cpu", weights_only=True)
+        actor_net.load_state_dict(state["actor"])
+        critic_net.load_state_dict(state["critic"])
+        optimizer.load_state_dict(state["optimizer"])
+        agent_steps = int(state["agent_steps"])
+
+    def save(folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        torch.save(actor_net.state_dict(), folder / "policy.pt")
+        torch.save({"actor": actor_net.state_dict(), "critic": critic_net.state_dict(),
+                    "optimizer": optimizer.state_dict(), "agent_steps": agent_steps}, folder / "trainer.pt")
+        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=env.task_id, env_overrides=dict(args.env),
+                              encoder_spec=env.encoder.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
+                              extra={"label": f"torchrl-{args.variant}", "hidden": list(args.hidden),
+                                     "run_dir": str(run_dir), "args": asdict(args)})
+
+    # ------------------------------------------------------------------ data
+    steps_per_batch = args.n_steps * args.n_copies * n_agents
+    collector = Collector(env, actor, frames_per_batch=args.n_steps * args.n_copies,
+                                  total_frames=-1, device="cpu", auto_register_policy_transforms=False)
+    buffer = ReplayBuffer(storage=LazyTensorStorage(args.n_steps * args.n_copies),
+                          sampler=SamplerWithoutReplacement(), batch_size=max(1, args.minibatch_size // n_agents))
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    running_return = np.zeros(args.n_copies)
+    running_cycles = np.zeros(args.n_copies, dtype=np.int64)
+    bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=f"torchrl-{args.variant}")
+    next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
+    collect_started = time.perf_counter()
+    env_seconds = env.step_seconds
+    for data in collector:
+        collect_s = time.perf_counter() - collect_started
+        env_s = env.step_seconds - env_seconds
+        update_started = time.perf_counter()
+        # shared done flags, expanded to every module as the value estimator needs them
+        reward_shape = data.get(("next", "agents", "reward")).shape
+        for key in ("done", "terminated"):
+            data.set(("next", "agents", key), data.get(("next", key)).unsqueeze(-1).expand(reward_shape))
+
+        # episode statistics (data is [copy, time])
+        rewards = data.get(("next", "agents", "reward"))[..., 0, 0].numpy()
+        done = data.get(("next", "done"))[..., 0].numpy()
+        terminated = data.get(("next", "terminated"))[..., 0].numpy()
+        episodes = []
+        for c in range(rewards.shape[0]):
+            for t in range(rewards.shape[1]):
+                running_return[c] += rewards[c, t]
+                running_cycles[c] += 1
+                if done[c, t]:
+                    episodes.append({"r": running_return[c], "l": running_cycles[c], "success": terminated[c, t]})
+                    running_return[c], running_cycles[c] = 0.0, 0
+
+        # PPO update
+        with torch.no_grad():
+            loss.value_estimator(data, params=loss.critic_network_params, target_params=loss.target_critic_network_params)
+        buffer.extend(data.reshape(-1))
+        for _ in range(args.n_epochs):
+            for _ in range(max(1, len(buffer) // buffer._batch_size)):
+                parts = loss(buffer.sample())
+                total = parts["loss_objective"] + parts["loss_critic"] + parts["loss_entropy"]
+                optimizer.zero_grad()
+                total.backward()
+                torch.nn.utils.clip_grad_norm_(loss.parameters(), args.max_grad_norm)
+                optimizer.step()
+        collector.update_policy_weights_()
+        update_s = time.perf_counter() - update_started
+
+        agent_steps += steps_per_batch
+        bar.update(steps_per_batch)
+        log.log(agent_steps, {**episode_stats(episodes), "loss/objective": parts["loss_objective"].item(),
+                              "loss/critic": parts["loss_critic"].item(), "loss/entropy": parts["loss_entropy"].item(),
+                              "time/env_seconds": env_s, "time/policy_seconds": collect_s - env_s,
+                              "time/update_seconds": update_s,
+                              "throughput/collect_agent_steps_per_s": steps_per_batch / collect_s,
+                              "throughput/env_agent_steps_per_s": steps_per_batch / env_s if env_s else None})
+        if agent_steps >= next_checkpoint:
+            save(checkpoint_folder(run_dir, agent_steps))
+            next_checkpoint += args.checkpoint_every
+        if agent_steps >= args.total_steps or (args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes):
+            break
+        collect_started = time.perf_counter()
+        env_seconds = env.step_seconds
+    bar.close()
+    collector.shutdown()
+    save(run_dir / "final")
+    log.close()
+    print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
+    return run_dir / "final"
+
+
+if __name__ == "__main__":
+    main()
