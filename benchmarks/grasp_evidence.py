@@ -12,8 +12,9 @@ plus, optionally, the per-episode rows as JSON:
    how far coverage and surround go.
 
 Per episode it records: success, the cycle of first contact (first cycle whose ``contact``
-metric is positive), the cycle of success, and the final ``coverage``, ``surround`` and
-``contact`` metrics.
+metric is positive), the cycle of success, the first cycle that met the default success
+thresholds (the same cycle unless a suite changes the thresholds), and the final
+``coverage``, ``surround`` and ``contact`` metrics.
 
 Usage::
 

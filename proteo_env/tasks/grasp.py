@@ -36,7 +36,7 @@ Geometry the metrics use (fixed per episode, O(object surface) to read)
     surface site are the object's sides (all 12 for a compact object).
 Metrics
     ``gap``      hop distance from the nearest module to a surface site (0: in contact),
-                 through the empty box around the object;
+                 counted through the box around the object (modules do not block it);
     ``contact``  number of modules touching the object;
     ``coverage`` share of the surface sites that hold a module;
     ``surround`` share of the object's sides with at least one module on them;
@@ -93,8 +93,8 @@ class GraspParams:
         object_size: sphere radius; box half side (times ``box_aspect`` per axis); for a blob the
             radius of the sphere with the same number of sites.
         box_aspect: per-axis factors of a box's half sides.
-        distance: empty lattice layers between the front of the base and the near side of the
-            object along the true direction (about the length a finger needs to touch it).
+        distance: empty lattice layers between the base's foremost module and the near side of
+            the object along the true direction (about the length a finger needs to touch it).
         direction: nominal direction from the base to the object (normalised).
         direction_spread_deg: the true direction is drawn per episode uniformly within this
             angle of ``direction`` (0: always ``direction``).
