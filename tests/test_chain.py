@@ -2,7 +2,7 @@
 policy does not form it, and the policy acts on observations alone.
 
 Limits come from measurements (``benchmarks/chain_evidence.py``, ``docs/chain_evidence.md``):
-30-module blobs form the chain in a median 173 (``minimal``), 231 (``rounded``) and 226
+30-module blobs form the chain in a median 174 (``minimal``), 231 (``rounded``) and 226
 (``sphere``) cycles, the slowest of seeds 0..19 in 260; the limit here, 600, is more than
 twice that. Seeds are 0..4, not picked. ``rhombic`` is left out: compact parts of a blob
 can have no legal move at all under it (19 of 20 at 30 modules, 17 of 20 at 50, 1 of 20 at
