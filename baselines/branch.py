@@ -208,18 +208,8 @@ class BranchPolicy(ChainPolicy):
             seen = nmode[search].copy()  # a NODE is a seed to approach, an INODE part of the chain
             seen[seen == NODE] = SEED
             seen[seen == INODE] = FINAL
-            moves, send = self._search_moves([keys[i] for i in search], msgs[search], kinds[search],
-                                             seen, scents[search], legal[search])
-            actions[search, lay.move] = moves
-            sending = send >= 0
-            actions[search[sending], lay.message_target] = MESSAGE_TO_ALL
-            actions[search[sending], lay.message_value] = send[sending] + 1
-            for i, m in zip(search.tolist(), moves.tolist()):
-                if m > 0:
-                    self.heading[keys[i]] = m - 1
-                    self.asked.add(keys[i])
-                else:
-                    self.asked.discard(keys[i])
+            self._search_actions(actions, keys, search, msgs[search], kinds[search], seen, scents[search],
+                                 legal[search])
         for i in np.flatnonzero(own >= FINAL):
             self.heading.pop(keys[i], None)
             self.asked.discard(keys[i])

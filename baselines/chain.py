@@ -129,6 +129,8 @@ class ChainPolicy(Policy):
             raise ValueError(f"on_stuck={on_stuck!r} is not allowed; allowed: {', '.join(ON_STUCK)}")
         if momentum < 0:
             raise ValueError(f"momentum={momentum!r} is not allowed; allowed: a number >= 0")
+        if avoid_octahedra not in (True, False, "all"):
+            raise ValueError(f"avoid_octahedra={avoid_octahedra!r} is not allowed; allowed: True, False or 'all'")
         self.p_seed = p_seed
         self.p_random = p_random
         self.on_stuck = on_stuck
@@ -214,18 +216,8 @@ class ChainPolicy(Policy):
 
         search = np.flatnonzero((own == SEARCH) & (promoted < 0))
         if search.size:
-            moves, send = self._search_moves([keys[i] for i in search], msgs[search], kinds[search],
-                                             nmode[search], scents[search], legal[search])
-            actions[search, lay.move] = moves
-            sending = send >= 0
-            actions[search[sending], lay.message_target] = MESSAGE_TO_ALL
-            actions[search[sending], lay.message_value] = send[sending] + 1
-            for i, m in zip(search.tolist(), moves.tolist()):
-                if m > 0:
-                    self.heading[keys[i]] = m - 1
-                    self.asked.add(keys[i])
-                else:
-                    self.asked.discard(keys[i])
+            self._search_actions(actions, keys, search, msgs[search], kinds[search], nmode[search],
+                                 scents[search], legal[search])
         for i in np.flatnonzero(own == FINAL):
             self.heading.pop(keys[i], None)
             self.asked.discard(keys[i])
@@ -236,6 +228,22 @@ class ChainPolicy(Policy):
         return self.act({agent: obs})[agent]
 
     # ------------------------------------------------------------------ SEARCH, batched
+    def _search_actions(self, actions, keys, search, msgs, kinds, seen_modes, scents, legal) -> None:
+        """Write the moves and growth broadcasts of the SEARCH agents ``search`` into ``actions``
+        (the other arguments are those agents' observation fields) and update their memory."""
+        lay = self.layout
+        moves, send = self._search_moves([keys[i] for i in search], msgs, kinds, seen_modes, scents, legal)
+        actions[search, lay.move] = moves
+        sending = send >= 0
+        actions[search[sending], lay.message_target] = MESSAGE_TO_ALL
+        actions[search[sending], lay.message_value] = send[sending] + 1
+        for i, m in zip(search.tolist(), moves.tolist()):
+            if m > 0:
+                self.heading[keys[i]] = m - 1
+                self.asked.add(keys[i])
+            else:
+                self.asked.discard(keys[i])
+
     def _search_moves(self, names, msgs, kinds, nmode, scents, legal):
         """Moves and growth broadcasts (-1: none) of the SEARCH modules.
 

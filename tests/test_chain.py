@@ -166,3 +166,12 @@ def test_seed_turns_instead_of_thickening():
         spot = DIRECTIONS[g]
         for k in (back, side):  # the new site touches no FINAL module but the seed
             assert ((spot - DIRECTIONS[k]) ** 2).sum() != 2
+
+
+def test_bad_policy_parameters_are_refused():
+    env = proteo_env.make("chain", n_modules=8)
+    for bad in ({"p_random": 1.5}, {"p_seed": -0.1}, {"on_stuck": "dance"}, {"momentum": -1.0},
+                {"avoid_octahedra": "some"}):
+        name = next(iter(bad))
+        with pytest.raises(ValueError, match=name):
+            ChainPolicy.for_env(env, seed=0, **bad)
