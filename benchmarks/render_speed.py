@@ -20,26 +20,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import platform
 import time
 
 import numpy as np
 
-
-def machine() -> dict:
-    import matplotlib
-    import PIL
-
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__,
-            "matplotlib": matplotlib.__version__, "pillow": PIL.__version__, "rasteriser": "matplotlib Agg",
-            "load_average_1min": round(os.getloadavg()[0], 2)}
+from machine_info import describe
 
 
 def scene_of_size(n: int, seed: int):
@@ -95,7 +80,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     rows = [bench_size(n, args.frames, args.width, args.height, args.seed) for n in args.sizes]
-    info = machine()
+    info = describe("numpy", "matplotlib", "PIL", rasteriser="matplotlib Agg")
     text = table(rows)
     described = ", ".join(f"{k} {v}" for k, v in info.items())
     print(text)

@@ -25,28 +25,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 
 import numpy as np
 
-
-def machine() -> dict:
-    import numba
-
-    import gymnasium
-    import pettingzoo
-
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": numba.config.NUMBA_NUM_THREADS,
-            "python": platform.python_version(), "numpy": np.__version__, "numba": numba.__version__,
-            "gymnasium": gymnasium.__version__, "pettingzoo": pettingzoo.__version__}
+from machine_info import describe
 
 
 def random_legal_moves(mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -116,7 +99,9 @@ def main() -> None:
     parser.add_argument("--workloads", nargs="+", default=["uniform", "legal"], choices=["uniform", "legal"])
     parser.add_argument("--json", default=None, help="write results and machine info to this file")
     args = parser.parse_args()
-    info = machine()
+    import numba
+
+    info = describe("numpy", "numba", "gymnasium", "pettingzoo", numba_threads=numba.config.NUMBA_NUM_THREADS)
     rows = [bench_size(n, args.cycles, args.motion_model, args.seed, w) for w in args.workloads for n in args.sizes]
     print(f"machine: {info}")
     print("| actions | N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "

@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from machine_info import describe
+
 MODES = ("pettingzoo", "engine", "batched", "reference")
 
 
@@ -118,23 +120,6 @@ def measure(mode: str, n: int, batch_modules: int, budget_s: float) -> dict:
             "ms_per_cycle": 1e3 * seconds / cycles, "peak_rss_mib": peak_mib}
 
 
-def machine(threads: int) -> dict:
-    import gymnasium
-    import numba
-    import pettingzoo
-    import platform
-
-    cpu = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": threads, "python": platform.python_version(),
-            "numpy": np.__version__, "numba": numba.__version__, "gymnasium": gymnasium.__version__,
-            "pettingzoo": pettingzoo.__version__}
-
-
 def plot(rows: list[dict], path: Path) -> None:
     import matplotlib
 
@@ -193,7 +178,7 @@ def main() -> None:
         lines.append(f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
                      f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |")
     table = "\n".join(lines)
-    info = machine(args.threads)
+    info = describe("numpy", "numba", "gymnasium", "pettingzoo", numba_threads=args.threads)
     print(f"\nmachine: {info}\n\n{table}")
     if args.out:
         out = Path(args.out)
