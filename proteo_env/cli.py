@@ -15,7 +15,7 @@ from pathlib import Path
 DEMO_SETTINGS = {
     "sandbox": {"n_modules": 40, "max_cycles": 200},
     "chain": {"n_modules": 40, "max_cycles": 3000},
-    "branch": {"n_modules": 100, "max_cycles": 400, "target_levels": 99, "motion_model": "minimal"},
+    "branch": {"n_modules": 100, "max_cycles": 400, "motion_model": "minimal"},
     "grasp": {"n_modules": 120, "object_size": 2.0, "distance": 4, "max_cycles": 1500},
     "table": {"board_size": 18, "depth": 4, "n_spares": 60, "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)), "motion_model": "minimal"},
 }
