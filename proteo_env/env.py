@@ -9,7 +9,7 @@ from pettingzoo import ParallelEnv
 
 from .config import EnvConfig
 from .core.world import World
-from .spaces import ActionLayout, ObservationBuffers, observation_space
+from .spaces import ObservationBuffers, observation_space
 from .batched import BatchedEnv
 from .tasks.base import Task
 

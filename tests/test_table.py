@@ -20,7 +20,7 @@ from proteo_env.config import ConfigError, load_run_config
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.core.world import Physics, World
 from proteo_env.rollout import run_episode
-from proteo_env.tasks.table import AROOT, FINAL, IROOT, ROOT, SEED, SLEEP, TableParams, board_sites, spare_sites
+from proteo_env.tasks.table import AROOT, FINAL, IROOT, ROOT, SLEEP, TableParams, board_sites, spare_sites
 
 CONFIGS = sorted(Path(__file__).resolve().parents[1].glob("configs/table*.yaml"))
 SHIFT = 250

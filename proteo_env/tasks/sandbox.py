@@ -29,8 +29,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..core.world import LayoutError
 from ..layouts import Layout, ball_sites, blob_sites, line_sites, parse_layout, place_in_box
 from .base import Task
