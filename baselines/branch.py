@@ -137,22 +137,9 @@ class BranchPolicy(ChainPolicy):
     def _act(self, keys, field, observation) -> np.ndarray:
         keys = list(keys)
         smax = self.scent_max
-        own = field("own_mode")[:, 0].astype(np.int64)
-        msgs = field("messages")
-        kinds = field("neighbour_kind")[:, :12]
-        nmode = field("neighbour_mode")[:, :12]
+        own, msgs, kinds, nmode, scents, own_scent, legal, actions, promoted = self._stacked(field, len(keys))
         is_mod = kinds == KIND_MODULE
-        scents = np.where(is_mod, field("neighbour_scent")[:, :12, 0], smax)
-        own_scent = field("own_scent")
-        legal = field("action_mask")[:, 1:].astype(bool)
-
         lay = self.layout
-        actions = np.zeros((len(keys), lay.length), dtype=np.int64)
-        actions[:, lay.roles] = RELAY
-        actions[:, lay.mode] = own
-
-        promoted = first_slot(msgs == BECOME_SEED)
-        promoted[(own != SLEEP) & (own != SEARCH)] = -1
         grown_nb = is_mod & np.isin(nmode, GROWN)
         for i in np.flatnonzero(promoted >= 0):
             others = grown_nb[i].copy()

@@ -177,26 +177,36 @@ class ChainPolicy(Policy):
         """
         return self._act(range(buffers.own_mode.shape[0]), lambda f: getattr(buffers, f), buffers.agent)
 
+    def _stacked(self, field, n: int):
+        """The fields every rule reads, stacked over ``n`` agents, and their default actions.
+
+        Returns own modes, messages, face-neighbour kinds, modes and channel-0 scents
+        (``scent_max`` where no module), own scents (all channels), legal moves (12,), the
+        default actions (relay every channel, keep the mode) and, per agent, the slot a
+        ``BECOME_SEED`` came from (-1 when none, or when not SLEEP or SEARCH).
+        """
+        own = field("own_mode")[:, 0].astype(np.int64)
+        msgs = field("messages")
+        kinds = field("neighbour_kind")[:, :12]
+        nmode = field("neighbour_mode")[:, :12]
+        scents = np.where(kinds == KIND_MODULE, field("neighbour_scent")[:, :12, 0], self.scent_max)
+        legal = field("action_mask")[:, 1:].astype(bool)
+        lay = self.layout
+        actions = np.zeros((n, lay.length), dtype=np.int64)
+        actions[:, lay.roles] = RELAY
+        actions[:, lay.mode] = own
+        promoted = first_slot(msgs == BECOME_SEED)
+        promoted[(own != SLEEP) & (own != SEARCH)] = -1
+        return own, msgs, kinds, nmode, scents, field("own_scent"), legal, actions, promoted
+
     def _act(self, keys, field, observation) -> np.ndarray:
         """Actions of the modules ``keys`` (memory keys, in row order); ``field(name)`` gives an
         observation field stacked over them, ``observation(i)`` one module's observation dict."""
         keys = list(keys)
         smax = self.scent_max
-        own = field("own_mode")[:, 0].astype(np.int64)
-        msgs = field("messages")
-        kinds = field("neighbour_kind")[:, :12]
-        nmode = field("neighbour_mode")[:, :12]
-        scents = np.where(kinds == KIND_MODULE, field("neighbour_scent")[:, :12, 0], smax)
-        own_scent = field("own_scent")[:, 0]
-        legal = field("action_mask")[:, 1:].astype(bool)
-
+        own, msgs, kinds, nmode, scents, own_scent, legal, actions, promoted = self._stacked(field, len(keys))
+        own_scent = own_scent[:, 0]
         lay = self.layout
-        actions = np.zeros((len(keys), lay.length), dtype=np.int64)
-        actions[:, lay.roles] = RELAY
-        actions[:, lay.mode] = own
-
-        promoted = first_slot(msgs == BECOME_SEED)
-        promoted[(own != SLEEP) & (own != SEARCH)] = -1
         for i in np.flatnonzero(promoted >= 0):
             actions[i] = self._seed(keys[i], observation(i), int(OPPOSITE[promoted[i]]), fresh=True)
         for i in np.flatnonzero(own == SEED):
