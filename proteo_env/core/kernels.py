@@ -46,29 +46,19 @@ def shuffle(items, count, state):
 
 # ---------------------------------------------------------------- rolls
 @kernel
-def legal_directions(grid, c, local_delta, sweep_bits, pivot_bit):
+def legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules):
     """Bit ``k`` set when the body at cell ``c`` may roll towards direction ``k`` (geometry only).
 
-    The 54 sites within two hops (``local_delta``, targets first) are read once into two bit
-    words, "not empty" and "holds a module"; a roll is legal when its target is empty and some
-    pivot holds a module whose swept cells (``sweep_bits``) are all empty.
+    ``blocked`` and ``modules`` are the bits of the 12 face neighbours already read ("not
+    empty", "holds a module"); the model's swept sites two hops away (``roll_delta[12:]``) are
+    read here, and only when some target is empty. A roll is legal when its target is empty
+    and some pivot holds a module whose swept cells (``sweep_bits``) are all empty.
     """
-    blocked = 0
-    modules = 0
-    for i in range(12):
-        v = grid[c + local_delta[i]]
-        if v != EMPTY:
-            blocked |= 1 << i
-            if v >= 0:
-                modules |= 1 << i
     if blocked == 0xFFF:
         return 0
-    for i in range(12, local_delta.shape[0]):
-        v = grid[c + local_delta[i]]
-        if v != EMPTY:
+    for i in range(12, roll_delta.shape[0]):
+        if grid[c + roll_delta[i]] != EMPTY:
             blocked |= 1 << i
-            if v >= 0:
-                modules |= 1 << i
     legal = 0
     for k in range(12):
         if blocked & (1 << k):
@@ -78,6 +68,20 @@ def legal_directions(grid, c, local_delta, sweep_bits, pivot_bit):
                 legal |= 1 << k
                 break
     return legal
+
+
+@kernel
+def legal_directions(grid, c, roll_delta, sweep_bits, pivot_bit):
+    """:func:`legal_rolls` of the body at cell ``c``, reading its face neighbours first."""
+    blocked = 0
+    modules = 0
+    for i in range(12):
+        v = grid[c + roll_delta[i]]
+        if v != EMPTY:
+            blocked |= 1 << i
+            if v >= 0:
+                modules |= 1 << i
+    return legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules)
 
 
 # ---------------------------------------------------------------- connectivity
@@ -91,7 +95,11 @@ def _find(parent, a):
 
 @kernel
 def _flood(start, allowed, local_adjacent):
-    """Bits of ``allowed`` local sites reachable from the ``start`` bits through ``allowed`` sites."""
+    """Bits of ``allowed`` local sites reachable from the ``start`` bits through ``allowed`` sites.
+
+    ``local_adjacent[i, byte]`` is the union of the sites adjacent to the set bits of ``byte``
+    at bits ``8 i .. 8 i + 7``, so a step of the flood costs one lookup per byte.
+    """
     reached = start
     frontier = start
     while frontier:
@@ -99,9 +107,8 @@ def _flood(start, allowed, local_adjacent):
         i = 0
         f = frontier
         while f:
-            if f & 1:
-                grown |= local_adjacent[i]
-            f >>= 1
+            grown |= local_adjacent[i, f & 255]
+            f >>= 8
             i += 1
         frontier = grown & allowed & ~reached
         reached |= frontier
@@ -114,7 +121,7 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
-    neighbours, or else through the modules within two hops of ``m``, yes. Otherwise one
+    neighbours, or else through the modules within two hops of ``m`` (read only then), yes. Otherwise one
     depth-first search per group of neighbours runs in lockstep over the module graph (``m``
     removed), each stepping first towards the next group's seed. The searches stop when all
     groups have met (connected) or one group's stacks run out (that piece is cut off), so the
@@ -123,16 +130,19 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     ``mark`` never needs clearing.
     """
     c = cell[m]
-    modules = 0
-    for i in range(local_delta.shape[0]):
+    touching = 0
+    for i in range(12):
         if grid[c + local_delta[i]] >= 0:
-            modules |= 1 << i
-    touching = modules & 0xFFF
+            touching |= 1 << i
     if touching & (touching - 1) == 0:
         return True
     first = touching & -touching
     if touching & ~_flood(first, touching, local_adjacent) == 0:
         return True
+    modules = touching
+    for i in range(12, local_delta.shape[0]):
+        if grid[c + local_delta[i]] >= 0:
+            modules |= 1 << i
     if touching & ~_flood(first, modules, local_adjacent) == 0:
         return True
 
@@ -195,7 +205,9 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
             if best_at >= 0:  # the neighbour nearest the target is explored next
                 top = depth[g] - 1
                 stacks[g, top], stacks[g, best_at] = stacks[g, best_at], stacks[g, top]
-        for g in range(n_groups):
+        for g in range(n_groups):  # a piece is cut off when all its merged groups ran out
+            if depth[g] > 0:
+                continue
             root = _find(parent, g)
             left = 0
             for h in range(n_groups):
@@ -303,7 +315,7 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 @kernel
 def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                  dir_delta, directions, local_delta, local_adjacent, sweep_bits, pivot_bit,
+                  dir_delta, directions, roll_delta, local_delta, local_adjacent, sweep_bits, pivot_bit,
                   movers, moved, mark, stacks, rel, epoch):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
@@ -324,7 +336,7 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         c = cell[a]
         if grid[c + dir_delta[k]] != EMPTY:  # the common denial, decided by one read
             continue
-        if not (legal_directions(grid, c, local_delta, sweep_bits, pivot_bit) >> k) & 1:
+        if not (legal_directions(grid, c, roll_delta, sweep_bits, pivot_bit) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
             grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, rel, epoch
@@ -404,13 +416,16 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 # ---------------------------------------------------------------- observations
 @kernel
 def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
+            nb_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask):
     """Fill the per-agent observation arrays (first axis: agent) from the world state.
 
-    A module's moves are masked out when it may not leave its site: anchored, or, with
-    ``keep_connected``, a cut module (``is_cut`` from :func:`articulation_points`).
+    One pass over each agent's neighbourhood sites (``nb_delta``, the 12 face neighbours
+    first) fills the neighbour fields, the contacts and the face-neighbour bits from which the
+    action mask follows (:func:`legal_rolls`). A module's moves are masked out when it may not
+    leave its site: anchored, or, with ``keep_connected``, a cut module (``is_cut`` from
+    :func:`articulation_points`).
 
     Shapes: ``neighbour_kind``/``neighbour_mode`` (A, K), ``neighbour_scent`` (A, K, C),
     ``own_mode`` (A, 1), ``own_scent`` (A, C), ``messages`` (A, 12), ``contact`` (A, 2)
@@ -420,6 +435,10 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
     n_sites = nb_delta.shape[0]
     for a in range(n_agents):
         c = cell[a]
+        blocked = 0
+        modules = 0
+        ground = 0
+        touching = 0
         for s in range(n_sites):
             v = grid[c + nb_delta[s]]
             if v >= 0:
@@ -427,34 +446,37 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
                 neighbour_mode[a, s] = mode[v]
                 for ch in range(n_channels):
                     neighbour_scent[a, s, ch] = scent[ch, v]
+                if s < 12:
+                    blocked |= 1 << s
+                    modules |= 1 << s
+                continue
+            neighbour_mode[a, s] = -1
+            for ch in range(n_channels):
+                neighbour_scent[a, s, ch] = scent_max
+            if v == EMPTY:
+                neighbour_kind[a, s] = KIND_EMPTY
+                continue
+            if v == OBJECT:
+                neighbour_kind[a, s] = KIND_OBJECT
             else:
-                neighbour_mode[a, s] = -1
-                for ch in range(n_channels):
-                    neighbour_scent[a, s, ch] = scent_max
-                if v == EMPTY:
-                    neighbour_kind[a, s] = KIND_EMPTY
+                neighbour_kind[a, s] = KIND_SOLID
+            if s < 12:
+                blocked |= 1 << s
+                if v == SOLID:
+                    ground = 1
                 elif v == OBJECT:
-                    neighbour_kind[a, s] = KIND_OBJECT
-                else:
-                    neighbour_kind[a, s] = KIND_SOLID
+                    touching = 1
         own_mode[a, 0] = mode[a]
         for ch in range(n_channels):
             own_scent[a, ch] = scent[ch, a]
-        ground = 0
-        touching = 0
         for k in range(12):
             messages[a, k] = inbox[a, k]
-            v = grid[c + dir_delta[k]]
-            if v == SOLID:
-                ground = 1
-            elif v == OBJECT:
-                touching = 1
         contact[a, 0] = ground
         contact[a, 1] = touching
         action_mask[a, 0] = 1
         legal = 0
         if not anchored[a] and not (keep_connected and is_cut[a]):
-            legal = legal_directions(grid, c, local_delta, sweep_bits, pivot_bit)
+            legal = legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules)
         for k in range(12):
             action_mask[a, k + 1] = (legal >> k) & 1
 
@@ -464,15 +486,15 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
 def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
               keep_connected, exact, sweeps, scent_max,
               move, new_mode, role, message_target, message_value, moved,
-              dir_delta, directions, opposite, local_delta, local_adjacent, sweep_bits, pivot_bit,
+              dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent, sweep_bits, pivot_bit,
               movers, mark, queue, stacks, rel, epoch, scent_buffer):
     """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
     n_modules = len(cell)
     mode[:n_agents] = new_mode
     deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
     n_moved = execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                            dir_delta, directions, local_delta, local_adjacent, sweep_bits, pivot_bit,
-                            movers, moved, mark, stacks, rel, epoch)
+                            dir_delta, directions, roll_delta, local_delta, local_adjacent, sweep_bits,
+                            pivot_bit, movers, moved, mark, stacks, rel, epoch)
     channel_role = np.empty(n_modules, dtype=np.int8)
     for ch in range(scent.shape[0]):
         channel_role[:n_agents] = role[:, ch]
@@ -487,7 +509,7 @@ def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, pas
 
 @kernel
 def observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected,
-                  nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
+                  nb_delta, dir_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
                   is_cut, disc, low, stack_node, stack_k,
                   neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
                   messages, contact, action_mask):
@@ -495,6 +517,6 @@ def observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_conne
     if keep_connected:
         articulation_points(grid, cell, len(cell), dir_delta, is_cut, disc, low, stack_node, stack_k)
     observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, dir_delta, local_delta, sweep_bits, pivot_bit, scent_max,
+            nb_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask)

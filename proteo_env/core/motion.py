@@ -92,14 +92,20 @@ The first 12 are :data:`DIRECTIONS`, so bit ``k`` of a local occupancy word is t
 move ``k``."""
 
 
-def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
-    """The model's tables as bit masks over :data:`LOCAL_OFFSETS`, for the kernels.
+def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The model's tables as bit masks over the sites its rolls involve, for the kernels.
 
-    Returns ``sweep_bits (12, 4)`` int64, the swept cells of direction ``k`` and pivot slot
-    ``j`` as bits, and ``pivot_bit (12, 4)`` int64, the bit index of that pivot.
+    Returns ``roll_offsets (R, 3)``: the 12 :data:`DIRECTIONS` first, then the sites two hops
+    away that some swept cell of this model lies on, in :data:`LOCAL_OFFSETS` order (R is 12
+    for ``minimal``, 18 for ``sphere``, 42 for ``rounded`` and ``rhombic``), so a kernel reads
+    only the sites that can matter; ``sweep_bits (12, 4)`` int64, the swept cells of direction
+    ``k`` and pivot slot ``j`` as bits over ``roll_offsets``; and ``pivot_bit (12, 4)`` int64,
+    the bit index of that pivot (a direction, so below 12).
     """
-    index = {tuple(o): i for i, o in enumerate(LOCAL_OFFSETS)}
     cases = swept_cells(model)
+    swept = {cell for cells in cases.values() for cell in cells}
+    roll_offsets = [o for i, o in enumerate(LOCAL_OFFSETS) if i < 12 or tuple(o) in swept]
+    index = {tuple(o): i for i, o in enumerate(roll_offsets)}
     sweep_bits = np.zeros((12, 4), dtype=np.int64)
     pivot_bit = np.zeros((12, 4), dtype=np.int64)
     for k, d in enumerate(DIRECTIONS):
@@ -107,4 +113,4 @@ def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
             pivot_bit[k, j] = index[tuple(q)]
             for cell in cases[(tuple(d), tuple(q))]:
                 sweep_bits[k, j] |= 1 << index[cell]
-    return sweep_bits, pivot_bit
+    return np.array(roll_offsets, dtype=np.int64).reshape(-1, 3), sweep_bits, pivot_bit

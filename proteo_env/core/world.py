@@ -84,13 +84,22 @@ DIRECTION_ADJACENCY = _direction_adjacency()
 
 
 def _local_adjacency_bits() -> np.ndarray:
-    """``(54,)`` int64: for each site within two hops, the bits of the local sites adjacent to it."""
+    """``(7, 256)`` int64: entry ``[i, byte]`` holds the bits of the local sites (of the 54
+    within two hops) adjacent to any of the sites ``8 i + j`` for the set bits ``j`` of ``byte``.
+    """
     faces = {tuple(d) for d in DIRECTIONS}
-    bits = np.zeros(len(LOCAL_OFFSETS), dtype=np.int64)
+    site_bits = np.zeros(len(LOCAL_OFFSETS), dtype=np.int64)
     for i, a in enumerate(LOCAL_OFFSETS):
         for j, b in enumerate(LOCAL_OFFSETS):
             if tuple(a - b) in faces:
-                bits[i] |= 1 << j
+                site_bits[i] |= 1 << j
+    n_bytes = (len(LOCAL_OFFSETS) + 7) // 8
+    bits = np.zeros((n_bytes, 256), dtype=np.int64)
+    for i in range(n_bytes):
+        for byte in range(256):
+            for j in range(8):
+                if (byte >> j) & 1 and 8 * i + j < len(LOCAL_OFFSETS):
+                    bits[i, byte] |= site_bits[8 * i + j]
     return bits
 
 
@@ -175,7 +184,8 @@ class World:
         self.dir_delta = self.shape.deltas(DIRECTIONS)
         self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
         self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
-        self.sweep_bits, self.pivot_bit = motion_bits(physics.motion_model)
+        roll_offsets, self.sweep_bits, self.pivot_bit = motion_bits(physics.motion_model)
+        self.roll_delta = self.shape.deltas(roll_offsets)
         self.scratch = Scratch(n)
 
         if physics.keep_connected and n > 0 and self.n_components() != 1:
@@ -241,7 +251,7 @@ class World:
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
-        legal = kernels.legal_directions(self.grid, self.cell[module], self.local_delta, self.sweep_bits,
+        legal = kernels.legal_directions(self.grid, self.cell[module], self.roll_delta, self.sweep_bits,
                                          self.pivot_bit)
         return bool((legal >> direction) & 1)
 
@@ -276,8 +286,8 @@ class World:
             np.asarray(move, dtype=np.int64), np.asarray(mode, dtype=np.int32),
             np.asarray(scent_role, dtype=np.int8), np.asarray(message_target, dtype=np.int64),
             np.asarray(message_value, dtype=np.int32), moved,
-            self.dir_delta, DIRECTIONS, OPPOSITE, self.local_delta, LOCAL_ADJACENCY_BITS, self.sweep_bits,
-            self.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
+            self.dir_delta, DIRECTIONS, OPPOSITE, self.roll_delta, self.local_delta, LOCAL_ADJACENCY_BITS,
+            self.sweep_bits, self.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
         return moved
 
     def observe(self, out) -> None:
@@ -285,7 +295,7 @@ class World:
         s = self.scratch
         kernels.observe_world(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
                               self.anchored, self.physics.keep_connected, self.neighbourhood_delta,
-                              self.dir_delta, self.local_delta, self.sweep_bits, self.pivot_bit,
+                              self.dir_delta, self.roll_delta, self.sweep_bits, self.pivot_bit,
                               self.physics.scent_max, s.is_cut, s.disc, s.low, s.stack_node, s.stack_k,
                               out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
                               out.own_scent, out.messages, out.contact, out.action_mask)
