@@ -140,7 +140,7 @@ class ProteoEnv(ParallelEnv):
         buffers = self.batch.reset(seed)
         self.agents = list(self.possible_agents)
         info = {"cycle": 0, **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()}}
-        return self._per_agent(buffers), {a: info for a in self.agents}
+        return buffers.per_agent(self.agents), {a: info for a in self.agents}
 
     def step(self, actions):
         if not self.agents:
@@ -156,7 +156,7 @@ class ProteoEnv(ParallelEnv):
                 **{f"metric/{k}": v for k, v in metrics.items()}}
         truncated = self.cycle >= self.max_cycles and not success
         agents = self.agents
-        observations = self._per_agent(buffers)
+        observations = buffers.per_agent(self.agents)
         rewards = dict.fromkeys(agents, reward)
         terminations = dict.fromkeys(agents, success)
         truncations = dict.fromkeys(agents, truncated)
@@ -207,9 +207,6 @@ class ProteoEnv(ParallelEnv):
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh :class:`~proteo_env.spaces.ObservationBuffers` with every agent's observation."""
         return self.batch.observe_arrays()
-
-    def _per_agent(self, buffers: ObservationBuffers) -> dict:
-        return {a: buffers.agent(i) for i, a in enumerate(self.agents)}
 
     # ------------------------------------------------------------------ views
     @property
