@@ -16,7 +16,10 @@ peak resident memory of its process. Ratios against the reference come from the 
 
 Usage::
 
-    python benchmarks/suite.py --sizes 100 1000 10000 100000 --threads 1 --out docs/benchmarks
+    python benchmarks/suite.py --sizes 100 1000 10000 100000 --threads 1 --out docs/speed/suite
+
+``--out docs/speed/suite`` writes ``suite.json`` (machine, arguments, every row), ``suite.md``
+(the table) and ``suite.png`` (the log-log plot); ``docs/benchmarks.md`` explains them.
 """
 
 from __future__ import annotations
@@ -149,7 +152,7 @@ def main() -> None:
     parser.add_argument("--batch-modules", type=int, default=20000, help="B * N of the batched runs")
     parser.add_argument("--budget", type=float, default=2.0, help="seconds of timed cycles per row")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
-    parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
+    parser.add_argument("--out", default=None, help="write <out>.json, <out>.md (the table) and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("MODE", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
