@@ -1,18 +1,27 @@
 """The speed suite: module-cycles per second against world size for every way of stepping.
 
-For each world size N (random connected blobs in the sandbox task, uniform random actions on
-every field) it measures, each in a fresh process so that peak memory is per measurement:
+The workload is fixed so that any machine measures the same work: a random connected blob
+of N modules in the sandbox task (default physics), reset with seed 0, then the first
+``--cycles`` cycles of uniform random actions on every field (drawn from a generator seeded 0
+at every reset, not timed). The episode is repeated from the same reset until ``--budget``
+seconds of stepping have been spent, so every repeat follows the same trajectory. (The
+workload matters: random rolls loosen the blob into thin strands, and the exact
+connectivity check of each roll costs more the thinner the structure; per-cycle cost at
+N = 10,000 roughly triples over the first 250 cycles.) Each measurement runs in a fresh
+process so that peak memory is per measurement:
 
 * ``pettingzoo``: :meth:`ProteoEnv.step` with per-agent dicts in and out;
 * ``engine``: :meth:`ProteoEnv.step_arrays` + :meth:`ProteoEnv.observe_arrays` (one world, arrays);
 * ``batched``: :class:`~proteo_env.batched.BatchedEnv` with ``B = max(1, batch_modules // N)``
   worlds stepped in one call (``B * N`` module-cycles per cycle);
 * ``reference``: the pure-Python reference cycle (:mod:`proteo_env.core.reference`) with its
-  observations, for the sizes where it finishes in reasonable time;
-* ``chain-kernel``: the chain behaviour run entirely inside the compiled core, when available.
+  observations, from the same start and move-order seed as ``engine`` (so the same
+  trajectory), for the first ``--reference-cycles`` cycles and sizes up to
+  ``--reference-max``.
 
-Every row records the first cycle apart (JIT compile, or loading the on-disk cache) and the
-peak resident memory of its process. Ratios against the reference come from the same run.
+Ratios against the reference compare the same cycles: each mode's mean time over its first
+``--reference-cycles`` cycles. Every row records the first cycle apart (JIT compile, or
+loading the on-disk cache) and the peak resident memory of its process.
 
 Usage::
 
@@ -40,87 +49,91 @@ from machine_info import describe
 MODES = ("pettingzoo", "engine", "batched", "reference")
 
 
-def _uniform_actions(nvec: np.ndarray, rows: int, rng: np.random.Generator) -> np.ndarray:
-    return rng.integers(0, nvec, size=(rows, len(nvec)))
-
-
-def _timed_cycles(step, budget_s: float, min_cycles: int = 3) -> tuple[float, int]:
-    """Run ``step()`` until ``budget_s`` seconds pass; return (seconds, cycles)."""
-    spent, cycles = 0.0, 0
-    while spent < budget_s or cycles < min_cycles:
-        spent += step()
-        cycles += 1
-    return spent, cycles
-
-
-def measure(mode: str, n: int, batch_modules: int, budget_s: float) -> dict:
-    """One measurement in this process (called in a subprocess by :func:`main`)."""
+def _stepper(mode: str, n: int, batch_modules: int):
+    """``(reset, step, rows, n_envs)``: ``reset()`` restarts the episode, ``step(rng)`` runs one
+    cycle with actions drawn from ``rng`` and returns the seconds spent stepping."""
     import proteo_env
 
-    rng = np.random.default_rng(0)
-    started = time.perf_counter()
     if mode == "batched":
         n_envs = max(1, batch_modules // n)
         env = proteo_env.make_batched("sandbox-v0", n_envs, n_modules=n, max_cycles=10**9)
-        env.reset(seed=0)
-        rows = n_envs * n
         nvec = env.action_layout.nvec
 
-        def step():
-            actions = _uniform_actions(nvec, rows, rng).reshape(n_envs, n, -1)
+        def step(rng):
+            actions = rng.integers(0, nvec, size=(n_envs, n, len(nvec)))
             t = time.perf_counter()
             env.step_arrays(actions)
             env.observe_arrays()
             return time.perf_counter() - t
-    elif mode in ("engine", "pettingzoo"):
-        n_envs = 1
-        rows = n
-        env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
-        observations, _ = env.reset(seed=0)
-        nvec = env.action_layout.nvec
+        return (lambda: env.reset(seed=0)), step, n_envs * n, n_envs
+
+    env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
+    nvec = env.action_layout.nvec
+    if mode == "engine":
+        def step(rng):
+            actions = rng.integers(0, nvec, size=(n, len(nvec)))
+            t = time.perf_counter()
+            env.step_arrays(actions)
+            env.observe_arrays()
+            return time.perf_counter() - t
+        return (lambda: env.reset(seed=0)), step, n, 1
+    if mode == "pettingzoo":
         agents = env.possible_agents
 
-        if mode == "engine":
-            def step():
-                actions = _uniform_actions(nvec, rows, rng)
-                t = time.perf_counter()
-                env.step_arrays(actions)
-                env.observe_arrays()
-                return time.perf_counter() - t
-        else:
-            def step():
-                actions = dict(zip(agents, _uniform_actions(nvec, rows, rng)))
-                t = time.perf_counter()
-                env.step(actions)
-                return time.perf_counter() - t
-    elif mode == "reference":
+        def step(rng):
+            actions = dict(zip(agents, rng.integers(0, nvec, size=(n, len(nvec)))))
+            t = time.perf_counter()
+            env.step(actions)
+            return time.perf_counter() - t
+        return (lambda: env.reset(seed=0)), step, n, 1
+    if mode == "reference":
         from proteo_env.core.reference import ReferenceWorld
 
-        n_envs = 1
-        rows = n
-        env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
-        env.reset(seed=0)
-        w = env.engine
-        ref = ReferenceWorld(size=w.shape.size, positions=w.positions, n_agents=w.n_agents,
-                             physics=w.physics, n_channels=w.n_channels)
-        ref.seed(0)
         lay = env.action_layout
+        world = {}
 
-        def step():
-            a = _uniform_actions(lay.nvec, rows, rng)
+        def reset():
+            env.reset(seed=0)
+            w = env.engine
+            ref = ReferenceWorld(size=w.shape.size, positions=w.positions, n_agents=w.n_agents,
+                                 physics=w.physics, n_channels=w.n_channels)
+            ref.rng_state = int(w.rng_state[0])
+            world["ref"] = ref
+
+        def step(rng):
+            a = rng.integers(0, nvec, size=(n, len(nvec)))
             t = time.perf_counter()
-            ref.step(move=a[:, lay.move], mode=a[:, lay.mode], scent_role=a[:, lay.roles],
-                     message_target=a[:, lay.message_target], message_value=a[:, lay.message_value])
-            ref.observe()
+            world["ref"].step(move=a[:, lay.move], mode=a[:, lay.mode], scent_role=a[:, lay.roles],
+                              message_target=a[:, lay.message_target], message_value=a[:, lay.message_value])
+            world["ref"].observe()
             return time.perf_counter() - t
-    else:
-        raise ValueError(f"mode={mode!r} is not known; allowed: {', '.join(MODES)}")
-    first = step() + (time.perf_counter() - started)
-    seconds, cycles = _timed_cycles(step, budget_s)
+        return reset, step, n, 1
+    raise ValueError(f"mode={mode!r} is not known; allowed: {', '.join(MODES)}")
+
+
+def measure(mode: str, n: int, batch_modules: int, budget_s: float, cycles: int) -> dict:
+    """One measurement in this process (called in a subprocess by :func:`main`).
+
+    Repeats the episode (reset, then ``cycles`` timed cycles) until ``budget_s`` seconds of
+    stepping are spent; returns the mean time of each cycle index over the repeats.
+    """
+    started = time.perf_counter()
+    reset, step, rows, n_envs = _stepper(mode, n, batch_modules)
+    reset()
+    first = step(np.random.default_rng(0)) + (time.perf_counter() - started)
+    per_cycle = np.zeros(cycles)
+    repeats = 0
+    while repeats == 0 or per_cycle.sum() < budget_s:
+        reset()
+        rng = np.random.default_rng(0)
+        per_cycle += [step(rng) for _ in range(cycles)]
+        repeats += 1
+    per_cycle /= repeats
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return {"mode": mode, "n_modules": n, "n_envs": n_envs, "cycles": cycles,
-            "first_cycle_s": first, "module_cycles_per_s": rows * cycles / seconds,
-            "ms_per_cycle": 1e3 * seconds / cycles, "peak_rss_mib": peak_mib}
+    return {"mode": mode, "n_modules": n, "n_envs": n_envs, "cycles": cycles, "repeats": repeats,
+            "first_cycle_s": first, "module_cycles_per_s": rows / per_cycle.mean(),
+            "ms_per_cycle": 1e3 * per_cycle.mean(), "per_cycle_ms": (1e3 * per_cycle).tolist(),
+            "peak_rss_mib": peak_mib}
 
 
 def plot(rows: list[dict], path: Path) -> None:
@@ -150,13 +163,17 @@ def main() -> None:
     parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
     parser.add_argument("--reference-max", type=int, default=1000, help="largest N for the reference")
     parser.add_argument("--batch-modules", type=int, default=20000, help="B * N of the batched runs")
-    parser.add_argument("--budget", type=float, default=2.0, help="seconds of timed cycles per row")
+    parser.add_argument("--budget", type=float, default=2.0, help="seconds of timed cycles per row (at least one episode)")
+    parser.add_argument("--cycles", type=int, default=50, help="cycles per episode, timed from a fresh reset")
+    parser.add_argument("--reference-cycles", type=int, default=3, help="cycles per episode of the reference")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md (the table) and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("MODE", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        print(json.dumps(measure(args.one[0], int(args.one[1]), args.batch_modules, args.budget)))
+        mode, n = args.one[0], int(args.one[1])
+        cycles = args.reference_cycles if mode == "reference" else args.cycles
+        print(json.dumps(measure(mode, n, args.batch_modules, args.budget, cycles)))
         return
 
     env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads)}
@@ -166,18 +183,24 @@ def main() -> None:
             if mode == "reference" and n > args.reference_max:
                 continue
             cmd = [sys.executable, __file__, "--one", mode, str(n), "--batch-modules", str(args.batch_modules),
-                   "--budget", str(args.budget)]
+                   "--budget", str(args.budget), "--cycles", str(args.cycles),
+                   "--reference-cycles", str(args.reference_cycles)]
             out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
             rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
             r = rows[-1]
             print(f"{mode:>11} N={n:>7,} B={r['n_envs']:>4}: {r['module_cycles_per_s']:>14,.0f} module-cycles/s, "
                   f"{r['ms_per_cycle']:.3f} ms/cycle, first {r['first_cycle_s']:.2f} s, "
                   f"peak {r['peak_rss_mib']:.0f} MiB", flush=True)
-    ref = {r["n_modules"]: r["module_cycles_per_s"] for r in rows if r["mode"] == "reference"}
-    lines = ["| mode | N | worlds B | module-cycles/s | ms per cycle | x reference | first cycle s | peak RSS MiB |",
+    def early_rate(r):  # module-cycles/s over the cycles the reference ran
+        rows_per_cycle = r["n_envs"] * r["n_modules"]
+        return 1e3 * rows_per_cycle / np.mean(r["per_cycle_ms"][:args.reference_cycles])
+
+    ref = {r["n_modules"]: early_rate(r) for r in rows if r["mode"] == "reference"}
+    lines = [f"| mode | N | worlds B | module-cycles/s | ms per cycle | x reference (first {args.reference_cycles} "
+             "cycles) | first cycle s | peak RSS MiB |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        ratio = f"{r['module_cycles_per_s'] / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref else "-"
+        ratio = f"{early_rate(r) / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref else "-"
         lines.append(f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
                      f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |")
     table = "\n".join(lines)
