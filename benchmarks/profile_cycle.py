@@ -1,0 +1,121 @@
+"""Where the time of one cycle goes: each kernel of the array API timed on its own.
+
+Runs the speed suite's workload (sandbox blob of N modules, reset with seed 0, uniform random
+actions drawn from a generator seeded 0) up to cycle ``--at``, then times every part of the
+next cycle on copies of that state, ``--repeats`` times each, and prints the best time of
+each part in milliseconds:
+
+* ``checks``: validating the action batch (:meth:`BatchedEnv.check_actions`);
+* ``messages``: :func:`~proteo_env.core.kernels.deliver_messages`;
+* ``moves``: :func:`~proteo_env.core.kernels.execute_moves` with connectivity kept, and
+  ``moves without connectivity`` (the same requests, no detach check) to show its share;
+* ``scent``: the scent sweep of channel 0;
+* ``cut modules``: :func:`~proteo_env.core.kernels.articulation_points` (Tarjan), needed for
+  exact action masks;
+* ``observation``: :func:`~proteo_env.core.kernels.observe` (neighbour fields and masks);
+* ``per-agent dicts``: what the PettingZoo API adds, building one dict per agent.
+
+Usage::
+
+    python benchmarks/profile_cycle.py --n 10000 --at 0 25 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+
+def best_ms(run, prepare, repeats: int) -> float:
+    """Best wall time of ``run()`` in ms, calling ``prepare()`` (untimed) before each repeat."""
+    best = float("inf")
+    for _ in range(repeats):
+        prepare()
+        started = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - started)
+    return 1e3 * best
+
+
+def profile(n: int, at: int, repeats: int) -> dict[str, float]:
+    import proteo_env
+    from proteo_env.core import kernels
+    from proteo_env.core.world import DIRECTIONS, LOCAL_ADJACENCY_BITS, OPPOSITE
+    from proteo_env.spaces import ObservationBuffers
+
+    env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    lay = env.action_layout
+    for _ in range(at):
+        env.step_arrays(rng.integers(0, lay.nvec, size=(n, lay.length)))
+    actions = rng.integers(0, lay.nvec, size=(n, lay.length))
+    w, s, p = env.engine, env.engine.scratch, env.engine.physics
+    saved = {name: getattr(w, name).copy() for name in ("grid", "cell", "rng_state", "inbox")}
+
+    def restore():  # the connectivity search's epoch only ever grows, so its marks need no reset
+        for name, value in saved.items():
+            getattr(w, name)[:] = value
+
+    move = actions[:, lay.move].copy()
+    target = actions[:, lay.message_target].copy()
+    value = actions[:, lay.message_value].astype(np.int32)
+    role = np.full(w.n_modules, kernels.RELAY, dtype=np.int8)
+    role[:n] = actions[:, lay.roles][:, 0]
+    scent = w.scent[0].copy()
+    moved = np.zeros(n, dtype=np.bool_)
+    buffers = ObservationBuffers(n, env.batch.n_sites, w.n_channels)
+
+    def moves(keep_connected):
+        return lambda: kernels.execute_moves(
+            w.grid, w.cell, n, move, w.anchored, keep_connected, w.rng_state, w.dir_delta, DIRECTIONS,
+            w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit, s.movers, moved,
+            s.mark, s.stacks, s.rel, s.epoch)
+
+    def observation():
+        kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
+                        w.neighbourhood_delta, w.roll_delta, w.sweep_bits, w.pivot_bit, p.scent_max,
+                        buffers.neighbour_kind, buffers.neighbour_mode, buffers.neighbour_scent,
+                        buffers.own_mode, buffers.own_scent, buffers.messages, buffers.contact,
+                        buffers.action_mask)
+
+    parts = {
+        "checks": lambda: env.batch.check_actions(actions[None]),
+        "messages": lambda: kernels.deliver_messages(w.grid, w.cell, n, target, value, w.dir_delta, OPPOSITE,
+                                                     w.inbox),
+        "moves": moves(True),
+        "moves without connectivity": moves(False),
+        "scent": lambda: kernels.relax_scent(w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer,
+                                             p.scent_sweeps, p.scent_max, w.dir_delta),
+        "cut modules": lambda: kernels.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s.is_cut,
+                                                           s.disc, s.low, s.stack_node, s.stack_k),
+        "observation": observation,
+        "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
+    }
+    result = {name: best_ms(run, restore, repeats) for name, run in parts.items()}
+    restore()
+    env.step_arrays(actions)
+    result["modules moved"] = int(env.last_moved.sum())
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--n", type=int, default=10000)
+    parser.add_argument("--at", type=int, nargs="+", default=[0, 50], help="cycles run before profiling")
+    parser.add_argument("--repeats", type=int, default=15)
+    args = parser.parse_args()
+    columns = {at: profile(args.n, at, args.repeats) for at in args.at}
+    print(f"N = {args.n:,}, best of {args.repeats}, ms")
+    print("| part | " + " | ".join(f"cycle {at}" for at in args.at) + " |")
+    print("|---|" + "---|" * len(args.at))
+    for name in next(iter(columns.values())):
+        cells = [f"{columns[at][name]:.2f}" if isinstance(columns[at][name], float) else f"{columns[at][name]:,}"
+                 for at in args.at]
+        print(f"| {name} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
