@@ -8,8 +8,10 @@ checkpoint gets one clear error.
 
 from __future__ import annotations
 
+import importlib
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
 
 TINY = {"n_modules": 6, "max_cycles": 8}
 TINY_FLAG = "{n_modules: 6, max_cycles: 8}"
+TABLE_TINY = {"board_size": 6, "depth": 2, "n_spares": 8, "motion_model": "minimal", "max_cycles": 6}
 
 
 # ---------------------------------------------------------------------- flatten (no torch needed)
@@ -213,3 +216,82 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
     assert main(["eval", "--tasks", "chain", "--seeds", "1", "--checkpoint", str(tmp_path / "empty"),
                  "--out", str(tmp_path / "out")]) == 2
     assert "not a proteo checkpoint" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- every training config, every task
+TRAIN_CONFIGS = sorted(p.name for p in Path("configs/train").glob("*.yaml"))
+TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
+    "sb3_ppo": ("sb3_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1", "--batch-size", "32",
+                            "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "torchrl": ("torchrl_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1",
+                                "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
+                       "--checkpoint-every", "1"]),
+}
+
+
+@pytest.mark.parametrize("config", [c for c in TRAIN_CONFIGS if not c.endswith("_chain.yaml")])
+def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_path):
+    """Every config in configs/train/ (chain's are run by the ``checkpoints`` fixture) with a tiny budget."""
+    pytest.importorskip("sb3_contrib")
+    pytest.importorskip("cma")
+    import yaml
+
+    from conftest import SMALL_OVERRIDES
+    from training.evaluate import evaluate
+
+    settings = yaml.safe_load((Path("configs/train") / config).read_text())
+    task = settings["task"].split("-v")[0]
+    module, flags = next(v for k, v in TINY_BUDGET.items() if config.startswith(k))
+    if "hidden" in settings and module == "cma_es":
+        flags = [*flags, "--hidden", "[4]"]
+    env = json.dumps({**SMALL_OVERRIDES.get(task, {}), "max_cycles": 6,
+                      **({"motion_model": settings["env"]["motion_model"]} if "motion_model" in settings["env"] else {})})
+    final = importlib.import_module(f"training.{module}").main(
+        ["--config", f"configs/train/{config}", *flags, "--env", env, "--time-limit-minutes", "0",
+         "--tensorboard", "false", "--run-dir", str(tmp_path / "run")])
+    meta = json.loads((final / "proteo.json").read_text())
+    assert meta["task"] == settings["task"] and meta["agent_steps"] > 0
+    eval_config = tmp_path / "eval.yaml"
+    eval_config.write_text(yaml.safe_dump({"seeds": 1, "first_seed": 0, "tasks": {task: {"env": json.loads(env)}}}))
+    results = evaluate(config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval",
+                       progress=False, plots=False)
+    assert [r.kind for r in results] == ["hand-coded", "random", "evolved" if module == "cma_es" else "learned"]
+    if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
+        from training.checkpoints import load_policy
+
+        policy = load_policy(final, proteo_env.make(settings["task"], **json.loads(env)))
+        assert "ignored" not in policy.name
+        assert {k: getattr(policy, k) for k in meta["params"]} == meta["params"]
+
+
+def test_rule_parameters_follow_kwargs_and_start_at_the_values_the_policy_uses():
+    from baselines import POLICIES, make_policy
+    from proteo_env.config import ConfigError
+    from training.cma_es import Args, policy_defaults, rule_params
+
+    env = proteo_env.make("branch-v0", n_modules=12, T=3, B=2, max_cycles=8)
+    defaults = policy_defaults(make_policy("branch", env))
+    params = {p.name: p for p in rule_params(POLICIES["branch"], Args(params=("T", "B", "p_random")), defaults)}
+    assert set(params) == {"T", "B", "p_random"}  # p_random is a chain parameter, passed on through **chain
+    assert (params["T"].default, params["B"].default, params["p_random"].default) == (3, 2, 0.05)  # the task's T, B
+    assert params["T"].decode(params["T"].encode(3)) == 3
+    with pytest.raises(ConfigError, match="'nonsense' is not a parameter of policy 'branch'"):
+        rule_params(POLICIES["branch"], Args(params=("nonsense",)))
+    with pytest.raises(ConfigError, match="bounds: 'f_max' is not a parameter of policy 'branch'"):
+        rule_params(POLICIES["branch"], Args(bounds={"f_max": [0, 1]}))
+
+
+def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_path):
+    pytest.importorskip("cma")
+    from training import cma_es
+
+    common = ["--config", "configs/train/cma_rules_table.yaml", "--generations", "1", "--popsize", "4",
+              "--episodes-per-candidate", "1", "--env", json.dumps(TABLE_TINY), "--tensorboard", "false",
+              "--time-limit-minutes", "0"]
+    final = cma_es.main([*common, "--bounds", "{f_max: [0.5, 1.5], f_min: [0.5, 1.5]}", "--sigma0", "0.5",
+                         "--run-dir", str(tmp_path / "some")])
+    assert "cma/rejected" in (final.parent / "progress.csv").read_text().splitlines()[0]
+    with pytest.raises(ValueError, match="rejected every candidate"):  # f_min > f_max always
+        cma_es.main([*common, "--bounds", "{f_max: [0.5, 0.6], f_min: [1.0, 2.0]}", "--run-dir", str(tmp_path / "all")])
+

@@ -100,14 +100,13 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
     folder = Path(meta["dir"])
     algorithm = meta["algorithm"]
     if algorithm == "cma-rules":
-        import inspect
-
         from baselines import POLICIES, make_policy
+        from training.cma_es import constructor_parameters
 
         if meta.get("policy") not in POLICIES:
             raise CheckpointError(f"checkpoint {str(folder)!r}: policy {meta.get('policy')!r} is not registered; "
                                   f"allowed: {', '.join(sorted(POLICIES))}")
-        accepted = set(inspect.signature(POLICIES[meta["policy"]].__init__).parameters)
+        accepted = set(constructor_parameters(POLICIES[meta["policy"]]))
         params = dict(meta.get("params", {}))
         dropped = sorted(set(params) - accepted)
         if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name

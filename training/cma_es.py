@@ -2,11 +2,17 @@
 
 ``controller: rules`` evolves the parameters of the task's hand-coded policy (the paper's own
 suggestion: seed probabilities, randomness of moves, thresholds such as ``T`` and ``B``). The
-parameters are read from the policy's constructor: floats named ``p_*`` range over [0, 1],
-other floats over [0, 2 * default] (at least [0, 1]), ints over [1, 2 * default + 1],
-booleans are "> 0.5", strings need their options in ``choices``. ``bounds`` and ``fixed``
-in the config override or drop any of them. CMA-ES works in the unit cube; the start point is
-the hand-coded defaults.
+parameters are read from the policy's constructor, including those it passes on to a parent
+class through ``**kwargs`` (the branch rules take the chain rules' ``p_random`` that way):
+floats named ``p_*`` range over [0, 1], other floats over [0, 2 * default] (at least [0, 1]),
+ints over [1, 2 * default + 1], booleans are "> 0.5", strings need their options in
+``choices``. ``params`` in the config names the ones to evolve (default: all of them),
+``bounds`` and ``fixed`` override ranges or drop parameters. The *default* of a parameter is
+the value the hand-coded policy uses in this environment (for example the branch task's
+``T`` and ``B``, or the table task's ``p_max``, which the policy reads from the task), so the
+start point is exactly the hand-coded policy. CMA-ES works in the unit cube. A candidate the
+policy rejects (for example ``f_min > f_max`` for the table rules) scores one below the worst
+valid candidate of its generation and is counted in ``cma/rejected``.
 
 ``controller: neural`` evolves the weights of a :class:`~training.policies.NumpyMLP`
 (observation features -> hidden tanh layer -> logits of every action field) shared by all
@@ -51,6 +57,8 @@ class Args:
     """``{param: [low, high]}`` overriding the inferred ranges (rules)."""
     choices: dict = field(default_factory=dict)
     """``{param: [option, ...]}`` for string parameters (rules); others stay at their default."""
+    params: tuple[str, ...] = ()
+    """Names of the rule parameters to evolve (rules); empty: every numeric or boolean one."""
     fixed: tuple[str, ...] = ()
     """Parameters left at their defaults (rules)."""
     hidden: tuple[int, ...] = (16,)
@@ -100,14 +108,42 @@ class Param:
         return float(np.clip((value - self.low) / (self.high - self.low), 0.0, 1.0))
 
 
-def rule_params(policy_cls, args: Args) -> list[Param]:
-    """The evolvable parameters of a hand-coded policy class (see the module docstring)."""
-    skip = {"self", "layout", "modes", "scent_max", "seed", *args.fixed}
-    out = []
-    for name, p in inspect.signature(policy_cls.__init__).parameters.items():
-        if name in skip or p.default is inspect.Parameter.empty or p.default is None:
+def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
+    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree."""
+    out: dict[str, inspect.Parameter] = {}
+    for cls in policy_cls.__mro__:
+        if "__init__" not in vars(cls):
             continue
-        d = p.default
+        signature = inspect.signature(cls.__init__).parameters
+        for name, p in signature.items():
+            if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD:
+                out.setdefault(name, p)
+        if not any(p.kind is p.VAR_KEYWORD for p in signature.values()):
+            break
+    return out
+
+
+def rule_params(policy_cls, args: Args, defaults: dict | None = None) -> list[Param]:
+    """The evolvable parameters of a hand-coded policy class (see the module docstring).
+
+    ``defaults`` maps parameter names to the values the policy uses in the environment at
+    hand (they replace the constructor's defaults as start point and range centre).
+    """
+    from proteo_env.config import ConfigError
+
+    skip = {"self", "layout", "modes", "scent_max", "seed", *args.fixed}
+    candidates = {name: p for name, p in constructor_parameters(policy_cls).items()
+                  if name not in skip and p.default is not inspect.Parameter.empty and p.default is not None}
+    for what, names in (("params", args.params), ("bounds", args.bounds), ("choices", args.choices)):
+        unknown = sorted(set(names) - set(candidates))
+        if unknown:
+            raise ConfigError(f"{what}: {unknown[0]!r} is not a parameter of policy {policy_cls.name!r}; "
+                              f"allowed: {', '.join(sorted(candidates))}")
+    out = []
+    for name, p in candidates.items():
+        if args.params and name not in args.params:
+            continue
+        d = (defaults or {}).get(name, p.default)
         if name in args.choices:
             out.append(Param(name, "choice", options=tuple(args.choices[name]), default=d))
         elif isinstance(d, bool):
@@ -120,6 +156,26 @@ def rule_params(policy_cls, args: Args) -> list[Param]:
             out.append(Param(name, "int", float(low), float(high), default=d))
     if not out:
         raise ValueError(f"policy {policy_cls.name!r} has no numeric or boolean parameters to evolve")
+    return out
+
+
+def policy_defaults(policy) -> dict:
+    """The rule parameters a built policy uses: its attributes named like its constructor's parameters.
+
+    Only attributes of the same kind as the constructor's default count (a bool for a bool, a
+    number for a number, a string for a string), so an unrelated attribute is never taken.
+    """
+    out = {}
+    for name, p in constructor_parameters(type(policy)).items():
+        value = getattr(policy, name, None)
+        d = p.default
+        if value is None or d is inspect.Parameter.empty or d is None:
+            continue
+        same_kind = (isinstance(value, bool) == isinstance(d, bool)
+                     and (isinstance(value, str) == isinstance(d, str))
+                     and (isinstance(value, (int, float, str))))
+        if same_kind:
+            out[name] = type(d)(value) if isinstance(d, (int, float)) and not isinstance(d, bool) else value
     return out
 
 
@@ -176,7 +232,8 @@ def main(argv=None) -> Path:
         policy_name = args.policy or env.task.default_policy
         if policy_name not in POLICIES:
             raise ValueError(f"policy {policy_name!r} is not registered; allowed: {', '.join(sorted(POLICIES))}")
-        params = rule_params(POLICIES[policy_name], args)
+        hand_coded = make_policy(policy_name, env)
+        params = rule_params(POLICIES[policy_name], args, defaults=policy_defaults(hand_coded))
 
         def decode(x):
             return {p.name: p.decode(v) for p, v in zip(params, x)}
@@ -227,15 +284,26 @@ def main(argv=None) -> Path:
         candidates = es.ask()
         fitness, outcomes = [], []
         for x in candidates:
-            results = [episode_return(env, build(x, s), s) for s in seeds]
+            try:
+                policies = [build(x, s) for s in seeds]
+            except ValueError:  # parameters the policy rejects (e.g. f_min > f_max): scored below
+                fitness.append(None)
+                continue
+            results = [episode_return(env, policy, s) for policy, s in zip(policies, seeds)]
             agent_steps += sum(r[2] for r in results) * n_agents
             outcomes += results
             fitness.append(float(np.mean([r[0] for r in results])))
-        es.tell(candidates, [-f for f in fitness])  # CMA-ES minimises
+        valid = [f for f in fitness if f is not None]
+        if not valid:
+            raise ValueError(f"generation {es.countiter + 1}: the policy rejected every candidate; "
+                             "narrow the ranges with bounds (or fixed) in the config")
+        worst = min(valid) - 1.0
+        es.tell(candidates, [-(worst if f is None else f) for f in fitness])  # CMA-ES minimises
         bar.update(1)
-        values = {"episode/return": float(np.mean(fitness)), "episode/best_candidate_return": max(fitness),
+        values = {"episode/return": float(np.mean(valid)), "episode/best_candidate_return": max(valid),
                   "episode/success": float(np.mean([r[1] for r in outcomes])),
-                  "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma)}
+                  "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma),
+                  "cma/rejected": float(len(fitness) - len(valid))}
         if args.controller == "rules":
             values.update({f"param/{k}": float(v) for k, v in decode(es.mean).items() if not isinstance(v, str)})
         log.log(agent_steps, values)
