@@ -295,3 +295,17 @@ def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_pa
     with pytest.raises(ValueError, match="rejected every candidate"):  # f_min > f_max always
         cma_es.main([*common, "--bounds", "{f_max: [0.5, 0.6], f_min: [1.0, 2.0]}", "--run-dir", str(tmp_path / "all")])
 
+
+
+def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped():
+    cma = pytest.importorskip("cma")
+    from training.cma_es import distribution_mean
+
+    es = cma.CMAEvolutionStrategy([0.1, 0.5], 0.3, {"bounds": [0.0, 1.0], "seed": 1, "verbose": -9})
+    for _ in range(15):  # minimising x[0] drives the internal mean below the lower bound
+        candidates = es.ask()
+        es.tell(candidates, [x[0] for x in candidates])
+    assert es.mean[0] < 0.0
+    mean = distribution_mean(es)
+    assert np.all((mean >= 0.0) & (mean <= 1.0)) and mean[0] > 0.0  # where the candidates are, not clipped to 0
+    np.testing.assert_allclose(mean, es.boundary_handler.transform(es.mean))

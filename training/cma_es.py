@@ -21,7 +21,9 @@ modules, with separable CMA-ES (diagonal covariance) since it has thousands of w
 Fitness of a candidate: the mean episode return over ``episodes_per_candidate`` seeds, the
 same seeds for every candidate of a generation (common random numbers), new seeds each
 generation. The checkpoint holds the distribution's mean (CMA-ES's best estimate under noise);
-``progress.csv`` logs the generation's mean and best return.
+``progress.csv`` logs the generation's mean and best return. (Checkpoints written before
+the mean was mapped into the bounds, see :func:`distribution_mean`, hold clipped parameters;
+``--resume CHECKPOINT --generations <its generation>`` writes them again, corrected.)
 
     python -m training.cma_es --config configs/train/cma_rules_chain.yaml
     python -m training.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
@@ -179,6 +181,18 @@ def policy_defaults(policy) -> dict:
     return out
 
 
+def distribution_mean(es) -> np.ndarray:
+    """The search distribution's mean where candidates live: inside the bounds.
+
+    With ``bounds`` CMA-ES keeps its mean in an unbounded internal space and maps every
+    candidate into the box (``BoundTransform``, a reflection, not a clip); ``es.mean`` can lie
+    outside the box, and clipping it would give a point no candidate was near (a probability
+    at -0.25 clips to 0, while the candidates around it use about 0.15). ``xfavorite`` is the
+    mean mapped like the candidates. Without bounds the two are the same.
+    """
+    return np.asarray(es.result.xfavorite)
+
+
 # ---------------------------------------------------------------------- fitness
 def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
     """Return, success and cycles of one episode (array API for neural controllers)."""
@@ -203,9 +217,9 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    if args.controller not in ("rules", "neural"):
-        from proteo_env.config import ConfigError
+    from proteo_env.config import ConfigError
 
+    if args.controller not in ("rules", "neural"):
         raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
     seed_everything(args.seed, threads=args.threads)
 
@@ -256,12 +270,17 @@ def main(argv=None) -> Path:
 
     if resume_meta is not None:
         es = pickle.loads((Path(resume_meta["dir"]) / "es.pkl").read_bytes())
+        if es.N != len(x0):
+            evolved = sorted(resume_meta.get("params", {}))
+            raise ConfigError(f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
+                              f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
+                              f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run")
     else:
         es = cma.CMAEvolutionStrategy(x0, args.sigma0, options)
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
-        mean = np.asarray(es.mean)
+        mean = distribution_mean(es)
         (folder / "es.pkl").write_bytes(pickle.dumps(es))  # for --resume only
         extra = {"label": algorithm, "run_dir": str(run_dir), "generation": int(es.countiter), "args": asdict(args)}
         if args.controller == "rules":
@@ -305,7 +324,7 @@ def main(argv=None) -> Path:
                   "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma),
                   "cma/rejected": float(len(fitness) - len(valid))}
         if args.controller == "rules":
-            values.update({f"param/{k}": float(v) for k, v in decode(es.mean).items() if not isinstance(v, str)})
+            values.update({f"param/{k}": float(v) for k, v in decode(distribution_mean(es)).items() if not isinstance(v, str)})
         log.log(agent_steps, values)
         if es.countiter % args.checkpoint_every == 0:
             save(checkpoint_folder(run_dir, agent_steps))
