@@ -36,7 +36,8 @@ def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
-def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | None = None) -> None:
+def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | None = None,
+              title: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -57,6 +58,8 @@ def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | N
         ax.set_title(title)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
@@ -69,12 +72,13 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="out/learning_curves.png")
     parser.add_argument("--window", type=int, default=5)
     parser.add_argument("--reference", default=None, help="hand-coded means, e.g. 'return=1.6,success=1,cycles=91'")
+    parser.add_argument("--title", default=None, help="figure title (the task and its size, for example)")
     args = parser.parse_args(argv)
     runs = dict(r.split("=", 1) if "=" in r else (Path(r).name, r) for r in args.runs)
     reference = None
     if args.reference:
         reference = {f"episode/{k}": float(v) for k, v in (p.split("=") for p in args.reference.split(","))}
-    plot_runs(runs, args.out, window=args.window, reference=reference)
+    plot_runs(runs, args.out, window=args.window, reference=reference, title=args.title)
     print(args.out)
     return 0
 
