@@ -28,7 +28,7 @@ modes of the grown tree (SEED, FINAL, NODE, INODE) all count as "the structure":
   not through the unused blob), and goes SEARCH when it or a neighbour carries regular scent.
 - SEARCH: relays both scents (with ``search_relays_node``, the paper's rule; off, it is
   silent on the node scent) and climbs the regular gradient exactly as the chain's SEARCH
-  (:meth:`ChainPolicy._search_moves`), seeing a NODE neighbour as a seed (it rolls over the
+  (:func:`baselines.kernels.search_moves`), seeing a NODE neighbour as a seed (it rolls over the
   node's faces to the growth spot the node broadcasts) and an INODE neighbour as FINAL.
 - SEED: emits the regular scent, relays the node scent, and otherwise is the chain's seed:
   it broadcasts its growth direction; a SLEEP or SEARCH module at its growth site gets the
@@ -69,8 +69,9 @@ import numpy as np
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, MESSAGE_TO_ALL, RELAY, SILENT
 
-from .chain import ChainPolicy
-from .primitives import BECOME_SEED, HORIZONTAL, first_slot, growth_direction, spot_touches
+from .chain import ChainPolicy, Observed
+from .kernels import BECOME_SEED
+from .primitives import HORIZONTAL, first_slot, growth_direction, spot_touches
 
 REFUSE = 14
 """Message value: "I will not become your seed: I touch another part of the tree"."""
@@ -134,10 +135,33 @@ class BranchPolicy(ChainPolicy):
         self.spot.clear()
         self.refused.clear()
 
-    def _act(self, keys, field, observation) -> np.ndarray:
-        keys = list(keys)
+    def _stacked(self, obs: Observed):
+        """The fields every rule reads, from the stacked observation ``obs``, and the default actions.
+
+        Returns own modes, face-neighbour kinds, modes and channel-0 scents (``scent_max`` where
+        no module), legal moves (12,), the default actions (relay every channel, keep the mode)
+        and, per agent, the slot a ``BECOME_SEED`` came from (-1 when none, or when not SLEEP or
+        SEARCH).
+        """
+        own = obs.own_mode[:, 0].astype(np.int64)
+        kinds = obs.neighbour_kind[:, :12]
+        nmode = obs.neighbour_mode[:, :12]
+        scents = np.where(kinds == KIND_MODULE, obs.neighbour_scent[:, :12, 0], self.scent_max)
+        legal = obs.action_mask[:, 1:].astype(bool)
+        lay = self.layout
+        actions = np.zeros((len(own), lay.length), dtype=np.int64)
+        actions[:, lay.roles] = RELAY
+        actions[:, lay.mode] = own
+        promoted = first_slot(obs.messages == BECOME_SEED)
+        promoted[(own != SLEEP) & (own != SEARCH)] = -1
+        return own, kinds, nmode, scents, legal, actions, promoted
+
+    def _act(self, slots, field, observation) -> np.ndarray:
+        keys = slots.tolist()  # memory slots also key the branch's own memory
         smax = self.scent_max
-        own, msgs, kinds, nmode, scents, own_scent, legal, actions, promoted = self._stacked(field, len(keys))
+        obs = Observed.read(field)
+        msgs, own_scent = obs.messages, obs.own_scent
+        own, kinds, nmode, scents, legal, actions, promoted = self._stacked(obs)
         is_mod = kinds == KIND_MODULE
         lay = self.layout
         grown_nb = is_mod & np.isin(nmode, GROWN)
@@ -159,7 +183,7 @@ class BranchPolicy(ChainPolicy):
             self.spawned[keys[i]] = min(self.spawned.get(keys[i], self.B), self.B) - 1
             self.spot.pop(keys[i], None)
         for i in np.flatnonzero(own == SEED):
-            actions[i] = self._seed(keys[i], observation(i), self.growth.get(keys[i], -1), fresh=False)
+            actions[i] = self._seed(keys[i], observation(i), int(self.memory.growth[keys[i]]), fresh=False)
         reverted = (refused >= 0) & (own == FINAL)
 
         sleep = (own == SLEEP) & (promoted == -1)
@@ -192,14 +216,13 @@ class BranchPolicy(ChainPolicy):
         if search.size:
             if not self.search_relays_node:
                 actions[search, lay.roles.start + 1] = SILENT
-            seen = nmode[search].copy()  # a NODE is a seed to approach, an INODE part of the chain
+            seen = obs.neighbour_mode.copy()  # a NODE is a seed to approach, an INODE part of the chain
             seen[seen == NODE] = SEED
             seen[seen == INODE] = FINAL
-            self._search_actions(actions, keys, search, msgs[search], kinds[search], seen, scents[search],
-                                 legal[search])
-        for i in np.flatnonzero(own >= FINAL):
-            self.heading.pop(keys[i], None)
-            self.asked.discard(keys[i])
+            self._search_actions(actions, slots, search, obs, seen)
+        grown = slots[own >= FINAL]
+        self.memory.heading[grown] = -1
+        self.memory.asked[grown] = False
         return actions
 
     # ------------------------------------------------------------------ NODE
@@ -214,7 +237,7 @@ class BranchPolicy(ChainPolicy):
             return False
         return spot_touches(obs, k, GROWN) == 0
 
-    def _node(self, agent, obs) -> np.ndarray:
+    def _node(self, agent: int, obs) -> np.ndarray:
         encode = self.layout.encode
         count = self.spawned.get(agent, 0)
         refused = self.refused.get(agent, ())
@@ -243,7 +266,7 @@ class BranchPolicy(ChainPolicy):
         self.spot[agent] = (direction, True, waited + 1)
         return encode(mode=NODE, roles=[EMIT, EMIT], message_target=MESSAGE_TO_ALL, message_value=direction + 1)
 
-    def _retire(self, agent) -> np.ndarray:
+    def _retire(self, agent: int) -> np.ndarray:
         self.spawned.pop(agent, None)
         self.spot.pop(agent, None)
         self.refused.pop(agent, None)
@@ -259,7 +282,7 @@ class BranchPolicy(ChainPolicy):
             return True
         return spot_touches(obs, growth, GROWN) > 0
 
-    def _seed(self, agent: str, obs, growth: int, *, fresh: bool, previous: int = -1) -> np.ndarray:
+    def _seed(self, agent: int, obs, growth: int, *, fresh: bool, previous: int = -1) -> np.ndarray:
         encode = self.layout.encode
         refused = self.refused.get(agent, ())
         if growth < 0 or growth in refused or (self.turn and self._blocked(obs, growth)):
@@ -271,12 +294,12 @@ class BranchPolicy(ChainPolicy):
             if new >= 0 or growth < 0 or growth in refused:
                 growth = new
         if growth < 0:
-            self.growth.pop(agent, None)
+            self.memory.growth[agent] = -1
             return encode(mode=SEED, roles=[EMIT, RELAY])
-        self.growth[agent] = growth
+        self.memory.growth[agent] = growth
         if (not fresh and obs["neighbour_kind"][growth] == KIND_MODULE
                 and obs["neighbour_mode"][growth] in (SLEEP, SEARCH)
                 and not (self.turn and self._blocked(obs, growth))):
-            del self.growth[agent]
+            self.memory.growth[agent] = -1
             return encode(mode=FINAL, roles=[RELAY, RELAY], message_target=growth, message_value=BECOME_SEED)
         return encode(mode=SEED, roles=[EMIT, RELAY], message_target=MESSAGE_TO_ALL, message_value=growth + 1)

@@ -59,22 +59,71 @@ one action out, plus the module's own private memory; nothing else is read):
   than itself, which would make the chain two modules thick) picks a new direction at most
   90 degrees from the old one whose site touches no FINAL module it can see.
 - FINAL: relays scent and never moves.
+
+The rules run as the numba kernels of :mod:`baselines.kernels` (:func:`~baselines.kernels.chain_actions`)
+on the observation fields stacked over modules; the private memory is one row per module
+(:class:`ModuleMemory`).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
-from proteo_env.spaces import EMIT, KIND_MODULE, MESSAGE_TO_ALL, RELAY
-
 from .base import Policy
-from .primitives import (BECOME_SEED, EQUATORS, SPOT_FACE, approach_batch, climb_batch, descent_batch,
-                         first_slot, growth_direction, random_pick, spot_touches)
+from .kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_actions, search_actions
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
 ON_STUCK = ("stay", "random")
+
+
+class Observed(NamedTuple):
+    """The observation fields the chain rule reads, stacked over agents (first axis: agent),
+    in the dtypes the kernels of :mod:`baselines.kernels` take."""
+
+    own_mode: np.ndarray
+    messages: np.ndarray
+    neighbour_kind: np.ndarray
+    neighbour_mode: np.ndarray
+    neighbour_scent: np.ndarray
+    own_scent: np.ndarray
+    action_mask: np.ndarray
+
+    @classmethod
+    def read(cls, field) -> Observed:
+        """The fields from ``field(name)``, which returns an observation field stacked over agents."""
+        dtypes = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8,
+                  "neighbour_mode": np.int32, "neighbour_scent": np.int32, "own_scent": np.int32,
+                  "action_mask": np.int8}
+        return cls(**{name: np.ascontiguousarray(field(name), dtype=dtype) for name, dtype in dtypes.items()})
+
+
+class ModuleMemory:
+    """The chain rule's private memory of every module, one entry per memory slot.
+
+    Attributes (S slots):
+        heading: ``(S,)`` int64, direction of the module's last requested move (-1: none).
+        growth: ``(S,)`` int64, a SEED's growth direction (-1: none).
+        asked: ``(S,)`` bool, the module asked to move last cycle.
+    """
+
+    def __init__(self):
+        self.clear()
+
+    def clear(self) -> None:
+        self.heading = np.empty(0, dtype=np.int64)
+        self.growth = np.empty(0, dtype=np.int64)
+        self.asked = np.empty(0, dtype=np.bool_)
+
+    def reserve(self, n_slots: int) -> None:
+        """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
+        extra = n_slots - len(self.heading)
+        if extra > 0:
+            self.heading = np.concatenate([self.heading, np.full(extra, -1, dtype=np.int64)])
+            self.growth = np.concatenate([self.growth, np.full(extra, -1, dtype=np.int64)])
+            self.asked = np.concatenate([self.asked, np.zeros(extra, dtype=np.bool_)])
 
 
 class ChainPolicy(Policy):
@@ -145,25 +194,37 @@ class ChainPolicy(Policy):
         self.queue = queue
         self.prefer_chain = prefer_chain
         self.avoid_octahedra = avoid_octahedra
-        self.asked: set = set()
-        """Private memory: the SEARCH modules that asked to move last cycle."""
-        self.heading: dict[str, int] = {}
-        """Private memory of each SEARCH module: the direction index of its last requested move."""
-        self.growth: dict[str, int] = {}
-        """Private memory of each SEED: its growth direction."""
+        self.memory = ModuleMemory()
+        """Private memory of every module (see :class:`ModuleMemory`)."""
+        self._slots: dict = {}
+        """Memory slot of each agent name seen by :meth:`act`."""
+        self._keyed_by: str | None = None
+
+    @property
+    def rules(self) -> ChainRules:
+        """The parameters as the kernels of :mod:`baselines.kernels` read them."""
+        octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
+        return ChainRules(
+            scent_max=int(self.scent_max), p_seed=float(self.p_seed), p_random=float(self.p_random),
+            random_when_stuck=self.on_stuck == "random", fewer_neighbours=bool(self.fewer_neighbours),
+            horizontal=bool(self.horizontal), clean_exit=bool(self.clean_exit), turn=bool(self.turn),
+            greedy_approach=bool(self.greedy_approach), wake_when_free=bool(self.wake_when_free),
+            directed=bool(self.directed), momentum=float(self.momentum), queue=bool(self.queue),
+            prefer_chain=bool(self.prefer_chain), avoid_octahedra=octahedra)
 
     def reset(self, seed=None):
         super().reset(seed)
-        self.growth.clear()
-        self.heading.clear()
-        self.asked.clear()
+        self.memory.clear()
+        self._slots.clear()
+        self._keyed_by = None
 
     def act(self, observations):
         names = list(observations)
         if not names:
             return {}
         obs = [observations[a] for a in names]
-        actions = self._act(names, lambda f: np.stack([o[f] for o in obs]), obs.__getitem__)
+        actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]),
+                            obs.__getitem__)
         return {a: actions[i] for i, a in enumerate(names)}
 
     def act_arrays(self, buffers) -> np.ndarray:
@@ -173,219 +234,45 @@ class ChainPolicy(Policy):
         ``env.observe_arrays()`` returns): the same per-agent observations as :meth:`act`
         receives, one row per agent, so the result is the same rule; it only skips building
         dicts (use with ``env.step_arrays``). Private memory is keyed by row index here and
-        by agent name in :meth:`act`; use one of the two within an episode.
+        by agent name in :meth:`act`; use one of the two between resets (the other raises
+        ``RuntimeError``).
         """
-        return self._act(range(buffers.own_mode.shape[0]), lambda f: getattr(buffers, f), buffers.agent)
+        n = buffers.own_mode.shape[0]
+        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f), buffers.agent)
 
-    def _stacked(self, field, n: int):
-        """The fields every rule reads, stacked over ``n`` agents, and their default actions.
+    def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
+        """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
+        given to each agent name at first sight (``"name"``)."""
+        if self._keyed_by not in (None, keyed_by):
+            raise RuntimeError(f"{type(self).__name__}: act() and act_arrays() used between two resets; "
+                               "allowed: one of them per episode (memory is keyed by agent name in act() "
+                               "and by row in act_arrays())")
+        self._keyed_by = keyed_by
+        if keyed_by == "row":
+            slots = np.arange(len(keys), dtype=np.int64)
+        else:
+            slots = np.array([self._slots.setdefault(k, len(self._slots)) for k in keys], dtype=np.int64)
+        self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
+        return slots
 
-        Returns own modes, messages, face-neighbour kinds, modes and channel-0 scents
-        (``scent_max`` where no module), own scents (all channels), legal moves (12,), the
-        default actions (relay every channel, keep the mode) and, per agent, the slot a
-        ``BECOME_SEED`` came from (-1 when none, or when not SLEEP or SEARCH).
-        """
-        own = field("own_mode")[:, 0].astype(np.int64)
-        msgs = field("messages")
-        kinds = field("neighbour_kind")[:, :12]
-        nmode = field("neighbour_mode")[:, :12]
-        scents = np.where(kinds == KIND_MODULE, field("neighbour_scent")[:, :12, 0], self.scent_max)
-        legal = field("action_mask")[:, 1:].astype(bool)
-        lay = self.layout
-        actions = np.zeros((n, lay.length), dtype=np.int64)
-        actions[:, lay.roles] = RELAY
-        actions[:, lay.mode] = own
-        promoted = first_slot(msgs == BECOME_SEED)
-        promoted[(own != SLEEP) & (own != SEARCH)] = -1
-        return own, msgs, kinds, nmode, scents, field("own_scent"), legal, actions, promoted
-
-    def _act(self, keys, field, observation) -> np.ndarray:
-        """Actions of the modules ``keys`` (memory keys, in row order); ``field(name)`` gives an
-        observation field stacked over them, ``observation(i)`` one module's observation dict."""
-        keys = list(keys)
-        smax = self.scent_max
-        own, msgs, kinds, nmode, scents, own_scent, legal, actions, promoted = self._stacked(field, len(keys))
-        own_scent = own_scent[:, 0]
-        lay = self.layout
-        for i in np.flatnonzero(promoted >= 0):
-            actions[i] = self._seed(keys[i], observation(i), int(OPPOSITE[promoted[i]]), fresh=True)
-        for i in np.flatnonzero(own == SEED):
-            actions[i] = self._seed(keys[i], observation(i), self.growth.get(keys[i], -1), fresh=False)
-
-        sleep = (own == SLEEP) & (promoted < 0)
-        if sleep.any():
-            detected = (own_scent < smax) | (scents < smax).any(axis=1)
-            wake = sleep & detected
-            if self.wake_when_free:
-                wake &= legal.any(axis=1)
-            actions[wake, lay.mode] = SEARCH
-            if self.p_seed > 0:
-                for i in np.flatnonzero(sleep & ~detected):
-                    if self.rng.random() < self.p_seed:
-                        actions[i] = self._seed(keys[i], observation(i), -1, fresh=True)
-
-        search = np.flatnonzero((own == SEARCH) & (promoted < 0))
-        if search.size:
-            self._search_actions(actions, keys, search, msgs[search], kinds[search], nmode[search],
-                                 scents[search], legal[search])
-        for i in np.flatnonzero(own == FINAL):
-            self.heading.pop(keys[i], None)
-            self.asked.discard(keys[i])
+    def _act(self, slots, field, observation) -> np.ndarray:
+        """Actions of the agents with memory ``slots`` (A,), in row order; ``field(name)`` gives an
+        observation field stacked over them, ``observation(i)`` one agent's observation dict."""
+        obs = Observed.read(field)
+        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
+        m = self.memory
+        chain_actions(*obs, slots, m.heading, m.growth, m.asked, self.rules, self.rng, actions)
         return actions
 
     def decide(self, agent: str, obs) -> np.ndarray:
         """The action of one module from its observation alone."""
         return self.act({agent: obs})[agent]
 
-    # ------------------------------------------------------------------ SEARCH, batched
-    def _search_actions(self, actions, keys, search, msgs, kinds, seen_modes, scents, legal) -> None:
-        """Write the moves and growth broadcasts of the SEARCH agents ``search`` into ``actions``
-        (the other arguments are those agents' observation fields) and update their memory."""
-        lay = self.layout
-        moves, send = self._search_moves([keys[i] for i in search], msgs, kinds, seen_modes, scents, legal)
-        actions[search, lay.move] = moves
-        sending = send >= 0
-        actions[search[sending], lay.message_target] = MESSAGE_TO_ALL
-        actions[search[sending], lay.message_value] = send[sending] + 1
-        for i, m in zip(search.tolist(), moves.tolist()):
-            if m > 0:
-                self.heading[keys[i]] = m - 1
-                self.asked.add(keys[i])
-            else:
-                self.asked.discard(keys[i])
-
-    def _search_moves(self, names, msgs, kinds, nmode, scents, legal):
-        """Moves and growth broadcasts (-1: none) of the SEARCH modules.
-
-        Rows are modules; each row uses only that module's observation and private memory.
-        """
-        q = len(names)
-        rows = np.arange(q)
-        moves = np.zeros(q, dtype=np.int64)
-        send = np.full(q, -1, dtype=np.int64)
-        todo = np.ones(q, dtype=bool)
-        growth_msg = (msgs >= 1) & (msgs <= 12)
-        heard = msgs - 1  # growth heard from each side (valid where growth_msg)
-
-        # next to a SEED (seen by its mode, so its side is known now): its growth is the value
-        # it broadcast (any side: the value does not go stale, only the side may)
-        seed_slot = first_slot(nmode == SEED)
-        near = seed_slot >= 0
-        g_slot = first_slot(growth_msg)
-        growth = np.where(g_slot >= 0, heard[rows, np.maximum(g_slot, 0)], -1)
-        s, g = np.maximum(seed_slot, 0), np.maximum(growth, 0)
-        at_spot = near & (growth >= 0) & (seed_slot == OPPOSITE[g])
-        hold = near & ((growth < 0) | at_spot)  # at the spot, or growth not heard yet
-        todo &= ~hold
-        if self.queue:
-            send[at_spot] = growth[at_spot]
-        seed_face = SPOT_FACE[s, g]
-        spot_taken = near & (growth >= 0) & (seed_face >= 0) & (kinds[rows, np.maximum(seed_face, 0)] == KIND_MODULE)
-
-        if self.queue:
-            # a SEARCH neighbour broadcasting a growth is holding a spot; its side is only
-            # trusted when this module asked for no move last cycle (so it has not moved since)
-            still = np.array([names[r] not in self.asked for r in range(q)], dtype=bool)
-            holder = growth_msg & (nmode == SEARCH) & still[:, None]
-            gy = np.maximum(heard, 0)
-            at_pre = holder & (np.arange(12)[None, :] == OPPOSITE[gy])
-            hold_pre = todo & at_pre.any(axis=1)
-            y = first_slot(at_pre)
-            send[hold_pre] = gy[rows, np.maximum(y, 0)][hold_pre]
-            todo &= ~hold_pre
-
-        go_seed = todo & near & ~spot_taken
-        idx = np.flatnonzero(go_seed)
-        if idx.size:
-            target = DIRECTIONS[seed_slot[idx]] + DIRECTIONS[growth[idx]]
-            moves[idx] = approach_batch(target, seed_slot[idx], legal[idx], self.rng,
-                                        greedy=self.greedy_approach, p_random=self.p_random)
-        todo &= ~go_seed
-
-        if self.queue:
-            idx = np.flatnonzero(todo & holder.any(axis=1))
-            if idx.size:
-                h = holder[idx]
-                pre_face = SPOT_FACE[np.arange(12)[None, :], gy[idx]]
-                free = h & (pre_face >= 0) & (np.take_along_axis(kinds[idx], np.maximum(pre_face, 0), axis=1) == 0)
-                free |= h & (pre_face < 0)  # spot out of sight: try it
-                pick = np.where(free.any(axis=1), first_slot(free), first_slot(h))
-                gp = gy[idx, pick]
-                beyond = ~free[np.arange(idx.size), pick]
-                target = DIRECTIONS[pick] + DIRECTIONS[gp] * np.where(beyond, 2, 1)[:, None]
-                moves[idx] = approach_batch(target, pick, legal[idx], self.rng, greedy=self.greedy_approach,
-                                            p_random=self.p_random)
-                todo[idx] = False
-            # heard a holder but cannot trust the side (asked to move last cycle): wait a cycle
-            wait = todo & (growth_msg & (nmode == SEARCH)).any(axis=1) & ~still
-            todo &= ~wait
-
-        idx = np.flatnonzero(todo & near)  # spot taken, no holder to follow: round the seed
-        if idx.size:
-            target = DIRECTIONS[seed_slot[idx]] + DIRECTIONS[growth[idx]]
-            moves[idx] = approach_batch(target, seed_slot[idx], legal[idx], self.rng,
-                                        greedy=self.greedy_approach, p_random=self.p_random)
-        todo &= ~near
-
-        climbers = np.flatnonzero(todo)
-        if climbers.size:
-            bias = None
-            if self.directed:
-                bias = descent_batch(scents[climbers], self.scent_max)
-            if self.momentum > 0:
-                last = np.array([self.heading.get(names[c], -1) for c in climbers])
-                heading = np.where((last >= 0)[:, None], DIRECTIONS[np.maximum(last, 0)], 0)
-                bias = (0 if bias is None else bias) + self.momentum * heading
-            sc = scents[climbers]
-            smax = self.scent_max
-            if self.prefer_chain:  # equal scents: a chain module counts as slightly lower
-                loose = (nmode[climbers] == SEARCH) | (nmode[climbers] == SLEEP)
-                sc = np.where(sc < smax, 2 * sc + loose, 2 * smax)
-                smax = 2 * smax
-            moves[climbers] = climb_batch(sc, kinds[climbers], legal[climbers], smax,
-                                          self.rng, self.p_random, on_stuck=self.on_stuck, bias=bias,
-                                          fewer_neighbours=self.fewer_neighbours)
-            if self.avoid_octahedra:
-                # the 4 sites round one of its octahedral holes are all taken, one of them by the
-                # chain: a module filling the last (unseen) vertex would lock an octahedron of
-                # six, where no member can roll under sphere, rounded or rhombic; leave
-                eq = EQUATORS
-                full = (kinds[climbers][:, eq] == KIND_MODULE).all(axis=2)
-                if self.avoid_octahedra != "all":
-                    chain = (nmode[climbers][:, eq] == FINAL) | (nmode[climbers][:, eq] == SEED)
-                    full &= chain.any(axis=2)
-                leave = full.any(axis=1) & legal[climbers].any(axis=1)
-                if leave.any():
-                    moves[climbers[leave]] = random_pick(legal[climbers[leave]], self.rng) + 1
-        return moves, send
-
-    def _blocked(self, obs, growth: int) -> bool:
-        """Can the chain not grow into ``DIRECTIONS[growth]`` from here?"""
-        kind = obs["neighbour_kind"][growth]
-        if kind == KIND_MODULE:
-            if obs["neighbour_mode"][growth] not in (SLEEP, SEARCH):
-                return True
-        elif kind != 0:  # solid, wall or object
-            return True
-        return spot_touches(obs, growth, (FINAL,)) > 0
-
-    def _seed(self, agent: str, obs, growth: int, *, fresh: bool) -> np.ndarray:
-        encode = self.layout.encode
-        if growth < 0 or (self.turn and self._blocked(obs, growth)):
-            new = growth_direction(obs, self.rng, horizontal=self.horizontal, previous=growth,
-                                   avoid_modes=(FINAL,), clean=self.clean_exit)
-            if new < 0 and self.horizontal:  # nowhere to go in the plane: leave it
-                new = growth_direction(obs, self.rng, horizontal=False, previous=growth,
-                                       avoid_modes=(FINAL,), clean=self.clean_exit)
-            if new >= 0 or growth < 0:
-                growth = new
-        if growth < 0:
-            self.growth.pop(agent, None)
-            return encode(mode=SEED, roles=[EMIT])
-        self.growth[agent] = growth
-        if (not fresh and obs["neighbour_kind"][growth] == KIND_MODULE
-                and obs["neighbour_mode"][growth] in (SLEEP, SEARCH)
-                and not (self.turn and self._blocked(obs, growth))):
-            del self.growth[agent]
-            return encode(mode=FINAL, roles=[RELAY], message_target=growth, message_value=BECOME_SEED)
-        return encode(mode=SEED, roles=[EMIT], message_target=MESSAGE_TO_ALL, message_value=growth + 1)
+    def _search_actions(self, actions, slots, rows, obs: Observed, seen_modes) -> None:
+        """Write the moves and growth broadcasts of the SEARCH agents at ``rows`` into ``actions``
+        and update their memory; ``seen_modes`` (A, K) is ``obs.neighbour_mode`` as the chain rule
+        should read it (a subclass maps its own modes onto SEED and FINAL)."""
+        m = self.memory
+        search_actions(np.asarray(rows, dtype=np.int64), obs.messages, obs.neighbour_kind,
+                       np.ascontiguousarray(seen_modes, dtype=np.int32), obs.neighbour_scent, obs.action_mask,
+                       slots, m.heading, m.asked, self.rules, self.rng, actions)

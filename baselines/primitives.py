@@ -20,14 +20,12 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY
 from proteo_env.spaces import KIND_EMPTY, KIND_MODULE
 
-BECOME_SEED = 13
-"""Message value asking the receiver to become the new SEED (it grows on in the same direction)."""
+from . import kernels
+
 GROWTH_BASE = 0
 """Message values ``1..12``: "I am a seed growing towards ``DIRECTIONS[value - 1]``"."""
 
 _FACE = {tuple(d): k for k, d in enumerate(DIRECTIONS)}
-_DOT = DIRECTIONS @ DIRECTIONS.T
-"""``(12, 12)`` dot products of the face directions (2 same, 1 at 60, 0 at 90, -1 at 120, -2 opposite)."""
 HORIZONTAL = DIRECTIONS[:, 2] == 0
 """``(12,)`` bool: the 4 face directions in the horizontal plane."""
 
@@ -203,57 +201,19 @@ def growth_direction(obs, rng: np.random.Generator, *, horizontal: bool, previou
     module before the seed) and the straight one is preferred. Among the rest the choice
     prefers, in order: with ``clean``, spots that touch the fewest modules besides the seed
     (the chain leaves the blob cleanly); spots whose opposite site holds a module (growth
-    away from the structure); then uniformly at random.
+    away from the structure); then uniformly at random (one ``rng.integers`` draw). The
+    rule runs as the kernel :func:`baselines.kernels.growth_direction`.
     """
-    kinds = obs["neighbour_kind"][:12]
-    ok = kinds == KIND_EMPTY
-    if horizontal:
-        ok &= HORIZONTAL
-    if previous >= 0:
-        if ok[previous] and spot_touches(obs, previous, avoid_modes) == 0:
-            return previous
-        ok &= _DOT[previous] >= 0
-    pool = [k for k in np.flatnonzero(ok) if spot_touches(obs, k, avoid_modes) == 0]
-    if not pool:
-        return -1
-    pool = np.array(pool)
-    if clean:
-        crowd = (kinds[DIRECTION_ADJACENCY[pool]] == KIND_MODULE).sum(axis=1)
-        pool = pool[crowd == crowd.min()]
-    outward = kinds[OPPOSITE[pool]] == KIND_MODULE
-    if outward.any():
-        pool = pool[outward]
-    return int(rng.choice(pool))
+    kinds = np.ascontiguousarray(obs["neighbour_kind"], dtype=np.int8)[None]
+    modes = np.ascontiguousarray(obs["neighbour_mode"], dtype=np.int32)[None]
+    avoid_bits = sum(1 << int(m) for m in set(avoid_modes))
+    return int(kernels.growth_direction(kinds, modes, 0, rng, bool(horizontal), int(previous), avoid_bits,
+                                        bool(clean)))
 
 
 # ---------------------------------------------------------------------- batched forms
-# The same rules for many modules at once: each function takes stacked observation fields
-# (first axis: module) and returns one result per module. They exist for speed only; each
-# row is computed from that module's own observation.
-
-ADJACENT_TO = np.zeros((12, 12), dtype=bool)
-"""``ADJACENT_TO[s, k]``: after a roll towards ``DIRECTIONS[k]`` the site ``DIRECTIONS[s]``
-is still a face neighbour (the roll goes over the faces of the module at ``s``)."""
-ADJACENT_TO[np.arange(12)[:, None], DIRECTION_ADJACENCY] = True
-
-SPOT_FACE = np.full((12, 12), -1, dtype=np.int64)
-"""``SPOT_FACE[s, g]``: face index of ``DIRECTIONS[s] + DIRECTIONS[g]`` (the growth spot of a
-neighbour at ``s`` growing towards ``g``), -1 when that site is no face neighbour (or is
-here, ``g == OPPOSITE[s]``)."""
-SPOT_DISTANCE = np.zeros((12, 12, 12), dtype=np.int64)
-"""``SPOT_DISTANCE[s, g, k]``: squared distance from the site ``DIRECTIONS[k]`` to that spot."""
-for _s in range(12):
-    for _g in range(12):
-        _spot = DIRECTIONS[_s] + DIRECTIONS[_g]
-        if _spot.any():
-            SPOT_FACE[_s, _g] = face_index(_spot)
-        SPOT_DISTANCE[_s, _g] = ((_spot[None, :] - DIRECTIONS) ** 2).sum(axis=1)
-
-
-EQUATORS = np.array([np.flatnonzero(DIRECTIONS[:, axis] == sign) for axis in range(3) for sign in (1, -1)])
-"""``(6, 4)`` face slots around each of the 6 octahedral holes that touch a site: the hole at
-half a step along ``+x`` is surrounded by this module, the 4 face sites with ``x = +1`` (its
-"equator", all seen) and the site two steps along ``+x`` (not seen)."""
+# Helpers over stacked observation fields (first axis: module); each row is computed from
+# that module's own observation.
 
 
 def random_pick(pool: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -267,75 +227,3 @@ def random_pick(pool: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def first_slot(hits: np.ndarray) -> np.ndarray:
     """``(Q,)`` first True column per row of ``hits`` (Q, 12); -1 where none."""
     return np.where(hits.any(axis=1), hits.argmax(axis=1), -1)
-
-
-def descent_batch(scents: np.ndarray, scent_max: int) -> np.ndarray:
-    """:func:`descent_direction` for ``(Q, 12)`` neighbour scents; returns ``(Q, 3)``."""
-    has = scents < scent_max
-    count = has.sum(axis=1)
-    total = np.where(has, scents, 0).sum(axis=1)
-    mean = total / np.maximum(count, 1)
-    weight = np.where(has, mean[:, None] - scents, 0.0)
-    out = weight @ DIRECTIONS
-    out[count < 2] = 0.0
-    return out
-
-
-def climb_batch(scents: np.ndarray, kinds: np.ndarray, legal: np.ndarray, scent_max: int,
-                rng: np.random.Generator, p_random: float, *, on_stuck: str = "stay",
-                bias: np.ndarray | None = None, fewer_neighbours: bool = False) -> np.ndarray:
-    """:func:`climb` for ``Q`` modules at once: ``(Q,)`` moves (0 or ``k + 1``).
-
-    ``scents`` (Q, 12) neighbour scents (``scent_max`` where no module), ``kinds`` (Q, 12)
-    neighbour kinds, ``legal`` (Q, 12) bool legal rolls, ``bias`` (Q, 3) or None.
-    """
-    q = scents.shape[0]
-    scents = scents.astype(np.int64)
-    big = np.iinfo(np.int64).max
-    there = np.where(legal, 1 + scents[:, DIRECTION_ADJACENCY].min(axis=2), big)
-    here = 1 + scents.min(axis=1)
-    best = there.min(axis=1)
-    pool = legal & (there == best[:, None])
-    stuck = best > here
-    if bias is not None:
-        dots = np.where(pool, bias @ DIRECTIONS.T, 0.0)
-        ahead = pool & (dots > 0)
-        pool = np.where(ahead.any(axis=1)[:, None], ahead, pool)
-    if fewer_neighbours:
-        crowd = (kinds == KIND_MODULE)[:, DIRECTION_ADJACENCY].sum(axis=2)
-        crowd = np.where(pool, crowd, 99)
-        pool &= crowd == crowd.min(axis=1)[:, None]
-    if on_stuck == "random":
-        pool = np.where(stuck[:, None], legal, pool)
-    else:
-        pool &= ~stuck[:, None]
-    wild = rng.random(q) < p_random
-    pool = np.where(wild[:, None], legal, pool)
-    return random_pick(pool, rng) + 1
-
-
-def approach_batch(target: np.ndarray, pivot: np.ndarray, legal: np.ndarray, rng: np.random.Generator,
-                   *, greedy: bool = True, p_random: float = 0.0) -> np.ndarray:
-    """``(Q,)`` moves towards ``target`` (Q, 3) sites (offsets from each module, never 0).
-
-    The rule of :func:`approach_growth_spot` for many modules: roll straight into the target
-    when it is a face neighbour and the roll is legal; otherwise roll over the faces of the
-    neighbour at slot ``pivot`` (Q,) (moves that keep it as a neighbour), the ones ending
-    nearest the target with ``greedy`` (random among ties) or any of them; when there is no
-    such roll, a random legal roll with probability ``p_random``, else stay.
-    """
-    q = target.shape[0]
-    rows = np.arange(q)
-    face = first_slot((DIRECTIONS[None, :, :] == target[:, None, :]).all(axis=2))
-    direct = (face >= 0) & legal[rows, np.maximum(face, 0)]
-    pool = legal & ADJACENT_TO[pivot]
-    if greedy:
-        dist = ((target[:, None, :] - DIRECTIONS[None, :, :]) ** 2).sum(axis=2)
-        dist = np.where(pool, dist, np.iinfo(np.int64).max)
-        pool &= dist == dist.min(axis=1)[:, None]
-    roll = random_pick(pool, rng) + 1
-    stuck = roll == 0
-    if p_random > 0 and stuck.any():
-        wild = stuck & (rng.random(q) < p_random)
-        roll = np.where(wild, random_pick(legal, rng) + 1, roll)
-    return np.where(direct, face + 1, roll)
