@@ -57,18 +57,28 @@ class ChainParams:
             6 gave the same success as 3 (50 of 50 blobs of 50 modules and 20 of 20 of 200
             under ``sphere``, ``rounded`` and ``minimal``).
         time_penalty: reward lost per cycle.
+        room: free sites on every horizontal side of the blob instead of ``n_modules +
+            margin`` (None: that default). The default box grows with the square of
+            ``n_modules`` (about 1.6e10 grid cells for 10,000 modules); a smaller room keeps
+            large worlds in memory, and walls ``room`` sites away cannot touch a module in its
+            first ``room - 3`` cycles (a module moves at most one site per axis and cycle, and
+            a roll reads sites at most two away), so those cycles are the same as in the
+            default box.
     """
 
     n_modules: int = 50
     initial_seed: bool = True
     margin: int = 3
     time_penalty: float = 0.001
+    room: int | None = None
 
     def __post_init__(self):
         if self.n_modules < 2:
             raise ValueError(f"n_modules={self.n_modules!r} is not allowed; allowed: an integer >= 2")
         if self.margin < 1:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
+        if self.room is not None and self.room < 1:
+            raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
 
 
 class Chain(Task):
@@ -81,7 +91,7 @@ class Chain(Task):
 
     def build_layout(self, rng):
         p = self.params
-        room = p.n_modules + p.margin  # a straight chain fits along any horizontal direction
+        room = p.n_modules + p.margin if p.room is None else p.room  # default: any straight chain fits
         sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin))
         return Layout(size=size, modules=sites)
 
