@@ -255,6 +255,20 @@ class ChainPolicy(Policy):
         self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
         return slots
 
+    def memory_rows(self, agents) -> ModuleMemory:
+        """A copy of the memory with one row per agent of ``agents`` (names, in row order), as
+        :meth:`act_arrays` reads it; agents without memory get empty rows."""
+        rows = ModuleMemory()
+        rows.reserve(len(agents))
+        if self._keyed_by == "name":
+            slots = np.array([self._slots.get(a, -1) for a in agents], dtype=np.int64)
+        else:
+            slots = np.arange(len(agents), dtype=np.int64)
+        known = (slots >= 0) & (slots < len(self.memory.heading))
+        for name in ("heading", "growth", "asked"):
+            getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
+        return rows
+
     def _act(self, slots, field, observation) -> np.ndarray:
         """Actions of the agents with memory ``slots`` (A,), in row order; ``field(name)`` gives an
         observation field stacked over them, ``observation(i)`` one agent's observation dict."""

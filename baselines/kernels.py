@@ -70,10 +70,13 @@ here, ``g == OPPOSITE[s]``)."""
 AROUND_BITS = np.array([sum(1 << int(j) for j in row) for row in DIRECTION_ADJACENCY], dtype=np.int64)
 """``AROUND_BITS[s]``: the face slots still next to ``DIRECTIONS[s]`` after any roll over them
 (the 4 slots adjacent to both here and there), as a bit set."""
-EQUATORS = np.array([np.flatnonzero(DIRECTIONS[:, axis] == sign) for axis in range(3) for sign in (1, -1)])
-"""``(6, 4)`` face slots around each of the 6 octahedral holes that touch a site: the hole at
-half a step along ``+x`` is surrounded by this module, the 4 face sites with ``x = +1`` (its
-"equator", all seen) and the site two steps along ``+x`` (not seen)."""
+EQUATOR_BITS = np.array([sum(1 << k for k in range(12) if DIRECTIONS[k, axis] == sign)
+                         for axis in range(3) for sign in (1, -1)], dtype=np.int64)
+"""``(6,)`` the face slots around each of the 6 octahedral holes that touch a site, as bit sets:
+the hole at half a step along ``+x`` is surrounded by this module, the 4 face sites with
+``x = +1`` (its "equator", all seen) and the site two steps along ``+x`` (not seen)."""
+BIT_COUNT = np.array([bin(v).count("1") for v in range(1 << 12)], dtype=np.int64)
+"""``BIT_COUNT[bits]``: the number of set bits of a 12-bit set."""
 HORIZONTAL_BITS = sum(1 << k for k in range(12) if DIRECTIONS[k, 2] == 0)
 """The 4 face directions in the horizontal plane, as a bit set."""
 DOT = DIRECTIONS @ DIRECTIONS.T
@@ -134,6 +137,16 @@ def legal_bits(action_mask, i):
 
 
 @kernel
+def module_bits(neighbour_kind, i):
+    """Bit set of the face slots of row ``i`` that hold a module."""
+    bits = 0
+    for k in range(12):
+        if neighbour_kind[i, k] == KIND_MODULE:
+            bits |= 1 << k
+    return bits
+
+
+@kernel
 def seen_scent(neighbour_kind, neighbour_scent, i, k, scent_max):
     """Channel-0 scent of the face neighbour ``k`` of row ``i`` (``scent_max`` where no module)."""
     if neighbour_kind[i, k] == KIND_MODULE:
@@ -180,16 +193,13 @@ def growth_direction(neighbour_kind, neighbour_mode, i, rng, horizontal, previou
     if pool == 0:
         return -1
     if clean:
-        crowd = np.zeros(12, dtype=np.int64)
+        modules = module_bits(neighbour_kind, i)
         fewest = 99
         for k in range(12):
             if (pool >> k) & 1:
-                for j in range(4):
-                    if neighbour_kind[i, DIRECTION_ADJACENCY[k, j]] == KIND_MODULE:
-                        crowd[k] += 1
-                fewest = min(fewest, crowd[k])
+                fewest = min(fewest, BIT_COUNT[modules & AROUND_BITS[k]])
         for k in range(12):
-            if (pool >> k) & 1 and crowd[k] != fewest:
+            if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
                 pool &= ~(1 << k)
     outward = 0
     for k in range(12):
@@ -350,28 +360,32 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
     """
     smax = rules.scent_max
     pools = np.empty(count, dtype=np.int64)
+    raw = np.empty(12, dtype=np.int64)
     sc = np.empty(12, dtype=np.int64)
+    there = np.empty(12, dtype=np.int64)
     bias = np.empty(3)
     for j in range(count):
         r = group[j]
         i = rows[r]
         lg = legal[r]
+        pools[j] = 0
+        if lg == 0:  # no legal roll: the pool is empty whatever the scents
+            continue
         here = _FAR
         n_scented = 0
         total = 0
         for k in range(12):
-            raw = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
-            if raw < smax:
+            raw[k] = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
+            s = raw[k]
+            if raw[k] < smax:
                 n_scented += 1
-                total += raw
-            s = raw
+                total += raw[k]
             if rules.prefer_chain:  # equal scents: a chain module counts as slightly lower
                 m = neighbour_mode[i, k]
-                s = 2 * raw + (1 if m == SEARCH or m == SLEEP else 0) if raw < smax else 2 * smax
+                s = 2 * raw[k] + (1 if m == SEARCH or m == SLEEP else 0) if raw[k] < smax else 2 * smax
             sc[k] = s
             here = min(here, 1 + s)
         best = _FAR
-        there = np.empty(12, dtype=np.int64)
         for k in range(12):
             there[k] = _FAR
             if (lg >> k) & 1:
@@ -385,7 +399,8 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
             if (lg >> k) & 1 and there[k] == best:
                 pool |= 1 << k
         stuck = best > here
-        if rules.directed or rules.momentum > 0:
+        several = (pool & (pool - 1)) != 0  # the filters below never change a pool of one
+        if several and (rules.directed or rules.momentum > 0):
             # the sums run in the order of a (Q, 12) @ (12, 3) product, term by term
             bias[:] = 0.0
             if rules.directed and n_scented >= 2:
@@ -393,8 +408,7 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
                 for axis in range(3):
                     acc = 0.0
                     for k in range(12):
-                        raw = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
-                        weight = mean - raw if raw < smax else 0.0
+                        weight = mean - raw[k] if raw[k] < smax else 0.0
                         acc += weight * DIRECTIONS[k, axis]
                     bias[axis] = acc
             if rules.momentum > 0 and heading_dir[r] >= 0:
@@ -410,17 +424,14 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
                         ahead |= 1 << k
             if ahead:
                 pool = ahead
-        if rules.fewer_neighbours and pool:
+        if rules.fewer_neighbours and (pool & (pool - 1)) != 0:
+            modules = module_bits(neighbour_kind, i)
             fewest = 99
-            crowd = np.zeros(12, dtype=np.int64)
             for k in range(12):
                 if (pool >> k) & 1:
-                    for a in range(4):
-                        if neighbour_kind[i, DIRECTION_ADJACENCY[k, a]] == KIND_MODULE:
-                            crowd[k] += 1
-                    fewest = min(fewest, crowd[k])
+                    fewest = min(fewest, BIT_COUNT[modules & AROUND_BITS[k]])
             for k in range(12):
-                if (pool >> k) & 1 and crowd[k] != fewest:
+                if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
                     pool &= ~(1 << k)
         if stuck:
             pool = lg if rules.random_when_stuck else 0
@@ -437,18 +448,16 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
         i = rows[r]
         if legal[r] == 0:
             continue
+        modules = module_bits(neighbour_kind, i)
+        chain = 0
+        for k in range(12):
+            m = neighbour_mode[i, k]
+            if m == FINAL or m == SEED:
+                chain |= 1 << k
         leave = False
         for e in range(6):
-            full = True
-            chain = False
-            for a in range(4):
-                k = EQUATORS[e, a]
-                if neighbour_kind[i, k] != KIND_MODULE:
-                    full = False
-                m = neighbour_mode[i, k]
-                if m == FINAL or m == SEED:
-                    chain = True
-            if full and (chain or rules.avoid_octahedra == OCTAHEDRA_ALL):
+            full = (modules & EQUATOR_BITS[e]) == EQUATOR_BITS[e]
+            if full and ((chain & EQUATOR_BITS[e]) != 0 or rules.avoid_octahedra == OCTAHEDRA_ALL):
                 leave = True
         if leave:
             moves[r] = random_pick(rng, legal[r]) + 1

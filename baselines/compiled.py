@@ -1,0 +1,239 @@
+"""Whole rollouts of the hand-coded chain behaviour inside compiled code.
+
+:func:`chain_rollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
+runs in Python, cycle after cycle, as one numba kernel: the engine's observation kernel, the
+chain rule's kernel (:func:`baselines.kernels.chain_actions`, the same code
+:class:`~baselines.chain.ChainPolicy` runs), the engine's cycle kernel and the chain task's
+success test. Same environment state, policy parameters, generator state and memory give the
+same trajectory as the Python loop, cycle for cycle (``tests/test_chain_kernel.py``).
+
+Example::
+
+    env = proteo_env.make("chain-v0", n_modules=200, motion_model="sphere", max_cycles=5000)
+    env.reset(seed=3)
+    result = chain_rollout(env, ChainPolicy.for_env(env, seed=3))
+    result.success, result.cycles, result.positions
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from proteo_env.core import kernels as engine
+from proteo_env.core.jit import kernel
+from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
+from proteo_env.core.structure import largest_thin_piece
+from proteo_env.core.world import LOCAL_ADJACENCY_BITS, Scratch
+from proteo_env.env import ProteoEnv
+from proteo_env.spaces import ObservationBuffers
+
+from .chain import ChainPolicy
+from .kernels import chain_actions
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """Outcome of a compiled rollout (N modules, R recorded cycles).
+
+    Attributes:
+        cycles: the cycle count reached, counted like ``env.cycle`` (the cycle of success when
+            ``success``).
+        success: the chain task's success test held after the last cycle.
+        positions: ``(N, 3)`` int64 module sites after the last cycle.
+        modes: ``(N,)`` int32 modes after the last cycle.
+        recorded_cycles: ``(R,)`` the cycles after which the state was recorded: every
+            ``record_every``-th of the call, and the last when it ends in success.
+        recorded_positions: ``(R, N, 3)`` module sites after those cycles.
+        recorded_modes: ``(R, N)`` modes after those cycles.
+        rng: the rollout's copy of the policy's generator, as the cycles run left it (the
+            policy's own generator is unchanged).
+    """
+
+    cycles: int
+    success: bool
+    positions: np.ndarray
+    modes: np.ndarray
+    recorded_cycles: np.ndarray
+    recorded_positions: np.ndarray
+    recorded_modes: np.ndarray
+    rng: np.random.Generator
+
+
+@kernel
+def is_chain(grid, cell, n_modules, dir_delta, degree, mark, queue):
+    """The chain task's success test: connected, ``N - 1`` contacts, every module with at most
+    2 neighbours. Stops at the first module with 3 or more (``degree``, ``mark``, ``queue``:
+    (N,) scratch)."""
+    contacts = 0
+    for n in range(n_modules):
+        d = 0
+        for k in range(12):
+            if grid[cell[n] + dir_delta[k]] >= 0:
+                d += 1
+        if d > 2:
+            return False
+        degree[n] = d
+        contacts += d
+    if contacts // 2 != n_modules - 1:
+        return False
+    return largest_thin_piece(grid, cell, n_modules, dir_delta, degree, mark, queue) == n_modules
+
+
+@kernel
+def _chain_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
+                  keep_connected, exact, sweeps, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
+                  pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer, is_cut, disc, low, stack_node,
+                  stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
+                  action_mask, slots, heading, growth, asked, rules, rng, max_cycles, record_every,
+                  recorded_cycles, recorded_cell, recorded_mode, degree, test_mark, test_queue):
+    """Run up to ``max_cycles`` cycles of observe, decide, step, test; return ``(cycles, success,
+    recorded)``. Arrays as in :class:`~proteo_env.core.world.World`, its scratch and
+    :class:`~proteo_env.spaces.ObservationBuffers`; ``recorded_*`` (R, ...) are filled in order."""
+    n_modules = cell.shape[0]
+    n_channels = scent.shape[0]
+    scent_max = rules.scent_max
+    actions = np.empty((n_agents, 4 + n_channels), dtype=np.int64)
+    move = np.empty(n_agents, dtype=np.int64)
+    new_mode = np.empty(n_agents, dtype=np.int32)
+    role = np.empty((n_agents, n_channels), dtype=np.int8)
+    target = np.empty(n_agents, dtype=np.int64)
+    value = np.empty(n_agents, dtype=np.int32)
+    moved = np.empty(n_agents, dtype=np.bool_)
+    recorded = 0
+    for cycle in range(1, max_cycles + 1):
+        engine.observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected, nb_delta,
+                             dir_delta, roll_delta, sweep_bits, pivot_bit, scent_max, is_cut, disc, low,
+                             stack_node, stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode,
+                             own_scent, messages, contact, action_mask)
+        chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
+                      slots, heading, growth, asked, rules, rng, actions)
+        for a in range(n_agents):
+            move[a] = actions[a, 0]
+            new_mode[a] = actions[a, 1]
+            for ch in range(n_channels):
+                role[a, ch] = actions[a, 2 + ch]
+            target[a] = actions[a, 2 + n_channels]
+            value[a] = actions[a, 3 + n_channels]
+        engine.run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
+                         keep_connected, exact, sweeps, scent_max, move, new_mode, role, target, value, moved,
+                         dir_delta, DIRECTIONS, OPPOSITE, roll_delta, local_delta, LOCAL_ADJACENCY_BITS,
+                         sweep_bits, pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer)
+        success = is_chain(grid, cell, n_modules, dir_delta, degree, test_mark, test_queue)
+        if record_every > 0 and (cycle % record_every == 0 or success):
+            recorded_cycles[recorded] = cycle
+            recorded_cell[recorded] = cell
+            recorded_mode[recorded] = mode
+            recorded += 1
+        if success:
+            return cycle, True, recorded
+    return max_cycles, False, recorded
+
+
+class ChainRollout:
+    """The chain behaviour from a copy of ``env``'s state, run inside compiled code.
+
+    :meth:`run` advances it by up to a given number of cycles (stopping at the chain task's
+    success); every call continues where the last one ended. The cycles are those that
+    driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))`` would
+    run: same trajectory, same draws from the policy's generator. Neither ``env`` nor
+    ``policy`` changes: the rollout works on copies of the world's state, of the policy's
+    generator and of its memory.
+
+    Args:
+        env: a :class:`~proteo_env.env.ProteoEnv` of the chain task, after ``reset``.
+        policy: a :class:`~baselines.chain.ChainPolicy` built for ``env`` (its parameters,
+            generator state and memory are read).
+
+    Attributes:
+        cycle: the cycle count reached, counted like ``env.cycle`` (starts at the env's).
+        success: the chain task's success test held after the last cycle.
+        rng: the rollout's copy of the policy's generator, as the cycles run so far left it.
+    """
+
+    def __init__(self, env, policy: ChainPolicy):
+        if not isinstance(env, ProteoEnv) or env.task.name != "chain":
+            raise ValueError(f"env={env!r} is not allowed; allowed: a ProteoEnv of the chain task "
+                             "(proteo_env.make('chain-v0', ...))")
+        world = env.engine
+        if world is None:
+            raise ValueError("env has no world yet; allowed: an env after reset(seed=...)")
+        if type(policy) is not ChainPolicy:
+            raise ValueError(f"policy={type(policy).__name__} is not allowed; allowed: a ChainPolicy")
+        if policy.layout != env.action_layout:
+            raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
+        self.world = world
+        self.rules = policy.rules
+        self.rng = copy.deepcopy(policy.rng)
+        self.memory = policy.memory_rows(env.possible_agents)
+        self.state = {name: getattr(world, name).copy() for name in ("grid", "cell", "mode", "scent", "inbox",
+                                                                        "rng_state")}
+        n = world.n_modules
+        self.scratch = Scratch(n)
+        self.observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
+        self.test_scratch = tuple(np.zeros(n, dtype=np.int64) for _ in range(3))
+        self.cycle = env.cycle
+        self.success = False
+
+    def run(self, max_cycles: int, *, record_every: int = 0) -> Rollout:
+        """Run up to ``max_cycles`` more cycles (none once the chain is complete).
+
+        ``record_every``: record positions and modes after every ``record_every``-th cycle of
+        this call and at success (0: none). Returns the :class:`Rollout` of this call (its
+        ``cycles`` is :attr:`cycle`).
+        """
+        for name, value in (("max_cycles", max_cycles), ("record_every", record_every)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 0")
+        w, st, s, obs, m = self.world, self.state, self.scratch, self.observation, self.memory
+        n = w.n_modules
+        capacity = max_cycles // record_every + 1 if record_every else 0
+        recorded_cycles = np.zeros(capacity, dtype=np.int64)
+        recorded_cell = np.zeros((capacity, n), dtype=st["cell"].dtype)
+        recorded_mode = np.zeros((capacity, n), dtype=st["mode"].dtype)
+        ran, recorded = 0, 0
+        if not self.success:
+            p = w.physics
+            ran, self.success, recorded = _chain_cycles(
+                st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
+                st["rng_state"], w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps,
+                w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.sweep_bits, w.pivot_bit,
+                s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer, s.is_cut, s.disc, s.low,
+                s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode,
+                obs.own_scent, obs.messages, obs.contact, obs.action_mask, np.arange(w.n_agents, dtype=np.int64),
+                m.heading, m.growth, m.asked, self.rules, self.rng, int(max_cycles), int(record_every),
+                recorded_cycles, recorded_cell, recorded_mode, *self.test_scratch)
+        recorded_cycles[:recorded] += self.cycle
+        self.cycle += int(ran)
+        shape = w.shape
+        return Rollout(cycles=self.cycle, success=bool(self.success), positions=shape.point(st["cell"]),
+                       modes=st["mode"].copy(), recorded_cycles=recorded_cycles[:recorded],
+                       recorded_positions=shape.point(recorded_cell[:recorded]),
+                       recorded_modes=recorded_mode[:recorded], rng=self.rng)
+
+
+def chain_rollout(env, policy: ChainPolicy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:
+    """Run the chain behaviour from ``env``'s current state inside compiled code.
+
+    ``ChainRollout(env, policy).run(max_cycles, record_every=record_every)``: the result is
+    what driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
+    until the chain task's success (or ``max_cycles``) would give. Neither ``env`` nor
+    ``policy`` changes.
+
+    Args:
+        env: a :class:`~proteo_env.env.ProteoEnv` of the chain task, after ``reset``.
+        policy: a :class:`~baselines.chain.ChainPolicy` built for ``env``.
+        max_cycles: cycles to run at most (default: the env's cycles left, ``max_cycles - cycle``).
+        record_every: record positions and modes after every ``record_every``-th cycle and at
+            success (0: only the final state).
+
+    Returns:
+        a :class:`Rollout`.
+    """
+    rollout = ChainRollout(env, policy)
+    return rollout.run(env.max_cycles - env.cycle if max_cycles is None else max_cycles, record_every=record_every)
+
+
+__all__ = ["ChainRollout", "Rollout", "chain_rollout", "is_chain"]

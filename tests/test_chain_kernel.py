@@ -1,0 +1,177 @@
+"""The chain behaviour inside compiled code (``baselines.compiled``) against the observation-based
+policy driven through the environment: same trajectory cycle for cycle, same cycles to success,
+same draws from the policy's generator; also with the kernels run as plain Python."""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import proteo_env
+from baselines.branch import BranchPolicy
+from baselines.chain import ChainPolicy
+from baselines.compiled import ChainRollout, chain_rollout
+
+LIMIT = 400
+
+
+def drive(env, policy, limit, *, use_dicts=False):
+    """Step ``env`` with ``policy`` through the observation API until success or ``limit`` cycles;
+    returns per-cycle positions and modes and whether the chain formed."""
+    positions, modes = [], []
+    success = False
+    while not success and env.cycle < limit:
+        if use_dicts:
+            actions = policy.act(env.observe_arrays().per_agent(env.possible_agents))
+            env.step_arrays(np.stack([actions[a] for a in env.possible_agents]))
+        else:
+            env.step_arrays(policy.act_arrays(env.observe_arrays()))
+        positions.append(env.world.positions)
+        modes.append(env.world.modes)
+        success = bool(env.task.success(env.engine))
+    return np.array(positions), np.array(modes), success
+
+
+def assert_same_trajectory(result, positions, modes, success, rng):
+    assert result.success == success
+    assert result.cycles == len(positions)
+    np.testing.assert_array_equal(result.recorded_cycles, np.arange(1, len(positions) + 1))
+    np.testing.assert_array_equal(result.recorded_positions, positions)
+    np.testing.assert_array_equal(result.recorded_modes, modes)
+    np.testing.assert_array_equal(result.positions, positions[-1])
+    assert result.rng.bit_generator.state == rng.bit_generator.state
+
+
+@pytest.mark.parametrize("model", ["minimal", "sphere"])
+@pytest.mark.parametrize("n", [12, 24])
+def test_compiled_rollout_is_the_observation_based_policy(model, n):
+    for seed in range(3):
+        env = proteo_env.make("chain-v0", n_modules=n, motion_model=model, max_cycles=LIMIT)
+        env.reset(seed=seed)
+        result = chain_rollout(env, ChainPolicy.for_env(env, seed=seed), record_every=1)
+        policy = ChainPolicy.for_env(env, seed=seed)
+        positions, modes, success = drive(env, policy, LIMIT)
+        assert success, f"{model} n={n} seed={seed}: no chain within {LIMIT} cycles"
+        assert_same_trajectory(result, positions, modes, success, policy.rng)
+
+
+@pytest.mark.parametrize("params", [
+    {"queue": True, "p_seed": 0.01, "on_stuck": "random"},
+    {"directed": False, "momentum": 0.0, "avoid_octahedra": "all", "greedy_approach": False, "wake_when_free": True},
+])
+def test_same_trajectory_with_other_rule_parameters(params):
+    env = proteo_env.make("chain-v0", n_modules=20, motion_model="rounded", max_cycles=150)
+    env.reset(seed=4)
+    result = chain_rollout(env, ChainPolicy.for_env(env, seed=4, **params), record_every=1)
+    policy = ChainPolicy.for_env(env, seed=4, **params)
+    positions, modes, success = drive(env, policy, 150)
+    assert_same_trajectory(result, positions, modes, success, policy.rng)
+
+
+@pytest.mark.parametrize("use_dicts", [False, True])
+def test_rollout_continues_a_started_episode(use_dicts):
+    """The rollout starts from the env's state and the policy's memory, whichever way it was keyed."""
+    env = proteo_env.make("chain-v0", n_modules=16, motion_model="sphere", max_cycles=LIMIT)
+    env.reset(seed=1)
+    policy = ChainPolicy.for_env(env, seed=1)
+    drive(env, policy, 40, use_dicts=use_dicts)
+    result = chain_rollout(env, policy, record_every=1)
+    positions, modes, success = drive(env, policy, LIMIT, use_dicts=use_dicts)
+    assert success
+    assert result.cycles == 40 + len(positions)
+    np.testing.assert_array_equal(result.recorded_positions, positions)
+    np.testing.assert_array_equal(result.recorded_modes, modes)
+    assert result.rng.bit_generator.state == policy.rng.bit_generator.state
+
+
+def test_runs_resume_and_leave_env_and_policy_unchanged():
+    env = proteo_env.make("chain-v0", n_modules=16, motion_model="minimal", max_cycles=LIMIT)
+    env.reset(seed=2)
+    policy = ChainPolicy.for_env(env, seed=2)
+    state, before = copy.deepcopy(env.engine.snapshot()), copy.deepcopy(policy.rng.bit_generator.state)
+    whole = chain_rollout(env, policy)
+    rollout = ChainRollout(env, policy)
+    first = rollout.run(30, record_every=10)
+    np.testing.assert_array_equal(first.recorded_cycles, [10, 20, 30])
+    rest = rollout.run(LIMIT)
+    assert whole.success and rest.success and rest.cycles == whole.cycles
+    np.testing.assert_array_equal(rest.positions, whole.positions)
+    np.testing.assert_array_equal(rest.modes, whole.modes)
+    assert rollout.run(5).cycles == whole.cycles  # nothing left to do after success
+    for key, value in env.engine.snapshot().items():
+        np.testing.assert_array_equal(value, state[key], err_msg=key)
+    assert policy.rng.bit_generator.state == before
+
+
+def test_room_changes_no_early_cycle():
+    """A box with ``room`` free sites gives the default box's first ``room - 3`` cycles."""
+    room = 12
+    runs = []
+    for extra in ({}, {"room": room}):
+        env = proteo_env.make("chain-v0", n_modules=30, motion_model="sphere", **extra)
+        env.reset(seed=0)
+        start = env.world.positions
+        result = chain_rollout(env, ChainPolicy.for_env(env, seed=0), max_cycles=room - 3)
+        runs.append((result.positions - start[0], result.modes, env.world.box))
+    (default, default_modes, default_box), (small, small_modes, small_box) = runs
+    assert small_box[0] < default_box[0]
+    np.testing.assert_array_equal(default, small)
+    np.testing.assert_array_equal(default_modes, small_modes)
+
+
+def test_bad_inputs_are_refused():
+    env = proteo_env.make("chain-v0", n_modules=8)
+    policy = ChainPolicy.for_env(env, seed=0)
+    with pytest.raises(ValueError, match="no world yet"):
+        chain_rollout(env, policy)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="max_cycles=-1 is not allowed"):
+        chain_rollout(env, policy, max_cycles=-1)
+    with pytest.raises(ValueError, match="record_every=1.5 is not allowed"):
+        chain_rollout(env, policy, record_every=1.5)
+    with pytest.raises(ValueError, match="policy=BranchPolicy is not allowed; allowed: a ChainPolicy"):
+        chain_rollout(env, BranchPolicy.for_env(env, seed=0))
+    sandbox = proteo_env.make("sandbox-v0", n_modules=8)
+    sandbox.reset(seed=0)
+    with pytest.raises(ValueError, match="allowed: a ProteoEnv of the chain task"):
+        chain_rollout(sandbox, policy)
+    with pytest.raises(ValueError, match="room=0 is not allowed"):
+        proteo_env.make("chain-v0", room=0)
+
+
+# ------------------------------------------------------------------ kernels as plain Python
+def fingerprint() -> str:
+    """Hash of a short compiled rollout and of the policy loop's actions on a small chain."""
+    env = proteo_env.make("chain-v0", n_modules=10, motion_model="sphere", max_cycles=25)
+    env.reset(seed=3)
+    result = chain_rollout(env, ChainPolicy.for_env(env, seed=3, queue=True), record_every=1)
+    digest = hashlib.sha256(result.recorded_positions.tobytes() + result.recorded_modes.tobytes())
+    digest.update(repr(result.rng.bit_generator.state).encode())
+    return digest.hexdigest()
+
+
+def nojit_child() -> None:
+    """Entry point of the subprocess run with ``NUMBA_DISABLE_JIT=1``."""
+    import numba
+
+    assert numba.config.DISABLE_JIT, "NUMBA_DISABLE_JIT was not picked up"
+    from baselines import kernels
+    assert not hasattr(kernels.chain_actions, "signatures"), "kernels are still compiled"
+    print("FINGERPRINT", fingerprint())
+
+
+def test_kernels_as_plain_python_give_the_same_rollout():
+    here = Path(__file__).resolve().parent
+    code = f"import sys; sys.path.insert(0, {str(here)!r}); import test_chain_kernel as t; t.nojit_child()"
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300,
+                            cwd=here.parent)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert f"FINGERPRINT {fingerprint()}" in result.stdout
