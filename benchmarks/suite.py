@@ -14,6 +14,13 @@ process so that peak memory is per measurement:
 * ``engine``: :meth:`ProteoEnv.step_arrays` + :meth:`ProteoEnv.observe_arrays` (one world, arrays);
 * ``batched``: :class:`~proteo_env.batched.BatchedEnv` with ``B = max(1, batch_modules // N)``
   worlds stepped in one call (``B * N`` module-cycles per cycle);
+* ``chain-kernel``: the hand-coded chain behaviour run inside compiled code
+  (:class:`baselines.compiled.ChainRollout`, observation, rule, cycle and success test in one
+  kernel) on the chain task (``chain-v0`` with ``room=CHAIN_ROOM``, reset with seed 0, policy
+  seed 0), not on the sandbox workload: the behaviour draws its own actions. One cycle per call
+  here, so that each cycle is timed like the other modes; ``benchmarks/chain_kernel_speed.py``
+  runs many cycles per call and compares with the policy driven through the env. No reference
+  ratio (the reference runs the sandbox workload);
 * ``reference``: the pure-Python reference cycle (:mod:`proteo_env.core.reference`) with its
   observations, from the same start and move-order seed as ``engine`` (so the same
   trajectory), for the first ``--reference-cycles`` cycles and sizes up to
@@ -46,7 +53,11 @@ import numpy as np
 
 from machine_info import describe
 
-MODES = ("pettingzoo", "engine", "batched", "reference")
+MODES = ("pettingzoo", "engine", "batched", "chain-kernel", "reference")
+CHAIN_ROOM = 64
+"""Free sites on each horizontal side of the ``chain-kernel`` blob: walls that far away touch no
+module in the first 61 cycles, so those are the default box's cycles (its grid would not fit in
+memory above a few thousand modules)."""
 
 
 def _stepper(mode: str, n: int, batch_modules: int):
@@ -66,6 +77,23 @@ def _stepper(mode: str, n: int, batch_modules: int):
             env.observe_arrays()
             return time.perf_counter() - t
         return (lambda: env.reset(seed=0)), step, n_envs * n, n_envs
+
+    if mode == "chain-kernel":
+        from baselines.chain import ChainPolicy
+        from baselines.compiled import ChainRollout
+
+        chain = proteo_env.make("chain-v0", n_modules=n, room=CHAIN_ROOM, max_cycles=10**9)
+        rollout = {}
+
+        def reset():
+            chain.reset(seed=0)
+            rollout["run"] = ChainRollout(chain, ChainPolicy.for_env(chain, seed=0)).run
+
+        def step(rng):  # the behaviour draws its own actions
+            t = time.perf_counter()
+            rollout["run"](1)
+            return time.perf_counter() - t
+        return reset, step, n, 1
 
     env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
     nvec = env.action_layout.nvec
@@ -200,7 +228,8 @@ def main() -> None:
              "cycles) | first cycle s | peak RSS MiB |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        ratio = f"{early_rate(r) / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref else "-"
+        same_workload = r["mode"] != "chain-kernel"  # the reference runs the sandbox workload
+        ratio = f"{early_rate(r) / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref and same_workload else "-"
         lines.append(f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
                      f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |")
     table = "\n".join(lines)

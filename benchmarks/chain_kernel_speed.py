@@ -1,0 +1,329 @@
+"""In-kernel chain behaviour: module-cycles per second against N, and against the Python loop.
+
+Workload (the same on every machine): the chain task (``chain-v0``, default physics: ``minimal``
+rolls, connectivity kept, one scent sweep per cycle) with N modules, reset with seed 0, and the
+hand-coded chain policy (``ChainPolicy``, default parameters, seed 0); the first ``--cycles``
+cycles from the reset. The box has ``room = cycles + 4`` free sites on each horizontal side
+instead of the task's ``N + 3`` (whose grid would not fit in memory above a few thousand
+modules); walls that far away touch no module in those cycles, so the trajectory is the
+default box's (``tests/test_chain_kernel.py::test_room_changes_no_early_cycle``).
+
+Each N runs in a fresh process (peak memory per row) with ``NUMBA_NUM_THREADS=--threads``:
+
+* ``build``: ``make`` + ``reset`` (the blob is grown in Python);
+* ``first call``: ``ChainRollout(env, policy).run(1)``, the load of the on-disk JIT cache plus
+  one cycle (the compile itself is timed once apart, in a process with an empty
+  ``NUMBA_CACHE_DIR``);
+* ``kernel``: ``ChainRollout(env, policy).run(cycles)``, ``--repeats`` times from the same reset
+  (the same trajectory every time); the table gives the best repeat and the median;
+* ``python``: the observation-based loop
+  ``env.step_arrays(policy.act_arrays(env.observe_arrays()))`` over the same cycles from the
+  same reset, once. The policy calls the same rule kernels, so the difference is what the
+  Python loop adds around them: action validation, fresh observation buffers, the task's
+  metrics. The final positions, modes and generator state must equal the kernel's.
+
+``--profile-n`` (default 10,000) also times each kernel of the loop on its own over the same
+cycles (called one by one from Python): the cut modules (Tarjan's pass, for exact action
+masks), the observation, the chain rule's decisions, the engine's cycle (messages, moves with
+the connectivity check, scent sweep) and the success test; and, apart, as many uniform draws
+from the policy's generator as 13 per SEARCH module (the least the rule draws for a climbing
+module: one "random roll instead?" uniform and 12 keys of its pick). ``--full-n`` (default 500)
+runs one whole episode to success in the task's default box both ways.
+
+Usage::
+
+    python benchmarks/chain_kernel_speed.py --sizes 100 1000 10000 100000 --out docs/speed/chain_kernel
+
+writes ``<out>.json`` (machine, arguments, rows), ``<out>.md`` (the tables) and ``<out>.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from machine_info import describe  # noqa: E402
+
+DRAWS_PER_SEARCH_MODULE = 13
+
+
+def fresh(n: int, cycles: int, room: int | None = None):
+    """The workload's env (reset with seed 0) and policy (seed 0)."""
+    import proteo_env
+    from baselines.chain import ChainPolicy
+
+    extra = {} if room is None else {"room": room}
+    env = proteo_env.make("chain-v0", n_modules=n, max_cycles=cycles, **extra)
+    env.reset(seed=0)
+    return env, ChainPolicy.for_env(env, seed=0)
+
+
+def python_loop(env, policy, cycles: int, *, until_success: bool = False) -> float:
+    """Seconds of ``cycles`` cycles of the observation-based loop (stopping at success if asked)."""
+    started = time.perf_counter()
+    for _ in range(cycles):
+        env.step_arrays(policy.act_arrays(env.observe_arrays()))
+        if until_success and env.task.success(env.engine):
+            break
+    return time.perf_counter() - started
+
+
+def measure(n: int, cycles: int, repeats: int) -> dict:
+    """One row: build, first call, kernel repeats and the Python loop at ``n`` modules."""
+    from baselines.compiled import ChainRollout
+
+    started = time.perf_counter()
+    env, policy = fresh(n, cycles, room=cycles + 4)
+    build_s = time.perf_counter() - started
+    started = time.perf_counter()
+    ChainRollout(env, policy).run(1)
+    first_s = time.perf_counter() - started
+    seconds = []
+    for _ in range(repeats):
+        rollout = ChainRollout(env, policy)
+        started = time.perf_counter()
+        result = rollout.run(cycles)
+        seconds.append(time.perf_counter() - started)
+    python_s = python_loop(env, policy, result.cycles)
+    same = (np.array_equal(env.world.positions, result.positions) and np.array_equal(env.world.modes, result.modes)
+            and policy.rng.bit_generator.state == result.rng.bit_generator.state)
+    if not same:
+        raise AssertionError(f"N={n}: the kernel and the Python loop reached different states")
+    best, median = min(seconds), float(np.median(seconds))
+    ran = result.cycles
+    return {"n_modules": n, "cycles": ran, "repeats": repeats, "build_s": build_s, "first_call_s": first_s,
+            "kernel_s": seconds, "kernel_ms_per_cycle": 1e3 * best / ran,
+            "kernel_median_ms_per_cycle": 1e3 * median / ran, "kernel_module_cycles_per_s": n * ran / best,
+            "python_ms_per_cycle": 1e3 * python_s / ran, "python_module_cycles_per_s": n * ran / python_s,
+            "ratio": python_s / best, "modes_at_end": np.bincount(result.modes, minlength=4).tolist(),
+            "same_state": same, "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def profile(n: int, cycles: int) -> dict:
+    """Each kernel of the loop timed on its own over the workload's cycles (ns per module-cycle).
+
+    Every kernel is called once on a small chain first, so that no compile lands in the timings.
+    """
+    import numba
+
+    from baselines.compiled import is_chain
+    from baselines.kernels import chain_actions
+    from proteo_env.core import kernels
+    from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
+    from proteo_env.core.world import LOCAL_ADJACENCY_BITS
+
+    @numba.njit
+    def draw(rng, count):
+        total = 0.0
+        for _ in range(count):
+            total += rng.random()
+        return total
+
+    def run(n: int, cycles: int) -> dict:
+        env, policy = fresh(n, cycles, room=cycles + 4)
+        w, s, p = env.engine, env.engine.scratch, env.engine.physics
+        obs = env.observe_arrays()
+        memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rules, np.arange(n)
+        actions = np.empty((n, env.action_layout.length), dtype=np.int64)
+        moved = np.zeros(n, dtype=np.bool_)
+        test = [np.zeros(n, dtype=np.int64) for _ in range(3)]
+        parts = dict.fromkeys(("cut modules", "observation", "decisions", "cycle", "success test", "draws"), 0.0)
+        n_search = 0
+        for _ in range(cycles):
+            t0 = time.perf_counter()
+            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s.is_cut, s.disc, s.low, s.stack_node,
+                                        s.stack_k)
+            t1 = time.perf_counter()
+            kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
+                            w.neighbourhood_delta, w.roll_delta, w.sweep_bits, w.pivot_bit, p.scent_max,
+                            obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode, obs.own_scent,
+                            obs.messages, obs.contact, obs.action_mask)
+            t2 = time.perf_counter()
+            searching = int((obs.own_mode[:, 0] == 1).sum())
+            spare = copy.deepcopy(policy.rng)
+            t3 = time.perf_counter()
+            draw(spare, DRAWS_PER_SEARCH_MODULE * searching)
+            t4 = time.perf_counter()
+            chain_actions(obs.own_mode, obs.messages, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent,
+                          obs.own_scent, obs.action_mask, slots, memory.heading, memory.growth, memory.asked, rules,
+                          policy.rng, actions)
+            t5 = time.perf_counter()
+            kernels.run_cycle(w.grid, w.cell, n, w.anchored, w.mode, w.scent, w.inbox, w.rng_state, w.passive_role,
+                              w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps, p.scent_max,
+                              actions[:, 0].copy(), actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
+                              actions[:, -2].copy(), actions[:, -1].astype(np.int32), moved, w.dir_delta, DIRECTIONS,
+                              OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit,
+                              s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
+            t6 = time.perf_counter()
+            is_chain(w.grid, w.cell, n, w.dir_delta, *test)
+            t7 = time.perf_counter()
+            for part, dt in zip(parts, (t1 - t0, t2 - t1, t5 - t4, t6 - t5, t7 - t6, t4 - t3)):
+                parts[part] += dt
+            n_search += searching
+        return {"n_modules": n, "cycles": cycles, "search_module_cycles": n_search,
+                "ns_per_module_cycle": {k: 1e9 * v / (n * cycles) for k, v in parts.items()}}
+
+    run(20, 2)
+    return run(n, cycles)
+
+
+def compile_time(n: int) -> dict:
+    """Seconds of the first ``run(1)`` (the compile of the rollout kernel and everything it calls,
+    when the process has an empty ``NUMBA_CACHE_DIR``)."""
+    from baselines.compiled import ChainRollout
+
+    env, policy = fresh(n, 1, room=5)
+    started = time.perf_counter()
+    ChainRollout(env, policy).run(1)
+    return {"n_modules": n, "first_call_s": time.perf_counter() - started}
+
+
+def full_episode(n: int) -> dict:
+    """One whole episode to success in the task's default box, compiled and through the Python loop."""
+    from baselines.compiled import chain_rollout
+
+    limit = 20 * n
+    env, policy = fresh(n, limit)
+    chain_rollout(env, policy, max_cycles=1)
+    started = time.perf_counter()
+    result = chain_rollout(env, policy)
+    kernel_s = time.perf_counter() - started
+    python_s = python_loop(env, policy, limit, until_success=True)
+    if env.cycle != result.cycles or not np.array_equal(env.world.positions, result.positions):
+        raise AssertionError(f"N={n}: the whole episode differs between the kernel and the Python loop")
+    return {"n_modules": n, "cycles": result.cycles, "success": result.success, "kernel_s": kernel_s,
+            "python_s": python_s, "kernel_module_cycles_per_s": n * result.cycles / kernel_s,
+            "python_module_cycles_per_s": n * result.cycles / python_s, "ratio": python_s / kernel_s}
+
+
+def slope(rows: list[dict], key: str) -> float:
+    """Least-squares slope of log(``key``) against log(N)."""
+    x = np.log([r["n_modules"] for r in rows])
+    y = np.log([r[key] for r in rows])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = np.array([r["n_modules"] for r in rows], dtype=float)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4.2), dpi=110)
+    left.plot(n, [r["kernel_module_cycles_per_s"] for r in rows], marker="o", label="in-kernel chain rollout")
+    left.plot(n, [r["python_module_cycles_per_s"] for r in rows], marker="s", label="policy through env (Python loop)")
+    left.axhline(20e6, color="grey", linestyle=":", label="target: 20 M at N = 10,000")
+    left.set_ylabel("module-cycles per second")
+    ms = np.array([r["kernel_ms_per_cycle"] for r in rows])
+    b, a = np.polyfit(np.log(n), np.log(ms), 1)
+    right.plot(n, ms, marker="o", label="in-kernel, ms per cycle")
+    right.plot(n, np.exp(a) * n ** b, linestyle="--", label=f"fit: slope {b:.2f}")
+    right.set_ylabel("ms per cycle")
+    for ax in (left, right):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("modules N")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def tables(rows: list[dict], parts: dict | None, full: dict | None, args) -> str:
+    lines = [f"| N | module-cycles/s (in-kernel, best) | ms per cycle (best / median of {args.repeats}) | "
+             "module-cycles/s (Python loop) | x Python loop | build s | first call s | peak RSS MiB |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['n_modules']:,} | {r['kernel_module_cycles_per_s']:,.0f} | {r['kernel_ms_per_cycle']:.3f} / "
+                     f"{r['kernel_median_ms_per_cycle']:.3f} | {r['python_module_cycles_per_s']:,.0f} | "
+                     f"{r['ratio']:.2f} | {r['build_s']:.2f} | {r['first_call_s']:.2f} | {r['peak_rss_mib']:.0f} |")
+    big = [r for r in rows if r["n_modules"] >= 10000]
+    lines += ["", f"Log-log slope of ms per cycle against N: {slope(rows, 'kernel_ms_per_cycle'):.3f} over all sizes"
+              + (f", {slope(big, 'kernel_ms_per_cycle'):.3f} from 10,000 to 100,000" if len(big) >= 2 else "") + "."]
+    if parts:
+        cost = parts["ns_per_module_cycle"]
+        lines += ["", f"Parts at N = {parts['n_modules']:,} over the same {parts['cycles']} cycles (ns per module-cycle; "
+                  f"{parts['search_module_cycles'] / (parts['n_modules'] * parts['cycles']):.0%} of module-cycles "
+                  "were SEARCH):", "", "| part | ns per module-cycle |", "|---|---|"]
+        lines += [f"| {k} | {v:.1f} |" for k, v in cost.items() if k != "draws"]
+        lines.append(f"| total of the parts | {sum(v for k, v in cost.items() if k != 'draws'):.1f} |")
+        lines.append(f"| of the decisions: {DRAWS_PER_SEARCH_MODULE} uniform draws per SEARCH module | "
+                     f"{cost['draws']:.1f} |")
+    if full:
+        lines += ["", f"Whole episode at N = {full['n_modules']:,} (task's default box, seed 0): success after "
+                  f"{full['cycles']:,} cycles; in-kernel {full['kernel_s']:.2f} s "
+                  f"({full['kernel_module_cycles_per_s']:,.0f} module-cycles/s), Python loop {full['python_s']:.2f} s "
+                  f"({full['python_module_cycles_per_s']:,.0f}), x{full['ratio']:.2f}."]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000, 100000])
+    parser.add_argument("--cycles", type=int, default=200, help="cycles from the reset, timed")
+    parser.add_argument("--repeats", type=int, default=3, help="kernel runs of those cycles per size")
+    parser.add_argument("--profile-n", type=int, default=10000, help="N of the per-part profile (0: none)")
+    parser.add_argument("--full-n", type=int, default=500, help="N of a whole episode to success (0: none)")
+    parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
+    parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
+    parser.add_argument("--one", nargs=2, metavar=("WHAT", "N"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        what, n = args.one[0], int(args.one[1])
+        row = {"row": lambda: measure(n, args.cycles, args.repeats), "profile": lambda: profile(n, args.cycles),
+               "full": lambda: full_episode(n), "compile": lambda: compile_time(n)}[what]()
+        print(json.dumps(row))
+        return
+
+    def child(what: str, n: int, **env) -> dict:
+        cmd = [sys.executable, __file__, "--one", what, str(n), "--cycles", str(args.cycles),
+               "--repeats", str(args.repeats)]
+        env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads), **env}
+        out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    with tempfile.TemporaryDirectory() as empty_cache:
+        compiled = child("compile", 100, NUMBA_CACHE_DIR=empty_cache)
+    print(f"first call with an empty JIT cache (compile): {compiled['first_call_s']:.1f} s", flush=True)
+    rows = []
+    for n in args.sizes:
+        rows.append(child("row", n))
+        r = rows[-1]
+        print(f"N={n:>7,}: in-kernel {r['kernel_module_cycles_per_s']:>12,.0f} module-cycles/s "
+              f"({r['kernel_ms_per_cycle']:.3f} ms per cycle), Python loop {r['python_module_cycles_per_s']:>10,.0f} "
+              f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB", flush=True)
+    parts = child("profile", args.profile_n) if args.profile_n else None
+    full = child("full", args.full_n) if args.full_n else None
+    info = describe("numpy", "numba", numba_threads=args.threads)
+    text = tables(rows, parts, full, args)
+    text = (f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "
+            "the *first call* column loads the compiled code from the on-disk cache.\n\n" + text)
+    print(f"\nmachine: {info}\n\n{text}")
+    if args.out:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "compile": compiled,
+                                                        "results": rows, "profile": parts, "full_episode": full},
+                                                       indent=2))
+        out.with_suffix(".md").write_text(f"machine: `{info}`\n\n{text}\n")
+        plot(rows, out.with_suffix(".png"))
+
+
+if __name__ == "__main__":
+    main()
