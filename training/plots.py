@@ -51,11 +51,11 @@ def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | N
         for ax, (x, y, _) in zip(axes, panels):
             xs = data[x] / (60.0 if x == "seconds" else 1.0)
             ax.plot(xs, _smooth(data[y], window), label=label)
-    for ax, (x, y, title) in zip(axes, panels):
+    for ax, (x, y, panel_title) in zip(axes, panels):
         if reference and y in reference:
             ax.axhline(reference[y], color="k", ls="--", lw=1, label="hand-coded")
         ax.set_xlabel("wall-clock minutes" if x == "seconds" else "agent-steps")
-        ax.set_title(title)
+        ax.set_title(panel_title)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     if title:
