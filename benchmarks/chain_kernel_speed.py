@@ -27,8 +27,9 @@ cycles (called one by one from Python): the cut modules (Tarjan's pass, for exac
 masks), the observation, the chain rule's decisions, the engine's cycle (messages, moves with
 the connectivity check, scent sweep) and the success test; and, apart, as many uniform draws
 from the policy's generator as 13 per SEARCH module (the least the rule draws for a climbing
-module: one "random roll instead?" uniform and 12 keys of its pick). ``--full-n`` (default 500)
-runs one whole episode to success in the task's default box both ways.
+module: one "random roll instead?" uniform and 12 keys of its pick), and the cycle's moves
+alone, with and without the connectivity check (on copies of the state). ``--full-n``
+(default 500) runs one whole episode to success in the task's default box both ways.
 
 Usage::
 
@@ -141,8 +142,9 @@ def profile(n: int, cycles: int) -> dict:
         actions = np.empty((n, env.action_layout.length), dtype=np.int64)
         moved = np.zeros(n, dtype=np.bool_)
         test = [np.zeros(n, dtype=np.int64) for _ in range(3)]
-        parts = dict.fromkeys(("cut modules", "observation", "decisions", "cycle", "success test", "draws"), 0.0)
-        n_search = 0
+        parts = dict.fromkeys(("cut modules", "observation", "decisions", "cycle", "success test", "draws",
+                               "moves", "moves without the connectivity check"), 0.0)
+        n_search = n_requested = n_moved = 0
         for _ in range(cycles):
             t0 = time.perf_counter()
             kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s.is_cut, s.disc, s.low, s.stack_node,
@@ -162,19 +164,31 @@ def profile(n: int, cycles: int) -> dict:
                           obs.own_scent, obs.action_mask, slots, memory.heading, memory.growth, memory.asked, rules,
                           policy.rng, actions)
             t5 = time.perf_counter()
+            move = actions[:, 0].copy()
+            for keep, part in ((True, "moves"), (False, "moves without the connectivity check")):
+                grid, cell, order = w.grid.copy(), w.cell.copy(), w.rng_state.copy()
+                started = time.perf_counter()
+                kernels.execute_moves(grid, cell, n, move, w.anchored, keep, order, w.dir_delta, DIRECTIONS,
+                                      w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit,
+                                      s.movers, moved, s.mark, s.stacks, s.rel, s.epoch)
+                parts[part] += time.perf_counter() - started
+            n_requested += int((move > 0).sum())
+            t6 = time.perf_counter()
             kernels.run_cycle(w.grid, w.cell, n, w.anchored, w.mode, w.scent, w.inbox, w.rng_state, w.passive_role,
                               w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps, p.scent_max,
-                              actions[:, 0].copy(), actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
+                              move, actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
                               actions[:, -2].copy(), actions[:, -1].astype(np.int32), moved, w.dir_delta, DIRECTIONS,
                               OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit,
                               s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
-            t6 = time.perf_counter()
-            is_chain(w.grid, w.cell, n, w.dir_delta, *test)
             t7 = time.perf_counter()
-            for part, dt in zip(parts, (t1 - t0, t2 - t1, t5 - t4, t6 - t5, t7 - t6, t4 - t3)):
+            n_moved += int(moved.sum())
+            is_chain(w.grid, w.cell, n, w.dir_delta, *test)
+            t8 = time.perf_counter()
+            for part, dt in zip(parts, (t1 - t0, t2 - t1, t5 - t4, t7 - t6, t8 - t7, t4 - t3)):
                 parts[part] += dt
             n_search += searching
         return {"n_modules": n, "cycles": cycles, "search_module_cycles": n_search,
+                "requested_per_cycle": n_requested / cycles, "moved_per_cycle": n_moved / cycles,
                 "ns_per_module_cycle": {k: 1e9 * v / (n * cycles) for k, v in parts.items()}}
 
     run(20, 2)
@@ -250,21 +264,28 @@ def tables(rows: list[dict], parts: dict | None, full: dict | None, args) -> str
              "module-cycles/s (Python loop) | x Python loop | build s | first call s | peak RSS MiB |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['n_modules']:,} | {r['kernel_module_cycles_per_s']:,.0f} | {r['kernel_ms_per_cycle']:.3f} / "
-                     f"{r['kernel_median_ms_per_cycle']:.3f} | {r['python_module_cycles_per_s']:,.0f} | "
+        lines.append(f"| {r['n_modules']:,} | {r['kernel_module_cycles_per_s']:,.0f} | "
+                     f"{r['kernel_ms_per_cycle']:.3f} / {r['kernel_median_ms_per_cycle']:.3f} | "
+                     f"{r['python_module_cycles_per_s']:,.0f} | "
                      f"{r['ratio']:.2f} | {r['build_s']:.2f} | {r['first_call_s']:.2f} | {r['peak_rss_mib']:.0f} |")
     big = [r for r in rows if r["n_modules"] >= 10000]
     lines += ["", f"Log-log slope of ms per cycle against N: {slope(rows, 'kernel_ms_per_cycle'):.3f} over all sizes"
               + (f", {slope(big, 'kernel_ms_per_cycle'):.3f} from 10,000 to 100,000" if len(big) >= 2 else "") + "."]
     if parts:
         cost = parts["ns_per_module_cycle"]
-        lines += ["", f"Parts at N = {parts['n_modules']:,} over the same {parts['cycles']} cycles (ns per module-cycle; "
-                  f"{parts['search_module_cycles'] / (parts['n_modules'] * parts['cycles']):.0%} of module-cycles "
-                  "were SEARCH):", "", "| part | ns per module-cycle |", "|---|---|"]
-        lines += [f"| {k} | {v:.1f} |" for k, v in cost.items() if k != "draws"]
-        lines.append(f"| total of the parts | {sum(v for k, v in cost.items() if k != 'draws'):.1f} |")
+        share = parts["search_module_cycles"] / (parts["n_modules"] * parts["cycles"])
+        lines += ["", f"Parts at N = {parts['n_modules']:,} over the same {parts['cycles']} cycles (ns per "
+                  f"module-cycle; {share:.0%} of module-cycles were SEARCH):", "",
+                  "| part | ns per module-cycle |", "|---|---|"]
+        whole = ("cut modules", "observation", "decisions", "cycle", "success test")
+        lines += [f"| {k} | {cost[k]:.1f} |" for k in whole]
+        lines.append(f"| total of the parts | {sum(cost[k] for k in whole):.1f} |")
         lines.append(f"| of the decisions: {DRAWS_PER_SEARCH_MODULE} uniform draws per SEARCH module | "
                      f"{cost['draws']:.1f} |")
+        lines.append(f"| of the cycle: the moves ({parts['requested_per_cycle']:,.0f} requested and "
+                     f"{parts['moved_per_cycle']:,.0f} made per cycle, on average) | {cost['moves']:.1f} |")
+        lines.append(f"| the same moves without the connectivity check | "
+                     f"{cost['moves without the connectivity check']:.1f} |")
     if full:
         lines += ["", f"Whole episode at N = {full['n_modules']:,} (task's default box, seed 0): success after "
                   f"{full['cycles']:,} cycles; in-kernel {full['kernel_s']:.2f} s "
@@ -307,7 +328,8 @@ def main() -> None:
         r = rows[-1]
         print(f"N={n:>7,}: in-kernel {r['kernel_module_cycles_per_s']:>12,.0f} module-cycles/s "
               f"({r['kernel_ms_per_cycle']:.3f} ms per cycle), Python loop {r['python_module_cycles_per_s']:>10,.0f} "
-              f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB", flush=True)
+              f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB",
+              flush=True)
     parts = child("profile", args.profile_n) if args.profile_n else None
     full = child("full", args.full_n) if args.full_n else None
     info = describe("numpy", "numba", numba_threads=args.threads)
