@@ -309,3 +309,16 @@ def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped()
     mean = distribution_mean(es)
     assert np.all((mean >= 0.0) & (mean <= 1.0)) and mean[0] > 0.0  # where the candidates are, not clipped to 0
     np.testing.assert_allclose(mean, es.boundary_handler.transform(es.mean))
+
+
+@pytest.mark.parametrize("config", sorted(p.name for p in Path("configs").glob("eval*.yaml")))
+def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
+    """The committed checkpoints load where ``proteo eval --config configs/<config>`` runs them."""
+    pytest.importorskip("sb3_contrib")
+    from training.checkpoints import load_policy
+    from training.evaluate import load_config
+
+    for name, entry in load_config(Path("configs") / config)["tasks"].items():
+        env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), **(entry.get("env") or {}))
+        for path in entry.get("checkpoints") or []:
+            assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
