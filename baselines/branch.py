@@ -66,18 +66,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from proteo_env.core.lattice import OPPOSITE
-from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, MESSAGE_TO_ALL, RELAY, SILENT
-
-from .chain import ChainPolicy, Observed
-from .kernels import BECOME_SEED
-from .primitives import HORIZONTAL, first_slot, growth_direction, spot_touches
-
-REFUSE = 14
-"""Message value: "I will not become your seed: I touch another part of the tree"."""
+from .chain import ChainPolicy, ModuleMemory, Observed
+from .kernels import NO_COUNT, BranchRules, branch_actions
 
 SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
-GROWN = (SEED, FINAL, NODE, INODE)
+
+
+class BranchMemory(ModuleMemory):
+    """The branch rule's private memory: the chain's (:class:`~baselines.chain.ModuleMemory`) and,
+    per slot, a NODE's seeds spawned (``spawned``, :data:`~baselines.kernels.NO_COUNT`: none
+    yet), its current growth spot (``spot_direction``, -1: none; ``spot_announced``;
+    ``spot_waited``, cycles) and the directions whose module refused to become a seed
+    (``refused``, a bit set)."""
+
+    FIELDS = {**ModuleMemory.FIELDS, "spawned": (np.int64, NO_COUNT), "spot_direction": (np.int64, -1),
+              "spot_announced": (np.bool_, False), "spot_waited": (np.int64, 0), "refused": (np.int64, 0)}
 
 
 class BranchPolicy(ChainPolicy):
@@ -114,12 +117,15 @@ class BranchPolicy(ChainPolicy):
         self.search_relays_node = search_relays_node
         self.refuse = refuse
         self.patience = patience
-        self.spawned: dict = {}
-        """Private memory of each NODE: seeds spawned so far."""
-        self.spot: dict = {}
-        """Private memory of each NODE: ``(direction, announced last cycle)`` of its current spot."""
-        self.refused: dict = {}
-        """Private memory of each SEED and NODE: directions whose module refused to become a seed."""
+        self.memory = BranchMemory()
+        """Private memory of every module (see :class:`BranchMemory`)."""
+
+    @property
+    def branch_rules(self) -> BranchRules:
+        """The branch's own parameters as the kernels of :mod:`baselines.kernels` read them."""
+        return BranchRules(T=int(self.T), B=int(self.B), p_node=float(self.p_node),
+                           search_relays_node=bool(self.search_relays_node), refuse=bool(self.refuse),
+                           patience=int(self.patience))
 
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
@@ -129,177 +135,10 @@ class BranchPolicy(ChainPolicy):
         params.setdefault("B", getattr(task_params, "B", 6))
         return super().for_env(env, seed=seed, **params)
 
-    def reset(self, seed=None):
-        super().reset(seed)
-        self.spawned.clear()
-        self.spot.clear()
-        self.refused.clear()
-
-    def _stacked(self, obs: Observed):
-        """The fields every rule reads, from the stacked observation ``obs``, and the default actions.
-
-        Returns own modes, face-neighbour kinds, modes and channel-0 scents (``scent_max`` where
-        no module), legal moves (12,), the default actions (relay every channel, keep the mode)
-        and, per agent, the slot a ``BECOME_SEED`` came from (-1 when none, or when not SLEEP or
-        SEARCH).
-        """
-        own = obs.own_mode[:, 0].astype(np.int64)
-        kinds = obs.neighbour_kind[:, :12]
-        nmode = obs.neighbour_mode[:, :12]
-        scents = np.where(kinds == KIND_MODULE, obs.neighbour_scent[:, :12, 0], self.scent_max)
-        legal = obs.action_mask[:, 1:].astype(bool)
-        lay = self.layout
-        actions = np.zeros((len(own), lay.length), dtype=np.int64)
-        actions[:, lay.roles] = RELAY
-        actions[:, lay.mode] = own
-        promoted = first_slot(obs.messages == BECOME_SEED)
-        promoted[(own != SLEEP) & (own != SEARCH)] = -1
-        return own, kinds, nmode, scents, legal, actions, promoted
-
-    def _act(self, slots, field, observation) -> np.ndarray:
-        keys = slots.tolist()  # memory slots also key the branch's own memory
-        smax = self.scent_max
+    def _act(self, slots, field) -> np.ndarray:
         obs = Observed.read(field)
-        msgs, own_scent = obs.messages, obs.own_scent
-        own, kinds, nmode, scents, legal, actions, promoted = self._stacked(obs)
-        is_mod = kinds == KIND_MODULE
-        lay = self.layout
-        grown_nb = is_mod & np.isin(nmode, GROWN)
-        for i in np.flatnonzero(promoted >= 0):
-            others = grown_nb[i].copy()
-            others[promoted[i]] = False
-            if self.refuse and others.any():  # joining would touch another part of the tree
-                actions[i, lay.message_target] = promoted[i]
-                actions[i, lay.message_value] = REFUSE
-                promoted[i] = -2  # neither a seed nor moving this cycle
-                continue
-            actions[i] = self._seed(keys[i], observation(i), int(OPPOSITE[promoted[i]]), fresh=True)
-        refused = first_slot(msgs == REFUSE)
-        for i in np.flatnonzero((refused >= 0) & (own == FINAL)):  # the seed it made refused: seed again
-            self.refused.setdefault(keys[i], set()).add(int(refused[i]))
-            actions[i] = self._seed(keys[i], observation(i), -1, fresh=True, previous=int(refused[i]))
-        for i in np.flatnonzero((refused >= 0) & ((own == NODE) | (own == INODE))):  # one seed fewer
-            self.refused.setdefault(keys[i], set()).add(int(refused[i]))
-            self.spawned[keys[i]] = min(self.spawned.get(keys[i], self.B), self.B) - 1
-            self.spot.pop(keys[i], None)
-        for i in np.flatnonzero(own == SEED):
-            actions[i] = self._seed(keys[i], observation(i), int(self.memory.growth[keys[i]]), fresh=False)
-        reverted = (refused >= 0) & (own == FINAL)
-
-        sleep = (own == SLEEP) & (promoted == -1)
-        actions[sleep, lay.roles.start + 1] = SILENT
-        if sleep.any():
-            detected = (own_scent[:, 0] < smax) | (scents < smax).any(axis=1)
-            wake = sleep & detected
-            if self.wake_when_free:
-                wake &= legal.any(axis=1)
-            actions[wake, lay.mode] = SEARCH
-            if self.p_node > 0:
-                for i in np.flatnonzero(sleep & ~detected):
-                    if self.rng.random() < self.p_node:
-                        actions[i] = self._node(keys[i], observation(i))
-
-        # FINAL: relay both; a weak node scent (known, > T) with no node next to it: go NODE
-        final = np.flatnonzero((own == FINAL) & ~reverted)
-        if final.size:
-            node_scent = own_scent[final, 1]
-            near_node = ((nmode[final] == NODE) | (nmode[final] == INODE)).any(axis=1)
-            become = (node_scent > self.T) & (node_scent < smax) & ~near_node
-            for i in final[become]:
-                actions[i] = self._node(keys[i], observation(i))
-        inode = (own == INODE) & ~((refused >= 0) & (own == INODE))
-        for i in np.flatnonzero((own == NODE) | ((own == INODE) & ~inode)):
-            actions[i] = self._node(keys[i], observation(i))
-        actions[inode, lay.roles.start + 1] = EMIT
-
-        search = np.flatnonzero((own == SEARCH) & (promoted == -1))
-        if search.size:
-            if not self.search_relays_node:
-                actions[search, lay.roles.start + 1] = SILENT
-            seen = obs.neighbour_mode.copy()  # a NODE is a seed to approach, an INODE part of the chain
-            seen[seen == NODE] = SEED
-            seen[seen == INODE] = FINAL
-            self._search_actions(actions, slots, search, obs, seen)
-        grown = slots[own >= FINAL]
-        self.memory.heading[grown] = -1
-        self.memory.asked[grown] = False
+        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
+        m = self.memory
+        branch_actions(*obs, slots, m.heading, m.growth, m.asked, m.spawned, m.spot_direction, m.spot_announced,
+                       m.spot_waited, m.refused, self.rules, self.branch_rules, self.rng, actions)
         return actions
-
-    # ------------------------------------------------------------------ NODE
-    def _spot_free(self, obs, k: int) -> bool:
-        """Can a new branch start at the neighbour site ``k``? It holds no grown module and
-        the sites seen next to it hold no grown module."""
-        kind = obs["neighbour_kind"][k]
-        if kind == KIND_MODULE:
-            if obs["neighbour_mode"][k] in GROWN:
-                return False
-        elif kind != KIND_EMPTY:
-            return False
-        return spot_touches(obs, k, GROWN) == 0
-
-    def _node(self, agent: int, obs) -> np.ndarray:
-        encode = self.layout.encode
-        count = self.spawned.get(agent, 0)
-        refused = self.refused.get(agent, ())
-        if count >= self.B:
-            return self._retire(agent)
-        direction, announced, waited = self.spot.get(agent, (-1, False, 0))
-        kinds = obs["neighbour_kind"]
-        if (direction < 0 or not self._spot_free(obs, direction)
-                or (kinds[direction] != KIND_MODULE and waited >= self.patience)):
-            # (re)choose a free site; an empty one is chosen again after ``patience`` cycles
-            allowed = HORIZONTAL if self.horizontal else np.ones(12, dtype=bool)
-            pool = [k for k in np.flatnonzero(allowed) if k not in refused and self._spot_free(obs, k)]
-            if not pool:
-                return self._retire(agent)
-            new = int(self.rng.choice(pool))
-            direction, announced, waited = new, announced and new == direction, 0
-        self.spawned[agent] = count
-        kind, mode = obs["neighbour_kind"][direction], obs["neighbour_mode"][direction]
-        if kind == KIND_MODULE and (mode == SLEEP or (mode == SEARCH and announced)):
-            self.spawned[agent] = count + 1
-            self.spot.pop(agent, None)
-            if count + 1 >= self.B:  # the last seed: go INODE in the same action
-                return encode(mode=INODE, roles=[RELAY, EMIT], message_target=direction,
-                              message_value=BECOME_SEED)
-            return encode(mode=NODE, roles=[EMIT, EMIT], message_target=direction, message_value=BECOME_SEED)
-        self.spot[agent] = (direction, True, waited + 1)
-        return encode(mode=NODE, roles=[EMIT, EMIT], message_target=MESSAGE_TO_ALL, message_value=direction + 1)
-
-    def _retire(self, agent: int) -> np.ndarray:
-        self.spawned.pop(agent, None)
-        self.spot.pop(agent, None)
-        self.refused.pop(agent, None)
-        return self.layout.encode(mode=INODE, roles=[RELAY, EMIT])
-
-    # ------------------------------------------------------------------ SEED
-    def _blocked(self, obs, growth: int) -> bool:
-        kind = obs["neighbour_kind"][growth]
-        if kind == KIND_MODULE:
-            if obs["neighbour_mode"][growth] not in (SLEEP, SEARCH):
-                return True
-        elif kind != KIND_EMPTY:
-            return True
-        return spot_touches(obs, growth, GROWN) > 0
-
-    def _seed(self, agent: int, obs, growth: int, *, fresh: bool, previous: int = -1) -> np.ndarray:
-        encode = self.layout.encode
-        refused = self.refused.get(agent, ())
-        if growth < 0 or growth in refused or (self.turn and self._blocked(obs, growth)):
-            new = growth_direction(obs, self.rng, horizontal=self.horizontal,
-                                   previous=growth if growth >= 0 else previous, avoid_modes=GROWN,
-                                   clean=self.clean_exit)
-            if new in refused:
-                new = -1
-            if new >= 0 or growth < 0 or growth in refused:
-                growth = new
-        if growth < 0:
-            self.memory.growth[agent] = -1
-            return encode(mode=SEED, roles=[EMIT, RELAY])
-        self.memory.growth[agent] = growth
-        if (not fresh and obs["neighbour_kind"][growth] == KIND_MODULE
-                and obs["neighbour_mode"][growth] in (SLEEP, SEARCH)
-                and not (self.turn and self._blocked(obs, growth))):
-            self.memory.growth[agent] = -1
-            return encode(mode=FINAL, roles=[RELAY, RELAY], message_target=growth, message_value=BECOME_SEED)
-        return encode(mode=SEED, roles=[EMIT, RELAY], message_target=MESSAGE_TO_ALL, message_value=growth + 1)

@@ -72,7 +72,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .base import Policy
-from .kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_actions, search_actions
+from .kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_actions
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
@@ -109,21 +109,22 @@ class ModuleMemory:
         asked: ``(S,)`` bool, the module asked to move last cycle.
     """
 
+    FIELDS = {"heading": (np.int64, -1), "growth": (np.int64, -1), "asked": (np.bool_, False)}
+    """Name, dtype and empty value of each per-slot array."""
+
     def __init__(self):
         self.clear()
 
     def clear(self) -> None:
-        self.heading = np.empty(0, dtype=np.int64)
-        self.growth = np.empty(0, dtype=np.int64)
-        self.asked = np.empty(0, dtype=np.bool_)
+        for name, (dtype, _) in self.FIELDS.items():
+            setattr(self, name, np.empty(0, dtype=dtype))
 
     def reserve(self, n_slots: int) -> None:
         """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
-        extra = n_slots - len(self.heading)
-        if extra > 0:
-            self.heading = np.concatenate([self.heading, np.full(extra, -1, dtype=np.int64)])
-            self.growth = np.concatenate([self.growth, np.full(extra, -1, dtype=np.int64)])
-            self.asked = np.concatenate([self.asked, np.zeros(extra, dtype=np.bool_)])
+        for name, (dtype, empty) in self.FIELDS.items():
+            values = getattr(self, name)
+            if n_slots > len(values):
+                setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
 
 
 class ChainPolicy(Policy):
@@ -223,8 +224,7 @@ class ChainPolicy(Policy):
         if not names:
             return {}
         obs = [observations[a] for a in names]
-        actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]),
-                            obs.__getitem__)
+        actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]))
         return {a: actions[i] for i, a in enumerate(names)}
 
     def act_arrays(self, buffers) -> np.ndarray:
@@ -238,7 +238,7 @@ class ChainPolicy(Policy):
         ``RuntimeError``).
         """
         n = buffers.own_mode.shape[0]
-        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f), buffers.agent)
+        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))
 
     def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
         """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
@@ -258,20 +258,20 @@ class ChainPolicy(Policy):
     def memory_rows(self, agents) -> ModuleMemory:
         """A copy of the memory with one row per agent of ``agents`` (names, in row order), as
         :meth:`act_arrays` reads it; agents without memory get empty rows."""
-        rows = ModuleMemory()
+        rows = type(self.memory)()
         rows.reserve(len(agents))
         if self._keyed_by == "name":
             slots = np.array([self._slots.get(a, -1) for a in agents], dtype=np.int64)
         else:
             slots = np.arange(len(agents), dtype=np.int64)
         known = (slots >= 0) & (slots < len(self.memory.heading))
-        for name in ("heading", "growth", "asked"):
+        for name in rows.FIELDS:
             getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
         return rows
 
-    def _act(self, slots, field, observation) -> np.ndarray:
+    def _act(self, slots, field) -> np.ndarray:
         """Actions of the agents with memory ``slots`` (A,), in row order; ``field(name)`` gives an
-        observation field stacked over them, ``observation(i)`` one agent's observation dict."""
+        observation field stacked over them."""
         obs = Observed.read(field)
         actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
         m = self.memory
@@ -281,12 +281,3 @@ class ChainPolicy(Policy):
     def decide(self, agent: str, obs) -> np.ndarray:
         """The action of one module from its observation alone."""
         return self.act({agent: obs})[agent]
-
-    def _search_actions(self, actions, slots, rows, obs: Observed, seen_modes) -> None:
-        """Write the moves and growth broadcasts of the SEARCH agents at ``rows`` into ``actions``
-        and update their memory; ``seen_modes`` (A, K) is ``obs.neighbour_mode`` as the chain rule
-        should read it (a subclass maps its own modes onto SEED and FINAL)."""
-        m = self.memory
-        search_actions(np.asarray(rows, dtype=np.int64), obs.messages, obs.neighbour_kind,
-                       np.ascontiguousarray(seen_modes, dtype=np.int32), obs.neighbour_scent, obs.action_mask,
-                       slots, m.heading, m.asked, self.rules, self.rng, actions)

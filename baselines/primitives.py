@@ -168,14 +168,6 @@ def approach_growth_spot(obs, slot: int, growth: int, rng: np.random.Generator,
     return int(rng.choice(legal)) + 1
 
 
-def spot_touches(obs, direction: int, modes) -> int:
-    """How many of the sites this module sees next to the site ``DIRECTIONS[direction]``
-    (the 4 sites adjacent to both) hold a module in one of ``modes``."""
-    around = DIRECTION_ADJACENCY[direction]
-    shown = obs["neighbour_mode"][:12][around]
-    return int(np.isin(shown, list(modes)).sum())
-
-
 def outward_direction(obs, rng: np.random.Generator, horizontal: bool) -> int:
     """A growth direction for a new seed: an empty neighbour site, preferring one whose
     opposite site holds a module (so growth leads away from the structure); horizontal
@@ -222,8 +214,3 @@ def random_pick(pool: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     keys[~pool] = -1.0
     pick = keys.argmax(axis=1)
     return np.where(pool.any(axis=1), pick, -1)
-
-
-def first_slot(hits: np.ndarray) -> np.ndarray:
-    """``(Q,)`` first True column per row of ``hits`` (Q, 12); -1 where none."""
-    return np.where(hits.any(axis=1), hits.argmax(axis=1), -1)
