@@ -137,6 +137,21 @@ def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_pat
     assert (tmp_path / "eval" / "eval.png").stat().st_size > 0
 
 
+def test_two_checkpoints_of_one_algorithm_get_their_folder_names(checkpoints, tmp_path):
+    import shutil
+
+    from training.evaluate import evaluate
+
+    other = tmp_path / "cma_neural_other"
+    shutil.copytree(checkpoints["cma_neural"], other)
+    results = evaluate(tasks=["chain"], seeds=1, checkpoints=[str(checkpoints["cma_neural"]), str(other)],
+                       out=tmp_path / "eval", progress=False, plots=False, config=None)
+    names = [r.policy for r in results]
+    assert names[:2] == ["chain", "random"]
+    assert names[2:] == [f"cma-neural ({checkpoints['cma_neural'].name})", "cma-neural (cma_neural_other)"]
+    assert names[2] != names[3]
+
+
 def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
     from training import cma_es, sb3_ppo
 

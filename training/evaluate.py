@@ -187,6 +187,15 @@ def load_config(path) -> dict:
     return {"seeds": int(data.get("seeds", 10)), "first_seed": int(data.get("first_seed", 0)), "tasks": tasks}
 
 
+def _name_apart(results: list[PolicyResult]) -> None:
+    """Give policies that share a name (two checkpoints of one algorithm) their checkpoint
+    folder's name in brackets, so that the table tells them apart."""
+    names = [r.policy for r in results]
+    for r in results:
+        if names.count(r.policy) > 1 and not r.source.startswith("baselines."):
+            r.policy = f"{r.policy} ({Path(r.source).name})"
+
+
 def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
              deterministic: bool = False, progress: bool = True, plots: bool = True) -> list[PolicyResult]:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
@@ -257,6 +266,7 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
             result.seconds = time.perf_counter() - started
             results.append(result)
         env.close()
+        _name_apart([r for r in results if r.task == cls.task_id()])
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
