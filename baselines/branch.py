@@ -60,6 +60,10 @@ modes of the grown tree (SEED, FINAL, NODE, INODE) all count as "the structure":
   the horizontal plane a node has at most 4 free directions (3 on a branch), so ``B`` above
   that is capped by the geometry.
 - INODE: emits the node scent, relays the regular scent, never moves.
+
+The rules run as the numba kernels of :mod:`baselines.kernels` (:func:`~baselines.kernels.branch_actions`,
+which calls the chain's SEARCH and seed kernels) on the observation fields stacked over modules;
+the private memory is one row per module (:class:`BranchMemory`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
-"""Whole rollouts of the hand-coded chain behaviour inside compiled code.
+"""Whole rollouts of the hand-coded chain and branch behaviours inside compiled code.
 
-:func:`chain_rollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
+:class:`CompiledRollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
 runs in Python, cycle after cycle, as one numba kernel: the engine's observation kernel, the
-chain rule's kernel (:func:`baselines.kernels.chain_actions`, the same code
-:class:`~baselines.chain.ChainPolicy` runs), the engine's cycle kernel and the chain task's
+behaviour's rule (:func:`baselines.kernels.chain_actions` or
+:func:`baselines.kernels.branch_actions`, the same code :class:`~baselines.chain.ChainPolicy`
+and :class:`~baselines.branch.BranchPolicy` run), the engine's cycle kernel and the task's
 success test. Same environment state, policy parameters, generator state and memory give the
 same trajectory as the Python loop, cycle for cycle (``tests/test_chain_kernel.py``).
 
@@ -11,7 +12,7 @@ Example::
 
     env = proteo_env.make("chain-v0", n_modules=200, motion_model="sphere", max_cycles=5000)
     env.reset(seed=3)
-    result = chain_rollout(env, ChainPolicy.for_env(env, seed=3))
+    result = compiled_rollout(env, ChainPolicy.for_env(env, seed=3))
     result.success, result.cycles, result.positions
 """
 
@@ -29,9 +30,18 @@ from proteo_env.core.structure import largest_thin_piece
 from proteo_env.core.world import LOCAL_ADJACENCY_BITS, Scratch
 from proteo_env.env import ProteoEnv
 from proteo_env.spaces import ObservationBuffers
+from proteo_env.tasks.branch import measure_tree
 
+from .branch import BranchMemory, BranchPolicy
 from .chain import ChainPolicy
-from .kernels import chain_actions
+from .kernels import INODE, NODE, BranchRules, branch_actions, chain_actions
+
+CHAIN, BRANCH = 0, 1
+"""The behaviours a rollout runs (the task and policy pairs of :data:`BEHAVIOURS`)."""
+BEHAVIOURS = {("chain", ChainPolicy): CHAIN, ("branch", BranchPolicy): BRANCH}
+"""``(task name, policy class)`` of each behaviour."""
+TEST_SCRATCH = 9
+"""(N,) scratch arrays of the success tests (:func:`measure_tree` takes 9)."""
 
 
 @dataclass(frozen=True)
@@ -41,7 +51,7 @@ class Rollout:
     Attributes:
         cycles: the cycle count reached, counted like ``env.cycle`` (the cycle of success when
             ``success``).
-        success: the chain task's success test held after the last cycle.
+        success: the task's success test held after the last cycle.
         positions: ``(N, 3)`` int64 module sites after the last cycle.
         modes: ``(N,)`` int32 modes after the last cycle.
         recorded_cycles: ``(R,)`` the cycles after which the state was recorded: every
@@ -83,15 +93,37 @@ def is_chain(grid, cell, n_modules, dir_delta, degree, mark, queue):
 
 
 @kernel
-def _chain_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
-                  keep_connected, exact, sweeps, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
-                  pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer, is_cut, disc, low, stack_node,
-                  stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
-                  action_mask, slots, heading, growth, asked, rules, rng, max_cycles, record_every,
-                  recorded_cycles, recorded_cell, recorded_mode, degree, test_mark, test_queue):
-    """Run up to ``max_cycles`` cycles of observe, decide, step, test; return ``(cycles, success,
-    recorded)``. Arrays as in :class:`~proteo_env.core.world.World`, its scratch and
-    :class:`~proteo_env.spaces.ObservationBuffers`; ``recorded_*`` (R, ...) are filled in order."""
+def is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap, target_levels, scratch):
+    """The branch task's success test: the grown piece from the root is a tree with at least
+    ``target_levels`` levels of branching (:func:`measure_tree`). The root is ``first_node``,
+    or when it is -1 the lowest-index NODE or INODE (module 0 when there is none);
+    ``scratch`` is ``(9, N)``."""
+    root = first_node
+    if root < 0:
+        root = 0
+        for n in range(n_modules):
+            if mode[n] == NODE or mode[n] == INODE:
+                root = n
+                break
+    size, edges, _, levels, _, _, _, _ = measure_tree(
+        grid, cell, mode, n_modules, dir_delta, root, min_gap, scratch[0], scratch[1], scratch[2], scratch[3],
+        scratch[4], scratch[5], scratch[6], scratch[7], scratch[8])
+    return size > 0 and edges == size - 1 and levels >= target_levels
+
+
+@kernel
+def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
+                    keep_connected, exact, sweeps, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
+                    pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer, is_cut, disc, low, stack_node,
+                    stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
+                    action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced, spot_waited,
+                    refused, rules, branch, rng, first_node, min_gap, target_levels, max_cycles, record_every,
+                    recorded_cycles, recorded_cell, recorded_mode, test_scratch):
+    """Run up to ``max_cycles`` cycles of observe, decide (``behaviour``: :data:`CHAIN` or
+    :data:`BRANCH`), step, test; return ``(cycles, success, recorded)``. Arrays as in
+    :class:`~proteo_env.core.world.World`, its scratch, :class:`~proteo_env.spaces.ObservationBuffers`
+    and :class:`~baselines.branch.BranchMemory` (the branch fields are unused by the chain);
+    ``recorded_*`` (R, ...) are filled in order."""
     n_modules = cell.shape[0]
     n_channels = scent.shape[0]
     scent_max = rules.scent_max
@@ -108,8 +140,13 @@ def _chain_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state,
                              dir_delta, roll_delta, sweep_bits, pivot_bit, scent_max, is_cut, disc, low,
                              stack_node, stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode,
                              own_scent, messages, contact, action_mask)
-        chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
-                      slots, heading, growth, asked, rules, rng, actions)
+        if behaviour == CHAIN:
+            chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
+                          action_mask, slots, heading, growth, asked, rules, rng, actions)
+        else:
+            branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
+                           action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
+                           spot_waited, refused, rules, branch, rng, actions)
         for a in range(n_agents):
             move[a] = actions[a, 0]
             new_mode[a] = actions[a, 1]
@@ -121,7 +158,11 @@ def _chain_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state,
                          keep_connected, exact, sweeps, scent_max, move, new_mode, role, target, value, moved,
                          dir_delta, DIRECTIONS, OPPOSITE, roll_delta, local_delta, LOCAL_ADJACENCY_BITS,
                          sweep_bits, pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer)
-        success = is_chain(grid, cell, n_modules, dir_delta, degree, test_mark, test_queue)
+        if behaviour == CHAIN:
+            success = is_chain(grid, cell, n_modules, dir_delta, test_scratch[0], test_scratch[1], test_scratch[2])
+        else:
+            success = is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap, target_levels,
+                                       test_scratch)
         if record_every > 0 and (cycle % record_every == 0 or success):
             recorded_cycles[recorded] = cycle
             recorded_cell[recorded] = cell
@@ -132,10 +173,10 @@ def _chain_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state,
     return max_cycles, False, recorded
 
 
-class ChainRollout:
-    """The chain behaviour from a copy of ``env``'s state, run inside compiled code.
+class CompiledRollout:
+    """A hand-coded behaviour from a copy of ``env``'s state, run inside compiled code.
 
-    :meth:`run` advances it by up to a given number of cycles (stopping at the chain task's
+    :meth:`run` advances it by up to a given number of cycles (stopping at the task's
     success); every call continues where the last one ended. The cycles are those that
     driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))`` would
     run: same trajectory, same draws from the policy's generator. Neither ``env`` nor
@@ -143,42 +184,56 @@ class ChainRollout:
     generator and of its memory.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` of the chain task, after ``reset``.
-        policy: a :class:`~baselines.chain.ChainPolicy` built for ``env`` (its parameters,
-            generator state and memory are read).
+        env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of the chain or the branch task.
+        policy: the task's hand-coded policy built for ``env``, exactly a
+            :class:`~baselines.chain.ChainPolicy` (chain) or a :class:`~baselines.branch.BranchPolicy`
+            (branch); its parameters, generator state and memory are read.
 
     Attributes:
         cycle: the cycle count reached, counted like ``env.cycle`` (starts at the env's).
-        success: the chain task's success test held after the last cycle.
+        success: the task's success test held after the last cycle.
         rng: the rollout's copy of the policy's generator, as the cycles run so far left it.
     """
 
-    def __init__(self, env, policy: ChainPolicy):
-        if not isinstance(env, ProteoEnv) or env.task.name != "chain":
-            raise ValueError(f"env={env!r} is not allowed; allowed: a ProteoEnv of the chain task "
-                             "(proteo_env.make('chain-v0', ...))")
+    def __init__(self, env, policy):
+        task = env.task.name if isinstance(env, ProteoEnv) else None
+        self.behaviour = BEHAVIOURS.get((task, type(policy)))
+        if self.behaviour is None:
+            allowed = ", ".join(f"{cls.__name__} on {name}-v0" for name, cls in BEHAVIOURS)
+            raise ValueError(f"policy={type(policy).__name__} on task={task!r} is not allowed; allowed: {allowed} "
+                             "(env: a ProteoEnv from proteo_env.make)")
         world = env.engine
         if world is None:
             raise ValueError("env has no world yet; allowed: an env after reset(seed=...)")
-        if type(policy) is not ChainPolicy:
-            raise ValueError(f"policy={type(policy).__name__} is not allowed; allowed: a ChainPolicy")
         if policy.layout != env.action_layout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
         self.rules = policy.rules
+        if self.behaviour == BRANCH:
+            p = env.task.params
+            self.branch = policy.branch_rules
+            self.first_node = env.task.first_node if p.initial_node else -1
+            self.min_gap, self.target_levels = p.min_gap, p.target_levels
+        else:  # the branch fields are unused
+            self.branch = BranchRules(T=0, B=0, p_node=0.0, search_relays_node=False, refuse=False, patience=0)
+            self.first_node, self.min_gap, self.target_levels = -1, 0, 0
         self.rng = copy.deepcopy(policy.rng)
-        self.memory = policy.memory_rows(env.possible_agents)
+        self.memory = BranchMemory()
+        self.memory.reserve(world.n_agents)
+        rows = policy.memory_rows(env.possible_agents)
+        for name in rows.FIELDS:
+            getattr(self.memory, name)[:] = getattr(rows, name)
         self.state = {name: getattr(world, name).copy() for name in ("grid", "cell", "mode", "scent", "inbox",
                                                                         "rng_state")}
         n = world.n_modules
         self.scratch = Scratch(n)
         self.observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
-        self.test_scratch = tuple(np.zeros(n, dtype=np.int64) for _ in range(3))
+        self.test_scratch = np.zeros((TEST_SCRATCH, n), dtype=np.int64)
         self.cycle = env.cycle
         self.success = False
 
     def run(self, max_cycles: int, *, record_every: int = 0) -> Rollout:
-        """Run up to ``max_cycles`` more cycles (none once the chain is complete).
+        """Run up to ``max_cycles`` more cycles (none once the task has succeeded).
 
         ``record_every``: record positions and modes after every ``record_every``-th cycle of
         this call and at success (0: none). Returns the :class:`Rollout` of this call (its
@@ -196,15 +251,16 @@ class ChainRollout:
         ran, recorded = 0, 0
         if not self.success:
             p = w.physics
-            ran, self.success, recorded = _chain_cycles(
-                st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
+            ran, self.success, recorded = _rollout_cycles(
+                self.behaviour, st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
                 st["rng_state"], w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps,
                 w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.sweep_bits, w.pivot_bit,
                 s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer, s.is_cut, s.disc, s.low,
                 s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode,
                 obs.own_scent, obs.messages, obs.contact, obs.action_mask, np.arange(w.n_agents, dtype=np.int64),
-                m.heading, m.growth, m.asked, self.rules, self.rng, int(max_cycles), int(record_every),
-                recorded_cycles, recorded_cell, recorded_mode, *self.test_scratch)
+                m.heading, m.growth, m.asked, m.spawned, m.spot_direction, m.spot_announced, m.spot_waited,
+                m.refused, self.rules, self.branch, self.rng, self.first_node, self.min_gap, self.target_levels,
+                int(max_cycles), int(record_every), recorded_cycles, recorded_cell, recorded_mode, self.test_scratch)
         recorded_cycles[:recorded] += self.cycle
         self.cycle += int(ran)
         shape = w.shape
@@ -214,17 +270,18 @@ class ChainRollout:
                        recorded_modes=recorded_mode[:recorded], rng=self.rng)
 
 
-def chain_rollout(env, policy: ChainPolicy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:
-    """Run the chain behaviour from ``env``'s current state inside compiled code.
+def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:
+    """Run a hand-coded behaviour from ``env``'s current state inside compiled code.
 
-    ``ChainRollout(env, policy).run(max_cycles, record_every=record_every)``: the result is
+    ``CompiledRollout(env, policy).run(max_cycles, record_every=record_every)``: the result is
     what driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
-    until the chain task's success (or ``max_cycles``) would give. Neither ``env`` nor
-    ``policy`` changes.
+    until the task's success (or ``max_cycles``) would give. Neither ``env`` nor ``policy``
+    changes.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` of the chain task, after ``reset``.
-        policy: a :class:`~baselines.chain.ChainPolicy` built for ``env``.
+        env: a :class:`~proteo_env.env.ProteoEnv` of the chain or the branch task, after ``reset``.
+        policy: a :class:`~baselines.chain.ChainPolicy` (chain) or
+            :class:`~baselines.branch.BranchPolicy` (branch) built for ``env``.
         max_cycles: cycles to run at most (default: the env's cycles left, ``max_cycles - cycle``).
         record_every: record positions and modes after every ``record_every``-th cycle and at
             success (0: only the final state).
@@ -232,8 +289,8 @@ def chain_rollout(env, policy: ChainPolicy, *, max_cycles: int | None = None, re
     Returns:
         a :class:`Rollout`.
     """
-    rollout = ChainRollout(env, policy)
+    rollout = CompiledRollout(env, policy)
     return rollout.run(env.max_cycles - env.cycle if max_cycles is None else max_cycles, record_every=record_every)
 
 
-__all__ = ["ChainRollout", "Rollout", "chain_rollout", "is_chain"]
+__all__ = ["BEHAVIOURS", "CompiledRollout", "Rollout", "compiled_rollout", "is_branched_tree", "is_chain"]

@@ -1,9 +1,9 @@
-"""The hand-coded chain rule as numba kernels over stacked observation fields.
+"""The hand-coded chain and branch rules as numba kernels over stacked observation fields.
 
-These kernels are the one implementation of the chain behaviour's decisions:
-:class:`~baselines.chain.ChainPolicy` calls them on the observations the environment hands
-out, :class:`~baselines.branch.BranchPolicy` calls the SEARCH part for its searching modules,
-and :func:`baselines.compiled.chain_rollout` calls them inside a compiled loop with the engine.
+These kernels are the one implementation of those behaviours' decisions:
+:class:`~baselines.chain.ChainPolicy` and :class:`~baselines.branch.BranchPolicy` call them on
+the observations the environment hands out, and :class:`baselines.compiled.CompiledRollout`
+calls them inside a compiled loop with the engine.
 
 Every kernel reads the observation fields of :mod:`proteo_env.spaces` stacked over agents
 (first axis: agent row) and the module's private memory, and draws from the policy's

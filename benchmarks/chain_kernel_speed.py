@@ -11,10 +11,10 @@ default box's (``tests/test_chain_kernel.py::test_room_changes_no_early_cycle``)
 Each N runs in a fresh process (peak memory per row) with ``NUMBA_NUM_THREADS=--threads``:
 
 * ``build``: ``make`` + ``reset`` (the blob is grown in Python);
-* ``first call``: ``ChainRollout(env, policy).run(1)``, the load of the on-disk JIT cache plus
+* ``first call``: ``CompiledRollout(env, policy).run(1)``, the load of the on-disk JIT cache plus
   one cycle (the compile itself is timed once apart, in a process with an empty
   ``NUMBA_CACHE_DIR``);
-* ``kernel``: ``ChainRollout(env, policy).run(cycles)``, ``--repeats`` times from the same reset
+* ``kernel``: ``CompiledRollout(env, policy).run(cycles)``, ``--repeats`` times from the same reset
   (the same trajectory every time); the table gives the best repeat and the median;
 * ``python``: the observation-based loop
   ``env.step_arrays(policy.act_arrays(env.observe_arrays()))`` over the same cycles from the
@@ -28,8 +28,10 @@ masks), the observation, the chain rule's decisions, the engine's cycle (message
 the connectivity check, scent sweep) and the success test; and, apart, as many uniform draws
 from the policy's generator as 13 per SEARCH module (the least the rule draws for a climbing
 module: one "random roll instead?" uniform and 12 keys of its pick), and the cycle's moves
-alone, with and without the connectivity check (on copies of the state). ``--full-n``
-(default 500) runs one whole episode to success in the task's default box both ways.
+alone, with and without the connectivity check (on copies of the state).
+``--chain-episodes N SEEDS`` (default 500 1) and ``--branch-episodes N SEEDS`` (default 100 10)
+run whole episodes to success of the chain and the branch behaviours in their tasks' default
+boxes, both ways, and check that they end alike.
 
 Usage::
 
@@ -62,15 +64,15 @@ from machine_info import describe  # noqa: E402
 DRAWS_PER_SEARCH_MODULE = 13
 
 
-def fresh(n: int, cycles: int, room: int | None = None):
-    """The workload's env (reset with seed 0) and policy (seed 0)."""
+def fresh(n: int, cycles: int, room: int | None = None, *, task: str = "chain", seed: int = 0):
+    """The workload's env (reset with ``seed``) and the task's hand-coded policy (seeded the same)."""
     import proteo_env
-    from baselines.chain import ChainPolicy
+    from baselines import make_policy
 
     extra = {} if room is None else {"room": room}
-    env = proteo_env.make("chain-v0", n_modules=n, max_cycles=cycles, **extra)
-    env.reset(seed=0)
-    return env, ChainPolicy.for_env(env, seed=0)
+    env = proteo_env.make(f"{task}-v0", n_modules=n, max_cycles=cycles, **extra)
+    env.reset(seed=seed)
+    return env, make_policy(task, env, seed=seed)
 
 
 def python_loop(env, policy, cycles: int, *, until_success: bool = False) -> float:
@@ -85,17 +87,17 @@ def python_loop(env, policy, cycles: int, *, until_success: bool = False) -> flo
 
 def measure(n: int, cycles: int, repeats: int) -> dict:
     """One row: build, first call, kernel repeats and the Python loop at ``n`` modules."""
-    from baselines.compiled import ChainRollout
+    from baselines.compiled import CompiledRollout
 
     started = time.perf_counter()
     env, policy = fresh(n, cycles, room=cycles + 4)
     build_s = time.perf_counter() - started
     started = time.perf_counter()
-    ChainRollout(env, policy).run(1)
+    CompiledRollout(env, policy).run(1)
     first_s = time.perf_counter() - started
     seconds = []
     for _ in range(repeats):
-        rollout = ChainRollout(env, policy)
+        rollout = CompiledRollout(env, policy)
         started = time.perf_counter()
         result = rollout.run(cycles)
         seconds.append(time.perf_counter() - started)
@@ -198,30 +200,36 @@ def profile(n: int, cycles: int) -> dict:
 def compile_time(n: int) -> dict:
     """Seconds of the first ``run(1)`` (the compile of the rollout kernel and everything it calls,
     when the process has an empty ``NUMBA_CACHE_DIR``)."""
-    from baselines.compiled import ChainRollout
+    from baselines.compiled import CompiledRollout
 
     env, policy = fresh(n, 1, room=5)
     started = time.perf_counter()
-    ChainRollout(env, policy).run(1)
+    CompiledRollout(env, policy).run(1)
     return {"n_modules": n, "first_call_s": time.perf_counter() - started}
 
 
-def full_episode(n: int) -> dict:
-    """One whole episode to success in the task's default box, compiled and through the Python loop."""
-    from baselines.compiled import chain_rollout
+def whole_episodes(task: str, n: int, seeds: int) -> dict:
+    """Episodes to success (limit ``20 N`` cycles) of seeds ``0 .. seeds - 1`` in the task's
+    default box and physics, compiled and through the Python loop (summed)."""
+    from baselines.compiled import compiled_rollout
 
     limit = 20 * n
-    env, policy = fresh(n, limit)
-    chain_rollout(env, policy, max_cycles=1)
-    started = time.perf_counter()
-    result = chain_rollout(env, policy)
-    kernel_s = time.perf_counter() - started
-    python_s = python_loop(env, policy, limit, until_success=True)
-    if env.cycle != result.cycles or not np.array_equal(env.world.positions, result.positions):
-        raise AssertionError(f"N={n}: the whole episode differs between the kernel and the Python loop")
-    return {"n_modules": n, "cycles": result.cycles, "success": result.success, "kernel_s": kernel_s,
-            "python_s": python_s, "kernel_module_cycles_per_s": n * result.cycles / kernel_s,
-            "python_module_cycles_per_s": n * result.cycles / python_s, "ratio": python_s / kernel_s}
+    warm_env, warm_policy = fresh(n, limit, task=task)
+    compiled_rollout(warm_env, warm_policy, max_cycles=1)
+    cycles, successes, kernel_s, python_s = 0, 0, 0.0, 0.0
+    for seed in range(seeds):
+        env, policy = fresh(n, limit, task=task, seed=seed)
+        started = time.perf_counter()
+        result = compiled_rollout(env, policy)
+        kernel_s += time.perf_counter() - started
+        python_s += python_loop(env, policy, limit, until_success=True)
+        if env.cycle != result.cycles or not np.array_equal(env.world.positions, result.positions):
+            raise AssertionError(f"{task} N={n} seed {seed}: the kernel and the Python loop ended differently")
+        cycles += result.cycles
+        successes += result.success
+    return {"task": task, "n_modules": n, "seeds": seeds, "successes": successes, "cycles": cycles,
+            "kernel_s": kernel_s, "python_s": python_s, "kernel_module_cycles_per_s": n * cycles / kernel_s,
+            "python_module_cycles_per_s": n * cycles / python_s, "ratio": python_s / kernel_s}
 
 
 def slope(rows: list[dict], key: str) -> float:
@@ -259,7 +267,7 @@ def plot(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def tables(rows: list[dict], parts: dict | None, full: dict | None, args) -> str:
+def tables(rows: list[dict], parts: dict | None, episodes: list[dict], args) -> str:
     lines = [f"| N | module-cycles/s (in-kernel, best) | ms per cycle (best / median of {args.repeats}) | "
              "module-cycles/s (Python loop) | x Python loop | build s | first call s | peak RSS MiB |",
              "|---|---|---|---|---|---|---|---|"]
@@ -286,11 +294,13 @@ def tables(rows: list[dict], parts: dict | None, full: dict | None, args) -> str
                      f"{parts['moved_per_cycle']:,.0f} made per cycle, on average) | {cost['moves']:.1f} |")
         lines.append(f"| the same moves without the connectivity check | "
                      f"{cost['moves without the connectivity check']:.1f} |")
-    if full:
-        lines += ["", f"Whole episode at N = {full['n_modules']:,} (task's default box, seed 0): success after "
-                  f"{full['cycles']:,} cycles; in-kernel {full['kernel_s']:.2f} s "
-                  f"({full['kernel_module_cycles_per_s']:,.0f} module-cycles/s), Python loop {full['python_s']:.2f} s "
-                  f"({full['python_module_cycles_per_s']:,.0f}), x{full['ratio']:.2f}."]
+    if episodes:
+        lines += ["", "Whole episodes to success (limit 20 N cycles) in the task's default box, seeds 0 .. S - 1:", "",
+                  "| task | N | seeds S | successes | cycles (sum) | in-kernel s | module-cycles/s | Python loop s | "
+                  "module-cycles/s | x Python loop |", "|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"| {e['task']} | {e['n_modules']:,} | {e['seeds']} | {e['successes']} | {e['cycles']:,} | "
+                  f"{e['kernel_s']:.2f} | {e['kernel_module_cycles_per_s']:,.0f} | {e['python_s']:.2f} | "
+                  f"{e['python_module_cycles_per_s']:,.0f} | {e['ratio']:.2f} |" for e in episodes]
     return "\n".join(lines)
 
 
@@ -300,7 +310,10 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=200, help="cycles from the reset, timed")
     parser.add_argument("--repeats", type=int, default=3, help="kernel runs of those cycles per size")
     parser.add_argument("--profile-n", type=int, default=10000, help="N of the per-part profile (0: none)")
-    parser.add_argument("--full-n", type=int, default=500, help="N of a whole episode to success (0: none)")
+    parser.add_argument("--chain-episodes", type=int, nargs=2, default=[500, 1], metavar=("N", "SEEDS"),
+                        help="whole chain episodes to success: N and the number of seeds (0 0: none)")
+    parser.add_argument("--branch-episodes", type=int, nargs=2, default=[100, 10], metavar=("N", "SEEDS"),
+                        help="whole branch episodes to success: N and the number of seeds (0 0: none)")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("WHAT", "N"), help=argparse.SUPPRESS)
@@ -308,13 +321,16 @@ def main() -> None:
     if args.one:
         what, n = args.one[0], int(args.one[1])
         row = {"row": lambda: measure(n, args.cycles, args.repeats), "profile": lambda: profile(n, args.cycles),
-               "full": lambda: full_episode(n), "compile": lambda: compile_time(n)}[what]()
+               "chain-episodes": lambda: whole_episodes("chain", n, args.chain_episodes[1]),
+               "branch-episodes": lambda: whole_episodes("branch", n, args.branch_episodes[1]),
+               "compile": lambda: compile_time(n)}[what]()
         print(json.dumps(row))
         return
 
     def child(what: str, n: int, **env) -> dict:
         cmd = [sys.executable, __file__, "--one", what, str(n), "--cycles", str(args.cycles),
-               "--repeats", str(args.repeats)]
+               "--repeats", str(args.repeats), "--chain-episodes", *map(str, args.chain_episodes),
+               "--branch-episodes", *map(str, args.branch_episodes)]
         env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads), **env}
         out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
@@ -331,9 +347,10 @@ def main() -> None:
               f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB",
               flush=True)
     parts = child("profile", args.profile_n) if args.profile_n else None
-    full = child("full", args.full_n) if args.full_n else None
+    episodes = [child(f"{task}-episodes", n) for task, (n, seeds) in
+                (("chain", args.chain_episodes), ("branch", args.branch_episodes)) if n and seeds]
     info = describe("numpy", "numba", numba_threads=args.threads)
-    text = tables(rows, parts, full, args)
+    text = tables(rows, parts, episodes, args)
     text = (f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "
             "the *first call* column loads the compiled code from the on-disk cache.\n\n" + text)
     print(f"\nmachine: {info}\n\n{text}")
@@ -341,7 +358,7 @@ def main() -> None:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
         out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "compile": compiled,
-                                                        "results": rows, "profile": parts, "full_episode": full},
+                                                        "results": rows, "profile": parts, "whole_episodes": episodes},
                                                        indent=2))
         out.with_suffix(".md").write_text(f"machine: `{info}`\n\n{text}\n")
         plot(rows, out.with_suffix(".png"))

@@ -15,7 +15,7 @@ process so that peak memory is per measurement:
 * ``batched``: :class:`~proteo_env.batched.BatchedEnv` with ``B = max(1, batch_modules // N)``
   worlds stepped in one call (``B * N`` module-cycles per cycle);
 * ``chain-kernel``: the hand-coded chain behaviour run inside compiled code
-  (:class:`baselines.compiled.ChainRollout`, observation, rule, cycle and success test in one
+  (:class:`baselines.compiled.CompiledRollout`, observation, rule, cycle and success test in one
   kernel) on the chain task (``chain-v0`` with ``room=CHAIN_ROOM``, reset with seed 0, policy
   seed 0), not on the sandbox workload: the behaviour draws its own actions. One cycle per call
   here, so that each cycle is timed like the other modes; ``benchmarks/chain_kernel_speed.py``
@@ -80,14 +80,14 @@ def _stepper(mode: str, n: int, batch_modules: int):
 
     if mode == "chain-kernel":
         from baselines.chain import ChainPolicy
-        from baselines.compiled import ChainRollout
+        from baselines.compiled import CompiledRollout
 
         chain = proteo_env.make("chain-v0", n_modules=n, room=CHAIN_ROOM, max_cycles=10**9)
         rollout = {}
 
         def reset():
             chain.reset(seed=0)
-            rollout["run"] = ChainRollout(chain, ChainPolicy.for_env(chain, seed=0)).run
+            rollout["run"] = CompiledRollout(chain, ChainPolicy.for_env(chain, seed=0)).run
 
         def step(rng):  # the behaviour draws its own actions
             t = time.perf_counter()

@@ -1,6 +1,7 @@
-"""The chain behaviour inside compiled code (``baselines.compiled``) against the observation-based
-policy driven through the environment: same trajectory cycle for cycle, same cycles to success,
-same draws from the policy's generator; also with the kernels run as plain Python."""
+"""The chain and branch behaviours inside compiled code (``baselines.compiled``) against the
+observation-based policies driven through the environment: same trajectory cycle for cycle, same
+cycles to success, same draws from the policy's generator; also with the kernels run as plain
+Python."""
 
 from __future__ import annotations
 
@@ -17,14 +18,14 @@ import pytest
 import proteo_env
 from baselines.branch import BranchPolicy
 from baselines.chain import ChainPolicy
-from baselines.compiled import ChainRollout, chain_rollout
+from baselines.compiled import CompiledRollout, compiled_rollout
 
 LIMIT = 400
 
 
 def drive(env, policy, limit, *, use_dicts=False):
     """Step ``env`` with ``policy`` through the observation API until success or ``limit`` cycles;
-    returns per-cycle positions and modes and whether the chain formed."""
+    returns per-cycle positions and modes and whether the task succeeded."""
     positions, modes = [], []
     success = False
     while not success and env.cycle < limit:
@@ -55,7 +56,7 @@ def test_compiled_rollout_is_the_observation_based_policy(model, n):
     for seed in range(3):
         env = proteo_env.make("chain-v0", n_modules=n, motion_model=model, max_cycles=LIMIT)
         env.reset(seed=seed)
-        result = chain_rollout(env, ChainPolicy.for_env(env, seed=seed), record_every=1)
+        result = compiled_rollout(env, ChainPolicy.for_env(env, seed=seed), record_every=1)
         policy = ChainPolicy.for_env(env, seed=seed)
         positions, modes, success = drive(env, policy, LIMIT)
         assert success, f"{model} n={n} seed={seed}: no chain within {LIMIT} cycles"
@@ -69,8 +70,33 @@ def test_compiled_rollout_is_the_observation_based_policy(model, n):
 def test_same_trajectory_with_other_rule_parameters(params):
     env = proteo_env.make("chain-v0", n_modules=20, motion_model="rounded", max_cycles=150)
     env.reset(seed=4)
-    result = chain_rollout(env, ChainPolicy.for_env(env, seed=4, **params), record_every=1)
+    result = compiled_rollout(env, ChainPolicy.for_env(env, seed=4, **params), record_every=1)
     policy = ChainPolicy.for_env(env, seed=4, **params)
+    positions, modes, success = drive(env, policy, 150)
+    assert_same_trajectory(result, positions, modes, success, policy.rng)
+
+
+@pytest.mark.parametrize("model", ["minimal", "sphere"])
+def test_compiled_branch_is_the_observation_based_policy(model):
+    for seed in range(2):
+        env = proteo_env.make("branch-v0", n_modules=40, T=4, B=3, motion_model=model, max_cycles=LIMIT)
+        env.reset(seed=seed)
+        result = compiled_rollout(env, BranchPolicy.for_env(env, seed=seed), record_every=1)
+        policy = BranchPolicy.for_env(env, seed=seed)
+        positions, modes, success = drive(env, policy, LIMIT)
+        assert_same_trajectory(result, positions, modes, success, policy.rng)
+        assert success or model == "sphere", f"{model} seed={seed}: no tree of 2 levels within {LIMIT} cycles"
+
+
+@pytest.mark.parametrize("task, params", [
+    ({"initial_node": False, "target_levels": 9}, {"p_node": 0.02, "refuse": False}),
+    ({"T": 3, "B": 2, "target_levels": 9}, {"patience": 3, "search_relays_node": False, "queue": True}),
+])
+def test_same_branch_trajectory_with_other_parameters(task, params):
+    env = proteo_env.make("branch-v0", n_modules=40, motion_model="minimal", max_cycles=150, **task)
+    env.reset(seed=5)
+    result = compiled_rollout(env, BranchPolicy.for_env(env, seed=5, **params), record_every=1)
+    policy = BranchPolicy.for_env(env, seed=5, **params)
     positions, modes, success = drive(env, policy, 150)
     assert_same_trajectory(result, positions, modes, success, policy.rng)
 
@@ -82,7 +108,7 @@ def test_rollout_continues_a_started_episode(use_dicts):
     env.reset(seed=1)
     policy = ChainPolicy.for_env(env, seed=1)
     drive(env, policy, 40, use_dicts=use_dicts)
-    result = chain_rollout(env, policy, record_every=1)
+    result = compiled_rollout(env, policy, record_every=1)
     positions, modes, success = drive(env, policy, LIMIT, use_dicts=use_dicts)
     assert success
     assert result.cycles == 40 + len(positions)
@@ -96,8 +122,8 @@ def test_runs_resume_and_leave_env_and_policy_unchanged():
     env.reset(seed=2)
     policy = ChainPolicy.for_env(env, seed=2)
     state, before = copy.deepcopy(env.engine.snapshot()), copy.deepcopy(policy.rng.bit_generator.state)
-    whole = chain_rollout(env, policy)
-    rollout = ChainRollout(env, policy)
+    whole = compiled_rollout(env, policy)
+    rollout = CompiledRollout(env, policy)
     first = rollout.run(30, record_every=10)
     np.testing.assert_array_equal(first.recorded_cycles, [10, 20, 30])
     rest = rollout.run(LIMIT)
@@ -118,7 +144,7 @@ def test_room_changes_no_early_cycle():
         env = proteo_env.make("chain-v0", n_modules=30, motion_model="sphere", **extra)
         env.reset(seed=0)
         start = env.world.positions
-        result = chain_rollout(env, ChainPolicy.for_env(env, seed=0), max_cycles=room - 3)
+        result = compiled_rollout(env, ChainPolicy.for_env(env, seed=0), max_cycles=room - 3)
         runs.append((result.positions - start[0], result.modes, env.world.box))
     (default, default_modes, default_box), (small, small_modes, small_box) = runs
     assert small_box[0] < default_box[0]
@@ -130,30 +156,33 @@ def test_bad_inputs_are_refused():
     env = proteo_env.make("chain-v0", n_modules=8)
     policy = ChainPolicy.for_env(env, seed=0)
     with pytest.raises(ValueError, match="no world yet"):
-        chain_rollout(env, policy)
+        compiled_rollout(env, policy)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="max_cycles=-1 is not allowed"):
-        chain_rollout(env, policy, max_cycles=-1)
+        compiled_rollout(env, policy, max_cycles=-1)
     with pytest.raises(ValueError, match="record_every=1.5 is not allowed"):
-        chain_rollout(env, policy, record_every=1.5)
-    with pytest.raises(ValueError, match="policy=BranchPolicy is not allowed; allowed: a ChainPolicy"):
-        chain_rollout(env, BranchPolicy.for_env(env, seed=0))
+        compiled_rollout(env, policy, record_every=1.5)
+    allowed = "allowed: ChainPolicy on chain-v0, BranchPolicy on branch-v0"
+    with pytest.raises(ValueError, match=f"policy=BranchPolicy on task='chain' is not allowed; {allowed}"):
+        compiled_rollout(env, BranchPolicy.for_env(env, seed=0))
     sandbox = proteo_env.make("sandbox-v0", n_modules=8)
     sandbox.reset(seed=0)
-    with pytest.raises(ValueError, match="allowed: a ProteoEnv of the chain task"):
-        chain_rollout(sandbox, policy)
+    with pytest.raises(ValueError, match=f"policy=ChainPolicy on task='sandbox' is not allowed; {allowed}"):
+        compiled_rollout(sandbox, policy)
     with pytest.raises(ValueError, match="room=0 is not allowed"):
         proteo_env.make("chain-v0", room=0)
 
 
 # ------------------------------------------------------------------ kernels as plain Python
 def fingerprint() -> str:
-    """Hash of a short compiled rollout and of the policy loop's actions on a small chain."""
-    env = proteo_env.make("chain-v0", n_modules=10, motion_model="sphere", max_cycles=25)
-    env.reset(seed=3)
-    result = chain_rollout(env, ChainPolicy.for_env(env, seed=3, queue=True), record_every=1)
-    digest = hashlib.sha256(result.recorded_positions.tobytes() + result.recorded_modes.tobytes())
-    digest.update(repr(result.rng.bit_generator.state).encode())
+    """Hash of short compiled rollouts of a small chain and a small branching tree."""
+    digest = hashlib.sha256()
+    for task, policy_cls, extra in (("chain-v0", ChainPolicy, {}), ("branch-v0", BranchPolicy, {"T": 3, "B": 2})):
+        env = proteo_env.make(task, n_modules=12, motion_model="sphere", max_cycles=25, **extra)
+        env.reset(seed=3)
+        result = compiled_rollout(env, policy_cls.for_env(env, seed=3, queue=True), record_every=1)
+        digest.update(result.recorded_positions.tobytes() + result.recorded_modes.tobytes())
+        digest.update(repr(result.rng.bit_generator.state).encode())
     return digest.hexdigest()
 
 

@@ -253,6 +253,12 @@ class Branch(Task):
             self._root = 0
         self._last = self._measure(world)
 
+    @property
+    def first_node(self) -> int:
+        """The module the task picked as the first NODE this episode (the tree's root when
+        ``initial_node``)."""
+        return self._root
+
     def _root_now(self, world) -> int:
         """The root: the task's first node; without one (``initial_node=False``) the lowest-index
         NODE or INODE module, else module 0."""
