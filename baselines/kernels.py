@@ -147,6 +147,21 @@ def module_bits(neighbour_kind, i):
 
 
 @kernel
+def fewest_neighbours(neighbour_kind, i, pool):
+    """The directions of the bit set ``pool`` (of row ``i``) with the fewest modules in the 4
+    face slots around them (:data:`AROUND_BITS`), as a bit set."""
+    modules = module_bits(neighbour_kind, i)
+    fewest = 99
+    for k in range(12):
+        if (pool >> k) & 1:
+            fewest = min(fewest, BIT_COUNT[modules & AROUND_BITS[k]])
+    for k in range(12):
+        if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
+            pool &= ~(1 << k)
+    return pool
+
+
+@kernel
 def seen_scent(neighbour_kind, neighbour_scent, i, k, scent_max):
     """Channel-0 scent of the face neighbour ``k`` of row ``i`` (``scent_max`` where no module)."""
     if neighbour_kind[i, k] == KIND_MODULE:
@@ -193,14 +208,7 @@ def growth_direction(neighbour_kind, neighbour_mode, i, rng, horizontal, previou
     if pool == 0:
         return -1
     if clean:
-        modules = module_bits(neighbour_kind, i)
-        fewest = 99
-        for k in range(12):
-            if (pool >> k) & 1:
-                fewest = min(fewest, BIT_COUNT[modules & AROUND_BITS[k]])
-        for k in range(12):
-            if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
-                pool &= ~(1 << k)
+        pool = fewest_neighbours(neighbour_kind, i, pool)
     outward = 0
     for k in range(12):
         if (pool >> k) & 1 and neighbour_kind[i, OPPOSITE[k]] == KIND_MODULE:
@@ -425,14 +433,7 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
             if ahead:
                 pool = ahead
         if rules.fewer_neighbours and (pool & (pool - 1)) != 0:
-            modules = module_bits(neighbour_kind, i)
-            fewest = 99
-            for k in range(12):
-                if (pool >> k) & 1:
-                    fewest = min(fewest, BIT_COUNT[modules & AROUND_BITS[k]])
-            for k in range(12):
-                if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
-                    pool &= ~(1 << k)
+            pool = fewest_neighbours(neighbour_kind, i, pool)
         if stuck:
             pool = lg if rules.random_when_stuck else 0
         pools[j] = pool
