@@ -27,8 +27,11 @@ process so that peak memory is per measurement:
   ``--reference-max``.
 
 Ratios against the reference compare the same cycles: each mode's mean time over its first
-``--reference-cycles`` cycles. Every row records the first cycle apart (JIT compile, or
-loading the on-disk cache) and the peak resident memory of its process.
+``--reference-cycles`` cycles. Every row records the first cycle apart (loading the compiled
+kernels from numba's on-disk cache, or compiling them when there is none) and the peak resident
+memory of its process. The JIT compile itself is measured apart, once per mode: the first cycle
+(``make``, ``reset`` and one step) at N = ``--compile-n`` in a process with an empty
+``NUMBA_CACHE_DIR``.
 
 Usage::
 
@@ -46,6 +49,7 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -195,6 +199,8 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=50, help="cycles per episode, timed from a fresh reset")
     parser.add_argument("--reference-cycles", type=int, default=3, help="cycles per episode of the reference")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
+    parser.add_argument("--compile-n", type=int, default=100,
+                        help="N of the JIT compile measurement with an empty cache (0: none)")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md (the table) and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("MODE", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -205,16 +211,26 @@ def main() -> None:
         return
 
     env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads)}
+
+    def child(mode: str, n: int, *, budget: float, cycles: int, **extra_env) -> dict:
+        cmd = [sys.executable, __file__, "--one", mode, str(n), "--batch-modules", str(args.batch_modules),
+               "--budget", str(budget), "--cycles", str(cycles), "--reference-cycles", str(args.reference_cycles)]
+        out = subprocess.run(cmd, env={**env, **extra_env}, capture_output=True, text=True, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    compiled = {}
+    if args.compile_n:
+        for mode in (m for m in args.modes if m != "reference"):
+            with tempfile.TemporaryDirectory() as cache:
+                compiled[mode] = child(mode, args.compile_n, budget=0.0, cycles=1, NUMBA_CACHE_DIR=cache)["first_cycle_s"]
+            print(f"{mode:>12}: JIT compile (first cycle, empty cache, N={args.compile_n}) {compiled[mode]:.1f} s",
+                  flush=True)
     rows = []
     for mode in args.modes:
         for n in args.sizes:
             if mode == "reference" and n > args.reference_max:
                 continue
-            cmd = [sys.executable, __file__, "--one", mode, str(n), "--batch-modules", str(args.batch_modules),
-                   "--budget", str(args.budget), "--cycles", str(args.cycles),
-                   "--reference-cycles", str(args.reference_cycles)]
-            out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
-            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+            rows.append(child(mode, n, budget=args.budget, cycles=args.cycles))
             r = rows[-1]
             print(f"{mode:>11} N={n:>7,} B={r['n_envs']:>4}: {r['module_cycles_per_s']:>14,.0f} module-cycles/s, "
                   f"{r['ms_per_cycle']:.3f} ms/cycle, first {r['first_cycle_s']:.2f} s, "
@@ -232,13 +248,18 @@ def main() -> None:
         ratio = f"{early_rate(r) / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref and same_workload else "-"
         lines.append(f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
                      f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |")
+    if compiled:
+        lines += ["", f"JIT compile, once per machine (first cycle with an empty cache, N = {args.compile_n}): "
+                  + ", ".join(f"{mode} {seconds:.1f} s" for mode, seconds in compiled.items())
+                  + "; the *first cycle* column loads the compiled kernels from the on-disk cache."]
     table = "\n".join(lines)
     info = describe("numpy", "numba", "gymnasium", "pettingzoo", numba_threads=args.threads)
     print(f"\nmachine: {info}\n\n{table}")
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "results": rows},
+        out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "compile_s": compiled,
+                                                        "results": rows},
                                                        indent=2))
         out.with_suffix(".md").write_text(f"machine: `{info}`\n\n{table}\n")
         plot(rows, out.with_suffix(".png"))
