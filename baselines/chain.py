@@ -16,7 +16,7 @@ one action out, plus the module's own private memory; nothing else is read):
   legal move. With ``p_seed > 0`` a SLEEP module that detects no scent becomes a SEED with
   that probability each cycle (the paper's decentralised start; the task's default is one
   seed picked centrally).
-- SEARCH, "move along scent gradient" (:func:`~baselines.primitives.climb`): the value of a
+- SEARCH, "move along scent gradient" (``_climb`` in :mod:`baselines.kernels`): the value of a
   site is one more than the smallest scent next to it. A module sees only 4 of a target
   site's neighbours (those next to both sites), so no single roll is ever *seen* to lower its
   value; the gradient says which neighbour is lowest and the module rolls over that

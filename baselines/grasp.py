@@ -92,6 +92,7 @@ from proteo_env.core.world import DIRECTION_ADJACENCY
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, MESSAGE_TO_ALL, RELAY, SILENT
 
 from .base import Policy
+from .primitives import face_index
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
@@ -102,8 +103,6 @@ SET_TOUCH = 14
 PASS_SEED = 15
 """Message value: "become TOUCHSEED" (a stuck TOUCHSEED to a TOUCH neighbour; ``relocate`` only)."""
 # values 1..12: a SEED's broadcast "my growth site is DIRECTIONS[value - 1]"
-
-_FACE = {tuple(int(v) for v in d): k for k, d in enumerate(DIRECTIONS)}
 
 
 class GraspPolicy(Policy):
@@ -297,7 +296,7 @@ class GraspPolicy(Policy):
         """
         spot = DIRECTIONS[slot] + DIRECTIONS[growth]
         mask = o["action_mask"]
-        k = _FACE.get(tuple(int(v) for v in spot), -1)
+        k = face_index(spot)
         if k >= 0 and mask[k + 1]:
             return k + 1
         legal = np.flatnonzero(mask[1:])

@@ -147,6 +147,17 @@ def module_bits(neighbour_kind, i):
 
 
 @kernel
+def detects_scent(own_scent, neighbour_kind, neighbour_scent, i, scent_max):
+    """Row ``i`` senses the channel-0 scent: its own value or a face neighbour's is below ``scent_max``."""
+    if own_scent[i, 0] < scent_max:
+        return True
+    for k in range(12):
+        if seen_scent(neighbour_kind, neighbour_scent, i, k, scent_max) < scent_max:
+            return True
+    return False
+
+
+@kernel
 def fewest_neighbours(neighbour_kind, i, pool):
     """The directions of the bit set ``pool`` (of row ``i``) with the fewest modules in the 4
     face slots around them (:data:`AROUND_BITS`), as a bit set."""
@@ -664,10 +675,7 @@ def chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
         if own == SEARCH:
             n_search += 1
         elif own == SLEEP:
-            detected = own_scent[i, 0] < smax
-            for k in range(12):
-                detected |= seen_scent(neighbour_kind, neighbour_scent, i, k, smax) < smax
-            if detected:
+            if detects_scent(own_scent, neighbour_kind, neighbour_scent, i, smax):
                 if not rules.wake_when_free or legal_bits(action_mask, i):
                     actions[i, 1] = SEARCH
             elif rules.p_seed > 0 and rng.random() < rules.p_seed:
@@ -906,10 +914,7 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
         if own_mode[i, 0] != SLEEP or promoted[i] != -1:
             continue
         actions[i, 3] = SILENT
-        detected = own_scent[i, 0] < smax
-        for k in range(12):
-            detected |= seen_scent(neighbour_kind, neighbour_scent, i, k, smax) < smax
-        if detected:
+        if detects_scent(own_scent, neighbour_kind, neighbour_scent, i, smax):
             if not rules.wake_when_free or legal_bits(action_mask, i):
                 actions[i, 1] = SEARCH
         elif branch.p_node > 0 and rng.random() < branch.p_node:

@@ -44,9 +44,9 @@ action out; nothing else is read). Messages: ``1..12`` "my growth spot is
   its own mode next cycle. Next to a SEED or AROOT whose broadcast it heard, it rolls over
   that neighbour's faces towards the spot (the lowest such neighbour when there are
   several; a random legal roll with probability ``p_random`` when it is stuck); next to one
-  it has not heard yet it holds still; otherwise it climbs the scent gradient with the rule
-  of :func:`~baselines.primitives.climb` (``on_stuck="stay"``), computed for all such
-  modules at once (:func:`climb_batch`).
+  it has not heard yet it holds still; otherwise it climbs the scent gradient with the chain's
+  SEARCH rule (:class:`~baselines.chain.ChainPolicy`, staying put when stuck, no bias),
+  computed for all such modules at once (:func:`climb_batch`).
 - "Set all FINAL and SEED neighbors to DISBAND" is :data:`DISBAND_NOW` sent to the leg's
   next module: the neighbour that took this module's spot (the side its
   :data:`SPOT_TAKEN` came from, kept in private memory). In a leg that is the only FINAL or
@@ -283,7 +283,7 @@ def _next_to_seed(obs) -> bool:
 def climb_batch(observations: list, scent_max: int, rng: np.random.Generator, p_random: float) -> np.ndarray:
     """``(Q,)`` moves (0 or ``k + 1``) along the scent gradient for ``Q`` observations at once.
 
-    The rule of :func:`~baselines.primitives.climb` (with ``on_stuck="stay"``), vectorised
+    The chain's SEARCH rule (:class:`~baselines.chain.ChainPolicy`; staying when stuck), vectorised
     over modules so that a table with a hundred searching modules stays cheap: the value
     at a target site is one more than the smallest scent seen next to it (the 4 face sites
     adjacent to both here and there); a module takes a random legal roll among those of

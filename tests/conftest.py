@@ -7,6 +7,11 @@ defaults. When a task is registered, add its entry here if its defaults are larg
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -60,3 +65,13 @@ def make_small():
 def actions_from():
     """Factory fixture: :func:`random_actions`."""
     return random_actions
+
+
+def run_without_jit(module: str, function: str) -> subprocess.CompletedProcess:
+    """Run ``tests/<module>.py``'s ``function()`` in a fresh interpreter with
+    ``NUMBA_DISABLE_JIT=1`` (every kernel as plain Python); returns the finished process."""
+    here = Path(__file__).resolve().parent
+    code = f"import sys; sys.path.insert(0, {str(here)!r}); import {module} as t; t.{function}()"
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300,
+                          cwd=here.parent)

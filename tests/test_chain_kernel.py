@@ -7,10 +7,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +15,7 @@ import proteo_env
 from baselines.branch import BranchPolicy
 from baselines.chain import ChainPolicy
 from baselines.compiled import CompiledRollout, compiled_rollout
+from conftest import run_without_jit
 
 LIMIT = 400
 
@@ -197,10 +194,6 @@ def nojit_child() -> None:
 
 
 def test_kernels_as_plain_python_give_the_same_rollout():
-    here = Path(__file__).resolve().parent
-    code = f"import sys; sys.path.insert(0, {str(here)!r}); import test_chain_kernel as t; t.nojit_child()"
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300,
-                            cwd=here.parent)
+    result = run_without_jit("test_chain_kernel", "nojit_child")
     assert result.returncode == 0, result.stdout + result.stderr
     assert f"FINGERPRINT {fingerprint()}" in result.stdout

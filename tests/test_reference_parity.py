@@ -8,11 +8,7 @@ observation field must be identical. One test repeats a short run in a subproces
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +18,7 @@ from proteo_env.core.reference import ReferenceWorld
 from proteo_env.core.world import Physics, World
 from proteo_env.layouts import ball_sites, blob_sites, line_sites, place_in_box
 from proteo_env.spaces import ObservationBuffers
+from conftest import run_without_jit
 
 OBS_FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent",
               "messages", "contact", "action_mask")
@@ -220,9 +217,5 @@ def nojit_child() -> None:
 
 
 def test_parity_without_jit():
-    here = Path(__file__).resolve().parent
-    code = f"import sys; sys.path.insert(0, {str(here)!r}); import test_reference_parity as t; t.nojit_child()"
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300,
-                            cwd=here.parent)
+    result = run_without_jit("test_reference_parity", "nojit_child")
     assert result.returncode == 0 and "NOJIT-PARITY-OK" in result.stdout, result.stdout + result.stderr
