@@ -51,3 +51,125 @@ class Policy:
             legal &= allowed[1:]
         choices = np.flatnonzero(legal)
         return int(self.rng.choice(choices)) + 1 if choices.size else 0
+
+
+FIELD_DTYPES = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8, "neighbour_mode": np.int32,
+                "neighbour_scent": np.int32, "own_scent": np.int32, "action_mask": np.int8, "contact": np.int8,
+                "load": np.float32, "hint": np.float32}
+"""The dtype in which the rule kernels take each observation field (those of :mod:`proteo_env.spaces`)."""
+
+
+def stacked_fields(field, names) -> tuple[np.ndarray, ...]:
+    """The observation fields ``names``, each from ``field(name)`` (stacked over agents, first
+    axis: agent), contiguous and in :data:`FIELD_DTYPES`."""
+    return tuple(np.ascontiguousarray(field(name), dtype=FIELD_DTYPES[name]) for name in names)
+
+
+class SlotMemory:
+    """Private memory of every module for a rule kernel, one entry per memory slot.
+
+    Subclasses list their per-slot arrays in ``FIELDS``: ``{name: (dtype, empty value)}``;
+    each is an attribute of shape ``(S,)``.
+    """
+
+    FIELDS: dict = {}
+
+    def __init__(self):
+        self.clear()
+
+    def clear(self) -> None:
+        for name, (dtype, _) in self.FIELDS.items():
+            setattr(self, name, np.empty(0, dtype=dtype))
+
+    def reserve(self, n_slots: int) -> None:
+        """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
+        for name, (dtype, empty) in self.FIELDS.items():
+            values = getattr(self, name)
+            if n_slots > len(values):
+                setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
+
+    @property
+    def n_slots(self) -> int:
+        return len(getattr(self, next(iter(self.FIELDS))))
+
+
+class KernelPolicy(Policy):
+    """A policy whose rule is a numba kernel over observation fields stacked over agents.
+
+    Subclasses set ``memory`` (a :class:`SlotMemory`) and implement :meth:`_act`. Private
+    memory is one slot per agent: keyed by agent name in :meth:`act`, by row in
+    :meth:`act_arrays`; use one of the two between resets (the other raises ``RuntimeError``).
+    """
+
+    memory: SlotMemory
+
+    def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
+        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        self._slots: dict = {}
+        """Memory slot of each agent name seen by :meth:`act`."""
+        self._keyed_by: str | None = None
+
+    def reset(self, seed=None):
+        super().reset(seed)
+        self.memory.clear()
+        self._slots.clear()
+        self._keyed_by = None
+
+    def act(self, observations):
+        names = list(observations)
+        if not names:
+            return {}
+        obs = [observations[a] for a in names]
+        actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]))
+        return {a: actions[i] for i, a in enumerate(names)}
+
+    def act_arrays(self, buffers) -> np.ndarray:
+        """``(A, L)`` actions for all agents from stacked observations.
+
+        ``buffers`` is an :class:`~proteo_env.spaces.ObservationBuffers` (what
+        ``env.observe_arrays()`` returns): the same per-agent observations as :meth:`act`
+        receives, one row per agent, so the result is the same rule; it only skips building
+        dicts (use with ``env.step_arrays``). Private memory is keyed by row index here and
+        by agent name in :meth:`act`; use one of the two between resets (the other raises
+        ``RuntimeError``).
+        """
+        n = buffers.own_mode.shape[0]
+        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))
+
+    def decide(self, agent: str, obs) -> np.ndarray:
+        """The action of one module from its observation alone."""
+        return self.act({agent: obs})[agent]
+
+    def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
+        """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
+        given to each agent name at first sight (``"name"``)."""
+        if self._keyed_by not in (None, keyed_by):
+            raise RuntimeError(f"{type(self).__name__}: act() and act_arrays() used between two resets; "
+                               "allowed: one of them per episode (memory is keyed by agent name in act() "
+                               "and by row in act_arrays())")
+        self._keyed_by = keyed_by
+        if keyed_by == "row":
+            slots = np.arange(len(keys), dtype=np.int64)
+        else:
+            slots = np.array([self._slots.setdefault(k, len(self._slots)) for k in keys], dtype=np.int64)
+        self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
+        return slots
+
+    def memory_rows(self, agents) -> SlotMemory:
+        """A copy of the memory with one row per agent of ``agents`` (names, in row order), as
+        :meth:`act_arrays` reads it; agents without memory get empty rows."""
+        rows = type(self.memory)()
+        rows.reserve(len(agents))
+        if self._keyed_by == "name":
+            slots = np.array([self._slots.get(a, -1) for a in agents], dtype=np.int64)
+        else:
+            slots = np.arange(len(agents), dtype=np.int64)
+        known = (slots >= 0) & (slots < self.memory.n_slots)
+        for name in rows.FIELDS:
+            getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
+        return rows
+
+    def _act(self, slots: np.ndarray, field) -> np.ndarray:
+        """``(A, L)`` actions of the agents with memory ``slots`` (A,), in row order; ``field(name)``
+        gives an observation field stacked over them."""
+        raise NotImplementedError

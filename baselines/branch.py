@@ -70,7 +70,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .chain import ChainPolicy, ModuleMemory, Observed
+from .base import stacked_fields
+from .chain import OBSERVED, ChainPolicy, ModuleMemory
 from .kernels import NO_COUNT, BranchRules, branch_actions
 
 SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
@@ -140,7 +141,7 @@ class BranchPolicy(ChainPolicy):
         return super().for_env(env, seed=seed, **params)
 
     def _act(self, slots, field) -> np.ndarray:
-        obs = Observed.read(field)
+        obs = stacked_fields(field, OBSERVED)
         actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
         m = self.memory
         branch_actions(*obs, slots, m.heading, m.growth, m.asked, m.spawned, m.spot_direction, m.spot_announced,

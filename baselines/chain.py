@@ -67,40 +67,19 @@ on the observation fields stacked over modules; the private memory is one row pe
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
-from .base import Policy
+from .base import KernelPolicy, SlotMemory, stacked_fields
 from .kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_actions
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
 ON_STUCK = ("stay", "random")
+OBSERVED = ("own_mode", "messages", "neighbour_kind", "neighbour_mode", "neighbour_scent", "own_scent", "action_mask")
+"""The observation fields the chain and branch rule kernels read, in their argument order."""
 
 
-class Observed(NamedTuple):
-    """The observation fields the chain rule reads, stacked over agents (first axis: agent),
-    in the dtypes the kernels of :mod:`baselines.kernels` take."""
-
-    own_mode: np.ndarray
-    messages: np.ndarray
-    neighbour_kind: np.ndarray
-    neighbour_mode: np.ndarray
-    neighbour_scent: np.ndarray
-    own_scent: np.ndarray
-    action_mask: np.ndarray
-
-    @classmethod
-    def read(cls, field) -> Observed:
-        """The fields from ``field(name)``, which returns an observation field stacked over agents."""
-        dtypes = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8,
-                  "neighbour_mode": np.int32, "neighbour_scent": np.int32, "own_scent": np.int32,
-                  "action_mask": np.int8}
-        return cls(**{name: np.ascontiguousarray(field(name), dtype=dtype) for name, dtype in dtypes.items()})
-
-
-class ModuleMemory:
+class ModuleMemory(SlotMemory):
     """The chain rule's private memory of every module, one entry per memory slot.
 
     Attributes (S slots):
@@ -110,24 +89,9 @@ class ModuleMemory:
     """
 
     FIELDS = {"heading": (np.int64, -1), "growth": (np.int64, -1), "asked": (np.bool_, False)}
-    """Name, dtype and empty value of each per-slot array."""
-
-    def __init__(self):
-        self.clear()
-
-    def clear(self) -> None:
-        for name, (dtype, _) in self.FIELDS.items():
-            setattr(self, name, np.empty(0, dtype=dtype))
-
-    def reserve(self, n_slots: int) -> None:
-        """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
-        for name, (dtype, empty) in self.FIELDS.items():
-            values = getattr(self, name)
-            if n_slots > len(values):
-                setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
 
 
-class ChainPolicy(Policy):
+class ChainPolicy(KernelPolicy):
     """Hand-coded chain growth (rules and how they are carried out in the module docstring).
 
     Args:
@@ -197,9 +161,6 @@ class ChainPolicy(Policy):
         self.avoid_octahedra = avoid_octahedra
         self.memory = ModuleMemory()
         """Private memory of every module (see :class:`ModuleMemory`)."""
-        self._slots: dict = {}
-        """Memory slot of each agent name seen by :meth:`act`."""
-        self._keyed_by: str | None = None
 
     @property
     def rules(self) -> ChainRules:
@@ -213,71 +174,9 @@ class ChainPolicy(Policy):
             directed=bool(self.directed), momentum=float(self.momentum), queue=bool(self.queue),
             prefer_chain=bool(self.prefer_chain), avoid_octahedra=octahedra)
 
-    def reset(self, seed=None):
-        super().reset(seed)
-        self.memory.clear()
-        self._slots.clear()
-        self._keyed_by = None
-
-    def act(self, observations):
-        names = list(observations)
-        if not names:
-            return {}
-        obs = [observations[a] for a in names]
-        actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]))
-        return {a: actions[i] for i, a in enumerate(names)}
-
-    def act_arrays(self, buffers) -> np.ndarray:
-        """``(A, L)`` actions for all agents from stacked observations.
-
-        ``buffers`` is an :class:`~proteo_env.spaces.ObservationBuffers` (what
-        ``env.observe_arrays()`` returns): the same per-agent observations as :meth:`act`
-        receives, one row per agent, so the result is the same rule; it only skips building
-        dicts (use with ``env.step_arrays``). Private memory is keyed by row index here and
-        by agent name in :meth:`act`; use one of the two between resets (the other raises
-        ``RuntimeError``).
-        """
-        n = buffers.own_mode.shape[0]
-        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))
-
-    def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
-        """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
-        given to each agent name at first sight (``"name"``)."""
-        if self._keyed_by not in (None, keyed_by):
-            raise RuntimeError(f"{type(self).__name__}: act() and act_arrays() used between two resets; "
-                               "allowed: one of them per episode (memory is keyed by agent name in act() "
-                               "and by row in act_arrays())")
-        self._keyed_by = keyed_by
-        if keyed_by == "row":
-            slots = np.arange(len(keys), dtype=np.int64)
-        else:
-            slots = np.array([self._slots.setdefault(k, len(self._slots)) for k in keys], dtype=np.int64)
-        self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
-        return slots
-
-    def memory_rows(self, agents) -> ModuleMemory:
-        """A copy of the memory with one row per agent of ``agents`` (names, in row order), as
-        :meth:`act_arrays` reads it; agents without memory get empty rows."""
-        rows = type(self.memory)()
-        rows.reserve(len(agents))
-        if self._keyed_by == "name":
-            slots = np.array([self._slots.get(a, -1) for a in agents], dtype=np.int64)
-        else:
-            slots = np.arange(len(agents), dtype=np.int64)
-        known = (slots >= 0) & (slots < len(self.memory.heading))
-        for name in rows.FIELDS:
-            getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
-        return rows
-
     def _act(self, slots, field) -> np.ndarray:
-        """Actions of the agents with memory ``slots`` (A,), in row order; ``field(name)`` gives an
-        observation field stacked over them."""
-        obs = Observed.read(field)
+        obs = stacked_fields(field, OBSERVED)
         actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
         m = self.memory
         chain_actions(*obs, slots, m.heading, m.growth, m.asked, self.rules, self.rng, actions)
         return actions
-
-    def decide(self, agent: str, obs) -> np.ndarray:
-        """The action of one module from its observation alone."""
-        return self.act({agent: obs})[agent]

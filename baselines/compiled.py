@@ -1,12 +1,14 @@
-"""Whole rollouts of the hand-coded chain and branch behaviours inside compiled code.
+"""Whole rollouts of the hand-coded chain, branch and table behaviours inside compiled code.
 
 :class:`CompiledRollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
 runs in Python, cycle after cycle, as one numba kernel: the engine's observation kernel, the
-behaviour's rule (:func:`baselines.kernels.chain_actions` or
-:func:`baselines.kernels.branch_actions`, the same code :class:`~baselines.chain.ChainPolicy`
-and :class:`~baselines.branch.BranchPolicy` run), the engine's cycle kernel and the task's
-success test. Same environment state, policy parameters, generator state and memory give the
-same trajectory as the Python loop, cycle for cycle (``tests/test_chain_kernel.py``).
+behaviour's rule (:func:`baselines.kernels.chain_actions`,
+:func:`baselines.kernels.branch_actions` or :func:`baselines.table_kernels.table_actions`, the
+same code :class:`~baselines.chain.ChainPolicy`, :class:`~baselines.branch.BranchPolicy` and
+:class:`~baselines.table.TablePolicy` run), the engine's cycle kernel and the task's
+bookkeeping and success test (for the table, the task's own kernels: the load sensor before
+the observation, :func:`~proteo_env.tasks.table.table_after_cycle` after the cycle). Same environment state, policy parameters, generator state and memory give the
+same trajectory as the Python loop, cycle for cycle (``tests/test_compiled_rollout.py``).
 
 Example::
 
@@ -31,14 +33,17 @@ from proteo_env.core.world import LOCAL_ADJACENCY_BITS, Scratch
 from proteo_env.env import ProteoEnv
 from proteo_env.spaces import ObservationBuffers
 from proteo_env.tasks.branch import measure_tree
+from proteo_env.tasks.table import TableLedger, root_loads, table_after_cycle
 
 from .branch import BranchMemory, BranchPolicy
 from .chain import ChainPolicy
 from .kernels import INODE, NODE, BranchRules, branch_actions, chain_actions
+from .table import TableMemory, TablePolicy
+from .table_kernels import TableRules, table_actions
 
-CHAIN, BRANCH = 0, 1
+CHAIN, BRANCH, TABLE = 0, 1, 2
 """The behaviours a rollout runs (the task and policy pairs of :data:`BEHAVIOURS`)."""
-BEHAVIOURS = {("chain", ChainPolicy): CHAIN, ("branch", BranchPolicy): BRANCH}
+BEHAVIOURS = {("chain", ChainPolicy): CHAIN, ("branch", BranchPolicy): BRANCH, ("table", TablePolicy): TABLE}
 """``(task name, policy class)`` of each behaviour."""
 TEST_SCRATCH = 9
 """(N,) scratch arrays of the success tests (:func:`measure_tree` takes 9)."""
@@ -113,20 +118,24 @@ def is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap
 
 @kernel
 def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
-                    keep_connected, exact, sweeps, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
+                    keep_connected, exact, sweeps, scent_max, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
                     pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer, is_cut, disc, low, stack_node,
                     stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
-                    action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced, spot_waited,
-                    refused, rules, branch, rng, first_node, min_gap, target_levels, max_cycles, record_every,
-                    recorded_cycles, recorded_cell, recorded_mode, test_scratch):
-    """Run up to ``max_cycles`` cycles of observe, decide (``behaviour``: :data:`CHAIN` or
-    :data:`BRANCH`), step, test; return ``(cycles, success, recorded)``. Arrays as in
-    :class:`~proteo_env.core.world.World`, its scratch, :class:`~proteo_env.spaces.ObservationBuffers`
-    and :class:`~baselines.branch.BranchMemory` (the branch fields are unused by the chain);
-    ``recorded_*`` (R, ...) are filled in order."""
+                    load, action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
+                    spot_waited, refused, spot, parent, child, rules, branch, table, rng, first_node, min_gap,
+                    target_levels, ledger, start_cycle, max_cycles, record_every, recorded_cycles, recorded_cell,
+                    recorded_mode, test_scratch):
+    """Run up to ``max_cycles`` cycles of observe, decide (``behaviour``: :data:`CHAIN`,
+    :data:`BRANCH` or :data:`TABLE`), step, test; return ``(cycles, success, recorded)``.
+    Arrays as in :class:`~proteo_env.core.world.World`, its scratch,
+    :class:`~proteo_env.spaces.ObservationBuffers`, :class:`~baselines.branch.BranchMemory`
+    (``heading`` .. ``refused``) and :class:`~baselines.table.TableMemory` (``spot``, ``parent``,
+    ``child``); ``rules``, ``branch``, ``table``: the rule parameters; ``ledger``: the table
+    task's :class:`~proteo_env.tasks.table.TableLedger`, ``start_cycle`` the env's cycle
+    before the first (what a behaviour does not use is a placeholder); ``recorded_*`` (R, ...)
+    are filled in order."""
     n_modules = cell.shape[0]
     n_channels = scent.shape[0]
-    scent_max = rules.scent_max
     actions = np.empty((n_agents, 4 + n_channels), dtype=np.int64)
     move = np.empty(n_agents, dtype=np.int64)
     new_mode = np.empty(n_agents, dtype=np.int32)
@@ -143,6 +152,10 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
         if behaviour == CHAIN:
             chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
                           action_mask, slots, heading, growth, asked, rules, rng, actions)
+        elif behaviour == TABLE:
+            root_loads(ledger, load[:, 0])
+            table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
+                          action_mask, contact, load, slots, spot, parent, child, table, rng, actions)
         else:
             branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
                            action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
@@ -160,6 +173,9 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
                          sweep_bits, pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer)
         if behaviour == CHAIN:
             success = is_chain(grid, cell, n_modules, dir_delta, test_scratch[0], test_scratch[1], test_scratch[2])
+        elif behaviour == TABLE:
+            table_after_cycle(grid, cell, mode, anchored, start_cycle + cycle, ledger)
+            success = ledger.restabilise[-1] >= 0
         else:
             success = is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap, target_levels,
                                        test_scratch)
@@ -173,6 +189,28 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
     return max_cycles, False, recorded
 
 
+def _placeholder_ledger() -> TableLedger:
+    """A :class:`~proteo_env.tasks.table.TableLedger` of the right types for the behaviours
+    that have no table (never read)."""
+    none = np.zeros(0, dtype=np.int64)
+    return TableLedger(roots=none, left=np.zeros(0, dtype=np.bool_), down_delta=none, shift_cycles=np.zeros(1, np.int64),
+                       schedule_weights=np.zeros((0, 2)), depth=0, stable_window=0, load_cap=0.0,
+                       active=np.zeros(0, dtype=np.bool_), grounded=np.zeros(0, dtype=np.bool_),
+                       signature=np.zeros((2, 0), dtype=np.bool_), clock=np.zeros(5, dtype=np.int64),
+                       weights=np.zeros(2), restabilise=np.zeros(1), scratch=np.zeros((3, 0), dtype=np.int64),
+                       stamp=np.zeros(1, dtype=np.int64))
+
+
+def _memory_copy(memory_type, rows, n_slots):
+    """A ``memory_type`` of ``n_slots`` empty slots holding the fields of ``rows`` it shares."""
+    memory = memory_type()
+    memory.reserve(n_slots)
+    for name in memory.FIELDS:
+        if name in rows.FIELDS:
+            getattr(memory, name)[:] = getattr(rows, name)
+    return memory
+
+
 class CompiledRollout:
     """A hand-coded behaviour from a copy of ``env``'s state, run inside compiled code.
 
@@ -180,14 +218,15 @@ class CompiledRollout:
     success); every call continues where the last one ended. The cycles are those that
     driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))`` would
     run: same trajectory, same draws from the policy's generator. Neither ``env`` nor
-    ``policy`` changes: the rollout works on copies of the world's state, of the policy's
-    generator and of its memory.
+    ``policy`` changes: the rollout works on copies of the world's state, of the task's
+    bookkeeping, of the policy's generator and of its memory.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of the chain or the branch task.
+        env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of the chain, branch or table task.
         policy: the task's hand-coded policy built for ``env``, exactly a
-            :class:`~baselines.chain.ChainPolicy` (chain) or a :class:`~baselines.branch.BranchPolicy`
-            (branch); its parameters, generator state and memory are read.
+            :class:`~baselines.chain.ChainPolicy` (chain), a :class:`~baselines.branch.BranchPolicy`
+            (branch) or a :class:`~baselines.table.TablePolicy` (table); its parameters,
+            generator state and memory are read.
 
     Attributes:
         cycle: the cycle count reached, counted like ``env.cycle`` (starts at the env's).
@@ -208,7 +247,11 @@ class CompiledRollout:
         if policy.layout != env.action_layout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
-        self.rules = policy.rules
+        scent_max = int(world.physics.scent_max)
+        self.rules = policy.rules if self.behaviour != TABLE else ChainPolicy(policy.layout, policy.modes,
+                                                                              scent_max=scent_max).rules
+        self.table = policy.rules if self.behaviour == TABLE else TableRules(scent_max, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self.ledger = env.task.ledger.copy() if self.behaviour == TABLE else _placeholder_ledger()
         if self.behaviour == BRANCH:
             p = env.task.params
             self.branch = policy.branch_rules
@@ -218,11 +261,9 @@ class CompiledRollout:
             self.branch = BranchRules(T=0, B=0, p_node=0.0, search_relays_node=False, refuse=False, patience=0)
             self.first_node, self.min_gap, self.target_levels = -1, 0, 0
         self.rng = copy.deepcopy(policy.rng)
-        self.memory = BranchMemory()
-        self.memory.reserve(world.n_agents)
         rows = policy.memory_rows(env.possible_agents)
-        for name in rows.FIELDS:
-            getattr(self.memory, name)[:] = getattr(rows, name)
+        self.memory = _memory_copy(BranchMemory, rows, world.n_agents)
+        self.table_memory = _memory_copy(TableMemory, rows, world.n_agents)
         self.state = {name: getattr(world, name).copy() for name in ("grid", "cell", "mode", "scent", "inbox",
                                                                         "rng_state")}
         n = world.n_modules
@@ -242,7 +283,7 @@ class CompiledRollout:
         for name, value in (("max_cycles", max_cycles), ("record_every", record_every)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 0")
-        w, st, s, obs, m = self.world, self.state, self.scratch, self.observation, self.memory
+        w, st, s, obs, m, t = self.world, self.state, self.scratch, self.observation, self.memory, self.table_memory
         n = w.n_modules
         capacity = max_cycles // record_every + 1 if record_every else 0
         recorded_cycles = np.zeros(capacity, dtype=np.int64)
@@ -254,12 +295,13 @@ class CompiledRollout:
             ran, self.success, recorded = _rollout_cycles(
                 self.behaviour, st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
                 st["rng_state"], w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps,
-                w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.sweep_bits, w.pivot_bit,
-                s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer, s.is_cut, s.disc, s.low,
-                s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode,
-                obs.own_scent, obs.messages, obs.contact, obs.action_mask, np.arange(w.n_agents, dtype=np.int64),
-                m.heading, m.growth, m.asked, m.spawned, m.spot_direction, m.spot_announced, m.spot_waited,
-                m.refused, self.rules, self.branch, self.rng, self.first_node, self.min_gap, self.target_levels,
+                int(p.scent_max), w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.sweep_bits,
+                w.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer, s.is_cut, s.disc,
+                s.low, s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent,
+                obs.own_mode, obs.own_scent, obs.messages, obs.contact, obs.load, obs.action_mask,
+                np.arange(w.n_agents, dtype=np.int64), m.heading, m.growth, m.asked, m.spawned, m.spot_direction,
+                m.spot_announced, m.spot_waited, m.refused, t.spot, t.parent, t.child, self.rules, self.branch,
+                self.table, self.rng, self.first_node, self.min_gap, self.target_levels, self.ledger, int(self.cycle),
                 int(max_cycles), int(record_every), recorded_cycles, recorded_cell, recorded_mode, self.test_scratch)
         recorded_cycles[:recorded] += self.cycle
         self.cycle += int(ran)
@@ -279,9 +321,9 @@ def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every
     changes.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` of the chain or the branch task, after ``reset``.
-        policy: a :class:`~baselines.chain.ChainPolicy` (chain) or
-            :class:`~baselines.branch.BranchPolicy` (branch) built for ``env``.
+        env: a :class:`~proteo_env.env.ProteoEnv` of the chain, branch or table task, after ``reset``.
+        policy: a :class:`~baselines.chain.ChainPolicy` (chain), :class:`~baselines.branch.BranchPolicy`
+            (branch) or :class:`~baselines.table.TablePolicy` (table) built for ``env``.
         max_cycles: cycles to run at most (default: the env's cycles left, ``max_cycles - cycle``).
         record_every: record positions and modes after every ``record_every``-th cycle and at
             success (0: only the final state).

@@ -127,6 +127,22 @@ def random_pick(rng, pool):
 
 
 @kernel
+def uniform_pick(rng, pool):
+    """A uniformly chosen slot of the bit set ``pool`` (the ``n``-th set bit, ``n`` one
+    ``rng.integers`` draw, as ``rng.choice`` over the slots in ascending order draws), or -1
+    and no draw when empty."""
+    if pool == 0:
+        return -1
+    nth = rng.integers(0, BIT_COUNT[pool])
+    for k in range(12):
+        if (pool >> k) & 1:
+            if nth == 0:
+                return k
+            nth -= 1
+    return -1
+
+
+@kernel
 def legal_bits(action_mask, i):
     """Bit set of the legal rolls of row ``i`` (``action_mask[i, k + 1]``)."""
     bits = 0
@@ -226,16 +242,7 @@ def growth_direction(neighbour_kind, neighbour_mode, i, rng, horizontal, previou
             outward |= 1 << k
     if outward:
         pool = outward
-    size = 0
-    for k in range(12):
-        size += (pool >> k) & 1
-    nth = rng.integers(0, size)
-    for k in range(12):
-        if (pool >> k) & 1:
-            if nth == 0:
-                return k
-            nth -= 1
-    return -1
+    return uniform_pick(rng, pool)
 
 
 @kernel
@@ -811,14 +818,7 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
             _retire(s, spawned, spot_direction, spot_announced, spot_waited, refused)
             _encode(actions, i, INODE, RELAY, EMIT, 0, 0)
             return
-        nth = rng.integers(0, BIT_COUNT[pool])
-        new = -1
-        for k in range(12):
-            if (pool >> k) & 1:
-                if nth == 0:
-                    new = k
-                    break
-                nth -= 1
+        new = uniform_pick(rng, pool)
         announced = announced and new == direction
         direction, waited = new, 0
     spawned[s] = count

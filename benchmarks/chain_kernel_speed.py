@@ -6,7 +6,7 @@ hand-coded chain policy (``ChainPolicy``, default parameters, seed 0); the first
 cycles from the reset. The box has ``room = cycles + 4`` free sites on each horizontal side
 instead of the task's ``N + 3`` (whose grid would not fit in memory above a few thousand
 modules); walls that far away touch no module in those cycles, so the trajectory is the
-default box's (``tests/test_chain_kernel.py::test_room_changes_no_early_cycle``).
+default box's (``tests/test_compiled_rollout.py::test_room_changes_no_early_cycle``).
 
 Each N runs in a fresh process (peak memory per row) with ``NUMBA_NUM_THREADS=--threads``:
 
@@ -31,7 +31,9 @@ module: one "random roll instead?" uniform and 12 keys of its pick), and the cyc
 alone, with and without the connectivity check (on copies of the state).
 ``--chain-episodes N SEEDS`` (default 500 1) and ``--branch-episodes N SEEDS`` (default 100 10)
 run whole episodes to success of the chain and the branch behaviours in their tasks' default
-boxes, both ways, and check that they end alike.
+boxes, both ways, and check that they end alike; ``--table-episodes BOARD SEEDS`` (default
+30 10) the same for the table behaviour in ``configs/table.yaml`` (the paper's two weight
+shifts) on a ``BOARD`` by ``BOARD`` board.
 
 Usage::
 
@@ -65,12 +67,18 @@ DRAWS_PER_SEARCH_MODULE = 13
 
 
 def fresh(n: int, cycles: int, room: int | None = None, *, task: str = "chain", seed: int = 0):
-    """The workload's env (reset with ``seed``) and the task's hand-coded policy (seeded the same)."""
+    """The workload's env (reset with ``seed``) and the task's hand-coded policy (seeded the same).
+    ``n`` is the number of modules, or for the table the board's side (``configs/table.yaml``)."""
     import proteo_env
+    import yaml
     from baselines import make_policy
 
-    extra = {} if room is None else {"room": room}
-    env = proteo_env.make(f"{task}-v0", n_modules=n, max_cycles=cycles, **extra)
+    if task == "table":
+        config = yaml.safe_load((ROOT / "configs" / "table.yaml").read_text())
+        extra = {k: v for k, v in config.items() if k not in ("task", "max_cycles")} | {"board_size": n}
+    else:
+        extra = {"n_modules": n} if room is None else {"n_modules": n, "room": room}
+    env = proteo_env.make(f"{task}-v0", max_cycles=cycles, **extra)
     env.reset(seed=seed)
     return env, make_policy(task, env, seed=seed)
 
@@ -209,11 +217,13 @@ def compile_time(n: int) -> dict:
 
 
 def whole_episodes(task: str, n: int, seeds: int) -> dict:
-    """Episodes to success (limit ``20 N`` cycles) of seeds ``0 .. seeds - 1`` in the task's
-    default box and physics, compiled and through the Python loop (summed)."""
+    """Episodes to success of seeds ``0 .. seeds - 1`` in the task's default box and physics
+    (limit ``20 N`` cycles; the table: ``configs/table.yaml``, limit 1,300 cycles), compiled
+    and through the Python loop (summed); module-cycles count every module (the table's board
+    too)."""
     from baselines.compiled import compiled_rollout
 
-    limit = 20 * n
+    limit = 1300 if task == "table" else 20 * n
     warm_env, warm_policy = fresh(n, limit, task=task)
     compiled_rollout(warm_env, warm_policy, max_cycles=1)
     cycles, successes, kernel_s, python_s = 0, 0, 0.0, 0.0
@@ -227,9 +237,10 @@ def whole_episodes(task: str, n: int, seeds: int) -> dict:
             raise AssertionError(f"{task} N={n} seed {seed}: the kernel and the Python loop ended differently")
         cycles += result.cycles
         successes += result.success
-    return {"task": task, "n_modules": n, "seeds": seeds, "successes": successes, "cycles": cycles,
-            "kernel_s": kernel_s, "python_s": python_s, "kernel_module_cycles_per_s": n * cycles / kernel_s,
-            "python_module_cycles_per_s": n * cycles / python_s, "ratio": python_s / kernel_s}
+    modules = env.engine.n_modules
+    return {"task": task, "n_modules": modules, "seeds": seeds, "successes": successes, "cycles": cycles,
+            "kernel_s": kernel_s, "python_s": python_s, "kernel_module_cycles_per_s": modules * cycles / kernel_s,
+            "python_module_cycles_per_s": modules * cycles / python_s, "ratio": python_s / kernel_s}
 
 
 def slope(rows: list[dict], key: str) -> float:
@@ -295,7 +306,8 @@ def tables(rows: list[dict], parts: dict | None, episodes: list[dict], args) -> 
         lines.append(f"| the same moves without the connectivity check | "
                      f"{cost['moves without the connectivity check']:.1f} |")
     if episodes:
-        lines += ["", "Whole episodes to success (limit 20 N cycles) in the task's default box, seeds 0 .. S - 1:", "",
+        lines += ["", "Whole episodes to success (limit 20 N cycles; the table: `configs/table.yaml`, 1,300) in the "
+                  "task's default box, seeds 0 .. S - 1 (N: all modules, the table's board too):", "",
                   "| task | N | seeds S | successes | cycles (sum) | in-kernel s | module-cycles/s | Python loop s | "
                   "module-cycles/s | x Python loop |", "|---|---|---|---|---|---|---|---|---|---|"]
         lines += [f"| {e['task']} | {e['n_modules']:,} | {e['seeds']} | {e['successes']} | {e['cycles']:,} | "
@@ -314,6 +326,8 @@ def main() -> None:
                         help="whole chain episodes to success: N and the number of seeds (0 0: none)")
     parser.add_argument("--branch-episodes", type=int, nargs=2, default=[100, 10], metavar=("N", "SEEDS"),
                         help="whole branch episodes to success: N and the number of seeds (0 0: none)")
+    parser.add_argument("--table-episodes", type=int, nargs=2, default=[30, 10], metavar=("BOARD", "SEEDS"),
+                        help="whole table episodes to success: board side and the number of seeds (0 0: none)")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("WHAT", "N"), help=argparse.SUPPRESS)
@@ -323,6 +337,7 @@ def main() -> None:
         row = {"row": lambda: measure(n, args.cycles, args.repeats), "profile": lambda: profile(n, args.cycles),
                "chain-episodes": lambda: whole_episodes("chain", n, args.chain_episodes[1]),
                "branch-episodes": lambda: whole_episodes("branch", n, args.branch_episodes[1]),
+               "table-episodes": lambda: whole_episodes("table", n, args.table_episodes[1]),
                "compile": lambda: compile_time(n)}[what]()
         print(json.dumps(row))
         return
@@ -330,7 +345,7 @@ def main() -> None:
     def child(what: str, n: int, **env) -> dict:
         cmd = [sys.executable, __file__, "--one", what, str(n), "--cycles", str(args.cycles),
                "--repeats", str(args.repeats), "--chain-episodes", *map(str, args.chain_episodes),
-               "--branch-episodes", *map(str, args.branch_episodes)]
+               "--branch-episodes", *map(str, args.branch_episodes), "--table-episodes", *map(str, args.table_episodes)]
         env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads), **env}
         out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
@@ -348,7 +363,8 @@ def main() -> None:
               flush=True)
     parts = child("profile", args.profile_n) if args.profile_n else None
     episodes = [child(f"{task}-episodes", n) for task, (n, seeds) in
-                (("chain", args.chain_episodes), ("branch", args.branch_episodes)) if n and seeds]
+                (("chain", args.chain_episodes), ("branch", args.branch_episodes), ("table", args.table_episodes))
+                if n and seeds]
     info = describe("numpy", "numba", numba_threads=args.threads)
     text = tables(rows, parts, episodes, args)
     text = (f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "

@@ -88,9 +88,11 @@ Paper section
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS
 from ..layouts import Layout
 from .base import Task
@@ -99,6 +101,9 @@ FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 MODES = ("FIXED", "ROOT", "IROOT", "AROOT", "SLEEP", "SEARCH", "SEED", "FINAL", "DISBAND")
 ACTIVE = (ROOT, AROOT)
 LEG_MODES = (SEED, FINAL)
+CYCLE, SHIFT, SINCE, CREATIONS, DISBANDS = range(5)
+"""Entries of :attr:`Table.clock`: the last cycle, the schedule entry in force, the cycle the
+signature last changed, leg creations and leg disbands so far."""
 DOWN = np.flatnonzero(DIRECTIONS[:, 2] == -1)
 """The 4 face directions that go down one layer."""
 
@@ -255,119 +260,217 @@ class Table(Task):
     # ------------------------------------------------------------------ episode state
     def reset(self, world, rng):
         p = self.params
-        self._roots = np.arange(p.n_spares, world.n_agents)
-        x = world.positions[self._roots, 0]
-        self._left = x < p.board_size / 2
-        self._down_delta = world.dir_delta[DOWN]
-        self._shift = 0
-        self._weights = np.array(p.schedule[0][1:], dtype=np.float64)
-        self._cycle = 0
-        self._restabilise = np.full(len(p.schedule), -1.0)
-        self._creations = 0
-        self._disbands = 0
-        self._was_active = np.isin(world.mode[self._roots], ACTIVE)
-        self._measure(world)
-        self._signature = (self._active.copy(), self._grounded.copy())
-        self._since = 0
-
-    def _measure(self, world) -> None:
-        """Active roots and grounded legs now (cached for load, reward and metrics)."""
-        self._active = np.isin(world.mode[self._roots], ACTIVE)
-        self._grounded = self._grounded_legs(world)
-
-    def _grounded_legs(self, world) -> np.ndarray:
-        """``(R,)`` bool: roots with a chain of FINAL/SEED modules down to the floor."""
-        grid, mode, anchored = world.grid, world.mode, world.anchored
-        grounded = np.zeros(len(self._roots), dtype=np.bool_)
-        below = grid[world.cell[self._roots][:, None] + self._down_delta[None, :]]  # (R, 4)
-        safe = np.where(below >= 0, below, 0)
-        starts = (below >= 0) & np.isin(mode[safe], LEG_MODES) & ~anchored[safe]
-        for r in np.flatnonzero(starts.any(axis=1)):
-            level = {int(m) for m in below[r][starts[r]]}
-            for _ in range(self.params.depth - 1):
-                nxt = set()
-                for m in level:
-                    for d in self._down_delta:
-                        v = int(grid[world.cell[m] + d])
-                        if v >= 0 and mode[v] in LEG_MODES and not anchored[v]:
-                            nxt.add(v)
-                level = nxt
-                if not level:
-                    break
-            grounded[r] = bool(level)
-        return grounded
+        roots = np.arange(p.n_spares, world.n_agents)
+        r = len(roots)
+        self.ledger = TableLedger(
+            roots=roots, left=world.positions[roots, 0] < p.board_size / 2,
+            down_delta=np.ascontiguousarray(world.dir_delta[DOWN]),
+            shift_cycles=np.array(p.shift_cycles, dtype=np.int64),
+            schedule_weights=np.array([entry[1:] for entry in p.schedule], dtype=np.float64),
+            depth=p.depth, stable_window=p.stable_window, load_cap=float(p.load_cap),
+            active=np.isin(world.mode[roots], ACTIVE), grounded=np.zeros(r, dtype=np.bool_),
+            signature=np.zeros((2, r), dtype=np.bool_), clock=np.zeros(5, dtype=np.int64),
+            weights=np.array(p.schedule[0][1:], dtype=np.float64), restabilise=np.full(len(p.schedule), -1.0),
+            scratch=np.zeros((3, world.n_modules), dtype=np.int64), stamp=np.zeros(1, dtype=np.int64))
+        """The episode's bookkeeping (:class:`TableLedger`)."""
+        book = self.ledger
+        grounded_legs(world.grid, world.cell, world.mode, world.anchored, book)
+        book.signature[0], book.signature[1] = book.active, book.grounded
 
     def after_cycle(self, world, cycle):
-        p = self.params
-        self._cycle = cycle
-        self._measure(world)
-        active = self._active
-        self._creations += int((active & ~self._was_active).sum())
-        self._disbands += int((~active & self._was_active).sum())
-        self._was_active = active
-        signature = (active, self._grounded)
-        if not all(np.array_equal(a, b) for a, b in zip(signature, self._signature)):
-            self._signature = (active.copy(), self._grounded.copy())
-            self._since = cycle
-        k = self._shift
-        start = max(self._since, p.shift_cycles[k])
-        if self._restabilise[k] < 0 and self._complete() and cycle - start >= p.stable_window:
-            self._restabilise[k] = start - p.shift_cycles[k]
-        if k + 1 < len(p.schedule) and cycle == p.shift_cycles[k + 1]:
-            self._shift = k + 1
-            self._weights = np.array(p.schedule[k + 1][1:], dtype=np.float64)
+        table_after_cycle(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
 
     def _complete(self) -> bool:
-        return bool(np.array_equal(self._active, self._grounded))
+        return bool(np.array_equal(self.ledger.active, self.ledger.grounded))
 
     # ------------------------------------------------------------------ sensors
-    def _region_loads(self) -> np.ndarray:
-        """``(2,)`` the reading of a root in the left and the right region."""
-        n_active = np.array([(self._active & self._left).sum(), (self._active & ~self._left).sum()])
-        cap = self.params.load_cap
-        loads = np.where(n_active > 0, self._weights / np.maximum(n_active, 1),
-                         np.where(self._weights > 0, cap, 0.0))
-        return np.minimum(loads, cap)
-
     def load(self, world):
         out = np.zeros(world.n_agents, dtype=np.float32)
-        left, right = self._region_loads()
-        out[self._roots] = np.where(self._left, left, right)
+        root_loads(self.ledger, out)
         return out
 
     # ------------------------------------------------------------------ reward, metrics, success
     def _legs(self) -> tuple[int, int]:
-        g = self._grounded
-        return int((g & self._left).sum()), int((g & ~self._left).sum())
+        g, left = self.ledger.grounded, self.ledger.left
+        return int((g & left).sum()), int((g & ~left).sum())
 
     def _support(self) -> float:
-        total = self._weights.sum()
+        weights = self.ledger.weights
+        total = weights.sum()
         if total <= 0:
             return 0.0
         legs = np.array(self._legs(), dtype=np.float64)
-        return float(np.minimum(self._weights, self.params.f_max * legs).sum() / total)
+        return float(np.minimum(weights, self.params.f_max * legs).sum() / total)
 
     def reward_terms(self, world, moved):
         return {"support": self._support(), "legs": 0.0 - self.params.leg_cost * sum(self._legs())}
 
     def metrics(self, world):
-        p = self.params
+        p, book = self.params, self.ledger
+        clock, active, left = book.clock, book.active, book.left
         legs_left, legs_right = self._legs()
-        load_left, load_right = self._region_loads()
-        start = max(self._since, p.shift_cycles[self._shift])
-        stable = self._complete() and self._cycle - start >= p.stable_window
-        out = {"weight_left": float(self._weights[0]), "weight_right": float(self._weights[1]),
+        load_left, load_right = region_loads(book)
+        start = max(clock[SINCE], p.shift_cycles[clock[SHIFT]])
+        stable = self._complete() and clock[CYCLE] - start >= p.stable_window
+        out = {"weight_left": float(book.weights[0]), "weight_right": float(book.weights[1]),
                "legs_left": float(legs_left), "legs_right": float(legs_right),
                "grounded_legs": float(legs_left + legs_right),
-               "active_left": float((self._active & self._left).sum()),
-               "active_right": float((self._active & ~self._left).sum()),
+               "active_left": float((active & left).sum()),
+               "active_right": float((active & ~left).sum()),
                "load_left": float(load_left), "load_right": float(load_right),
                "support": self._support(), "stable": float(stable),
-               "leg_creations": float(self._creations), "leg_disbands": float(self._disbands)}
-        for k, value in enumerate(self._restabilise):
+               "leg_creations": float(clock[CREATIONS]), "leg_disbands": float(clock[DISBANDS])}
+        for k, value in enumerate(book.restabilise):
             out[f"restabilise_{k}"] = float(value)
         out["success"] = float(self.success(world))
         return out
 
     def success(self, world):
-        return bool(self._restabilise[-1] >= 0)
+        return bool(self.ledger.restabilise[-1] >= 0)
+
+
+# ---------------------------------------------------------------------- bookkeeping
+class TableLedger(NamedTuple):
+    """The table episode's bookkeeping as the kernels below read and update it (R roots, K
+    schedule entries, N modules); the compiled rollout of the hand-coded behaviour
+    (:mod:`baselines.compiled`) runs the same kernels on a copy.
+
+    Attributes:
+        roots: ``(R,)`` int64 agent index of each root.
+        left: ``(R,)`` bool, the root is in the left region.
+        down_delta: ``(4,)`` int64 grid offsets of the face sites one layer down.
+        shift_cycles: ``(K,)`` int64 cycles at which the schedule's entries start.
+        schedule_weights: ``(K, 2)`` float64 weights (left, right) of each entry.
+        depth, stable_window, load_cap: the task's parameters of those names.
+        active: ``(R,)`` bool, the root is ROOT or AROOT (after the last cycle).
+        grounded: ``(R,)`` bool, the root has a grounded leg (after the last cycle).
+        signature: ``(2, R)`` bool, (active, grounded) since ``clock[SINCE]``.
+        clock: ``(5,)`` int64, indexed by :data:`CYCLE`, :data:`SHIFT`, :data:`SINCE`,
+            :data:`CREATIONS`, :data:`DISBANDS`.
+        weights: ``(2,)`` float64 weights (left, right) now.
+        restabilise: ``(K,)`` float64, cycles to re-stabilise after each shift (-1: not yet).
+        scratch: ``(3, N)`` int64 scratch of :func:`grounded_legs`; ``stamp``: ``(1,)`` int64.
+    """
+
+    roots: np.ndarray
+    left: np.ndarray
+    down_delta: np.ndarray
+    shift_cycles: np.ndarray
+    schedule_weights: np.ndarray
+    depth: int
+    stable_window: int
+    load_cap: float
+    active: np.ndarray
+    grounded: np.ndarray
+    signature: np.ndarray
+    clock: np.ndarray
+    weights: np.ndarray
+    restabilise: np.ndarray
+    scratch: np.ndarray
+    stamp: np.ndarray
+
+    def copy(self) -> TableLedger:
+        """A copy whose arrays are new."""
+        return TableLedger(*(v.copy() if isinstance(v, np.ndarray) else v for v in self))
+
+
+@kernel
+def region_loads(book):
+    """``(2,)`` the load sensor's reading in the left and the right region of
+    :class:`TableLedger` ``book``: the region's weight per active root, ``load_cap`` with weight
+    and no active root, at most ``load_cap``."""
+    loads = np.zeros(2)
+    for region in range(2):
+        n_active = 0
+        for r in range(book.roots.shape[0]):
+            if book.active[r] and book.left[r] == (region == 0):
+                n_active += 1
+        if n_active > 0:
+            loads[region] = min(book.weights[region] / n_active, book.load_cap)
+        elif book.weights[region] > 0:
+            loads[region] = book.load_cap
+    return loads
+
+
+@kernel
+def root_loads(book, out):
+    """Write each root's reading (:func:`region_loads`) into ``out[roots]`` (float32, (A,) or (A, 1))."""
+    loads = region_loads(book)
+    for r in range(book.roots.shape[0]):
+        out[book.roots[r]] = loads[0] if book.left[r] else loads[1]
+
+
+@kernel
+def _leg_module(grid, mode, anchored, site):
+    """The module at ``site`` when it is a leg module (SEED or FINAL, not anchored), else -1."""
+    v = grid[site]
+    if v >= 0 and (mode[v] == SEED or mode[v] == FINAL) and not anchored[v]:
+        return v
+    return -1
+
+
+@kernel
+def grounded_legs(grid, cell, mode, anchored, book):
+    """Write ``book.grounded`` (R,): a chain of SEED or FINAL modules runs from the root down to
+    the floor, one layer per module (``depth`` modules). ``stamp`` is bumped so that
+    ``scratch[2]`` never needs clearing."""
+    roots, down_delta, depth, grounded, stamp = book.roots, book.down_delta, book.depth, book.grounded, book.stamp
+    level, below, seen = book.scratch[0], book.scratch[1], book.scratch[2]
+    for r in range(roots.shape[0]):
+        stamp[0] += 1
+        n_level = 0
+        for d in range(down_delta.shape[0]):
+            v = _leg_module(grid, mode, anchored, cell[roots[r]] + down_delta[d])
+            if v >= 0 and seen[v] != stamp[0]:
+                seen[v] = stamp[0]
+                level[n_level] = v
+                n_level += 1
+        for _ in range(depth - 1):
+            if n_level == 0:
+                break
+            stamp[0] += 1
+            n_below = 0
+            for j in range(n_level):
+                for d in range(down_delta.shape[0]):
+                    v = _leg_module(grid, mode, anchored, cell[level[j]] + down_delta[d])
+                    if v >= 0 and seen[v] != stamp[0]:
+                        seen[v] = stamp[0]
+                        below[n_below] = v
+                        n_below += 1
+            level, below = below, level
+            n_level = n_below
+        grounded[r] = n_level > 0
+
+
+@kernel
+def table_after_cycle(grid, cell, mode, anchored, cycle, book):
+    """Update :class:`TableLedger` ``book`` after ``cycle``: active roots and grounded legs, leg
+    creations and disbands, the signature and the cycle it last changed, ``restabilise`` of the
+    schedule entry in force, and the schedule's next shift."""
+    roots, active, grounded, signature, clock = book.roots, book.active, book.grounded, book.signature, book.clock
+    shift_cycles, restabilise = book.shift_cycles, book.restabilise
+    clock[CYCLE] = cycle
+    changed = False
+    for r in range(roots.shape[0]):
+        now = mode[roots[r]] == ROOT or mode[roots[r]] == AROOT
+        if now and not active[r]:
+            clock[CREATIONS] += 1
+        if active[r] and not now:
+            clock[DISBANDS] += 1
+        active[r] = now
+    grounded_legs(grid, cell, mode, anchored, book)
+    complete = True
+    for r in range(roots.shape[0]):
+        changed |= signature[0, r] != active[r] or signature[1, r] != grounded[r]
+        complete &= active[r] == grounded[r]
+    if changed:
+        signature[0] = active
+        signature[1] = grounded
+        clock[SINCE] = cycle
+    k = clock[SHIFT]
+    start = max(clock[SINCE], shift_cycles[k])
+    if restabilise[k] < 0 and complete and cycle - start >= book.stable_window:
+        restabilise[k] = start - shift_cycles[k]
+    if k + 1 < shift_cycles.shape[0] and cycle == shift_cycles[k + 1]:
+        clock[SHIFT] = k + 1
+        book.weights[:] = book.schedule_weights[k + 1]

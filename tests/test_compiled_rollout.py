@@ -1,7 +1,7 @@
-"""The chain and branch behaviours inside compiled code (``baselines.compiled``) against the
-observation-based policies driven through the environment: same trajectory cycle for cycle, same
-cycles to success, same draws from the policy's generator; also with the kernels run as plain
-Python."""
+"""The chain, branch and table behaviours inside compiled code (``baselines.compiled``) against
+the observation-based policies driven through the environment: same trajectory cycle for cycle,
+same cycles to success, same draws from the policy's generator; also with the kernels run as
+plain Python."""
 
 from __future__ import annotations
 
@@ -15,9 +15,14 @@ import proteo_env
 from baselines.branch import BranchPolicy
 from baselines.chain import ChainPolicy
 from baselines.compiled import CompiledRollout, compiled_rollout
+from baselines.table import TablePolicy
 from conftest import run_without_jit
+from proteo_env.tasks.table import FINAL as LEG_FINAL
 
 LIMIT = 400
+SMALL_TABLE = dict(board_size=12, depth=3, n_spares=40, schedule=[[0, 8.0, 2.0], [150, 2.0, 8.0]], stable_window=30,
+                   motion_model="minimal", max_cycles=800)
+"""A table that grows legs, moves them after one weight shift and settles in about 240 cycles."""
 
 
 def drive(env, policy, limit, *, use_dicts=False):
@@ -98,6 +103,47 @@ def test_same_branch_trajectory_with_other_parameters(task, params):
     assert_same_trajectory(result, positions, modes, success, policy.rng)
 
 
+def test_compiled_table_is_the_observation_based_policy():
+    for seed in range(3):
+        env = proteo_env.make("table-v0", **SMALL_TABLE)
+        env.reset(seed=seed)
+        result = compiled_rollout(env, TablePolicy.for_env(env, seed=seed), record_every=1)
+        policy = TablePolicy.for_env(env, seed=seed)
+        positions, modes, success = drive(env, policy, SMALL_TABLE["max_cycles"])
+        assert success, f"seed={seed}: the table did not settle after the shift"
+        assert_same_trajectory(result, positions, modes, success, policy.rng)
+        assert (result.modes == LEG_FINAL).sum() >= env.task.params.depth - 1  # legs stand
+
+
+def test_same_table_trajectory_with_other_rule_parameters():
+    params = {"p_random": 0.3, "p_max": 1.0, "p_min": 1.0, "f_max": 1.5, "f_min": 0.7}
+    env = proteo_env.make("table-v0", **SMALL_TABLE)
+    env.reset(seed=6)
+    result = compiled_rollout(env, TablePolicy.for_env(env, seed=6, **params), max_cycles=200, record_every=1)
+    policy = TablePolicy.for_env(env, seed=6, **params)
+    positions, modes, success = drive(env, policy, 200)
+    assert_same_trajectory(result, positions, modes, success, policy.rng)
+
+
+def test_table_rollout_continues_after_a_weight_shift():
+    """From mid-episode (past the shift, legs and memory in place) the rollout continues the
+    env's bookkeeping: same trajectory, same cycle of success; the env's task is untouched."""
+    env = proteo_env.make("table-v0", **SMALL_TABLE)
+    env.reset(seed=1)
+    policy = TablePolicy.for_env(env, seed=1)
+    drive(env, policy, 160, use_dicts=True)
+    ledger = env.task.ledger.copy()
+    result = compiled_rollout(env, policy, record_every=1)
+    for before, after in zip(ledger, env.task.ledger):
+        np.testing.assert_array_equal(before, after)
+    positions, modes, success = drive(env, policy, SMALL_TABLE["max_cycles"], use_dicts=True)
+    assert success and result.success
+    assert result.cycles == 160 + len(positions) == env.cycle
+    np.testing.assert_array_equal(result.recorded_positions, positions)
+    np.testing.assert_array_equal(result.recorded_modes, modes)
+    assert result.rng.bit_generator.state == policy.rng.bit_generator.state
+
+
 @pytest.mark.parametrize("use_dicts", [False, True])
 def test_rollout_continues_a_started_episode(use_dicts):
     """The rollout starts from the env's state and the policy's memory, whichever way it was keyed."""
@@ -159,7 +205,7 @@ def test_bad_inputs_are_refused():
         compiled_rollout(env, policy, max_cycles=-1)
     with pytest.raises(ValueError, match="record_every=1.5 is not allowed"):
         compiled_rollout(env, policy, record_every=1.5)
-    allowed = "allowed: ChainPolicy on chain-v0, BranchPolicy on branch-v0"
+    allowed = "allowed: ChainPolicy on chain-v0, BranchPolicy on branch-v0, TablePolicy on table-v0"
     with pytest.raises(ValueError, match=f"policy=BranchPolicy on task='chain' is not allowed; {allowed}"):
         compiled_rollout(env, BranchPolicy.for_env(env, seed=0))
     sandbox = proteo_env.make("sandbox-v0", n_modules=8)
@@ -172,12 +218,16 @@ def test_bad_inputs_are_refused():
 
 # ------------------------------------------------------------------ kernels as plain Python
 def fingerprint() -> str:
-    """Hash of short compiled rollouts of a small chain and a small branching tree."""
+    """Hash of short compiled rollouts of a small chain, a small branching tree and a small table."""
     digest = hashlib.sha256()
-    for task, policy_cls, extra in (("chain-v0", ChainPolicy, {}), ("branch-v0", BranchPolicy, {"T": 3, "B": 2})):
-        env = proteo_env.make(task, n_modules=12, motion_model="sphere", max_cycles=25, **extra)
+    small = {"n_modules": 12, "motion_model": "sphere", "max_cycles": 25}
+    for task, policy_cls, extra, params in (
+            ("chain-v0", ChainPolicy, small, {"queue": True}),
+            ("branch-v0", BranchPolicy, {**small, "T": 3, "B": 2}, {"queue": True}),
+            ("table-v0", TablePolicy, {**SMALL_TABLE, "max_cycles": 40}, {"p_max": 0.5})):
+        env = proteo_env.make(task, **extra)
         env.reset(seed=3)
-        result = compiled_rollout(env, policy_cls.for_env(env, seed=3, queue=True), record_every=1)
+        result = compiled_rollout(env, policy_cls.for_env(env, seed=3, **params), record_every=1)
         digest.update(result.recorded_positions.tobytes() + result.recorded_modes.tobytes())
         digest.update(repr(result.rng.bit_generator.state).encode())
     return digest.hexdigest()
@@ -194,6 +244,6 @@ def nojit_child() -> None:
 
 
 def test_kernels_as_plain_python_give_the_same_rollout():
-    result = run_without_jit("test_chain_kernel", "nojit_child")
+    result = run_without_jit("test_compiled_rollout", "nojit_child")
     assert result.returncode == 0, result.stdout + result.stderr
     assert f"FINGERPRINT {fingerprint()}" in result.stdout
