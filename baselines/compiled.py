@@ -1,13 +1,15 @@
-"""Whole rollouts of the hand-coded chain, branch and table behaviours inside compiled code.
+"""Whole rollouts of the paper's hand-coded behaviours (chain, branch, table, grasp) inside compiled code.
 
 :class:`CompiledRollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
 runs in Python, cycle after cycle, as one numba kernel: the engine's observation kernel, the
 behaviour's rule (:func:`baselines.kernels.chain_actions`,
-:func:`baselines.kernels.branch_actions` or :func:`baselines.table_kernels.table_actions`, the
-same code :class:`~baselines.chain.ChainPolicy`, :class:`~baselines.branch.BranchPolicy` and
-:class:`~baselines.table.TablePolicy` run), the engine's cycle kernel and the task's
-bookkeeping and success test (for the table, the task's own kernels: the load sensor before
-the observation, :func:`~proteo_env.tasks.table.table_after_cycle` after the cycle). Same environment state, policy parameters, generator state and memory give the
+:func:`baselines.kernels.branch_actions`, :func:`baselines.table_kernels.table_actions` or
+:func:`baselines.grasp_kernels.grasp_actions`, the same code :class:`~baselines.chain.ChainPolicy`,
+:class:`~baselines.branch.BranchPolicy`, :class:`~baselines.table.TablePolicy` and
+:class:`~baselines.grasp.GraspPolicy` run), the engine's cycle kernel and the task's
+bookkeeping and success test (for the table and the grasp, the task's own kernels: the load
+sensor before the observation and :func:`~proteo_env.tasks.table.table_after_cycle` after the
+cycle; :func:`~proteo_env.tasks.grasp.grasp_hold`). Same environment state, policy parameters, generator state and memory give the
 same trajectory as the Python loop, cycle for cycle (``tests/test_compiled_rollout.py``).
 
 Example::
@@ -33,17 +35,21 @@ from proteo_env.core.world import LOCAL_ADJACENCY_BITS, Scratch
 from proteo_env.env import ProteoEnv
 from proteo_env.spaces import ObservationBuffers
 from proteo_env.tasks.branch import measure_tree
+from proteo_env.tasks.grasp import GraspSurface, grasp_hold
 from proteo_env.tasks.table import TableLedger, root_loads, table_after_cycle
 
 from .branch import BranchMemory, BranchPolicy
 from .chain import ChainPolicy
+from .grasp import GraspMemory, GraspPolicy
+from .grasp_kernels import GraspRules, grasp_actions
 from .kernels import INODE, NODE, BranchRules, branch_actions, chain_actions
 from .table import TableMemory, TablePolicy
 from .table_kernels import TableRules, table_actions
 
-CHAIN, BRANCH, TABLE = 0, 1, 2
+CHAIN, BRANCH, TABLE, GRASP = 0, 1, 2, 3
 """The behaviours a rollout runs (the task and policy pairs of :data:`BEHAVIOURS`)."""
-BEHAVIOURS = {("chain", ChainPolicy): CHAIN, ("branch", BranchPolicy): BRANCH, ("table", TablePolicy): TABLE}
+BEHAVIOURS = {("chain", ChainPolicy): CHAIN, ("branch", BranchPolicy): BRANCH, ("table", TablePolicy): TABLE,
+              ("grasp", GraspPolicy): GRASP}
 """``(task name, policy class)`` of each behaviour."""
 TEST_SCRATCH = 9
 """(N,) scratch arrays of the success tests (:func:`measure_tree` takes 9)."""
@@ -121,19 +127,21 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
                     keep_connected, exact, sweeps, scent_max, nb_delta, dir_delta, roll_delta, local_delta, sweep_bits,
                     pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer, is_cut, disc, low, stack_node,
                     stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
-                    load, action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
-                    spot_waited, refused, spot, parent, child, rules, branch, table, rng, first_node, min_gap,
-                    target_levels, ledger, start_cycle, max_cycles, record_every, recorded_cycles, recorded_cell,
-                    recorded_mode, test_scratch):
+                    load, hint, action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
+                    spot_waited, refused, spot, parent, child, seed_growth, waited, stuck, age, previous, rules,
+                    branch, table, grasp, rng, first_node, min_gap, target_levels, ledger, object_surface, start_cycle,
+                    max_cycles, record_every, recorded_cycles, recorded_cell, recorded_mode, test_scratch):
     """Run up to ``max_cycles`` cycles of observe, decide (``behaviour``: :data:`CHAIN`,
-    :data:`BRANCH` or :data:`TABLE`), step, test; return ``(cycles, success, recorded)``.
-    Arrays as in :class:`~proteo_env.core.world.World`, its scratch,
-    :class:`~proteo_env.spaces.ObservationBuffers`, :class:`~baselines.branch.BranchMemory`
-    (``heading`` .. ``refused``) and :class:`~baselines.table.TableMemory` (``spot``, ``parent``,
-    ``child``); ``rules``, ``branch``, ``table``: the rule parameters; ``ledger``: the table
-    task's :class:`~proteo_env.tasks.table.TableLedger`, ``start_cycle`` the env's cycle
-    before the first (what a behaviour does not use is a placeholder); ``recorded_*`` (R, ...)
-    are filled in order."""
+    :data:`BRANCH`, :data:`TABLE` or :data:`GRASP`), step, test; return ``(cycles, success,
+    recorded)``. Arrays as in :class:`~proteo_env.core.world.World`, its scratch,
+    :class:`~proteo_env.spaces.ObservationBuffers` (``hint`` filled), :class:`~baselines.branch.BranchMemory`
+    (``heading`` .. ``refused``), :class:`~baselines.table.TableMemory` (``spot``, ``parent``,
+    ``child``) and :class:`~baselines.grasp.GraspMemory` (``seed_growth`` is its ``growth``,
+    .. ``previous``); ``rules``, ``branch``, ``table``, ``grasp``: the rule parameters;
+    ``ledger``: the table task's :class:`~proteo_env.tasks.table.TableLedger`, ``object_surface`` the
+    grasp task's :class:`~proteo_env.tasks.grasp.GraspSurface`, ``start_cycle`` the env's
+    cycle before the first (what a behaviour does not use is a placeholder); ``recorded_*``
+    (R, ...) are filled in order."""
     n_modules = cell.shape[0]
     n_channels = scent.shape[0]
     actions = np.empty((n_agents, 4 + n_channels), dtype=np.int64)
@@ -156,6 +164,10 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
             root_loads(ledger, load[:, 0])
             table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
                           action_mask, contact, load, slots, spot, parent, child, table, rng, actions)
+        elif behaviour == GRASP:
+            grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
+                          action_mask, contact, hint, slots, seed_growth, waited, stuck, age, previous, grasp, rng,
+                          actions)
         else:
             branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent,
                            action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
@@ -176,6 +188,8 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
         elif behaviour == TABLE:
             table_after_cycle(grid, cell, mode, anchored, start_cycle + cycle, ledger)
             success = ledger.restabilise[-1] >= 0
+        elif behaviour == GRASP:
+            success = grasp_hold(grid, object_surface)[3]
         else:
             success = is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap, target_levels,
                                        test_scratch)
@@ -201,6 +215,13 @@ def _placeholder_ledger() -> TableLedger:
                        stamp=np.zeros(1, dtype=np.int64))
 
 
+def _placeholder_surface() -> GraspSurface:
+    """A :class:`~proteo_env.tasks.grasp.GraspSurface` of the right types for the behaviours
+    that grasp nothing (never read)."""
+    none = np.zeros(0, dtype=np.int64)
+    return GraspSurface(cell=none, side=none, n_sides=0, coverage_threshold=0.0, surround_threshold=0.0)
+
+
 def _memory_copy(memory_type, rows, n_slots):
     """A ``memory_type`` of ``n_slots`` empty slots holding the fields of ``rows`` it shares."""
     memory = memory_type()
@@ -222,11 +243,13 @@ class CompiledRollout:
     bookkeeping, of the policy's generator and of its memory.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of the chain, branch or table task.
+        env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of the chain, branch, table or
+            grasp task.
         policy: the task's hand-coded policy built for ``env``, exactly a
             :class:`~baselines.chain.ChainPolicy` (chain), a :class:`~baselines.branch.BranchPolicy`
-            (branch) or a :class:`~baselines.table.TablePolicy` (table); its parameters,
-            generator state and memory are read.
+            (branch), a :class:`~baselines.table.TablePolicy` (table) or a
+            :class:`~baselines.grasp.GraspPolicy` (grasp); its parameters, generator state and
+            memory are read.
 
     Attributes:
         cycle: the cycle count reached, counted like ``env.cycle`` (starts at the env's).
@@ -248,10 +271,13 @@ class CompiledRollout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
         scent_max = int(world.physics.scent_max)
-        self.rules = policy.rules if self.behaviour != TABLE else ChainPolicy(policy.layout, policy.modes,
-                                                                              scent_max=scent_max).rules
+        chained = self.behaviour in (CHAIN, BRANCH)
+        self.rules = policy.rules if chained else ChainPolicy(policy.layout, policy.modes, scent_max=scent_max).rules
         self.table = policy.rules if self.behaviour == TABLE else TableRules(scent_max, 0.0, 0.0, 0.0, 0.0, 0.0)
         self.ledger = env.task.ledger.copy() if self.behaviour == TABLE else _placeholder_ledger()
+        self.grasp = policy.rules if self.behaviour == GRASP else GraspRules(scent_max, 0.0, False, 1, False, False,
+                                                                             False, 1, False, 1, -1, False, False)
+        self.surface = env.task.surface if self.behaviour == GRASP else _placeholder_surface()
         if self.behaviour == BRANCH:
             p = env.task.params
             self.branch = policy.branch_rules
@@ -264,11 +290,13 @@ class CompiledRollout:
         rows = policy.memory_rows(env.possible_agents)
         self.memory = _memory_copy(BranchMemory, rows, world.n_agents)
         self.table_memory = _memory_copy(TableMemory, rows, world.n_agents)
+        self.grasp_memory = _memory_copy(GraspMemory, rows, world.n_agents)  # each behaviour reads its own
         self.state = {name: getattr(world, name).copy() for name in ("grid", "cell", "mode", "scent", "inbox",
                                                                         "rng_state")}
         n = world.n_modules
         self.scratch = Scratch(n)
         self.observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
+        self.observation.hint[:] = env.task.hint(world)
         self.test_scratch = np.zeros((TEST_SCRATCH, n), dtype=np.int64)
         self.cycle = env.cycle
         self.success = False
@@ -284,6 +312,7 @@ class CompiledRollout:
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 0")
         w, st, s, obs, m, t = self.world, self.state, self.scratch, self.observation, self.memory, self.table_memory
+        g = self.grasp_memory
         n = w.n_modules
         capacity = max_cycles // record_every + 1 if record_every else 0
         recorded_cycles = np.zeros(capacity, dtype=np.int64)
@@ -298,10 +327,11 @@ class CompiledRollout:
                 int(p.scent_max), w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.sweep_bits,
                 w.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer, s.is_cut, s.disc,
                 s.low, s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent,
-                obs.own_mode, obs.own_scent, obs.messages, obs.contact, obs.load, obs.action_mask,
+                obs.own_mode, obs.own_scent, obs.messages, obs.contact, obs.load, obs.hint, obs.action_mask,
                 np.arange(w.n_agents, dtype=np.int64), m.heading, m.growth, m.asked, m.spawned, m.spot_direction,
-                m.spot_announced, m.spot_waited, m.refused, t.spot, t.parent, t.child, self.rules, self.branch,
-                self.table, self.rng, self.first_node, self.min_gap, self.target_levels, self.ledger, int(self.cycle),
+                m.spot_announced, m.spot_waited, m.refused, t.spot, t.parent, t.child, g.growth, g.waited, g.stuck,
+                g.age, g.previous, self.rules, self.branch, self.table, self.grasp, self.rng, self.first_node,
+                self.min_gap, self.target_levels, self.ledger, self.surface, int(self.cycle),
                 int(max_cycles), int(record_every), recorded_cycles, recorded_cell, recorded_mode, self.test_scratch)
         recorded_cycles[:recorded] += self.cycle
         self.cycle += int(ran)
@@ -321,9 +351,10 @@ def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every
     changes.
 
     Args:
-        env: a :class:`~proteo_env.env.ProteoEnv` of the chain, branch or table task, after ``reset``.
+        env: a :class:`~proteo_env.env.ProteoEnv` of the chain, branch, table or grasp task, after ``reset``.
         policy: a :class:`~baselines.chain.ChainPolicy` (chain), :class:`~baselines.branch.BranchPolicy`
-            (branch) or :class:`~baselines.table.TablePolicy` (table) built for ``env``.
+            (branch), :class:`~baselines.table.TablePolicy` (table) or :class:`~baselines.grasp.GraspPolicy`
+            (grasp) built for ``env``.
         max_cycles: cycles to run at most (default: the env's cycles left, ``max_cycles - cycle``).
         record_every: record positions and modes after every ``record_every``-th cycle and at
             success (0: only the final state).

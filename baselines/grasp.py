@@ -78,34 +78,40 @@ seed thus wanders through the TOUCH patch to its rim, where growth can go on.
 scent, so once the object is reached ("seeds transfer to the TOUCHSEED state", paper) the
 searchers go to the grasp rather than to fingers that missed.
 
-The policy decides for all agents of a cycle at once (the SLEEP, FINAL, TOUCH and climbing
-SEARCH modules as arrays, the few modules next to a seed one by one); every decision reads
-only that agent's own observation and private memory.
+The rules run as the numba kernel :func:`baselines.grasp_kernels.grasp_actions` on the
+observation fields stacked over modules; every decision reads only that agent's own
+observation and private memory (:class:`GraspMemory`, one row per module).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
-from proteo_env.core.world import DIRECTION_ADJACENCY
-from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, MESSAGE_TO_ALL, RELAY, SILENT
+from .base import KernelPolicy, SlotMemory, stacked_fields
+from .grasp_kernels import (FINAL, PASS_SEED, SEARCH, SEED, SET_FINAL, SET_TOUCH, SLEEP, TOUCH, TOUCHSEED,
+                            GraspRules, grasp_actions)
 
-from .base import Policy
-from .primitives import face_index
-
-SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
-
-SET_FINAL = 13
-"""Message value: "go FINAL" (the searcher that takes over to the SEED it replaces)."""
-SET_TOUCH = 14
-"""Message value: "go TOUCH" (a searcher touching the object to the SEED or TOUCHSEED it replaces)."""
-PASS_SEED = 15
-"""Message value: "become TOUCHSEED" (a stuck TOUCHSEED to a TOUCH neighbour; ``relocate`` only)."""
-# values 1..12: a SEED's broadcast "my growth site is DIRECTIONS[value - 1]"
+OBSERVED = ("own_mode", "messages", "neighbour_kind", "neighbour_mode", "neighbour_scent", "own_scent", "action_mask",
+            "contact", "hint")
+"""The observation fields :func:`~baselines.grasp_kernels.grasp_actions` reads, in its argument order."""
 
 
-class GraspPolicy(Policy):
+class GraspMemory(SlotMemory):
+    """The grasp rule's private memory of every module, one entry per memory slot.
+
+    Attributes (S slots, int64):
+        growth: a SEED's growth direction (-1: none).
+        waited: cycles a SEED or TOUCHSEED has waited for a hand-over.
+        stuck: cycles in a row a SEED has had no growth site.
+        age: cycles since the module became SEED.
+        previous: the step that made a SEED (the direction it grew the finger; -1: none).
+    """
+
+    FIELDS = {"growth": (np.int64, -1), "waited": (np.int64, 0), "stuck": (np.int64, 0), "age": (np.int64, 0),
+              "previous": (np.int64, -1)}
+
+
+class GraspPolicy(KernelPolicy):
     """Hand-coded grasping (rules and how they are carried out in the module docstring).
 
     Args:
@@ -162,255 +168,30 @@ class GraspPolicy(Policy):
         self.prefer_touch = prefer_touch
         self.straight = straight
         self.wrap_forward = wrap_forward
-        self.growth: dict[str, int] = {}
-        """Private memory of each SEED: its growth direction."""
-        self.waited: dict[str, int] = {}
-        """Private memory of each SEED and TOUCHSEED: cycles waited for a hand-over."""
-        self.stuck: dict[str, int] = {}
-        """Private memory of each SEED: cycles in a row without a growth site."""
-        self.age: dict[str, int] = {}
-        """Private memory of each SEED: cycles since it became SEED."""
-        self.previous: dict[str, int] = {}
-        """Private memory of each SEED: the step that made it (the direction it grew the finger)."""
+        if layout.n_channels != 2:
+            raise ValueError(f"layout with n_channels={layout.n_channels} is not allowed; allowed: 2 (the grasp "
+                             "task's seed and touch scents)")
+        self.memory = GraspMemory()
+        """Private memory of every module (see :class:`GraspMemory`)."""
 
-        channels = layout.n_channels
-        self._relay = [RELAY] * channels
-        self._emit_seed = [EMIT] + [RELAY] * (channels - 1)
-        self._emit_touch = [EMIT] * channels
-        self._touch_channel = 1 if channels > 1 and prefer_touch else -1
+    @property
+    def rules(self) -> GraspRules:
+        """The parameters as :func:`~baselines.grasp_kernels.grasp_actions` reads them."""
+        return GraspRules(scent_max=int(self.scent_max), p_random=float(self.p_random),
+                          random_on_flat=self.on_flat == "random", patience=int(self.patience),
+                          touch_first=bool(self.touch_first), greedy_approach=bool(self.greedy_approach),
+                          relocate=bool(self.relocate), touch_patience=int(self.touch_patience),
+                          retire=bool(self.retire), retire_after=int(self.retire_after),
+                          touch_channel=1 if self.prefer_touch else -1, straight=bool(self.straight),
+                          wrap_forward=bool(self.wrap_forward))
 
-    def reset(self, seed=None):
-        super().reset(seed)
-        self.growth.clear()
-        self.waited.clear()
-        self.stuck.clear()
-        self.previous.clear()
-        self.age.clear()
+    def _act(self, slots, field) -> np.ndarray:
+        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
+        m = self.memory
+        grasp_actions(*stacked_fields(field, OBSERVED), slots, m.growth, m.waited, m.stuck, m.age, m.previous,
+                      self.rules, self.rng, actions)
+        return actions
 
-    # ------------------------------------------------------------------ all agents
-    def act(self, observations):
-        agents = list(observations)
-        if not agents:
-            return {}
-        obs = [observations[a] for a in agents]
-        lay = self.layout
-        mode = np.array([o["own_mode"][0] for o in obs], dtype=np.int64)
-        actions = np.zeros((len(agents), lay.length), dtype=np.int64)
-        actions[:, lay.mode] = mode
-        actions[:, lay.roles] = RELAY
 
-        sleeping = np.flatnonzero(mode == SLEEP)
-        if sleeping.size:
-            smax = self.scent_max
-            detected = np.array([o["neighbour_scent"][:12, 0].min() < smax for o in (obs[i] for i in sleeping)])
-            actions[sleeping, lay.mode] = np.where(detected, SEARCH, SLEEP)
-            actions[sleeping, lay.roles] = np.where(detected, RELAY, SILENT)[:, None]
-
-        searching = np.flatnonzero(mode == SEARCH)
-        if searching.size:
-            self._search(agents, obs, searching, actions)
-        for i in np.flatnonzero(mode == SEED):
-            actions[i] = self._seed(agents[i], obs[i])
-        for i in np.flatnonzero(mode == TOUCHSEED):
-            actions[i] = self._touch_seed(agents[i], obs[i])
-        if self.relocate:
-            for i in np.flatnonzero(mode == TOUCH):
-                if (obs[i]["messages"] == PASS_SEED).any():
-                    self.waited[agents[i]] = 0
-                    actions[i, lay.mode] = TOUCHSEED
-                    actions[i, lay.roles] = self._emit_touch
-        return dict(zip(agents, actions))
-
-    # ------------------------------------------------------------------ SEARCH
-    def _search(self, agents, obs, idx, actions) -> None:
-        lay = self.layout
-        nb_mode = np.array([obs[i]["neighbour_mode"][:12] for i in idx])
-        is_seed = (nb_mode == SEED) | (nb_mode == TOUCHSEED)
-        near_seed = is_seed.any(axis=1)
-        climbers = idx[~near_seed]
-        if climbers.size:
-            actions[climbers, lay.move] = self._climb([obs[i] for i in climbers])
-        for row in np.flatnonzero(near_seed):
-            i = idx[row]
-            o = obs[i]
-            seeds = np.flatnonzero(is_seed[row])
-            if o["contact"][1]:
-                actions[i] = lay.encode(mode=TOUCHSEED, roles=self._emit_touch, message_target=int(seeds[0]),
-                                        message_value=SET_TOUCH)
-                continue
-            plain = seeds[nb_mode[row, seeds] == SEED]
-            if plain.size:
-                actions[i] = self._near_seed(agents[i], o, plain)
-            else:
-                actions[i, lay.move] = self._around(o, int(seeds[0]))
-
-    def _climb(self, obs: list) -> np.ndarray:
-        """``(S,)`` gradient moves of the climbing searchers (module docstring)."""
-        smax = self.scent_max
-        mask = np.array([o["action_mask"][1:] for o in obs], dtype=bool)
-        kind = np.array([o["neighbour_kind"][:12] for o in obs])
-        scent = np.array([o["neighbour_scent"][:12, 0] for o in obs], dtype=np.int64)
-        if self._touch_channel >= 0:  # follow the touch scent wherever it is smelt
-            touch = np.array([o["neighbour_scent"][:12, self._touch_channel] for o in obs], dtype=np.int64)
-            smelt = (np.where(kind == KIND_MODULE, touch, smax) < smax).any(axis=1)
-            scent[smelt] = touch[smelt]
-        scent[kind != KIND_MODULE] = smax
-        here = scent.min(axis=1)
-        there = scent[:, DIRECTION_ADJACENCY].min(axis=2)
-        there[~mask] = np.iinfo(np.int64).max
-        best = there.min(axis=1)
-        keeps = (best <= here) & (best < smax)
-        pool = (there == best[:, None]) & mask & keeps[:, None]
-        rng = self.rng
-        if self.on_flat == "random":
-            stuck = ~keeps & mask.any(axis=1)
-            pool[stuck] = mask[stuck]
-        jump = rng.random(len(obs)) < self.p_random
-        pool[jump] = mask[jump]
-        keys = rng.random(pool.shape)
-        keys[~pool] = -1.0
-        return np.where(pool.any(axis=1), keys.argmax(axis=1) + 1, 0)
-
-    def _near_seed(self, agent: str, o, plain: np.ndarray) -> np.ndarray:
-        """Next to a SEED (not touching the object): take over at its growth site or go there."""
-        lay = self.layout
-        msgs = o["messages"]
-        for slot in plain:
-            slot = int(slot)
-            value = int(msgs[slot])
-            if not 1 <= value <= 12:
-                continue
-            growth = value - 1
-            if OPPOSITE[growth] == slot:  # this is the seed's growth site
-                self.previous[agent] = growth
-                return lay.encode(mode=SEED, roles=self._emit_seed, message_target=slot, message_value=SET_FINAL)
-            return lay.encode(move=self._approach(o, slot, growth), mode=SEARCH, roles=self._relay)
-        return lay.encode(mode=SEARCH, roles=self._relay)  # growth not heard from here yet: hold still
-
-    def _approach(self, o, slot: int, growth: int) -> int:
-        """A roll towards the growth site ``seed + DIRECTIONS[growth]`` of the seed at ``slot``.
-
-        If the site is a neighbour site and the roll there is legal, take it; otherwise roll
-        over the seed's faces (rolls that keep the seed as a neighbour), with
-        ``greedy_approach`` among those that end nearest the site, else at random; 0 if none.
-        """
-        spot = DIRECTIONS[slot] + DIRECTIONS[growth]
-        mask = o["action_mask"]
-        k = face_index(spot)
-        if k >= 0 and mask[k + 1]:
-            return k + 1
-        legal = np.flatnonzero(mask[1:])
-        legal = legal[(DIRECTION_ADJACENCY[legal] == slot).any(axis=1)]
-        if legal.size == 0:
-            return 0
-        if self.greedy_approach:
-            dist = ((spot[None, :] - DIRECTIONS[legal]) ** 2).sum(axis=1)
-            legal = legal[dist == dist.min()]
-        return int(legal[self.rng.integers(legal.size)]) + 1
-
-    def _around(self, o, slot: int) -> int:
-        """The paper's "random move" next to the TOUCHSEED at ``slot`` (module docstring)."""
-        legal = np.flatnonzero(o["action_mask"][1:])
-        if legal.size == 0:
-            return 0
-        keep = legal[(DIRECTION_ADJACENCY[legal] == slot).any(axis=1)]
-        if keep.size and self.touch_first:
-            kinds = o["neighbour_kind"][:12]
-            touching = keep[(kinds[DIRECTION_ADJACENCY[keep]] == KIND_OBJECT).any(axis=1)]
-            if touching.size:
-                keep = touching
-        if keep.size > 1 and self.wrap_forward:
-            ahead = keep[DIRECTIONS[keep] @ o["hint"] > 0]
-            if ahead.size:
-                keep = ahead
-        pool = keep if keep.size else legal
-        return int(pool[self.rng.integers(pool.size)]) + 1
-
-    # ------------------------------------------------------------------ seeds
-    def _seed(self, agent: str, o) -> np.ndarray:
-        lay = self.layout
-        msgs = o["messages"]
-        if (msgs == SET_TOUCH).any():
-            self._forget(agent)
-            return lay.encode(mode=TOUCH, roles=self._relay)
-        if (msgs == SET_FINAL).any():
-            self._forget(agent)
-            return lay.encode(mode=FINAL, roles=self._relay)
-        growth = self.growth.get(agent, -1)
-        waited = self.waited.get(agent, 0) + 1
-        avoid = -1
-        if growth >= 0:
-            kind = o["neighbour_kind"][growth]
-            taken = kind != KIND_EMPTY and not (kind == KIND_MODULE and o["neighbour_mode"][growth] in (SLEEP, SEARCH))
-            if taken or waited > self.patience:
-                avoid = growth if not taken else -1
-                growth = -1
-        if growth < 0:
-            growth = self._growth_direction(o, self.previous.get(agent, -1) if avoid < 0 else -1, avoid)
-            waited = 0
-        age = self.age.get(agent, 0) + 1
-        self.age[agent] = age
-        stuck = self.stuck.get(agent, 0) + 1 if growth < 0 else 0
-        self.stuck[agent] = stuck
-        if self.retire and not o["contact"][1] and (stuck > self.patience or age > self.retire_after):
-            self._forget(agent)
-            return lay.encode(mode=FINAL, roles=self._relay)
-        if growth < 0:  # nowhere to grow (yet)
-            self.growth.pop(agent, None)
-            return lay.encode(mode=SEED, roles=self._emit_seed)
-        self.growth[agent] = growth
-        self.waited[agent] = waited
-        return lay.encode(mode=SEED, roles=self._emit_seed, message_target=MESSAGE_TO_ALL, message_value=growth + 1)
-
-    def _growth_direction(self, o, previous: int, avoid: int) -> int:
-        """The growth site of a seed (module docstring), or -1 when there is none.
-
-        Candidates are the empty neighbour sites whose direction has a positive dot product
-        with the hint (``avoid`` excluded while there are others). With ``straight`` and the
-        finger's previous step known, the site that makes the last two steps point most
-        nearly along the hint (ties at random); otherwise one drawn with probability
-        proportional to the dot product.
-        """
-        hint = o["hint"].astype(np.float64)
-        dots = DIRECTIONS @ hint
-        cand = np.flatnonzero((o["neighbour_kind"][:12] == KIND_EMPTY) & (dots > 1e-9))
-        if cand.size > 1 and avoid >= 0:
-            cand = cand[cand != avoid]
-        if cand.size == 0:
-            return -1
-        if self.straight and previous >= 0:
-            two = DIRECTIONS[cand] + DIRECTIONS[previous]
-            cos = (two @ hint) / np.maximum(np.linalg.norm(two, axis=1), 1e-12)
-            cand = cand[cos >= cos.max() - 1e-9]
-            return int(cand[self.rng.integers(cand.size)])
-        w = dots[cand]
-        return int(cand[self.rng.choice(cand.size, p=w / w.sum())])
-
-    def _touch_seed(self, agent: str, o) -> np.ndarray:
-        lay = self.layout
-        if (o["messages"] == SET_TOUCH).any():
-            self._forget(agent)
-            return lay.encode(mode=TOUCH, roles=self._relay)
-        if self.relocate:
-            waited = self.waited.get(agent, 0) + 1
-            self.waited[agent] = waited
-            kinds = o["neighbour_kind"][:12]
-            empty = np.flatnonzero(kinds == KIND_EMPTY)
-            open_site = bool((kinds[DIRECTION_ADJACENCY[empty]] == KIND_OBJECT).any()) if empty.size else False
-            touch = np.flatnonzero(o["neighbour_mode"][:12] == TOUCH)
-            if touch.size and (not open_site or waited > self.touch_patience):
-                self._forget(agent)
-                if touch.size > 1 and self.wrap_forward:
-                    ahead = touch[DIRECTIONS[touch] @ o["hint"] > 0]
-                    if ahead.size:
-                        touch = ahead
-                slot = int(touch[self.rng.integers(touch.size)])
-                return lay.encode(mode=TOUCH, roles=self._relay, message_target=slot, message_value=PASS_SEED)
-        return lay.encode(mode=TOUCHSEED, roles=self._emit_touch)
-
-    def _forget(self, agent: str) -> None:
-        self.growth.pop(agent, None)
-        self.waited.pop(agent, None)
-        self.stuck.pop(agent, None)
-        self.previous.pop(agent, None)
-        self.age.pop(agent, None)
+__all__ = ["FINAL", "PASS_SEED", "SEARCH", "SEED", "SET_FINAL", "SET_TOUCH", "SLEEP", "TOUCH", "TOUCHSEED",
+           "GraspMemory", "GraspPolicy"]

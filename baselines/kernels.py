@@ -302,6 +302,36 @@ def seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, rules, rng, ac
 
 # ---------------------------------------------------------------- SEARCH
 @kernel
+def approach_spot(action_mask, i, slot, growth, greedy, rng):
+    """A roll of row ``i`` towards the growth spot ``DIRECTIONS[slot] + DIRECTIONS[growth]`` of
+    the seed at ``slot``: straight in when it is a face site and the roll is legal, else over
+    the seed's faces (with ``greedy`` only to the sites nearest the spot), a uniform pick
+    (:func:`uniform_pick`); 0 when there or stuck."""
+    if growth == OPPOSITE[slot]:
+        return 0
+    legal = legal_bits(action_mask, i)
+    k = SPOT_FACE[slot, growth]
+    if k >= 0 and (legal >> k) & 1:
+        return k + 1
+    pool = legal & AROUND_BITS[slot]
+    if pool == 0:
+        return 0
+    if greedy:
+        nearest, pool_nearest = _FAR, 0
+        for j in range(12):
+            if (pool >> j) & 1:
+                d = 0
+                for axis in range(3):
+                    d += (DIRECTIONS[slot, axis] + DIRECTIONS[growth, axis] - DIRECTIONS[j, axis]) ** 2
+                if d < nearest:
+                    nearest, pool_nearest = d, 0
+                if d == nearest:
+                    pool_nearest |= 1 << j
+        pool = pool_nearest
+    return uniform_pick(rng, pool) + 1
+
+
+@kernel
 def _approach(rng, target, pivot, legal, greedy, p_random, moves):
     """Moves of a group of modules towards ``target`` (Q, 3) sites, rolling over the faces of
     the neighbour at slot ``pivot`` (Q,); ``legal`` (Q,) bit sets; writes ``moves`` (Q,).

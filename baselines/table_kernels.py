@@ -39,7 +39,7 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .kernels import AROUND_BITS, SPOT_FACE, detects_scent, legal_bits, random_pick, uniform_pick
+from .kernels import approach_spot, detects_scent, legal_bits, random_pick, uniform_pick
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 
@@ -145,33 +145,6 @@ def _disband_leg(i, s, new_mode, spot, parent, child, actions):
 
 
 @kernel
-def _approach(action_mask, i, slot, growth, rng):
-    """A roll of row ``i`` towards the growth spot ``DIRECTIONS[slot] + DIRECTIONS[growth]`` of
-    the seed at ``slot``: straight in when it is a face site and the roll is legal, else over
-    the seed's faces to the sites nearest it (a uniform pick); 0 when there or stuck."""
-    if growth == OPPOSITE[slot]:
-        return 0
-    legal = legal_bits(action_mask, i)
-    k = SPOT_FACE[slot, growth]
-    if k >= 0 and (legal >> k) & 1:
-        return k + 1
-    pool = legal & AROUND_BITS[slot]
-    if pool == 0:
-        return 0
-    nearest, pool_nearest = _FAR, 0
-    for j in range(12):
-        if (pool >> j) & 1:
-            d = 0
-            for axis in range(3):
-                d += (DIRECTIONS[slot, axis] + DIRECTIONS[growth, axis] - DIRECTIONS[j, axis]) ** 2
-            if d < nearest:
-                nearest, pool_nearest = d, 0
-            if d == nearest:
-                pool_nearest |= 1 << j
-    return uniform_pick(rng, pool_nearest) + 1
-
-
-@kernel
 def _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent, child, rules, rng, actions):
     """A SEARCH module at row ``i`` next to a SEED or AROOT: take over at its spot, or roll
     towards the spot of the lowest seed it has heard, or hold still."""
@@ -201,7 +174,7 @@ def _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent,
         if (heard >> k) & 1 and DIRECTIONS[k, 2] == lowest:
             pool |= 1 << k
     slot = uniform_pick(rng, pool)
-    move = _approach(action_mask, i, slot, messages[i, slot] - 1, rng)
+    move = approach_spot(action_mask, i, slot, messages[i, slot] - 1, True, rng)
     if move == 0 and rules.p_random > 0 and rng.random() < rules.p_random:
         move = uniform_pick(rng, legal_bits(action_mask, i)) + 1
     _encode(actions, i, move, SEARCH, RELAY, 0, 0)

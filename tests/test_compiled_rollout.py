@@ -1,4 +1,4 @@
-"""The chain, branch and table behaviours inside compiled code (``baselines.compiled``) against
+"""The chain, branch, table and grasp behaviours inside compiled code (``baselines.compiled``) against
 the observation-based policies driven through the environment: same trajectory cycle for cycle,
 same cycles to success, same draws from the policy's generator; also with the kernels run as
 plain Python."""
@@ -15,6 +15,7 @@ import proteo_env
 from baselines.branch import BranchPolicy
 from baselines.chain import ChainPolicy
 from baselines.compiled import CompiledRollout, compiled_rollout
+from baselines.grasp import GraspPolicy
 from baselines.table import TablePolicy
 from conftest import run_without_jit
 from proteo_env.tasks.table import FINAL as LEG_FINAL
@@ -144,6 +145,39 @@ def test_table_rollout_continues_after_a_weight_shift():
     assert result.rng.bit_generator.state == policy.rng.bit_generator.state
 
 
+SMALL_GRASP = dict(n_modules=160, motion_model="sphere", max_cycles=400)
+"""``configs/grasp.yaml``'s grasp, which the hand-coded fingers reach and wrap in 200 to 310 cycles
+(seeds 0, 1, 2)."""
+
+
+@pytest.mark.parametrize("params", [{}, {"on_flat": "random", "straight": False, "wrap_forward": False,
+                                         "relocate": False, "prefer_touch": False, "greedy_approach": False}])
+def test_compiled_grasp_is_the_observation_based_policy(params):
+    successes = 0
+    for seed in range(3):
+        env = proteo_env.make("grasp-v0", **SMALL_GRASP)
+        env.reset(seed=seed)
+        result = compiled_rollout(env, GraspPolicy.for_env(env, seed=seed, **params), record_every=1)
+        policy = GraspPolicy.for_env(env, seed=seed, **params)
+        positions, modes, success = drive(env, policy, SMALL_GRASP["max_cycles"])
+        assert_same_trajectory(result, positions, modes, success, policy.rng)
+        successes += success
+    assert successes == 3 or params, "the default rules wrap the sphere with seeds 0, 1, 2"
+
+
+def test_grasp_rollout_continues_a_started_episode():
+    env = proteo_env.make("grasp-v0", **SMALL_GRASP)
+    env.reset(seed=4)
+    policy = GraspPolicy.for_env(env, seed=4)
+    drive(env, policy, 60, use_dicts=True)
+    result = compiled_rollout(env, policy, record_every=1)
+    positions, modes, success = drive(env, policy, SMALL_GRASP["max_cycles"], use_dicts=True)
+    assert result.success == success and result.cycles == env.cycle
+    np.testing.assert_array_equal(result.recorded_positions, positions)
+    np.testing.assert_array_equal(result.recorded_modes, modes)
+    assert result.rng.bit_generator.state == policy.rng.bit_generator.state
+
+
 @pytest.mark.parametrize("use_dicts", [False, True])
 def test_rollout_continues_a_started_episode(use_dicts):
     """The rollout starts from the env's state and the policy's memory, whichever way it was keyed."""
@@ -205,7 +239,8 @@ def test_bad_inputs_are_refused():
         compiled_rollout(env, policy, max_cycles=-1)
     with pytest.raises(ValueError, match="record_every=1.5 is not allowed"):
         compiled_rollout(env, policy, record_every=1.5)
-    allowed = "allowed: ChainPolicy on chain-v0, BranchPolicy on branch-v0, TablePolicy on table-v0"
+    allowed = ("allowed: ChainPolicy on chain-v0, BranchPolicy on branch-v0, TablePolicy on table-v0, "
+               "GraspPolicy on grasp-v0")
     with pytest.raises(ValueError, match=f"policy=BranchPolicy on task='chain' is not allowed; {allowed}"):
         compiled_rollout(env, BranchPolicy.for_env(env, seed=0))
     sandbox = proteo_env.make("sandbox-v0", n_modules=8)
@@ -218,13 +253,14 @@ def test_bad_inputs_are_refused():
 
 # ------------------------------------------------------------------ kernels as plain Python
 def fingerprint() -> str:
-    """Hash of short compiled rollouts of a small chain, a small branching tree and a small table."""
+    """Hash of short compiled rollouts of a small chain, branching tree, table and grasp."""
     digest = hashlib.sha256()
     small = {"n_modules": 12, "motion_model": "sphere", "max_cycles": 25}
     for task, policy_cls, extra, params in (
             ("chain-v0", ChainPolicy, small, {"queue": True}),
             ("branch-v0", BranchPolicy, {**small, "T": 3, "B": 2}, {"queue": True}),
-            ("table-v0", TablePolicy, {**SMALL_TABLE, "max_cycles": 40}, {"p_max": 0.5})):
+            ("table-v0", TablePolicy, {**SMALL_TABLE, "max_cycles": 40}, {"p_max": 0.5}),
+            ("grasp-v0", GraspPolicy, {**SMALL_GRASP, "n_modules": 30, "max_cycles": 40}, {"straight": False})):
         env = proteo_env.make(task, **extra)
         env.reset(seed=3)
         result = compiled_rollout(env, policy_cls.for_env(env, seed=3, **params), record_every=1)

@@ -130,7 +130,7 @@ def test_metrics_when_every_surface_site_is_held_and_when_one_is():
     # the side of that site is the face direction nearest its direction from the centroid
     rel = surface[0] - layout.object_sites.mean(axis=0)
     side = int(np.argmax(SIDES @ (rel / np.linalg.norm(rel)) - 1e-6 * (SIDES @ layout.direction)))
-    assert task._side[0] == side
+    assert task.surface.side[0] == side
 
 
 # ---------------------------------------------------------------------- reward and termination

@@ -59,9 +59,11 @@ Paper section
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
+from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task
@@ -328,8 +330,12 @@ class Grasp(Task):
         # ties (a site on a sector boundary) go to the sector facing the base most, so a
         # site on the object's equator is never credited to its far side
         towards_base = -(SIDES @ np.asarray(layout.direction, dtype=np.float64))
-        self._side = np.argmax(rel @ SIDES.T + 1e-6 * towards_base[None, :], axis=1)
-        self._n_sides = len(np.unique(self._side))
+        side = np.argmax(rel @ SIDES.T + 1e-6 * towards_base[None, :], axis=1).astype(np.int64)
+        p = self.params
+        self.surface = GraspSurface(cell=np.ascontiguousarray(self._surface_cell, dtype=np.int64), side=side,
+                                    n_sides=len(np.unique(side)), coverage_threshold=float(p.coverage_threshold),
+                                    surround_threshold=float(p.surround_threshold))
+        """The object's surface sites and the success thresholds (:class:`GraspSurface`)."""
         self._gap_field = self._hop_field(world)
         self._last = self._measure(world)
         self._previous = self._last
@@ -353,15 +359,10 @@ class Grasp(Task):
         return dist
 
     def _measure(self, world) -> dict:
-        held = world.grid[self._surface_cell] >= 0
-        contact = int(held.sum())
-        sides = int(np.unique(self._side[held]).size) if contact else 0
+        contact, coverage, surround, success = grasp_hold(world.grid, self.surface)
         gap = int(self._gap_field[world.cell[: world.n_agents]].min())
-        coverage = contact / max(len(self._surface_cell), 1)
-        surround = sides / max(self._n_sides, 1)
-        p = self.params
-        success = coverage >= p.coverage_threshold and surround >= p.surround_threshold and contact > 0
-        return {"gap": gap, "contact": contact, "coverage": coverage, "surround": surround, "success": success}
+        return {"gap": gap, "contact": int(contact), "coverage": float(coverage), "surround": float(surround),
+                "success": bool(success)}
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
@@ -390,3 +391,40 @@ class Grasp(Task):
     def surface_sites(self) -> np.ndarray:
         """``(S, 3)`` the surface sites of this episode's object (after :meth:`reset`)."""
         return self._surface_sites
+
+
+class GraspSurface(NamedTuple):
+    """The object's surface as :func:`grasp_hold` reads it (S surface sites); the compiled rollout
+    of the hand-coded behaviour (:mod:`baselines.compiled`) tests success with it too.
+
+    Attributes:
+        cell: ``(S,)`` int64 grid cell of each surface site.
+        side: ``(S,)`` int64 side (0..11, :data:`SIDES`) of each surface site.
+        n_sides: the number of sides that hold a surface site.
+        coverage_threshold, surround_threshold: the task's parameters of those names.
+    """
+
+    cell: np.ndarray
+    side: np.ndarray
+    n_sides: int
+    coverage_threshold: float
+    surround_threshold: float
+
+
+@kernel
+def grasp_hold(grid, surface):
+    """``(contact, coverage, surround, success)`` of the modules on :class:`GraspSurface`
+    ``surface``: modules on surface sites, their share of the sites, the share of the sides held,
+    and both thresholds met with some contact."""
+    held_side = np.zeros(12, dtype=np.bool_)
+    contact, sides = 0, 0
+    for j in range(surface.cell.shape[0]):
+        if grid[surface.cell[j]] >= 0:
+            contact += 1
+            if not held_side[surface.side[j]]:
+                held_side[surface.side[j]] = True
+                sides += 1
+    coverage = contact / max(surface.cell.shape[0], 1)
+    surround = sides / max(surface.n_sides, 1)
+    success = coverage >= surface.coverage_threshold and surround >= surface.surround_threshold and contact > 0
+    return contact, coverage, surround, success
