@@ -33,7 +33,8 @@ alone, with and without the connectivity check (on copies of the state).
 run whole episodes to success of the chain and the branch behaviours in their tasks' default
 boxes, both ways, and check that they end alike; ``--table-episodes BOARD SEEDS`` (default
 30 10) the same for the table behaviour in ``configs/table.yaml`` (the paper's two weight
-shifts) on a ``BOARD`` by ``BOARD`` board.
+shifts) on a ``BOARD`` by ``BOARD`` board, and ``--grasp-episodes N SEEDS`` (default 160 10)
+for the grasp behaviour in ``configs/grasp.yaml`` with N modules.
 
 Usage::
 
@@ -73,9 +74,10 @@ def fresh(n: int, cycles: int, room: int | None = None, *, task: str = "chain", 
     import yaml
     from baselines import make_policy
 
-    if task == "table":
-        config = yaml.safe_load((ROOT / "configs" / "table.yaml").read_text())
-        extra = {k: v for k, v in config.items() if k not in ("task", "max_cycles")} | {"board_size": n}
+    if task in ("table", "grasp"):
+        config = yaml.safe_load((ROOT / "configs" / f"{task}.yaml").read_text())
+        size = {"table": "board_size", "grasp": "n_modules"}[task]
+        extra = {k: v for k, v in config.items() if k not in ("task", "max_cycles")} | {size: n}
     else:
         extra = {"n_modules": n} if room is None else {"n_modules": n, "room": room}
     env = proteo_env.make(f"{task}-v0", max_cycles=cycles, **extra)
@@ -223,7 +225,7 @@ def whole_episodes(task: str, n: int, seeds: int) -> dict:
     too)."""
     from baselines.compiled import compiled_rollout
 
-    limit = 1300 if task == "table" else 20 * n
+    limit = 1300 if task == "table" else 20 * n  # the grasp: 3,200 cycles for 160 modules
     warm_env, warm_policy = fresh(n, limit, task=task)
     compiled_rollout(warm_env, warm_policy, max_cycles=1)
     cycles, successes, kernel_s, python_s = 0, 0, 0.0, 0.0
@@ -328,6 +330,8 @@ def main() -> None:
                         help="whole branch episodes to success: N and the number of seeds (0 0: none)")
     parser.add_argument("--table-episodes", type=int, nargs=2, default=[30, 10], metavar=("BOARD", "SEEDS"),
                         help="whole table episodes to success: board side and the number of seeds (0 0: none)")
+    parser.add_argument("--grasp-episodes", type=int, nargs=2, default=[160, 10], metavar=("N", "SEEDS"),
+                        help="whole grasp episodes to success: N and the number of seeds (0 0: none)")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("WHAT", "N"), help=argparse.SUPPRESS)
@@ -338,6 +342,7 @@ def main() -> None:
                "chain-episodes": lambda: whole_episodes("chain", n, args.chain_episodes[1]),
                "branch-episodes": lambda: whole_episodes("branch", n, args.branch_episodes[1]),
                "table-episodes": lambda: whole_episodes("table", n, args.table_episodes[1]),
+               "grasp-episodes": lambda: whole_episodes("grasp", n, args.grasp_episodes[1]),
                "compile": lambda: compile_time(n)}[what]()
         print(json.dumps(row))
         return
@@ -345,7 +350,8 @@ def main() -> None:
     def child(what: str, n: int, **env) -> dict:
         cmd = [sys.executable, __file__, "--one", what, str(n), "--cycles", str(args.cycles),
                "--repeats", str(args.repeats), "--chain-episodes", *map(str, args.chain_episodes),
-               "--branch-episodes", *map(str, args.branch_episodes), "--table-episodes", *map(str, args.table_episodes)]
+               "--branch-episodes", *map(str, args.branch_episodes), "--table-episodes", *map(str, args.table_episodes),
+               "--grasp-episodes", *map(str, args.grasp_episodes)]
         env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads), **env}
         out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
@@ -363,8 +369,8 @@ def main() -> None:
               flush=True)
     parts = child("profile", args.profile_n) if args.profile_n else None
     episodes = [child(f"{task}-episodes", n) for task, (n, seeds) in
-                (("chain", args.chain_episodes), ("branch", args.branch_episodes), ("table", args.table_episodes))
-                if n and seeds]
+                (("chain", args.chain_episodes), ("branch", args.branch_episodes), ("table", args.table_episodes),
+                 ("grasp", args.grasp_episodes)) if n and seeds]
     info = describe("numpy", "numba", numba_threads=args.threads)
     text = tables(rows, parts, episodes, args)
     text = (f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "
