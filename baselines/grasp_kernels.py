@@ -36,7 +36,7 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
 
-from .kernels import AROUND_BITS, approach_spot, legal_bits, random_pick, uniform_pick
+from .kernels import AROUND_BITS, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
@@ -123,21 +123,8 @@ def _climb_pool(neighbour_kind, neighbour_scent, action_mask, i, rules):
         scent[k] = neighbour_scent[i, k, channel] if neighbour_kind[i, k] == KIND_MODULE else smax
         here = min(here, scent[k])
     legal = legal_bits(action_mask, i)
-    there = np.empty(12, dtype=np.int64)
-    best = _FAR
-    for k in range(12):
-        there[k] = _FAR
-        if (legal >> k) & 1:
-            low = _FAR
-            for a in range(4):
-                low = min(low, scent[DIRECTION_ADJACENCY[k, a]])
-            there[k] = low
-            best = min(best, low)
-    if best <= here and best < smax:
-        pool = 0
-        for k in range(12):
-            if (legal >> k) & 1 and there[k] == best:
-                pool |= 1 << k
+    pool, low = lowest_rolls(scent, legal)
+    if low <= here and low < smax:
         return pool
     return legal if rules.random_on_flat else 0
 

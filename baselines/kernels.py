@@ -143,6 +143,27 @@ def uniform_pick(rng, pool):
 
 
 @kernel
+def lowest_rolls(scent, legal):
+    """``(pool, low)``: the rolls of the bit set ``legal`` whose 4 sites next to both here and the
+    target (``DIRECTION_ADJACENCY``) hold the lowest of ``scent`` (12,), and that lowest value
+    (the largest int64 when ``legal`` is empty)."""
+    there = np.empty(12, dtype=np.int64)
+    best = _FAR
+    for k in range(12):
+        if (legal >> k) & 1:
+            low = _FAR
+            for a in range(4):
+                low = min(low, scent[DIRECTION_ADJACENCY[k, a]])
+            there[k] = low
+            best = min(best, low)
+    pool = 0
+    for k in range(12):
+        if (legal >> k) & 1 and there[k] == best:
+            pool |= 1 << k
+    return pool, best
+
+
+@kernel
 def legal_bits(action_mask, i):
     """Bit set of the legal rolls of row ``i`` (``action_mask[i, k + 1]``)."""
     bits = 0

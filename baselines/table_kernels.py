@@ -36,10 +36,10 @@ import numpy as np
 
 from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
-from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
+from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .kernels import approach_spot, detects_scent, legal_bits, random_pick, uniform_pick
+from .kernels import approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 
@@ -188,25 +188,9 @@ def _gradient_pool(neighbour_kind, neighbour_scent, action_mask, i, scent_max):
     here = _FAR
     for k in range(12):
         scent[k] = neighbour_scent[i, k, 0] if neighbour_kind[i, k] == KIND_MODULE else scent_max
-        here = min(here, 1 + scent[k])
-    legal = legal_bits(action_mask, i)
-    there = np.empty(12, dtype=np.int64)
-    best = _FAR
-    for k in range(12):
-        there[k] = _FAR
-        if (legal >> k) & 1:
-            low = _FAR
-            for a in range(4):
-                low = min(low, scent[DIRECTION_ADJACENCY[k, a]])
-            there[k] = 1 + low
-            best = min(best, there[k])
-    if best > here:
-        return 0
-    pool = 0
-    for k in range(12):
-        if (legal >> k) & 1 and there[k] == best:
-            pool |= 1 << k
-    return pool
+        here = min(here, scent[k])
+    pool, low = lowest_rolls(scent, legal_bits(action_mask, i))
+    return pool if low <= here else 0
 
 
 @kernel

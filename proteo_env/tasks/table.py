@@ -401,12 +401,18 @@ def root_loads(book, out):
 
 
 @kernel
-def _leg_module(grid, mode, anchored, site):
-    """The module at ``site`` when it is a leg module (SEED or FINAL, not anchored), else -1."""
-    v = grid[site]
-    if v >= 0 and (mode[v] == SEED or mode[v] == FINAL) and not anchored[v]:
-        return v
-    return -1
+def _legs_below(grid, cell, mode, anchored, above, n_above, down_delta, seen, stamp, below):
+    """Write into ``below`` the leg modules (SEED or FINAL, not anchored) one layer below the
+    modules ``above[:n_above]``, each once (``seen[v] == stamp``); return how many."""
+    n_below = 0
+    for j in range(n_above):
+        for d in range(down_delta.shape[0]):
+            v = grid[cell[above[j]] + down_delta[d]]
+            if v >= 0 and (mode[v] == SEED or mode[v] == FINAL) and not anchored[v] and seen[v] != stamp:
+                seen[v] = stamp
+                below[n_below] = v
+                n_below += 1
+    return n_below
 
 
 @kernel
@@ -414,32 +420,18 @@ def grounded_legs(grid, cell, mode, anchored, book):
     """Write ``book.grounded`` (R,): a chain of SEED or FINAL modules runs from the root down to
     the floor, one layer per module (``depth`` modules). ``stamp`` is bumped so that
     ``scratch[2]`` never needs clearing."""
-    roots, down_delta, depth, grounded, stamp = book.roots, book.down_delta, book.depth, book.grounded, book.stamp
+    roots, down_delta, stamp = book.roots, book.down_delta, book.stamp
     level, below, seen = book.scratch[0], book.scratch[1], book.scratch[2]
     for r in range(roots.shape[0]):
-        stamp[0] += 1
-        n_level = 0
-        for d in range(down_delta.shape[0]):
-            v = _leg_module(grid, mode, anchored, cell[roots[r]] + down_delta[d])
-            if v >= 0 and seen[v] != stamp[0]:
-                seen[v] = stamp[0]
-                level[n_level] = v
-                n_level += 1
-        for _ in range(depth - 1):
+        level[0] = roots[r]
+        n_level = 1
+        for _ in range(book.depth):
+            stamp[0] += 1
+            n_level = _legs_below(grid, cell, mode, anchored, level, n_level, down_delta, seen, stamp[0], below)
+            level, below = below, level
             if n_level == 0:
                 break
-            stamp[0] += 1
-            n_below = 0
-            for j in range(n_level):
-                for d in range(down_delta.shape[0]):
-                    v = _leg_module(grid, mode, anchored, cell[level[j]] + down_delta[d])
-                    if v >= 0 and seen[v] != stamp[0]:
-                        seen[v] = stamp[0]
-                        below[n_below] = v
-                        n_below += 1
-            level, below = below, level
-            n_level = n_below
-        grounded[r] = n_level > 0
+        book.grounded[r] = n_level > 0
 
 
 @kernel
