@@ -159,11 +159,11 @@ def profile(n: int, cycles: int) -> dict:
         n_search = n_requested = n_moved = 0
         for _ in range(cycles):
             t0 = time.perf_counter()
-            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s.is_cut, s.disc, s.low, s.stack_node,
-                                        s.stack_k)
+            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low,
+                                        s.stack_node, s.stack_k)
             t1 = time.perf_counter()
             kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
-                            w.neighbourhood_delta, w.roll_delta, w.sweep_bits, w.pivot_bit, p.scent_max,
+                            w.neighbourhood_delta, w.roll_delta, w.roll_table, p.scent_max,
                             obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode, obs.own_scent,
                             obs.messages, obs.contact, obs.action_mask)
             t2 = time.perf_counter()
@@ -181,8 +181,8 @@ def profile(n: int, cycles: int) -> dict:
                 grid, cell, order = w.grid.copy(), w.cell.copy(), w.rng_state.copy()
                 started = time.perf_counter()
                 kernels.execute_moves(grid, cell, n, move, w.anchored, keep, order, w.dir_delta, DIRECTIONS,
-                                      w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit,
-                                      s.movers, moved, s.mark, s.stacks, s.rel, s.epoch)
+                                      w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
+                                      s.movers, moved, s.mark, s.stacks, s.rel, s.search)
                 parts[part] += time.perf_counter() - started
             n_requested += int((move > 0).sum())
             t6 = time.perf_counter()
@@ -190,8 +190,8 @@ def profile(n: int, cycles: int) -> dict:
                               w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps, p.scent_max,
                               move, actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
                               actions[:, -2].copy(), actions[:, -1].astype(np.int32), moved, w.dir_delta, DIRECTIONS,
-                              OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit,
-                              s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
+                              OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
+                              s.movers, s.mark, s.queue, s.stacks, s.rel, s.search, s.scent_buffer)
             t7 = time.perf_counter()
             n_moved += int(moved.sum())
             is_chain(w.grid, w.cell, n, w.dir_delta, *test)

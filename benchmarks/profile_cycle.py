@@ -55,7 +55,7 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
     w, s, p = env.engine, env.engine.scratch, env.engine.physics
     saved = {name: getattr(w, name).copy() for name in ("grid", "cell", "rng_state", "inbox")}
 
-    def restore():  # the connectivity search's epoch only ever grows, so its marks need no reset
+    def restore():  # the connectivity search's epoch (search[0]) only grows, so its marks need no reset
         for name, value in saved.items():
             getattr(w, name)[:] = value
 
@@ -71,12 +71,12 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
     def moves(keep_connected):
         return lambda: kernels.execute_moves(
             w.grid, w.cell, n, move, w.anchored, keep_connected, w.rng_state, w.dir_delta, DIRECTIONS,
-            w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.sweep_bits, w.pivot_bit, s.movers, moved,
-            s.mark, s.stacks, s.rel, s.epoch)
+            w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table, s.movers, moved,
+            s.mark, s.stacks, s.rel, s.search)
 
     def observation():
         kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
-                        w.neighbourhood_delta, w.roll_delta, w.sweep_bits, w.pivot_bit, p.scent_max,
+                        w.neighbourhood_delta, w.roll_delta, w.roll_table, p.scent_max,
                         buffers.neighbour_kind, buffers.neighbour_mode, buffers.neighbour_scent,
                         buffers.own_mode, buffers.own_scent, buffers.messages, buffers.contact,
                         buffers.action_mask)
@@ -90,7 +90,7 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
         "scent": lambda: kernels.relax_scent(w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer,
                                              p.scent_sweeps, p.scent_max, w.dir_delta),
         "cut modules": lambda: kernels.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s.is_cut,
-                                                           s.disc, s.low, s.stack_node, s.stack_k),
+                                                           s.adjacency, s.disc, s.low, s.stack_node, s.stack_k),
         "observation": observation,
         "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
     }

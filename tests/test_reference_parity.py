@@ -182,6 +182,29 @@ def test_parity_radius_two_observations(layout):
     assert run_parity(Case(layout, "sphere", True, "sweep1", 2, True, 40, seed=21), obs_radius=2) > 0
 
 
+@pytest.mark.parametrize("model", MOTION_MODELS)
+@pytest.mark.parametrize("fill", [0.12, 0.3])
+def test_roll_table_decides_like_the_reference_rule(model, fill):
+    """Every (module, direction) of a crowded random world, with modules, solids and object
+    sites around: the engine's byte tables give the reference's pivot-and-sweep verdict."""
+    rng = np.random.default_rng(int(fill * 10) + len(model))
+    size = (11, 11, 11)
+    g = np.mgrid[0:11, 0:11, 0:11].reshape(3, -1).T
+    sites = g[g.sum(axis=1) % 2 == 0]
+    kind = rng.random(len(sites))
+    modules = sites[kind < fill]
+    solid = sites[(kind >= fill) & (kind < fill + 0.08)]
+    objects = sites[(kind >= fill + 0.08) & (kind < fill + 0.12)]
+    physics = Physics(motion_model=model, keep_connected=False)
+    kw = dict(size=size, positions=modules, n_agents=len(modules), physics=physics, solid=solid,
+              object_sites=objects)
+    world, ref = World(**kw), ReferenceWorld(**kw)
+    verdicts = np.array([[world.roll_is_legal(m, k) for k in range(12)] for m in range(len(modules))])
+    expected = np.array([[ref.roll_is_legal(m, k) for k in range(12)] for m in range(len(modules))])
+    assert verdicts.any() and not verdicts.all()
+    np.testing.assert_array_equal(verdicts, expected)
+
+
 def test_seeding_matches_world():
     """``seed`` maps any non-negative integer to the same state as ``World.seed`` (never 0)."""
     world, ref = build(Case("blob10", "sphere", True, "sweep1", 1, False, 0, seed=1))

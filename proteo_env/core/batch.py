@@ -23,25 +23,25 @@ from .world import LOCAL_ADJACENCY_BITS, Scratch, World
 def _run_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
                 keep_connected, exact, sweeps, scent_max, move, new_mode, role, message_target,
                 message_value, moved, dir_delta, directions, opposite, roll_delta, local_delta,
-                local_adjacent, sweep_bits, pivot_bit, movers, mark, queue, stacks, rel, epoch, scent_buffer):
+                local_adjacent, roll_table, movers, mark, queue, stacks, rel, search, scent_buffer):
     for b in prange(grid.shape[0]):
         kernels.run_cycle(grid[b], cell[b], n_agents, anchored[b], mode[b], scent[b], inbox[b],
                           rng_state[b], passive_role, surface, keep_connected, exact, sweeps, scent_max,
                           move[b], new_mode[b], role[b], message_target[b], message_value[b], moved[b],
                           dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent,
-                          sweep_bits, pivot_bit, movers[b], mark[b], queue[b], stacks[b], rel[b], epoch[b],
+                          roll_table, movers[b], mark[b], queue[b], stacks[b], rel[b], search[b],
                           scent_buffer[b])
 
 
 @parallel_kernel
 def _observe_worlds(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected, nb_delta,
-                    dir_delta, roll_delta, sweep_bits, pivot_bit, scent_max, is_cut, disc, low,
+                    dir_delta, roll_delta, roll_table, scent_max, is_cut, adjacency, disc, low,
                     stack_node, stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode,
                     own_scent, messages, contact, action_mask):
     for b in prange(grid.shape[0]):
         kernels.observe_world(grid[b], cell[b], n_agents, mode[b], scent[b], inbox[b], anchored[b],
-                              keep_connected, nb_delta, dir_delta, roll_delta, sweep_bits, pivot_bit,
-                              scent_max, is_cut[b], disc[b], low[b], stack_node[b], stack_k[b],
+                              keep_connected, nb_delta, dir_delta, roll_delta, roll_table,
+                              scent_max, is_cut[b], adjacency[b], disc[b], low[b], stack_node[b], stack_k[b],
                               neighbour_kind[b], neighbour_mode[b], neighbour_scent[b], own_mode[b],
                               own_scent[b], messages[b], contact[b], action_mask[b])
 
@@ -110,7 +110,7 @@ class WorldBatch:
                     np.asarray(mode, dtype=np.int32), np.asarray(scent_role, dtype=np.int8),
                     np.asarray(message_target, dtype=np.int64), np.asarray(message_value, dtype=np.int32),
                     moved, w.dir_delta, DIRECTIONS, OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS,
-                    w.sweep_bits, w.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch,
+                    w.roll_table, s.movers, s.mark, s.queue, s.stacks, s.rel, s.search,
                     s.scent_buffer)
         return moved
 
@@ -127,7 +127,7 @@ class WorldBatch:
 
         _observe_worlds(self.grid, self.cell, a, self.mode, self.scent, self.inbox, self.anchored,
                         w.physics.keep_connected, w.neighbourhood_delta, w.dir_delta, w.roll_delta,
-                        w.sweep_bits, w.pivot_bit, w.physics.scent_max, s.is_cut, s.disc, s.low,
+                        w.roll_table, w.physics.scent_max, s.is_cut, s.adjacency, s.disc, s.low,
                         s.stack_node, s.stack_k, rows(out.neighbour_kind), rows(out.neighbour_mode),
                         rows(out.neighbour_scent), rows(out.own_mode), rows(out.own_scent),
                         rows(out.messages), rows(out.contact), rows(out.action_mask))

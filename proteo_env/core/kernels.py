@@ -14,7 +14,7 @@ from .lattice import EMPTY, OBJECT, SOLID
 
 SILENT, RELAY, EMIT = 0, 1, 2
 KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
-LABEL_BITS = 16  # connectivity search: mark = epoch * LABEL_BITS + label
+LABEL_BITS = 16  # connectivity search: mark = epoch * LABEL_BITS + group label (or REMOVED_LABEL)
 REMOVED_LABEL = 15
 
 
@@ -46,32 +46,34 @@ def shuffle(items, count, state):
 
 # ---------------------------------------------------------------- rolls
 @kernel
-def legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules):
+def legal_rolls(grid, c, roll_delta, roll_table, blocked, modules):
     """Bit ``k`` set when the body at cell ``c`` may roll towards direction ``k`` (geometry only).
 
     ``blocked`` and ``modules`` are the bits of the 12 face neighbours already read ("not
     empty", "holds a module"); the model's swept sites two hops away (``roll_delta[12:]``) are
     read here, and only when some target is empty. A roll is legal when its target is empty
-    and some pivot holds a module whose swept cells (``sweep_bits``) are all empty.
+    and some pivot holds a module whose swept cells are all empty; ``roll_table`` (see
+    :func:`~proteo_env.core.motion.motion_bits`) decides the 12 directions a byte at a time.
     """
     if blocked == 0xFFF:
         return 0
     for i in range(12, roll_delta.shape[0]):
         if grid[c + roll_delta[i]] != EMPTY:
             blocked |= 1 << i
+    low, high = modules & 255, modules >> 8
     legal = 0
-    for k in range(12):
-        if blocked & (1 << k):
-            continue
-        for j in range(4):
-            if (modules >> pivot_bit[k, j]) & 1 and (blocked & sweep_bits[k, j]) == 0:
-                legal |= 1 << k
-                break
-    return legal
+    for j in range(4):
+        swept = 0
+        rest = blocked
+        for i in range(2, roll_table.shape[1]):
+            swept |= roll_table[j, i, rest & 255]
+            rest >>= 8
+        legal |= (roll_table[j, 0, low] | roll_table[j, 1, high]) & ~swept
+    return legal & (0xFFF ^ (blocked & 0xFFF))
 
 
 @kernel
-def legal_directions(grid, c, roll_delta, sweep_bits, pivot_bit):
+def legal_directions(grid, c, roll_delta, roll_table):
     """:func:`legal_rolls` of the body at cell ``c``, reading its face neighbours first."""
     blocked = 0
     modules = 0
@@ -81,16 +83,18 @@ def legal_directions(grid, c, roll_delta, sweep_bits, pivot_bit):
             blocked |= 1 << i
             if v >= 0:
                 modules |= 1 << i
-    return legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules)
+    return legal_rolls(grid, c, roll_delta, roll_table, blocked, modules)
 
 
 # ---------------------------------------------------------------- connectivity
 @kernel
-def _find(parent, a):
-    while parent[a] != a:
-        parent[a] = parent[parent[a]]
-        a = parent[a]
-    return a
+def _group_root(parents, g):
+    """Union-find root of search group ``g``; ``parents`` packs each group's parent in 4 bits."""
+    while True:
+        up = (parents >> (4 * g)) & 15
+        if up == g:
+            return g
+        g = up
 
 
 @kernel
@@ -117,23 +121,24 @@ def _flood(start, allowed, local_adjacent):
 
 @kernel
 def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent,
-                           mark, stacks, rel, epoch):
+                           mark, stacks, rel, search):
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
-    neighbours, or else through the modules within two hops of ``m`` (read only then), yes. Otherwise one
-    depth-first search per group of neighbours runs in lockstep over the module graph (``m``
-    removed), each stepping first towards the next group's seed. The searches stop when all
-    groups have met (connected) or one group's stacks run out (that piece is cut off), so the
-    cost is bounded by the size of the smallest piece. Scratch: ``mark`` (N,), ``stacks``
-    (12, N), ``rel`` (N, 3) positions relative to ``m``; ``epoch`` (1,) is bumped so that
-    ``mark`` never needs clearing.
+    neighbours, or else through the modules within two hops of ``m`` (read only then), yes.
+    Otherwise one depth-first search per group of neighbours runs in lockstep over the module
+    graph (``m`` removed), each stepping first towards the next group's seed. The searches stop
+    when all groups have met (connected) or one group's stacks run out (that piece is cut off),
+    so the cost is bounded by the size of the smallest piece. Scratch: ``mark`` (N,), ``stacks``
+    (12, N), ``rel`` (N, 3) positions relative to ``m``; ``search`` (13,) holds the epoch in
+    ``search[0]``, bumped so that ``mark`` never needs clearing, and the depth of each group's
+    stack in ``search[1:13]``. The groups' union-find parents and seed directions are packed
+    4 bits per group in two integers, so a search allocates nothing.
     """
     c = cell[m]
     touching = 0
     for i in range(12):
-        if grid[c + local_delta[i]] >= 0:
-            touching |= 1 << i
+        touching |= np.int64(grid[c + local_delta[i]] >= 0) << i
     if touching & (touching - 1) == 0:
         return True
     first = touching & -touching
@@ -141,17 +146,16 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
         return True
     modules = touching
     for i in range(12, local_delta.shape[0]):
-        if grid[c + local_delta[i]] >= 0:
-            modules |= 1 << i
+        modules |= np.int64(grid[c + local_delta[i]] >= 0) << i
     if touching & ~_flood(first, modules, local_adjacent) == 0:
         return True
 
-    epoch[0] += 1
-    base = epoch[0] * LABEL_BITS
+    search[0] += 1
+    base = search[0] * LABEL_BITS
+    depth = search[1:13]
     mark[m] = base + REMOVED_LABEL
-    parent = np.arange(12)
-    depth = np.zeros(12, dtype=np.int64)
-    seed_slot = np.zeros(12, dtype=np.int64)
+    parents = 0
+    seed_slots = 0
     n_groups = 0
     remaining = touching
     while remaining:
@@ -165,7 +169,8 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
         rel[seed] = directions[k]
         stacks[n_groups, 0] = seed
         depth[n_groups] = 1
-        seed_slot[n_groups] = k
+        parents |= n_groups << (4 * n_groups)
+        seed_slots |= k << (4 * n_groups)
         n_groups += 1
     groups_left = n_groups
     while True:
@@ -174,8 +179,8 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
                 continue
             depth[g] -= 1
             n = stacks[g, depth[g]]
-            label = _find(parent, g)
-            target = directions[seed_slot[(g + 1) % n_groups]]
+            label = _group_root(parents, g)
+            target = directions[(seed_slots >> (4 * ((g + 1) % n_groups))) & 15]
             best_at, best_distance = -1, 1 << 62
             cn = cell[n]
             for k in range(12):
@@ -186,9 +191,9 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
                     other = mark[nb] - base
                     if other == REMOVED_LABEL:
                         continue
-                    other = _find(parent, other)
+                    other = _group_root(parents, other)
                     if other != label:
-                        parent[other] = label
+                        parents ^= (other ^ label) << (4 * other)
                         groups_left -= 1
                         if groups_left == 1:
                             return True
@@ -208,22 +213,38 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
         for g in range(n_groups):  # a piece is cut off when all its merged groups ran out
             if depth[g] > 0:
                 continue
-            root = _find(parent, g)
+            root = _group_root(parents, g)
             left = 0
             for h in range(n_groups):
-                if _find(parent, h) == root:
+                if _group_root(parents, h) == root:
                     left += depth[h]
             if left == 0:
                 return False
 
 
 @kernel
-def articulation_points(grid, cell, n_modules, dir_delta, is_cut, disc, low, stack_node, stack_k):
+def module_adjacency(grid, cell, n_modules, dir_delta, adjacency):
+    """Fill ``adjacency`` (N, 13) int32: row ``n`` lists the module neighbours of module ``n``
+    in direction order, and column 12 holds how many there are."""
+    for n in range(n_modules):
+        c = cell[n]
+        degree = 0
+        for k in range(12):
+            v = grid[c + dir_delta[k]]
+            adjacency[n, degree] = v
+            degree += v >= 0
+        adjacency[n, 12] = degree
+
+
+@kernel
+def articulation_points(grid, cell, n_modules, dir_delta, is_cut, adjacency, disc, low, stack_node, stack_k):
     """Mark in ``is_cut`` (N,) the modules whose removal disconnects the module graph.
 
-    Iterative Tarjan depth-first search over every component; ``disc``, ``low``,
-    ``stack_node`` and ``stack_k`` are (N,) scratch arrays.
+    Iterative Tarjan depth-first search over every component, on the neighbour lists of
+    :func:`module_adjacency` (so each edge costs one read); ``adjacency`` (N, 13) and
+    ``disc``, ``low``, ``stack_node``, ``stack_k`` (N,) are int32 scratch arrays.
     """
+    module_adjacency(grid, cell, n_modules, dir_delta, adjacency)
     for n in range(n_modules):
         disc[n] = -1
         is_cut[n] = False
@@ -240,11 +261,9 @@ def articulation_points(grid, cell, n_modules, dir_delta, is_cut, disc, low, sta
         while top >= 0:
             n = stack_node[top]
             k = stack_k[top]
-            if k < 12:
+            if k < adjacency[n, 12]:
                 stack_k[top] = k + 1
-                nb = grid[cell[n] + dir_delta[k]]
-                if nb < 0:
-                    continue
+                nb = adjacency[n, k]
                 if disc[nb] < 0:
                     disc[nb] = low[nb] = timer
                     timer += 1
@@ -315,8 +334,8 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 @kernel
 def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                  dir_delta, directions, roll_delta, local_delta, local_adjacent, sweep_bits, pivot_bit,
-                  movers, moved, mark, stacks, rel, epoch):
+                  dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table,
+                  movers, moved, mark, stacks, rel, search):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
     ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
@@ -336,10 +355,10 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         c = cell[a]
         if grid[c + dir_delta[k]] != EMPTY:  # the common denial, decided by one read
             continue
-        if not (legal_directions(grid, c, roll_delta, sweep_bits, pivot_bit) >> k) & 1:
+        if not (legal_directions(grid, c, roll_delta, roll_table) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
-            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, rel, epoch
+            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, rel, search
         ):
             continue
         grid[c] = EMPTY
@@ -416,7 +435,7 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 # ---------------------------------------------------------------- observations
 @kernel
 def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
+            nb_delta, roll_delta, roll_table, scent_max,
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask):
     """Fill the per-agent observation arrays (first axis: agent) from the world state.
@@ -476,7 +495,7 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
         action_mask[a, 0] = 1
         legal = 0
         if not anchored[a] and not (keep_connected and is_cut[a]):
-            legal = legal_rolls(grid, c, roll_delta, sweep_bits, pivot_bit, blocked, modules)
+            legal = legal_rolls(grid, c, roll_delta, roll_table, blocked, modules)
         for k in range(12):
             action_mask[a, k + 1] = (legal >> k) & 1
 
@@ -486,15 +505,15 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
 def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
               keep_connected, exact, sweeps, scent_max,
               move, new_mode, role, message_target, message_value, moved,
-              dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent, sweep_bits, pivot_bit,
-              movers, mark, queue, stacks, rel, epoch, scent_buffer):
+              dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent, roll_table,
+              movers, mark, queue, stacks, rel, search, scent_buffer):
     """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
     n_modules = len(cell)
     mode[:n_agents] = new_mode
     deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
     n_moved = execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                            dir_delta, directions, roll_delta, local_delta, local_adjacent, sweep_bits,
-                            pivot_bit, movers, moved, mark, stacks, rel, epoch)
+                            dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table, movers,
+                            moved, mark, stacks, rel, search)
     channel_role = np.empty(n_modules, dtype=np.int8)
     for ch in range(scent.shape[0]):
         channel_role[:n_agents] = role[:, ch]
@@ -509,14 +528,14 @@ def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, pas
 
 @kernel
 def observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected,
-                  nb_delta, dir_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
-                  is_cut, disc, low, stack_node, stack_k,
+                  nb_delta, dir_delta, roll_delta, roll_table, scent_max,
+                  is_cut, adjacency, disc, low, stack_node, stack_k,
                   neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
                   messages, contact, action_mask):
     """Every agent's observation of one world (cut modules found first when connectivity is kept)."""
     if keep_connected:
-        articulation_points(grid, cell, len(cell), dir_delta, is_cut, disc, low, stack_node, stack_k)
+        articulation_points(grid, cell, len(cell), dir_delta, is_cut, adjacency, disc, low, stack_node, stack_k)
     observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, roll_delta, sweep_bits, pivot_bit, scent_max,
+            nb_delta, roll_delta, roll_table, scent_max,
             neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
             messages, contact, action_mask)

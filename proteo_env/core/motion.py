@@ -92,25 +92,42 @@ The first 12 are :data:`DIRECTIONS`, so bit ``k`` of a local occupancy word is t
 move ``k``."""
 
 
-def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The model's tables as bit masks over the sites its rolls involve, for the kernels.
+def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
+    """The model's tables as byte lookups over the sites its rolls involve, for the kernels.
 
     Returns ``roll_offsets (R, 3)``: the 12 :data:`DIRECTIONS` first, then the sites two hops
     away that some swept cell of this model lies on, in :data:`LOCAL_OFFSETS` order (R is 12
     for ``minimal``, 18 for ``sphere``, 42 for ``rounded`` and ``rhombic``), so a kernel reads
-    only the sites that can matter; ``sweep_bits (12, 4)`` int64, the swept cells of direction
-    ``k`` and pivot slot ``j`` as bits over ``roll_offsets``; and ``pivot_bit (12, 4)`` int64,
-    the bit index of that pivot (a direction, so below 12).
+    only the sites that can matter; and ``roll_table (4, 2 + ceil(R / 8), 256)`` int16, which
+    turns occupancy words over ``roll_offsets`` into words over the 12 directions, a byte at a
+    time. For pivot slot ``j`` (the ``j``-th of the 4 sites next to both ends of a roll, in
+    :func:`common_neighbours` order):
+
+    * ``roll_table[j, i, byte]`` for ``i < 2``: bit ``k`` is set when the pivot of direction
+      ``k`` is one of the set bits of ``byte``, read as bits ``8 i .. 8 i + 7`` of a word of
+      occupied directions;
+    * ``roll_table[j, 2 + i, byte]``: bit ``k`` is set when some swept cell of direction ``k``
+      about that pivot is one of the set bits of ``byte``, read as bits ``8 i .. 8 i + 7``.
+
+    So a roll towards ``k`` is legal when bit ``k`` of ``pivots & ~swept`` is set for some
+    ``j`` (see :func:`~proteo_env.core.kernels.legal_rolls`): 4 x (2 + R / 8) lookups decide
+    all 12 directions at once.
     """
     cases = swept_cells(model)
     swept = {cell for cells in cases.values() for cell in cells}
     roll_offsets = [o for i, o in enumerate(LOCAL_OFFSETS) if i < 12 or tuple(o) in swept]
     index = {tuple(o): i for i, o in enumerate(roll_offsets)}
-    sweep_bits = np.zeros((12, 4), dtype=np.int64)
-    pivot_bit = np.zeros((12, 4), dtype=np.int64)
+    n_bytes = (len(roll_offsets) + 7) // 8
+    roll_table = np.zeros((4, 2 + n_bytes, 256), dtype=np.int16)
+    byte_bits = [[j for j in range(8) if (byte >> j) & 1] for byte in range(256)]
     for k, d in enumerate(DIRECTIONS):
         for j, q in enumerate(common_neighbours(d)):
-            pivot_bit[k, j] = index[tuple(q)]
-            for cell in cases[(tuple(d), tuple(q))]:
-                sweep_bits[k, j] |= 1 << index[cell]
-    return np.array(roll_offsets, dtype=np.int64).reshape(-1, 3), sweep_bits, pivot_bit
+            pivot = index[tuple(q)]
+            cells = {index[cell] for cell in cases[(tuple(d), tuple(q))]}
+            for byte, bits in enumerate(byte_bits):
+                if pivot % 8 in bits:  # a pivot is a direction, so in byte 0 or 1
+                    roll_table[j, pivot // 8, byte] |= 1 << k
+                for i in range(n_bytes):
+                    if any(8 * i + b in cells for b in bits):
+                        roll_table[j, 2 + i, byte] |= 1 << k
+    return np.array(roll_offsets, dtype=np.int64).reshape(-1, 3), roll_table

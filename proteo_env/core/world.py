@@ -109,16 +109,19 @@ LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
 class Scratch:
     """Work arrays of one world's kernels (never part of the state)."""
 
-    NAMES = ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k", "stacks", "rel",
-             "epoch", "scent_buffer", "is_cut")
+    NAMES = ("mark", "queue", "movers", "stacks", "rel", "search", "adjacency", "disc", "low", "stack_node",
+             "stack_k", "scent_buffer", "is_cut")
 
     def __init__(self, n: int):
-        for name in ("mark", "queue", "movers", "disc", "low", "stack_node", "stack_k"):
+        for name in ("mark", "queue", "movers"):
             setattr(self, name, np.zeros(n, dtype=np.int64))
         self.mark[:] = -1
         self.stacks = np.zeros((12, n), dtype=np.int64)
         self.rel = np.zeros((n, 3), dtype=np.int64)
-        self.epoch = np.zeros(1, dtype=np.int64)
+        self.search = np.zeros(13, dtype=np.int64)
+        self.adjacency = np.zeros((n, 13), dtype=np.int32)
+        for name in ("disc", "low", "stack_node", "stack_k"):
+            setattr(self, name, np.zeros(n, dtype=np.int32))
         self.scent_buffer = np.zeros(n, dtype=np.int32)
         self.is_cut = np.zeros(n, dtype=np.bool_)
 
@@ -184,7 +187,7 @@ class World:
         self.dir_delta = self.shape.deltas(DIRECTIONS)
         self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
         self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
-        roll_offsets, self.sweep_bits, self.pivot_bit = motion_bits(physics.motion_model)
+        roll_offsets, self.roll_table = motion_bits(physics.motion_model)
         self.roll_delta = self.shape.deltas(roll_offsets)
         self.scratch = Scratch(n)
 
@@ -246,13 +249,12 @@ class World:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
         s = self.scratch
         kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, s.is_cut,
-                                    s.disc, s.low, s.stack_node, s.stack_k)
+                                    s.adjacency, s.disc, s.low, s.stack_node, s.stack_k)
         return s.is_cut
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
-        legal = kernels.legal_directions(self.grid, self.cell[module], self.roll_delta, self.sweep_bits,
-                                         self.pivot_bit)
+        legal = kernels.legal_directions(self.grid, self.cell[module], self.roll_delta, self.roll_table)
         return bool((legal >> direction) & 1)
 
     def can_detach(self, module: int) -> bool:
@@ -260,7 +262,7 @@ class World:
         s = self.scratch
         return bool(kernels.detach_keeps_connected(
             self.grid, self.cell, module, self.dir_delta, DIRECTIONS, self.local_delta, LOCAL_ADJACENCY_BITS,
-            s.mark, s.stacks, s.rel, s.epoch))
+            s.mark, s.stacks, s.rel, s.search))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -287,7 +289,7 @@ class World:
             np.asarray(scent_role, dtype=np.int8), np.asarray(message_target, dtype=np.int64),
             np.asarray(message_value, dtype=np.int32), moved,
             self.dir_delta, DIRECTIONS, OPPOSITE, self.roll_delta, self.local_delta, LOCAL_ADJACENCY_BITS,
-            self.sweep_bits, self.pivot_bit, s.movers, s.mark, s.queue, s.stacks, s.rel, s.epoch, s.scent_buffer)
+            self.roll_table, s.movers, s.mark, s.queue, s.stacks, s.rel, s.search, s.scent_buffer)
         return moved
 
     def observe(self, out) -> None:
@@ -295,8 +297,8 @@ class World:
         s = self.scratch
         kernels.observe_world(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
                               self.anchored, self.physics.keep_connected, self.neighbourhood_delta,
-                              self.dir_delta, self.roll_delta, self.sweep_bits, self.pivot_bit,
-                              self.physics.scent_max, s.is_cut, s.disc, s.low, s.stack_node, s.stack_k,
+                              self.dir_delta, self.roll_delta, self.roll_table,
+                              self.physics.scent_max, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k,
                               out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
                               out.own_scent, out.messages, out.contact, out.action_mask)
 
