@@ -125,7 +125,7 @@ def is_branched_tree(grid, cell, mode, n_modules, dir_delta, first_node, min_gap
 @kernel
 def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
                     keep_connected, exact, sweeps, scent_max, nb_delta, dir_delta, roll_delta, local_delta, roll_table,
-                    movers, mark, queue, stacks, rel, search, scent_buffer, is_cut, adjacency, disc, low, stack_node,
+                    movers, mark, queue, stacks, search, scent_buffer, is_cut, adjacency, disc, low, stack_node,
                     stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent, messages, contact,
                     load, hint, action_mask, slots, heading, growth, asked, spawned, spot_direction, spot_announced,
                     spot_waited, refused, spot, parent, child, seed_growth, waited, stuck, age, previous, rules,
@@ -182,7 +182,7 @@ def _rollout_cycles(behaviour, grid, cell, n_agents, anchored, mode, scent, inbo
         engine.run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
                          keep_connected, exact, sweeps, scent_max, move, new_mode, role, target, value, moved,
                          dir_delta, DIRECTIONS, OPPOSITE, roll_delta, local_delta, LOCAL_ADJACENCY_BITS,
-                         roll_table, movers, mark, queue, stacks, rel, search, scent_buffer)
+                         roll_table, movers, mark, queue, stacks, search, scent_buffer)
         if behaviour == CHAIN:
             success = is_chain(grid, cell, n_modules, dir_delta, test_scratch[0], test_scratch[1], test_scratch[2])
         elif behaviour == TABLE:
@@ -294,7 +294,7 @@ class CompiledRollout:
         self.state = {name: getattr(world, name).copy() for name in ("grid", "cell", "mode", "scent", "inbox",
                                                                         "rng_state")}
         n = world.n_modules
-        self.scratch = Scratch(n)
+        self.scratch = Scratch(n, len(world.grid))
         self.observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
         self.observation.hint[:] = env.task.hint(world)
         self.test_scratch = np.zeros((TEST_SCRATCH, n), dtype=np.int64)
@@ -325,7 +325,7 @@ class CompiledRollout:
                 self.behaviour, st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
                 st["rng_state"], w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps,
                 int(p.scent_max), w.neighbourhood_delta, w.dir_delta, w.roll_delta, w.local_delta, w.roll_table,
-                s.movers, s.mark, s.queue, s.stacks, s.rel, s.search, s.scent_buffer, s.is_cut, s.adjacency, s.disc,
+                s.movers, s.mark, s.queue, s.stacks, s.search, s.scent_buffer, s.is_cut, s.adjacency, s.disc,
                 s.low, s.stack_node, s.stack_k, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent,
                 obs.own_mode, obs.own_scent, obs.messages, obs.contact, obs.load, obs.hint, obs.action_mask,
                 np.arange(w.n_agents, dtype=np.int64), m.heading, m.growth, m.asked, m.spawned, m.spot_direction,

@@ -182,7 +182,7 @@ def profile(n: int, cycles: int) -> dict:
                 started = time.perf_counter()
                 kernels.execute_moves(grid, cell, n, move, w.anchored, keep, order, w.dir_delta, DIRECTIONS,
                                       w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
-                                      s.movers, moved, s.mark, s.stacks, s.rel, s.search)
+                                      s.movers, moved, s.mark, s.stacks, s.search)
                 parts[part] += time.perf_counter() - started
             n_requested += int((move > 0).sum())
             t6 = time.perf_counter()
@@ -191,7 +191,7 @@ def profile(n: int, cycles: int) -> dict:
                               move, actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
                               actions[:, -2].copy(), actions[:, -1].astype(np.int32), moved, w.dir_delta, DIRECTIONS,
                               OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
-                              s.movers, s.mark, s.queue, s.stacks, s.rel, s.search, s.scent_buffer)
+                              s.movers, s.mark, s.queue, s.stacks, s.search, s.scent_buffer)
             t7 = time.perf_counter()
             n_moved += int(moved.sum())
             is_chain(w.grid, w.cell, n, w.dir_delta, *test)

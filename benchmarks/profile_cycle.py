@@ -72,7 +72,7 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
         return lambda: kernels.execute_moves(
             w.grid, w.cell, n, move, w.anchored, keep_connected, w.rng_state, w.dir_delta, DIRECTIONS,
             w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table, s.movers, moved,
-            s.mark, s.stacks, s.rel, s.search)
+            s.mark, s.stacks, s.search)
 
     def observation():
         kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,

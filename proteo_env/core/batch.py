@@ -23,13 +23,13 @@ from .world import LOCAL_ADJACENCY_BITS, Scratch, World
 def _run_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
                 keep_connected, exact, sweeps, scent_max, move, new_mode, role, message_target,
                 message_value, moved, dir_delta, directions, opposite, roll_delta, local_delta,
-                local_adjacent, roll_table, movers, mark, queue, stacks, rel, search, scent_buffer):
+                local_adjacent, roll_table, movers, mark, queue, stacks, search, scent_buffer):
     for b in prange(grid.shape[0]):
         kernels.run_cycle(grid[b], cell[b], n_agents, anchored[b], mode[b], scent[b], inbox[b],
                           rng_state[b], passive_role, surface, keep_connected, exact, sweeps, scent_max,
                           move[b], new_mode[b], role[b], message_target[b], message_value[b], moved[b],
                           dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent,
-                          roll_table, movers[b], mark[b], queue[b], stacks[b], rel[b], search[b],
+                          roll_table, movers[b], mark[b], queue[b], stacks[b], search[b],
                           scent_buffer[b])
 
 
@@ -74,7 +74,7 @@ class WorldBatch:
         self.n_agents = first.n_agents
         for name in World.STATE:
             setattr(self, name, np.stack([getattr(w, name) for w in worlds]))
-        self.scratch = Scratch(0)
+        self.scratch = Scratch(0, 0)
         for name in Scratch.NAMES:
             setattr(self.scratch, name, np.stack([getattr(w.scratch, name) for w in worlds]))
         self._rehome()
@@ -110,7 +110,7 @@ class WorldBatch:
                     np.asarray(mode, dtype=np.int32), np.asarray(scent_role, dtype=np.int8),
                     np.asarray(message_target, dtype=np.int64), np.asarray(message_value, dtype=np.int32),
                     moved, w.dir_delta, DIRECTIONS, OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS,
-                    w.roll_table, s.movers, s.mark, s.queue, s.stacks, s.rel, s.search,
+                    w.roll_table, s.movers, s.mark, s.queue, s.stacks, s.search,
                     s.scent_buffer)
         return moved
 

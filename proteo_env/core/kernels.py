@@ -119,9 +119,13 @@ def _flood(start, allowed, local_adjacent):
     return reached
 
 
+LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1, 4096)], dtype=np.int8)
+"""``(4096,)``: index of the lowest set bit of a 12-bit word (a table read instead of a loop)."""
+
+
 @kernel
 def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent,
-                           mark, stacks, rel, search):
+                           mark, stacks, search):
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
@@ -129,11 +133,14 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     Otherwise one depth-first search per group of neighbours runs in lockstep over the module
     graph (``m`` removed), each stepping first towards the next group's seed. The searches stop
     when all groups have met (connected) or one group's stacks run out (that piece is cut off),
-    so the cost is bounded by the size of the smallest piece. Scratch: ``mark`` (N,), ``stacks``
-    (12, N), ``rel`` (N, 3) positions relative to ``m``; ``search`` (13,) holds the epoch in
-    ``search[0]``, bumped so that ``mark`` never needs clearing, and the depth of each group's
-    stack in ``search[1:13]``. The groups' union-find parents and seed directions are packed
-    4 bits per group in two integers, so a search allocates nothing.
+    so the cost is bounded by the size of the smallest piece.
+
+    The search works on cells, so what it touches lies close together: ``mark`` (cells,) int64
+    labels visited cells, and each group's stack in ``stacks`` (12, N, 4) int32 holds entries
+    ``(cell, x, y, z)``, the position relative to ``m`` riding along. ``search`` (13,) holds
+    the epoch in ``search[0]``, bumped so that ``mark`` never needs clearing, and the depth of
+    each group's stack in ``search[1:13]``. The groups' union-find parents and seed
+    directions are packed 4 bits per group in two integers, so a search allocates nothing.
     """
     c = cell[m]
     touching = 0
@@ -153,7 +160,7 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     search[0] += 1
     base = search[0] * LABEL_BITS
     depth = search[1:13]
-    mark[m] = base + REMOVED_LABEL
+    mark[c] = base + REMOVED_LABEL
     parents = 0
     seed_slots = 0
     n_groups = 0
@@ -161,16 +168,15 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     while remaining:
         bit = remaining & -remaining
         remaining &= ~_flood(bit, modules, local_adjacent)
-        k = 0
-        while not (bit >> k) & 1:
-            k += 1
-        seed = grid[c + dir_delta[k]]
+        k = LOWEST_BIT[bit]
+        seed = c + dir_delta[k]
         mark[seed] = base + n_groups
-        rel[seed] = directions[k]
-        stacks[n_groups, 0] = seed
+        stacks[n_groups, 0, 0] = seed
+        for axis in range(3):
+            stacks[n_groups, 0, 1 + axis] = directions[k, axis]
         depth[n_groups] = 1
         parents |= n_groups << (4 * n_groups)
-        seed_slots |= k << (4 * n_groups)
+        seed_slots |= np.int64(k) << (4 * n_groups)
         n_groups += 1
     groups_left = n_groups
     while True:
@@ -178,17 +184,20 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
             if depth[g] == 0:
                 continue
             depth[g] -= 1
-            n = stacks[g, depth[g]]
+            entry = stacks[g, depth[g]]
+            cn, x, y, z = entry[0], entry[1], entry[2], entry[3]
             label = _group_root(parents, g)
             target = directions[(seed_slots >> (4 * ((g + 1) % n_groups))) & 15]
             best_at, best_distance = -1, 1 << 62
-            cn = cell[n]
+            around = 0
             for k in range(12):
-                nb = grid[cn + dir_delta[k]]
-                if nb < 0:
-                    continue
-                if mark[nb] >= base:
-                    other = mark[nb] - base
+                around |= np.int64(grid[cn + dir_delta[k]] >= 0) << k
+            while around:  # the module neighbours, lowest direction first
+                k = LOWEST_BIT[around]
+                around &= around - 1
+                nc = cn + dir_delta[k]
+                if mark[nc] >= base:
+                    other = mark[nc] - base
                     if other == REMOVED_LABEL:
                         continue
                     other = _group_root(parents, other)
@@ -198,18 +207,21 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
                         if groups_left == 1:
                             return True
                     continue
-                mark[nb] = base + g
-                distance = 0
-                for axis in range(3):
-                    rel[nb, axis] = rel[n, axis] + directions[k, axis]
-                    distance += (rel[nb, axis] - target[axis]) ** 2
-                stacks[g, depth[g]] = nb
+                mark[nc] = base + g
+                d = depth[g]
+                nx, ny, nz = x + directions[k, 0], y + directions[k, 1], z + directions[k, 2]
+                stacks[g, d, 0] = nc
+                stacks[g, d, 1] = nx
+                stacks[g, d, 2] = ny
+                stacks[g, d, 3] = nz
+                distance = (nx - target[0]) ** 2 + (ny - target[1]) ** 2 + (nz - target[2]) ** 2
                 if distance < best_distance:
-                    best_at, best_distance = depth[g], distance
-                depth[g] += 1
+                    best_at, best_distance = d, distance
+                depth[g] = d + 1
             if best_at >= 0:  # the neighbour nearest the target is explored next
                 top = depth[g] - 1
-                stacks[g, top], stacks[g, best_at] = stacks[g, best_at], stacks[g, top]
+                for f in range(4):
+                    stacks[g, top, f], stacks[g, best_at, f] = stacks[g, best_at, f], stacks[g, top, f]
         for g in range(n_groups):  # a piece is cut off when all its merged groups ran out
             if depth[g] > 0:
                 continue
@@ -335,7 +347,7 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 @kernel
 def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
                   dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table,
-                  movers, moved, mark, stacks, rel, search):
+                  movers, moved, mark, stacks, search):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
     ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
@@ -358,7 +370,7 @@ def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_stat
         if not (legal_directions(grid, c, roll_delta, roll_table) >> k) & 1:
             continue
         if keep_connected and not detach_keeps_connected(
-            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, rel, search
+            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, search
         ):
             continue
         grid[c] = EMPTY
@@ -506,14 +518,14 @@ def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, pas
               keep_connected, exact, sweeps, scent_max,
               move, new_mode, role, message_target, message_value, moved,
               dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent, roll_table,
-              movers, mark, queue, stacks, rel, search, scent_buffer):
+              movers, mark, queue, stacks, search, scent_buffer):
     """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
     n_modules = len(cell)
     mode[:n_agents] = new_mode
     deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
     n_moved = execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
                             dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table, movers,
-                            moved, mark, stacks, rel, search)
+                            moved, mark, stacks, search)
     channel_role = np.empty(n_modules, dtype=np.int8)
     for ch in range(scent.shape[0]):
         channel_role[:n_agents] = role[:, ch]

@@ -107,17 +107,17 @@ LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
 
 
 class Scratch:
-    """Work arrays of one world's kernels (never part of the state)."""
+    """Work arrays of one world's kernels (never part of the state), for ``n`` modules on a
+    grid of ``cells`` cells."""
 
-    NAMES = ("mark", "queue", "movers", "stacks", "rel", "search", "adjacency", "disc", "low", "stack_node",
-             "stack_k", "scent_buffer", "is_cut")
+    NAMES = ("mark", "queue", "movers", "stacks", "search", "adjacency", "disc", "low", "stack_node", "stack_k",
+             "scent_buffer", "is_cut")
 
-    def __init__(self, n: int):
-        for name in ("mark", "queue", "movers"):
-            setattr(self, name, np.zeros(n, dtype=np.int64))
-        self.mark[:] = -1
-        self.stacks = np.zeros((12, n), dtype=np.int64)
-        self.rel = np.zeros((n, 3), dtype=np.int64)
+    def __init__(self, n: int, cells: int):
+        self.mark = np.full(cells, -1, dtype=np.int64)
+        self.queue = np.zeros(n, dtype=np.int64)
+        self.movers = np.zeros(n, dtype=np.int64)
+        self.stacks = np.zeros((12, n, 4), dtype=np.int32)
         self.search = np.zeros(13, dtype=np.int64)
         self.adjacency = np.zeros((n, 13), dtype=np.int32)
         for name in ("disc", "low", "stack_node", "stack_k"):
@@ -189,7 +189,7 @@ class World:
         self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
         roll_offsets, self.roll_table = motion_bits(physics.motion_model)
         self.roll_delta = self.shape.deltas(roll_offsets)
-        self.scratch = Scratch(n)
+        self.scratch = Scratch(n, len(self.grid))
 
         if physics.keep_connected and n > 0 and self.n_components() != 1:
             raise LayoutError(
@@ -243,7 +243,7 @@ class World:
     def n_components(self) -> int:
         """Number of connected pieces of the module graph (board modules included)."""
         return int(kernels.count_components(self.grid, self.cell, self.n_modules, self.dir_delta,
-                                            self.scratch.mark.copy(), self.scratch.queue))
+                                            np.zeros(self.n_modules, dtype=np.int64), self.scratch.queue))
 
     def cut_modules(self) -> np.ndarray:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
@@ -262,7 +262,7 @@ class World:
         s = self.scratch
         return bool(kernels.detach_keeps_connected(
             self.grid, self.cell, module, self.dir_delta, DIRECTIONS, self.local_delta, LOCAL_ADJACENCY_BITS,
-            s.mark, s.stacks, s.rel, s.search))
+            s.mark, s.stacks, s.search))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -289,7 +289,7 @@ class World:
             np.asarray(scent_role, dtype=np.int8), np.asarray(message_target, dtype=np.int64),
             np.asarray(message_value, dtype=np.int32), moved,
             self.dir_delta, DIRECTIONS, OPPOSITE, self.roll_delta, self.local_delta, LOCAL_ADJACENCY_BITS,
-            self.roll_table, s.movers, s.mark, s.queue, s.stacks, s.rel, s.search, s.scent_buffer)
+            self.roll_table, s.movers, s.mark, s.queue, s.stacks, s.search, s.scent_buffer)
         return moved
 
     def observe(self, out) -> None:
