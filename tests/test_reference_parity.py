@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from proteo_env.core.kernels import LAST_EPOCH
 from proteo_env.core.motion import MOTION_MODELS
 from proteo_env.core.reference import ReferenceWorld
 from proteo_env.core.world import Physics, World
@@ -122,9 +123,13 @@ def assert_same(world: World, ref: ReferenceWorld, buffers: ObservationBuffers, 
         np.testing.assert_array_equal(getattr(buffers, f), obs[f], err_msg=f"{where}: observation {f}")
 
 
-def run_parity(case: Case, obs_radius: int = 1) -> int:
-    """Run one case; return how many moves happened (the test wants the runs to be lively)."""
+def run_parity(case: Case, obs_radius: int = 1, first_epoch: int = 0) -> int:
+    """Run one case; return how many moves happened (the test wants the runs to be lively).
+
+    ``first_epoch`` starts the engine's connectivity-search epoch there (the reference has none).
+    """
     world, ref = build(case, obs_radius)
+    world.scratch.search[0] = first_epoch
     world.seed(case.seed * 7919 + 11)
     ref.seed(case.seed * 7919 + 11)
     buffers = ObservationBuffers(world.n_agents, 12 if obs_radius == 1 else 54, case.n_channels)
@@ -140,6 +145,8 @@ def run_parity(case: Case, obs_radius: int = 1) -> int:
         n_moves += int(moved_world.sum())
     if case.keep_connected:
         assert world.n_components() == 1 == ref.n_components()
+    if first_epoch:
+        assert world.scratch.search[0] < first_epoch, "the searches never ran out of epochs"
     return n_moves
 
 
@@ -174,6 +181,12 @@ def test_parity(case):
 def test_parity_long_minimal_blob():
     """One longer run where many modules move (minimal model, connectivity kept)."""
     assert run_parity(Case("blob30", "minimal", True, "sweep1", 2, True, 150, seed=7)) > 100
+
+
+def test_parity_across_the_search_epoch_wrap():
+    """The connectivity search's int32 marks are cleared when its epochs run out, mid-run."""
+    case = Case("blob40", "minimal", True, "sweep1", 1, False, 40, seed=8)
+    assert run_parity(case, first_epoch=LAST_EPOCH - 3) > 0
 
 
 @pytest.mark.parametrize("layout", ["obstacles", "anchored"])

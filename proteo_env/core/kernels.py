@@ -16,6 +16,7 @@ SILENT, RELAY, EMIT = 0, 1, 2
 KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
 LABEL_BITS = 16  # connectivity search: mark = epoch * LABEL_BITS + group label (or REMOVED_LABEL)
 REMOVED_LABEL = 15
+LAST_EPOCH = (2**31 - 1) // LABEL_BITS - 1  # int32 marks: past it, marks are cleared and epochs restart
 
 
 # ---------------------------------------------------------------- random numbers
@@ -135,12 +136,13 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     when all groups have met (connected) or one group's stacks run out (that piece is cut off),
     so the cost is bounded by the size of the smallest piece.
 
-    The search works on cells, so what it touches lies close together: ``mark`` (cells,) int64
+    The search works on cells, so what it touches lies close together: ``mark`` (cells,) int32
     labels visited cells, and each group's stack in ``stacks`` (12, N, 4) int32 holds entries
     ``(cell, x, y, z)``, the position relative to ``m`` riding along. ``search`` (13,) holds
-    the epoch in ``search[0]``, bumped so that ``mark`` never needs clearing, and the depth of
-    each group's stack in ``search[1:13]``. The groups' union-find parents and seed
-    directions are packed 4 bits per group in two integers, so a search allocates nothing.
+    the epoch in ``search[0]``, bumped so that ``mark`` needs clearing only when the epochs run
+    out (:data:`LAST_EPOCH`), and the depth of each group's stack in ``search[1:13]``. The
+    groups' union-find parents and seed directions are packed 4 bits per group in two
+    integers, so a search allocates nothing.
     """
     c = cell[m]
     touching = 0
@@ -157,6 +159,9 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     if touching & ~_flood(first, modules, local_adjacent) == 0:
         return True
 
+    if search[0] >= LAST_EPOCH:  # once in about 134 million searches
+        mark[:] = -1
+        search[0] = 0
     search[0] += 1
     base = search[0] * LABEL_BITS
     depth = search[1:13]

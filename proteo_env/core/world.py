@@ -114,7 +114,7 @@ class Scratch:
              "scent_buffer", "is_cut")
 
     def __init__(self, n: int, cells: int):
-        self.mark = np.full(cells, -1, dtype=np.int64)
+        self.mark = np.full(cells, -1, dtype=np.int32)
         self.queue = np.zeros(n, dtype=np.int64)
         self.movers = np.zeros(n, dtype=np.int64)
         self.stacks = np.zeros((12, n, 4), dtype=np.int32)
