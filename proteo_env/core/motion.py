@@ -111,23 +111,26 @@ def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
 
     So a roll towards ``k`` is legal when bit ``k`` of ``pivots & ~swept`` is set for some
     ``j`` (see :func:`~proteo_env.core.kernels.legal_rolls`): 4 x (2 + R / 8) lookups decide
-    all 12 directions at once.
+    all 12 directions at once. The tables are built once per model; each call returns copies.
     """
+    roll_offsets, roll_table = _motion_tables(model)
+    return roll_offsets.copy(), roll_table.copy()
+
+
+@lru_cache(maxsize=None)
+def _motion_tables(model: str) -> tuple[np.ndarray, np.ndarray]:
     cases = swept_cells(model)
     swept = {cell for cells in cases.values() for cell in cells}
     roll_offsets = [o for i, o in enumerate(LOCAL_OFFSETS) if i < 12 or tuple(o) in swept]
     index = {tuple(o): i for i, o in enumerate(roll_offsets)}
     n_bytes = (len(roll_offsets) + 7) // 8
     roll_table = np.zeros((4, 2 + n_bytes, 256), dtype=np.int16)
-    byte_bits = [[j for j in range(8) if (byte >> j) & 1] for byte in range(256)]
+    byte = np.arange(256)
     for k, d in enumerate(DIRECTIONS):
         for j, q in enumerate(common_neighbours(d)):
-            pivot = index[tuple(q)]
-            cells = {index[cell] for cell in cases[(tuple(d), tuple(q))]}
-            for byte, bits in enumerate(byte_bits):
-                if pivot % 8 in bits:  # a pivot is a direction, so in byte 0 or 1
-                    roll_table[j, pivot // 8, byte] |= 1 << k
-                for i in range(n_bytes):
-                    if any(8 * i + b in cells for b in bits):
-                        roll_table[j, 2 + i, byte] |= 1 << k
+            pivot = index[tuple(q)]  # a direction, so in byte 0 or 1
+            roll_table[j, pivot // 8, (byte >> (pivot % 8)) & 1 == 1] |= 1 << k
+            cells = sum(1 << index[cell] for cell in cases[(tuple(d), tuple(q))])
+            for i in range(n_bytes):
+                roll_table[j, 2 + i, (byte & ((cells >> (8 * i)) & 255)) != 0] |= 1 << k
     return np.array(roll_offsets, dtype=np.int64).reshape(-1, 3), roll_table
