@@ -36,7 +36,7 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
 
-from .kernels import AROUND_BITS, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick
+from .kernels import AROUND_BITS, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick, write_action
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
@@ -66,17 +66,6 @@ class GraspRules(NamedTuple):
     touch_channel: int
     straight: bool
     wrap_forward: bool
-
-
-@kernel
-def _encode(actions, i, move, mode, role_0, role_1, target, value):
-    """Write the action ``(move, mode, roles, target, value)`` of row ``i`` (two scent channels)."""
-    actions[i, 0] = move
-    actions[i, 1] = mode
-    actions[i, 2] = role_0
-    actions[i, 3] = role_1
-    actions[i, 4] = target
-    actions[i, 5] = value
 
 
 @kernel
@@ -165,7 +154,7 @@ def _search_near_seed(messages, neighbour_kind, neighbour_mode, action_mask, con
             if m == SEED:
                 plain |= 1 << k
     if contact[i, 1]:
-        _encode(actions, i, 0, TOUCHSEED, EMIT, EMIT, first, SET_TOUCH)
+        write_action(actions, i, 0, TOUCHSEED, EMIT, EMIT, first, SET_TOUCH)
         return
     if plain == 0:
         actions[i, 0] = _around(neighbour_kind, action_mask, hint, i, first, rules, rng)
@@ -179,7 +168,7 @@ def _search_near_seed(messages, neighbour_kind, neighbour_mode, action_mask, con
         growth = value - 1
         if OPPOSITE[growth] == slot:  # this is the seed's growth site
             previous[s] = growth
-            _encode(actions, i, 0, SEED, EMIT, RELAY, slot, SET_FINAL)
+            write_action(actions, i, 0, SEED, EMIT, RELAY, slot, SET_FINAL)
         else:
             actions[i, 0] = approach_spot(action_mask, i, slot, growth, rules.greedy_approach, rng)
         return
@@ -247,7 +236,7 @@ def _seed(messages, neighbour_kind, neighbour_mode, contact, hint, i, s, growth,
           rules, rng, actions):
     """A SEED row ``i`` (slot ``s``): obey a hand-over, keep or choose its growth site, retire."""
     if _heard(messages, i, SET_TOUCH) or _heard(messages, i, SET_FINAL):
-        _encode(actions, i, 0, TOUCH if _heard(messages, i, SET_TOUCH) else FINAL, RELAY, RELAY, 0, 0)
+        write_action(actions, i, 0, TOUCH if _heard(messages, i, SET_TOUCH) else FINAL, RELAY, RELAY, 0, 0)
         _forget(s, growth, waited, stuck, age, previous)
         return
     g = growth[s]
@@ -267,14 +256,14 @@ def _seed(messages, neighbour_kind, neighbour_mode, contact, hint, i, s, growth,
     stuck[s] = stuck[s] + 1 if g < 0 else 0
     if rules.retire and not contact[i, 1] and (stuck[s] > rules.patience or age[s] > rules.retire_after):
         _forget(s, growth, waited, stuck, age, previous)
-        _encode(actions, i, 0, FINAL, RELAY, RELAY, 0, 0)
+        write_action(actions, i, 0, FINAL, RELAY, RELAY, 0, 0)
         return
     growth[s] = g
     if g < 0:  # nowhere to grow (yet)
-        _encode(actions, i, 0, SEED, EMIT, RELAY, 0, 0)
+        write_action(actions, i, 0, SEED, EMIT, RELAY, 0, 0)
         return
     waited[s] = w
-    _encode(actions, i, 0, SEED, EMIT, RELAY, MESSAGE_TO_ALL, g + 1)
+    write_action(actions, i, 0, SEED, EMIT, RELAY, MESSAGE_TO_ALL, g + 1)
 
 
 @kernel
@@ -283,7 +272,7 @@ def _touch_seed(messages, neighbour_kind, neighbour_mode, hint, i, s, growth, wa
     """A TOUCHSEED row ``i`` (slot ``s``): obey a hand-over, or with ``relocate`` pass the role on."""
     if _heard(messages, i, SET_TOUCH):
         _forget(s, growth, waited, stuck, age, previous)
-        _encode(actions, i, 0, TOUCH, RELAY, RELAY, 0, 0)
+        write_action(actions, i, 0, TOUCH, RELAY, RELAY, 0, 0)
         return
     if rules.relocate:
         waited[s] += 1
@@ -302,9 +291,9 @@ def _touch_seed(messages, neighbour_kind, neighbour_mode, hint, i, s, growth, wa
                 ahead = _ahead(touch, hint, i)
                 if ahead:
                     touch = ahead
-            _encode(actions, i, 0, TOUCH, RELAY, RELAY, uniform_pick(rng, touch), PASS_SEED)
+            write_action(actions, i, 0, TOUCH, RELAY, RELAY, uniform_pick(rng, touch), PASS_SEED)
             return
-    _encode(actions, i, 0, TOUCHSEED, EMIT, EMIT, 0, 0)
+    write_action(actions, i, 0, TOUCHSEED, EMIT, EMIT, 0, 0)
 
 
 @kernel
@@ -320,13 +309,13 @@ def grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
     n_climbers = 0
     for i in range(n):
         mode = own_mode[i, 0]
-        _encode(actions, i, 0, mode, RELAY, RELAY, 0, 0)
+        write_action(actions, i, 0, mode, RELAY, RELAY, 0, 0)
         if mode == SLEEP:
             detected = False
             for k in range(12):
                 detected |= neighbour_scent[i, k, 0] < rules.scent_max
             role = RELAY if detected else SILENT
-            _encode(actions, i, 0, SEARCH if detected else SLEEP, role, role, 0, 0)
+            write_action(actions, i, 0, SEARCH if detected else SLEEP, role, role, 0, 0)
         elif mode == SEARCH:
             for k in range(12):
                 near_seed[i] |= neighbour_mode[i, k] == SEED or neighbour_mode[i, k] == TOUCHSEED
@@ -357,4 +346,4 @@ def grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
         for i in range(n):
             if own_mode[i, 0] == TOUCH and _heard(messages, i, PASS_SEED):
                 waited[slots[i]] = 0
-                _encode(actions, i, 0, TOUCHSEED, EMIT, EMIT, 0, 0)
+                write_action(actions, i, 0, TOUCHSEED, EMIT, EMIT, 0, 0)

@@ -105,6 +105,21 @@ class ChainRules(NamedTuple):
     avoid_octahedra: int
 
 
+# ---------------------------------------------------------------- writing actions
+@kernel
+def write_action(actions, i, move, mode, first_role, other_roles, target, value):
+    """Write row ``i`` of ``actions`` (A, L): ``move``, ``mode``, scent role ``first_role`` on
+    channel 0 and ``other_roles`` on every other channel, message ``target`` and ``value``."""
+    n_fields = actions.shape[1]
+    actions[i, 0] = move
+    actions[i, 1] = mode
+    actions[i, 2] = first_role
+    for f in range(3, n_fields - 2):
+        actions[i, f] = other_roles
+    actions[i, n_fields - 2] = target
+    actions[i, n_fields - 1] = value
+
+
 # ---------------------------------------------------------------- picks and bit sets
 @kernel
 def first_bit(bits):
@@ -298,26 +313,15 @@ def seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, rules, rng, ac
                                    rules.clean_exit)
         if new >= 0 or growth < 0:
             growth = new
-    n_fields = actions.shape[1]
-    actions[i, 0] = 0
-    actions[i, 1] = SEED
-    for f in range(2, n_fields - 2):
-        actions[i, f] = EMIT
-    actions[i, n_fields - 2] = 0
-    actions[i, n_fields - 1] = 0
     if growth < 0:
+        write_action(actions, i, 0, SEED, EMIT, EMIT, 0, 0)
         return -1
     kind, m = neighbour_kind[i, growth], neighbour_mode[i, growth]
     if (not fresh and kind == KIND_MODULE and (m == SLEEP or m == SEARCH)
             and not (rules.turn and _seed_blocked(neighbour_kind, neighbour_mode, i, growth, final_bits))):
-        actions[i, 1] = FINAL
-        for f in range(2, n_fields - 2):
-            actions[i, f] = RELAY
-        actions[i, n_fields - 2] = growth
-        actions[i, n_fields - 1] = BECOME_SEED
+        write_action(actions, i, 0, FINAL, RELAY, RELAY, growth, BECOME_SEED)
         return -1
-    actions[i, n_fields - 2] = MESSAGE_TO_ALL
-    actions[i, n_fields - 1] = growth + 1
+    write_action(actions, i, 0, SEED, EMIT, EMIT, MESSAGE_TO_ALL, growth + 1)
     return growth
 
 
@@ -701,17 +705,11 @@ def chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
     modules act by :func:`search_actions`; FINAL modules forget their heading.
     """
     n_agents = own_mode.shape[0]
-    n_fields = actions.shape[1]
     smax = rules.scent_max
     promoted = np.full(n_agents, -1, dtype=np.int64)
     for i in range(n_agents):
         own = own_mode[i, 0]
-        actions[i, 0] = 0
-        actions[i, 1] = own
-        for f in range(2, n_fields - 2):
-            actions[i, f] = RELAY
-        actions[i, n_fields - 2] = 0
-        actions[i, n_fields - 1] = 0
+        write_action(actions, i, 0, own, RELAY, RELAY, 0, 0)
         if own == SLEEP or own == SEARCH:
             for k in range(12):
                 if messages[i, k] == BECOME_SEED:
@@ -773,18 +771,6 @@ class BranchRules(NamedTuple):
 
 
 @kernel
-def _encode(actions, i, mode, role_0, role_1, target, value):
-    """Write the action ``(stay, mode, roles, target, value)`` of row ``i`` (two scent channels)."""
-    n_fields = actions.shape[1]
-    actions[i, 0] = 0
-    actions[i, 1] = mode
-    actions[i, 2] = role_0
-    actions[i, 3] = role_1
-    actions[i, n_fields - 2] = target
-    actions[i, n_fields - 1] = value
-
-
-@kernel
 def branch_seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, previous, refused, rules, rng, actions):
     """Write the action of the branch seed at row ``i`` into ``actions[i]``; return the growth it
     keeps in memory (-1: none).
@@ -804,14 +790,14 @@ def branch_seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, previou
         if new >= 0 or not known or (refused >> growth) & 1:
             growth = new
     if growth < 0:
-        _encode(actions, i, SEED, EMIT, RELAY, 0, 0)
+        write_action(actions, i, 0, SEED, EMIT, RELAY, 0, 0)
         return -1
     kind, m = neighbour_kind[i, growth], neighbour_mode[i, growth]
     if (not fresh and kind == KIND_MODULE and (m == SLEEP or m == SEARCH)
             and not (rules.turn and _seed_blocked(neighbour_kind, neighbour_mode, i, growth, GROWN_BITS))):
-        _encode(actions, i, FINAL, RELAY, RELAY, growth, BECOME_SEED)
+        write_action(actions, i, 0, FINAL, RELAY, RELAY, growth, BECOME_SEED)
         return -1
-    _encode(actions, i, SEED, EMIT, RELAY, MESSAGE_TO_ALL, growth + 1)
+    write_action(actions, i, 0, SEED, EMIT, RELAY, MESSAGE_TO_ALL, growth + 1)
     return growth
 
 
@@ -855,7 +841,7 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
     count = spawned[s] if spawned[s] != NO_COUNT else 0
     if count >= branch.B:
         _retire(s, spawned, spot_direction, spot_announced, spot_waited, refused)
-        _encode(actions, i, INODE, RELAY, EMIT, 0, 0)
+        write_action(actions, i, 0, INODE, RELAY, EMIT, 0, 0)
         return
     direction, announced, waited = spot_direction[s], spot_announced[s], spot_waited[s]
     if (direction < 0 or not _spot_free(neighbour_kind, neighbour_mode, i, direction)
@@ -867,7 +853,7 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
                 pool |= 1 << k
         if pool == 0:
             _retire(s, spawned, spot_direction, spot_announced, spot_waited, refused)
-            _encode(actions, i, INODE, RELAY, EMIT, 0, 0)
+            write_action(actions, i, 0, INODE, RELAY, EMIT, 0, 0)
             return
         new = uniform_pick(rng, pool)
         announced = announced and new == direction
@@ -880,14 +866,14 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
         spot_announced[s] = False
         spot_waited[s] = 0
         if count + 1 >= branch.B:  # the last seed: go INODE in the same action
-            _encode(actions, i, INODE, RELAY, EMIT, direction, BECOME_SEED)
+            write_action(actions, i, 0, INODE, RELAY, EMIT, direction, BECOME_SEED)
         else:
-            _encode(actions, i, NODE, EMIT, EMIT, direction, BECOME_SEED)
+            write_action(actions, i, 0, NODE, EMIT, EMIT, direction, BECOME_SEED)
         return
     spot_direction[s] = direction
     spot_announced[s] = True
     spot_waited[s] = waited + 1
-    _encode(actions, i, NODE, EMIT, EMIT, MESSAGE_TO_ALL, direction + 1)
+    write_action(actions, i, 0, NODE, EMIT, EMIT, MESSAGE_TO_ALL, direction + 1)
 
 
 @kernel
@@ -914,7 +900,7 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
     refused_from = np.full(n_agents, -1, dtype=np.int64)
     for i in range(n_agents):
         own = own_mode[i, 0]
-        _encode(actions, i, own, RELAY, RELAY, 0, 0)
+        write_action(actions, i, 0, own, RELAY, RELAY, 0, 0)
         for k in range(12):
             if messages[i, k] == REFUSE:
                 refused_from[i] = k

@@ -39,7 +39,8 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .kernels import approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick
+from .kernels import (approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick,
+                      write_action)
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 
@@ -71,16 +72,6 @@ class TableRules(NamedTuple):
     f_max: float
     f_min: float
     p_random: float
-
-
-@kernel
-def _encode(actions, i, move, mode, role, target, value):
-    """Write the action ``(move, mode, role, target, value)`` of row ``i`` (one scent channel)."""
-    actions[i, 0] = move
-    actions[i, 1] = mode
-    actions[i, 2] = role
-    actions[i, 3] = target
-    actions[i, 4] = value
 
 
 @kernel
@@ -128,9 +119,9 @@ def _seed(neighbour_kind, neighbour_mode, i, s, mode, spot, parent, rng, actions
                 break
     spot[s] = sp
     if sp < 0:
-        _encode(actions, i, 0, mode, EMIT, 0, 0)
+        write_action(actions, i, 0, mode, EMIT, EMIT, 0, 0)
     else:
-        _encode(actions, i, 0, mode, EMIT, MESSAGE_TO_ALL, sp + 1)
+        write_action(actions, i, 0, mode, EMIT, EMIT, MESSAGE_TO_ALL, sp + 1)
 
 
 @kernel
@@ -139,9 +130,9 @@ def _disband_leg(i, s, new_mode, spot, parent, child, actions):
     c = child[s]
     spot[s], parent[s], child[s] = -1, -1, -1
     if c < 0:
-        _encode(actions, i, 0, new_mode, RELAY, 0, 0)
+        write_action(actions, i, 0, new_mode, RELAY, RELAY, 0, 0)
     else:
-        _encode(actions, i, 0, new_mode, RELAY, c, DISBAND_NOW)
+        write_action(actions, i, 0, new_mode, RELAY, RELAY, c, DISBAND_NOW)
 
 
 @kernel
@@ -161,13 +152,13 @@ def _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent,
             if growth == OPPOSITE[k]:  # at the seed's spot: become the SEED
                 spot[s], child[s] = -1, -1
                 parent[s] = k
-                _encode(actions, i, 0, SEED, EMIT, k, SPOT_TAKEN)
+                write_action(actions, i, 0, SEED, EMIT, EMIT, k, SPOT_TAKEN)
                 return
             if 0 <= growth < 12:
                 heard |= 1 << k
                 lowest = min(lowest, DIRECTIONS[k, 2])
     if heard == 0:  # next to a seed not heard yet: hold still
-        _encode(actions, i, 0, SEARCH, RELAY, 0, 0)
+        write_action(actions, i, 0, SEARCH, RELAY, RELAY, 0, 0)
         return
     pool = 0
     for k in range(12):
@@ -177,7 +168,7 @@ def _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent,
     move = approach_spot(action_mask, i, slot, messages[i, slot] - 1, True, rng)
     if move == 0 and rules.p_random > 0 and rng.random() < rules.p_random:
         move = uniform_pick(rng, legal_bits(action_mask, i)) + 1
-    _encode(actions, i, move, SEARCH, RELAY, 0, 0)
+    write_action(actions, i, move, SEARCH, RELAY, RELAY, 0, 0)
 
 
 @kernel
@@ -225,37 +216,37 @@ def table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
             else:
                 climbers[n_climbers] = i
                 n_climbers += 1
-                _encode(actions, i, 0, SEARCH, RELAY, 0, 0)
+                write_action(actions, i, 0, SEARCH, RELAY, RELAY, 0, 0)
         elif mode == FINAL:
-            _encode(actions, i, 0, DISBAND if disband else FINAL, RELAY, 0, 0)
+            write_action(actions, i, 0, DISBAND if disband else FINAL, RELAY, RELAY, 0, 0)
         elif mode == IROOT:
             if load[i, 0] > f_max and rng.random() < rules.p_max:
                 _seed(neighbour_kind, neighbour_mode, i, s, AROOT, spot, parent, rng, actions)
             else:
-                _encode(actions, i, 0, IROOT, RELAY, 0, 0)
+                write_action(actions, i, 0, IROOT, RELAY, RELAY, 0, 0)
         elif mode == ROOT:
             if load[i, 0] < f_min and rng.random() < rules.p_min:
                 _disband_leg(i, s, IROOT, spot, parent, child, actions)
             else:
-                _encode(actions, i, 0, ROOT, RELAY, 0, 0)
+                write_action(actions, i, 0, ROOT, RELAY, RELAY, 0, 0)
         elif mode == AROOT or mode == SEED:
             if taken >= 0:  # the module below took the spot: it is this leg's next module
                 child[s] = taken
             if mode == SEED and disband:
                 spot[s], parent[s] = -1, -1
-                _encode(actions, i, 0, DISBAND, RELAY, 0, 0)
+                write_action(actions, i, 0, DISBAND, RELAY, RELAY, 0, 0)
             elif taken >= 0 or (mode == SEED and contact[i, 0]):
                 spot[s], parent[s] = -1, -1
-                _encode(actions, i, 0, ROOT if mode == AROOT else FINAL, RELAY, 0, 0)
+                write_action(actions, i, 0, ROOT if mode == AROOT else FINAL, RELAY, RELAY, 0, 0)
             else:
                 _seed(neighbour_kind, neighbour_mode, i, s, mode, spot, parent, rng, actions)
         elif mode == DISBAND:
             _disband_leg(i, s, SEARCH, spot, parent, child, actions)
         elif mode == SLEEP:
             awake = detects_scent(own_scent, neighbour_kind, neighbour_scent, i, rules.scent_max)
-            _encode(actions, i, 0, SEARCH if awake else SLEEP, RELAY, 0, 0)
+            write_action(actions, i, 0, SEARCH if awake else SLEEP, RELAY, RELAY, 0, 0)
         else:  # FIXED (board modules are passive; an agent never is)
-            _encode(actions, i, 0, mode, RELAY, 0, 0)
+            write_action(actions, i, 0, mode, RELAY, RELAY, 0, 0)
     pools = np.empty(n_climbers, dtype=np.int64)
     for j in range(n_climbers):
         pools[j] = _gradient_pool(neighbour_kind, neighbour_scent, action_mask, climbers[j], rules.scent_max)
