@@ -37,6 +37,7 @@ import numpy as np
 
 from ..core.structure import StructureProbe
 from ..layouts import Layout, blob_sites, place_in_box
+from ..core.kernels import EMIT, RELAY
 from .base import Task
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
@@ -88,6 +89,8 @@ class Chain(Task):
     Params = ChainParams
     n_message_values = 15
     default_policy = "chain"
+    mode_roles = ((RELAY,), (RELAY,), (EMIT,), (RELAY,))
+    """``move+mode``: the SEED emits the scent, every other mode relays it."""
 
     def build_layout(self, rng):
         p = self.params
@@ -105,6 +108,7 @@ class Chain(Task):
     def reset(self, world, rng):
         self._probe = StructureProbe(world.n_modules)
         self._last = self._measure(world)
+        self._previous = self._last
 
     def _measure(self, world):
         degree, edges, thin_piece = self._probe.measure(world)

@@ -95,6 +95,7 @@ import numpy as np
 from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS
 from ..layouts import Layout
+from ..core.kernels import EMIT, RELAY
 from .base import Task
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
@@ -237,6 +238,8 @@ class Table(Task):
     Params = TableParams
     n_message_values = 15
     default_policy = "table"
+    mode_roles = tuple((EMIT,) if m in (AROOT, SEED) else (RELAY,) for m in range(len(MODES)))
+    """``move+mode``: an AROOT (a root growing a leg) and a leg's SEED emit; the rest relay."""
     plot_groups = {
         "legs and weight per region": ["legs_left", "legs_right", "weight_left", "weight_right"],
         "active roots per region": ["active_left", "active_right"],
