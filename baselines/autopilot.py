@@ -8,6 +8,8 @@ which is how the environment finds it without importing this package by name.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 from .base import KernelPolicy
 from .branch import BranchPolicy
 from .chain import ChainPolicy
@@ -22,5 +24,6 @@ RULES: dict[str, type[KernelPolicy]] = {"chain": ChainPolicy, "branch": BranchPo
 def hand_coded_rules(env, seed: int | None = None) -> KernelPolicy:
     """The task's hand-coded policy for ``env`` (anything with ``action_layout``, ``task`` and
     ``config``), with the task's rule parameters; its :meth:`~baselines.base.KernelPolicy.act_arrays`
-    gives full actions."""
-    return RULES[env.task.name].for_env(env, seed=seed)
+    gives full actions, whatever the env's control level."""
+    full = SimpleNamespace(action_layout=env.action_layout, task=env.task, config=env.config)
+    return RULES[env.task.name].for_env(full, seed=seed)

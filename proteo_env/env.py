@@ -193,8 +193,9 @@ class ProteoEnv(ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _action_batch(self, actions: dict) -> np.ndarray:
-        """Stack the per-agent actions into ``(A, F)`` (``F`` fields of the control level; an int
-        per agent at ``"move"``); any problem raises a ``ValueError`` naming the agent."""
+        """Stack the per-agent actions into ``(A, F)`` (``F`` fields of the control level; an int,
+        or a ``(1,)`` array, per agent at ``"move"``); any problem raises a ``ValueError`` naming
+        the agent."""
         fields = self.control_fields
         scalar = self.control == "move"
         if len(actions) != len(self.agents) or not all(a in actions for a in self.agents):
@@ -205,16 +206,16 @@ class ProteoEnv(ParallelEnv):
             unknown = [a for a in actions if a not in set(self.agents)]
             raise ValueError(f"actions for {len(unknown)} unknown agents (first: {unknown[0]!r}); "
                              "allowed: the agents in env.agents")
-        expected = () if scalar else (len(fields),)
+        shapes = [(), (1,)] if scalar else [(len(fields),)]
         try:
             batch = np.asarray([actions[a] for a in self.agents])
         except (ValueError, TypeError):
             batch = None
-        if batch is None or batch.shape != (len(self.agents),) + expected or batch.dtype.kind not in "iu":
-            allowed = "an int, the move" if scalar else f"{expected} = {list(fields)}"
+        if batch is None or batch.shape[1:] not in shapes or batch.dtype.kind not in "iu":
+            allowed = "an int, the move" if scalar else f"{shapes[0]} = {list(fields)}"
             for a in self.agents:
                 value = np.asarray(actions[a])
-                if value.shape != expected:
+                if value.shape not in shapes:
                     raise ValueError(f"action of {a}: shape {value.shape} is not allowed{self.batch.at_level}; "
                                      f"allowed: {allowed}")
                 if value.dtype.kind not in "iu":

@@ -234,7 +234,7 @@ def test_move_level_without_rules_names_the_tasks_that_have_them():
 def test_actions_that_do_not_fit_the_level_change_nothing():
     env = _make("chain-v0", "move")
     obs, _ = env.reset(seed=0)
-    policy = make_policy("chain", env, seed=0)  # full actions: not this level's
+    policy = make_policy("chain", _make("chain-v0", "full"), seed=0)  # full actions: not this level's
     before = env.world.positions.copy()
     with pytest.raises(ValueError, match=r"module_0: shape \(5,\) is not allowed at control level 'move'; "
                                          r"allowed: an int, the move"):
@@ -249,3 +249,14 @@ def test_actions_that_do_not_fit_the_level_change_nothing():
     both.reset(seed=0)
     with pytest.raises(ValueError, match=r"module_0: mode=4 is not allowed; allowed: 0..3"):
         both.step({a: np.array([0, 4]) for a in both.agents})
+
+
+def test_policies_refuse_a_level_they_do_not_act_at():
+    env = _make("chain-v0", "move")
+    with pytest.raises(ValueError, match=r"policy 'chain' gives actions at control level full, not at the env's "
+                                         r"control='move'"):
+        make_policy("chain", env)
+    random = make_policy("random", env, seed=0)  # random moves under the rules
+    obs, _ = env.reset(seed=0)
+    obs, *_ = env.step(random.act(obs))
+    assert env.cycle == 1
