@@ -279,8 +279,20 @@ def _name_apart(results: list[PolicyResult]) -> None:
             r.policy = f"{r.policy} ({Path(r.source).name})"
 
 
+def _picture(env, path: Path, caption: str) -> None:
+    """The world of ``env`` as it is now, drawn into ``path`` (PNG)."""
+    from proteo_env.render.renderer import Renderer
+    from proteo_env.render.scene import Scene
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    renderer = Renderer()
+    renderer.savefig(Scene.from_world(env.world, caption=caption), path)
+    renderer.close()
+
+
 def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
-             deterministic: bool = False, progress: bool = True, plots: bool = True) -> list[PolicyResult]:
+             deterministic: bool = False, progress: bool = True, plots: bool = True,
+             pictures: bool = False) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
     Args:
@@ -290,6 +302,11 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
         checkpoints: extra checkpoint paths; each goes to the task it was trained on.
         out: output folder.
         deterministic: learned and evolved neural policies take arg-max actions.
+        pictures: draw the end of each policy's first episode (what it builds) into
+            ``out/pictures/<task>_<policy>.png`` (the first run of a training-seed group).
+
+    Returns:
+        one :class:`PolicyResult` per policy, or :class:`GroupResult` per training-seed group.
     """
     from tqdm import tqdm
 
@@ -324,6 +341,7 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                               f"allowed: checkpoints of {', '.join(by_task)}")
         by_task[name].append((str(path), ""))
 
+    out_dir = Path(out)
     results: list[PolicyResult] = []
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
@@ -355,6 +373,12 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                 result.cycles.append(int(episode.cycles))
                 result.seeds.append(seed)
                 result.metrics.append({k: float(v) for k, v in episode.metrics.items()})
+                first_of_group = not group or not any(r.group == group and r.task == result.task for r in results)
+                if pictures and seed == seed_list[0] and first_of_group:
+                    label = group or (policy.name if path is None else Path(path).name)
+                    _picture(env, out_dir / "pictures" / f"{cls.name}_{label}_{level}.png".replace("+", "-"),
+                             f"{cls.task_id()} · {label} ({level}) · seed {seed} · cycle {episode.cycles}"
+                             f"{' · success' if episode.success else ''}")
             result.seconds = time.perf_counter() - started
             results.append(result)
         for env in envs.values():
@@ -389,7 +413,7 @@ def main(args) -> int:
         config = DEFAULT_CONFIG
     results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
                        checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
-                       plots=not args.no_plots)
+                       plots=not args.no_plots, pictures=args.pictures)
     print(markdown_table(results))
     print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
     return 0
