@@ -52,6 +52,8 @@ class BatchedEnv:
         self.tasks = list(tasks)
         self.config = config or EnvConfig()
         self.n_envs = len(tasks)
+        for task in self.tasks:
+            task.max_cycles = self.config.max_cycles
         task = tasks[0]
         self.action_layout = ActionLayout(len(task.modes), task.n_channels, task.n_message_values)
         self.level = ControlLevel(self.config.control, self.action_layout)

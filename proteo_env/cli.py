@@ -98,11 +98,11 @@ def _table(rows: list[dict]) -> str:
 
 
 def demo(args) -> int:
-    from .registry import TASKS
+    from .registry import newest_tasks
 
     out = Path(args.out)
     rows = []
-    for task_id, cls in sorted(TASKS.items()):
+    for task_id, cls in sorted(newest_tasks().items()):
         overrides = dict(DEMO_SETTINGS.get(cls.name, {}))
         if args.motion_model:
             overrides["motion_model"] = args.motion_model

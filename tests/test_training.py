@@ -330,10 +330,13 @@ def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped()
 def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
     """The committed checkpoints load where ``proteo eval --config configs/<config>`` runs them."""
     pytest.importorskip("sb3_contrib")
-    from training.checkpoints import load_policy
+    from training.checkpoints import load_policy, read_meta
     from training.evaluate import load_config
 
     for name, entry in load_config(Path("configs") / config)["tasks"].items():
-        env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), **(entry.get("env") or {}))
-        for path in entry.get("checkpoints") or []:
-            assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
+        for item in entry.get("checkpoints") or []:
+            for path in [item] if isinstance(item, str) else item["runs"]:
+                level = read_meta(path).get("control", "full")
+                env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), control=level,
+                                      **(entry.get("env") or {}))
+                assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped

@@ -53,6 +53,8 @@ class Task:
     n_message_values: int = 15
     default_policy: str = "random"
     plot_groups: dict[str, list[str]] = {}
+    max_cycles: int = 1000
+    """The environment's cycle limit, set by the environment on its task instances."""
     mode_roles: tuple[tuple[int, ...], ...] | None = None
 
     def __init__(self, params=None):

@@ -14,7 +14,8 @@ Actions
 Reward (team reward, the sum of these terms each cycle)
     ``thin``    = ``(T_t - T_{t-1}) / N``, the change in the number ``T`` of modules with at
                   most two neighbours (a potential-based shaping term);
-    ``success`` = 1 on the cycle the chain is complete;
+    ``success`` = 1 on the cycle the chain is complete (``chain-v1``, the default: its
+                  straightness, end-to-end lattice distance over ``N - 1``; :class:`ChainV1`);
     ``time``    = ``-time_penalty`` (default 0.001).
 Metrics
     ``chain_length`` (largest one-module-thick connected piece), ``thin_share`` (``T / N``),
@@ -135,3 +136,39 @@ class Chain(Task):
 
     def success(self, world):
         return self._last["complete"]
+
+
+def fcc_hops(a: np.ndarray, b: np.ndarray) -> int:
+    """The fewest face-neighbour steps between sites ``a`` and ``b`` (3,) of the FCC lattice."""
+    d = np.abs(np.asarray(a, dtype=np.int64) - np.asarray(b, dtype=np.int64))
+    return int(max(d.max(), d.sum() // 2))
+
+
+class ChainV1(Chain):
+    """``chain-v1``: the chain's success bonus is paid for a *straight* chain.
+
+    ``chain-v0`` paid the ``success`` bonus of 1 for any one-module-thick chain, and a learner
+    that folds the blob into a winding path finishes sooner and earns more than the paper's
+    straight chain (docs/tasks/chain.md, "Reward against degenerate strategies"). Here the
+    bonus is the chain's *straightness*: the lattice distance (fewest face steps) between its
+    two ends divided by ``N - 1``, 1 for a straight chain along one lattice direction, less
+    for a winding one. Dynamics, observation, actions, success test and the other terms are
+    those of ``chain-v0``; the metric ``straightness`` is added (0 until the chain is complete).
+    """
+
+    version = 1
+
+    def straightness(self, world) -> float:
+        """End-to-end lattice distance over ``N - 1`` of the complete chain; 0 before it is complete."""
+        if not self._last["complete"]:
+            return 0.0
+        ends = np.flatnonzero(self._probe.degree[: world.n_modules] == 1)
+        return fcc_hops(world.positions[ends[0]], world.positions[ends[-1]]) / (world.n_modules - 1)
+
+    def reward_terms(self, world, moved):
+        terms = super().reward_terms(world, moved)
+        terms["success"] = self.straightness(world) if self._last["complete"] else 0.0
+        return terms
+
+    def metrics(self, world):
+        return {**super().metrics(world), "straightness": self.straightness(world)}

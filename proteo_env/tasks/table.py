@@ -61,6 +61,9 @@ Reward (team reward, the sum of these terms each cycle)
                   the grounded legs ``G_r`` carry when each leg carries at most ``f_max``
                   (the load per grounded leg within capacity); 0 when there is no weight;
     ``legs``    = ``-leg_cost * (G_left + G_right)`` (few legs).
+    ``settled`` (``table-v1``, the default) = ``(max_cycles - cycle) * (support + legs)`` on the
+                  cycle of success, else 0: the rest of the horizon at the stable rate
+                  (:class:`TableV1`).
 Metrics
     ``weight_left``, ``weight_right`` (current ``W1``, ``W2``; a change marks a shift),
     ``legs_left``, ``legs_right``, ``grounded_legs``, ``active_left``, ``active_right``,
@@ -70,7 +73,8 @@ Metrics
     ``restabilise_{K-1}`` (one per schedule entry), ``success``.
 Termination
     Success: the configuration after the last scheduled shift is stable
-    (``restabilise_{K-1}`` is known). Truncation at ``max_cycles``: set it past the last
+    (``restabilise_{K-1}`` is known); ``table-v1`` also asks that every region with weight
+    stand on a grounded leg. Truncation at ``max_cycles``: set it past the last
     shift plus the time to re-stabilise and ``stable_window``. With the default schedule the
     hand-coded policy succeeds after 920-1120 cycles (docs/table_evidence.md), so the env's
     default of 1000 is too short; ``configs/table.yaml`` uses 1300.
@@ -330,6 +334,39 @@ class Table(Task):
 
     def success(self, world):
         return bool(self.ledger.restabilise[-1] >= 0)
+
+
+class TableV1(Table):
+    """``table-v1``: settling never earns less than not settling, and the legs must carry the weight.
+
+    ``table-v0`` paid ``support + legs`` every cycle and ended the episode at success, so a
+    policy that never settles collected reward for the whole horizon and beat the rules
+    (docs/tasks/table.md, "Reward against degenerate strategies"); and with no active root
+    the empty signature counted as a stable configuration, so doing nothing succeeded. Here:
+
+    - ``settled`` = ``(max_cycles - cycle) * (support + legs)`` on the cycle of success: the
+      rest of the horizon paid at the stable configuration's rate, what holding it would have
+      earned had the episode gone on (``max_cycles`` is the environment's cycle limit);
+    - success also asks that every region with weight stands on at least one grounded leg.
+
+    Dynamics, observation, actions and the other terms are those of ``table-v0``.
+    """
+
+    version = 1
+
+    def _carried(self) -> bool:
+        """Every region with weight has a grounded leg."""
+        legs = np.array(self._legs())
+        return bool(np.all((self.ledger.weights <= 0) | (legs > 0)))
+
+    def success(self, world):
+        return super().success(world) and self._carried()
+
+    def reward_terms(self, world, moved):
+        terms = super().reward_terms(world, moved)
+        rest = self.max_cycles - int(self.ledger.clock[CYCLE])
+        terms["settled"] = rest * (terms["support"] + terms["legs"]) if self.success(world) else 0.0
+        return terms
 
 
 # ---------------------------------------------------------------------- bookkeeping

@@ -1,0 +1,79 @@
+"""Rewards whose optimum is the paper's behaviour: chain-v1 pays a straight chain, table-v1 pays
+settling and asks the legs to carry the weight (docs/tasks/*.md, "Reward against degenerate
+strategies", measured by benchmarks/degenerate_strategies.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import proteo_env
+from baselines import make_policy
+from proteo_env.registry import newest_tasks, task_class
+from proteo_env.rollout import run_episode
+from proteo_env.tasks.chain import fcc_hops
+from training.checkpoints import load_policy
+
+CHAIN = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
+TABLE = {"board_size": 9, "depth": 2, "n_spares": 16, "schedule": ((0, 8, 2), (150, 2, 8)), "stable_window": 30,
+         "motion_model": "minimal", "max_cycles": 500}
+
+
+def test_versions_are_registered_and_bare_names_mean_the_newest():
+    assert {"chain-v0", "chain-v1", "table-v0", "table-v1"} <= set(proteo_env.TASKS)
+    assert task_class("chain").task_id() == "chain-v1" and task_class("table").task_id() == "table-v1"
+    assert set(newest_tasks()) == {"sandbox-v0", "chain-v1", "branch-v0", "table-v1", "grasp-v0"}
+
+
+def test_fcc_hops():
+    assert fcc_hops((0, 0, 0), (5, 5, 0)) == 5  # straight along a face direction
+    assert fcc_hops((0, 0, 0), (2, 0, 0)) == 2  # two steps: (1,1,0) then (1,-1,0)
+    assert fcc_hops((0, 0, 0), (1, 1, 2)) == 2
+    assert fcc_hops((3, 1, 0), (3, 1, 0)) == 0
+
+
+def _final_terms(env, policy, seed):
+    result = run_episode(env, policy, seed=seed)
+    return result, result.history[-1]
+
+
+def test_chain_v1_pays_a_straight_chain_more_than_a_winding_one():
+    env = proteo_env.make("chain-v1", **CHAIN)
+    straight = run_episode(env, make_policy("chain", env, seed=1000), seed=1000)
+    winding = run_episode(env, load_policy("checkpoints/chain/sb3_ppo", env, seed=1000), seed=1000)
+    assert straight.success and winding.success
+    assert straight.metrics["straightness"] == pytest.approx(1.0)
+    assert winding.metrics["straightness"] < 0.8
+    v0 = proteo_env.make("chain-v0", **CHAIN)
+    winding_v0 = run_episode(v0, load_policy("checkpoints/chain/sb3_ppo", v0, seed=1000), seed=1000)
+    # the same trajectory; only the success bonus differs, by exactly 1 - straightness
+    assert winding_v0.cycles == winding.cycles
+    assert winding_v0.total_reward - winding.total_reward == pytest.approx(1 - winding.metrics["straightness"])
+    assert straight.total_reward > winding.total_reward
+
+
+def test_table_v1_pays_the_rest_of_the_horizon_on_success():
+    env = proteo_env.make("table-v1", **TABLE)
+    policy = make_policy("table", env, seed=3)
+    observations, _ = env.reset(seed=3)
+    policy.reset(3)
+    last = None
+    while env.agents:
+        observations, rewards, terms, truncs, infos = env.step(policy.act(observations))
+        info = infos["module_0"]
+        if not terms["module_0"]:
+            last = info
+    assert terms["module_0"], "the rules settle the small table"
+    rest = TABLE["max_cycles"] - info["cycle"]
+    assert info["reward/settled"] == pytest.approx(rest * (info["reward/support"] + info["reward/legs"]))
+    assert info["reward/settled"] > 0
+    # before success nothing is settled
+    assert last["reward/settled"] == 0.0
+
+
+def test_table_v1_does_not_count_doing_nothing_as_success():
+    for task_id, expected in (("table-v0", True), ("table-v1", False)):
+        env = proteo_env.make(task_id, **TABLE)
+        result = run_episode(env, make_policy("table", env, seed=0, p_max=0.0, p_min=0.0), seed=0)
+        assert result.success is expected, task_id
+        assert result.total_reward == 0.0
