@@ -57,6 +57,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES, ObservationBuffers
@@ -239,8 +240,6 @@ class Worlds:
     """
 
     def __init__(self, args: Args, env_seed: int):
-        import proteo_env
-
         if args.n_groups < 1 or args.n_envs % args.n_groups:
             raise ConfigError(f"n_groups={args.n_groups!r} is not allowed with n_envs={args.n_envs}; allowed: a "
                               "divisor of n_envs")
@@ -361,7 +360,7 @@ def train(args: Args) -> Path:
                            f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
                            resume=resume_meta is not None)
     save_args(args, run_dir)
-    worlds = Worlds(args, env_seed=args.seed + agent_steps)
+    worlds = Worlds(args, env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
     net = ActorCritic(enc, nvec, args.arch, args.hidden)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
