@@ -240,6 +240,8 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
                             "--n-epochs", "1", "--checkpoint-every", "32"]),
     "torchrl": ("torchrl_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1",
                                 "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "ppo_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
+                     "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
                        "--checkpoint-every", "1"]),
 }
@@ -271,7 +273,9 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     eval_config.write_text(yaml.safe_dump({"seeds": 1, "first_seed": 0, "tasks": {task: {"env": json.loads(env)}}}))
     results = evaluate(config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval",
                        progress=False, plots=False)
-    assert [r.kind for r in results] == ["hand-coded", "random", "evolved" if module == "cma_es" else "learned"]
+    random_levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
+    assert [(r.kind, r.level) for r in results] == [("hand-coded", "full")] + [("random", lv) for lv in random_levels] \
+        + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
         from training.checkpoints import load_policy
 
