@@ -84,7 +84,7 @@ def test_same_seed_same_first_update(tmp_path):
 
 
 def test_bad_arguments_are_refused(tmp_path):
-    with pytest.raises(ValueError, match="arch='conv'.*allowed: mlp, lattice"):
+    with pytest.raises(ValueError, match="arch='conv'.*allowed: mlp, lattice, shared"):
         tiny_run(tmp_path / "a", "--arch", "conv")
     with pytest.raises(ValueError, match="n_groups=3.*n_envs=8"):
         tiny_run(tmp_path / "b", "--n-groups", "3")
@@ -129,3 +129,17 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
     assert gap > 3 * math.hypot(standard_error(learned.returns), standard_error(random_moves.returns)), \
         (learned.returns, random_moves.returns)
     assert np.mean(learned.cycles) < np.mean(random_moves.cycles)
+
+
+def test_shared_trunk_feeds_both_heads_and_its_checkpoint_loads(tmp_path):
+    env = proteo_env.make("chain-v1", control="move", **SMALL_ENV)
+    from proteo_env.adapters.flatten import ObservationEncoder
+
+    net = ppo.ActorCritic(ObservationEncoder.for_env(env), env.control_nvec, "shared", (16, 16))
+    x = torch.randn(5, ObservationEncoder.for_env(env).size)
+    logits, values = net(x)
+    assert logits.shape == (5, 13) and values.shape == (5,)
+    values.sum().backward()  # the value's gradient reaches the trunk the policy reads
+    assert net.trunk[0].weight.grad.abs().sum() > 0 and net.actor.weight.grad is None
+    final = tiny_run(tmp_path / "s", "--arch", "shared")
+    assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name

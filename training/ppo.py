@@ -19,6 +19,8 @@ Actions. One categorical head per controlled field of the control level (``contr
 Networks (``arch``):
 
 - ``mlp``: a tanh MLP from the flat features to the logits of every head.
+- ``shared``: one tanh MLP trunk feeding both the policy's logits and the value (the critic
+  shares the actor's layers: one pass instead of two, in the rollout and the update).
 - ``lattice``: one small encoder shared by the 12 neighbour directions. Direction ``k``'s
   token is what the module sees there (the site's kind, mode and scent blocks, the message
   received from it, whether the move towards it is legal) and the direction's unit vector;
@@ -26,8 +28,9 @@ Networks (``arch``):
   (mode, scent, contact, load, hint) into a context; the logit of "move towards ``k``" is a
   shared head on (token ``k``, context), the other heads read the context.
 
-The critic is a separate tanh MLP on the same local features: one parameter-shared value per
-module estimating the team's return (every module receives the team reward).
+The critic (at ``mlp`` and ``lattice``) is a separate tanh MLP on the same local features: one
+parameter-shared value per module estimating the team's return (every module receives the
+team reward).
 
 Episode ends. A world's episode ends at success or at ``max_cycles``; all worlds of a
 ``BatchedEnv`` step together and ``reset`` rebuilds all of them, so a world that succeeds
@@ -65,7 +68,7 @@ from training.common import (ProgressLog, checkpoint_folder, episode_stats, make
                              seed_everything, write_checkpoint_meta)
 
 ALGORITHM = "ppo"
-ARCHS = ("mlp", "lattice")
+ARCHS = ("mlp", "lattice", "shared")
 
 
 @dataclass(frozen=True)
@@ -95,7 +98,7 @@ class Args:
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
-    """Gradient norm limit, applied to the actor and to the critic separately."""
+    """Gradient norm limit, applied to the actor and to the critic separately (to all weights at arch=shared)."""
     arch: str = "mlp"
     """Actor network: mlp or lattice (see the module docstring)."""
     hidden: tuple[int, ...] = (64, 64)
@@ -113,13 +116,19 @@ class Args:
 
 
 # ---------------------------------------------------------------------- networks
-def mlp(in_dim: int, out_dim: int, hidden: tuple[int, ...], *, out_gain: float) -> nn.Sequential:
-    """A tanh MLP with orthogonal initialisation; ``out_gain`` scales the last layer."""
+def hidden_layers(in_dim: int, hidden: tuple[int, ...]) -> list[nn.Module]:
+    """Tanh layers of sizes ``hidden`` from ``in_dim`` inputs, orthogonally initialised."""
     layers, last = [], in_dim
     for h in hidden:
         layers += [_orthogonal(nn.Linear(last, h), np.sqrt(2)), nn.Tanh()]
         last = h
-    return nn.Sequential(*layers, _orthogonal(nn.Linear(last, out_dim), out_gain))
+    return layers
+
+
+def mlp(in_dim: int, out_dim: int, hidden: tuple[int, ...], *, out_gain: float) -> nn.Sequential:
+    """A tanh MLP with orthogonal initialisation; ``out_gain`` scales the last layer."""
+    last = hidden[-1] if hidden else in_dim
+    return nn.Sequential(*hidden_layers(in_dim, hidden), _orthogonal(nn.Linear(last, out_dim), out_gain))
 
 
 def _orthogonal(layer: nn.Linear, gain: float) -> nn.Linear:
@@ -186,22 +195,34 @@ class LatticeActor(nn.Module):
 
 
 class ActorCritic(nn.Module):
-    """The shared policy: ``logits(x) (N, sum(nvec))`` and ``value(x) (N,)`` from flat features ``x (N, D)``."""
+    """The shared policy: ``logits(x) (N, sum(nvec))`` and ``value(x) (N,)`` from flat features
+    ``x (N, D)``; ``net(x)`` gives both (one pass through the trunk at ``arch="shared"``)."""
 
     def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64)):
         super().__init__()
         if arch not in ARCHS:
             raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
         self.nvec = [int(n) for n in nvec]
-        self.actor = (mlp(encoder.size, sum(self.nvec), tuple(hidden), out_gain=0.01) if arch == "mlp"
-                      else LatticeActor(encoder, self.nvec, tuple(hidden)))
-        self.critic = mlp(encoder.size, 1, tuple(hidden), out_gain=1.0)
+        hidden = tuple(hidden)
+        if arch == "shared":
+            self.trunk = nn.Sequential(*hidden_layers(encoder.size, hidden))
+            self.actor = _orthogonal(nn.Linear(hidden[-1], sum(self.nvec)), 0.01)
+            self.critic = _orthogonal(nn.Linear(hidden[-1], 1), 1.0)
+        else:
+            self.trunk = nn.Identity()
+            self.actor = (mlp(encoder.size, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
+                          else LatticeActor(encoder, self.nvec, hidden))
+            self.critic = mlp(encoder.size, 1, hidden, out_gain=1.0)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = self.trunk(x)
+        return self.actor(h), self.critic(h)[:, 0]
 
     def logits(self, x: torch.Tensor) -> torch.Tensor:
-        return self.actor(x)
+        return self.actor(self.trunk(x))
 
     def value(self, x: torch.Tensor) -> torch.Tensor:
-        return self.critic(x)[:, 0]
+        return self.critic(self.trunk(x))[:, 0]
 
 
 def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[int]) -> list[torch.Tensor]:
@@ -404,9 +425,9 @@ def train(args: Args) -> Path:
         with torch.no_grad():
             for t in range(t_steps):
                 worlds.encode(features[t], move_mask[t])
-                log_probs = masked_log_probs(net.logits(obs_t[t]), mask_t[t], nvec)
-                actions, logp = sample(log_probs)
-                actions_t[t], logp_t[t], values_t[t] = actions, logp, net.value(obs_t[t])
+                logits, values = net(obs_t[t])
+                actions, logp = sample(masked_log_probs(logits, mask_t[t], nvec))
+                actions_t[t], logp_t[t], values_t[t] = actions, logp, values
                 reward, valid, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1),
                                                                  finished)
                 rewards_w[t], valid_w[t], terminal_w[t] = reward, valid, terminal
@@ -435,16 +456,20 @@ def train(args: Args) -> Path:
                 mb = order[start:start + args.minibatch_size]
                 x, m, act, old_logp, adv, ret = (v[mb] for v in flat)
                 adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                log_probs = masked_log_probs(net.logits(x), m, nvec)
+                logits, values = net(x)
+                log_probs = masked_log_probs(logits, m, nvec)
                 ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
                 policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
-                value_loss = 0.5 * (net.value(x) - ret).pow(2).mean()
+                value_loss = 0.5 * (values - ret).pow(2).mean()
                 ent = entropy(log_probs).mean()
                 loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
                 optimiser.zero_grad(set_to_none=True)
                 loss.backward()
-                nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
-                nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
+                if args.arch == "shared":
+                    nn.utils.clip_grad_norm_(net.parameters(), args.max_grad_norm)
+                else:
+                    nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
+                    nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
                 optimiser.step()
                 with torch.no_grad():
                     stats["loss/policy"].append(policy_loss.item())
