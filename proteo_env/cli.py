@@ -300,6 +300,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/eval", help="folder for results.md, results.json and eval.png")
     p.add_argument("--deterministic", action="store_true", help="neural policies take arg-max actions")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--publish", action="append", default=None, metavar="FILE.md",
+                   help="also put the table into this markdown file, between its '<!-- proteo eval --out OUT -->' "
+                   "and '<!-- end of proteo eval table -->' markers (repeatable)")
     p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
                    "OUT/pictures/ (what it builds)")
     p.set_defaults(func=lambda a: __import__("training.evaluate", fromlist=["main"]).main(a))

@@ -42,3 +42,18 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
                                           r"allowed: a checkpoint path, or \{label: NAME, runs: \[PATH, ...\]\}"):
         evaluate(config=_config(tmp_path, [{"label": "x"}]), tasks=["chain"], out=tmp_path / "out",
                  progress=False, plots=False)
+
+
+def test_publish_puts_the_table_between_the_markers_and_refuses_a_page_without_them(tmp_path):
+    from training.evaluate import PUBLISH_END, publish
+
+    page = tmp_path / "page.md"
+    page.write_text("intro\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n")
+    publish("| new |", "docs/eval/x", [page])
+    assert page.read_text() == ("intro\n<!-- proteo eval --out docs/eval/x -->\n| new |\n"
+                                f"{PUBLISH_END}\nrest\n")
+    other = tmp_path / "other.md"
+    other.write_text("no markers\n")
+    with pytest.raises(ValueError, match="no '<!-- proteo eval --out docs/eval/x -->'"):
+        publish("| t |", "docs/eval/x", [page, other])
+    assert "| new |" in page.read_text()  # nothing written when one file lacks the markers

@@ -406,6 +406,27 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
     return rows
 
 
+PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"
+PUBLISH_END = "<!-- end of proteo eval table -->"
+
+
+def publish(table: str, out, files) -> None:
+    """Put ``table`` between the markers :data:`PUBLISH_BEGIN` (naming the ``--out`` folder) and
+    :data:`PUBLISH_END` in each of ``files`` (a markdown page that shows the table); a file
+    without the begin marker is an error that says what to add, and nothing is written."""
+    begin = PUBLISH_BEGIN.format(out=Path(out).as_posix())
+    texts = {}
+    for f in map(Path, files):
+        text = f.read_text() if f.is_file() else ""
+        if begin not in text or PUBLISH_END not in text.split(begin, 1)[1]:
+            raise ValueError(f"--publish {str(f)!r}: no {begin!r} ... {PUBLISH_END!r} markers; allowed: a "
+                             "markdown file that has them where the table goes")
+        head, rest = text.split(begin, 1)
+        texts[f] = f"{head}{begin}\n{table}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
+    for f, text in texts.items():
+        f.write_text(text)
+
+
 def main(args) -> int:
     """Entry point of ``proteo eval`` (arguments parsed in :mod:`proteo_env.cli`)."""
     config = args.config
@@ -414,6 +435,8 @@ def main(args) -> int:
     results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
                        checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
                        plots=not args.no_plots, pictures=args.pictures)
+    if args.publish:
+        publish(markdown_table(results), args.out, args.publish)
     print(markdown_table(results))
     print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
     return 0
