@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.lattice import DIRECTIONS
 from .camera import Camera, side_azimuth
 from .colours import BACKGROUND, FLOOR_COLOUR, MODE_COLOURS, OBJECT_COLOUR, PALETTE, SEARCH_FAR, SOLID_COLOUR
 from .geometry import FACE_QUADS
@@ -93,7 +94,7 @@ def episode_data(recording) -> dict:
         "colours": {"object": OBJECT_COLOUR, "solid": SOLID_COLOUR, "floor": FLOOR_COLOUR, "background": BACKGROUND},
         "light": {"ambient": AMBIENT, "direction_in_camera": [float(v) for v in LIGHT_IN_CAMERA]},
         "view_direction": [float(v) for v in Camera(azimuth=side_azimuth(recording.positions[-1])).axes()[2]],
-        "face_quads": FACE_QUADS.tolist(), "floor_level": FLOOR_LEVEL,
+        "face_quads": FACE_QUADS.tolist(), "directions": DIRECTIONS.tolist(), "floor_level": FLOOR_LEVEL,
         "box": [int(v) for v in recording.box], "floor": bool(recording.floor),
         "n_frames": int(recording.n_frames), "n_modules": int(recording.positions.shape[1]),
         "n_channels": int(recording.scents.shape[1]),

@@ -104,6 +104,17 @@
     return geometry;
   }
 
+  /** Corners (4 x 3 per face, wound to face outwards) and unit normals of the 12 faces of a cell at the origin. */
+  function faceCorners(faceQuads) {
+    return faceQuads.map((quad) => {
+      const [a, b, c] = quad.map((p) => new THREE.Vector3(...p));
+      const centre = quad.reduce((sum, p) => sum.add(new THREE.Vector3(...p)), new THREE.Vector3()).multiplyScalar(0.25);
+      const outward = new THREE.Vector3().subVectors(b, a).cross(new THREE.Vector3().subVectors(c, a)).dot(centre) > 0;
+      const order = outward ? quad : [quad[0], quad[3], quad[2], quad[1]];
+      return { corners: order.flat(), normal: centre.clone().normalize().toArray() };
+    });
+  }
+
   function staticCells(geometry, sites, colour, clipping) {
     const count = sites.length / 3;
     const mesh = new THREE.InstancedMesh(geometry, new THREE.MeshLambertMaterial({ color: new THREE.Color(...hexColour(colour)), clippingPlanes: clipping }), Math.max(count, 1));
@@ -175,14 +186,27 @@
     const cut = new THREE.Plane(new THREE.Vector3(-1, 0, 0), 0);
     const clipping = [];
     const geometry = cellGeometry(meta.face_quads);
-    const material = new THREE.MeshLambertMaterial({ color: 0xffffff, clippingPlanes: clipping });
-    const modules = new THREE.InstancedMesh(geometry, material, Math.max(N, 1));
-    modules.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
-    modules.instanceColor = new THREE.InstancedBufferAttribute(new Float32Array(Math.max(N, 1) * 3), 3);
-    modules.instanceColor.setUsage(THREE.DynamicDrawUsage);
+    // modules are drawn face by face, in one mesh rebuilt per picture: only the faces that look onto a
+    // free site and towards the camera (a software WebGL draws one big mesh far faster than instances)
+    const directions = meta.directions, faces = faceCorners(meta.face_quads);
+    const maxFaces = Math.max(N * 12, 1);
+    const faceGeometry = new THREE.BufferGeometry();
+    for (const name of ['position', 'color']) {
+      const attribute = new THREE.BufferAttribute(new Float32Array(maxFaces * 12), 3);
+      attribute.setUsage(THREE.DynamicDrawUsage);
+      faceGeometry.setAttribute(name, attribute);
+    }
+    const index = new Uint32Array(maxFaces * 6);
+    for (let f = 0; f < maxFaces; f++) index.set([4 * f, 4 * f + 1, 4 * f + 2, 4 * f, 4 * f + 2, 4 * f + 3], 6 * f);
+    faceGeometry.setIndex(new THREE.BufferAttribute(index, 1));
+    // faces are flat and the light turns with the camera, so each face's shade is computed here, once per
+    // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light))
+    const modules = new THREE.Mesh(faceGeometry, new THREE.MeshBasicMaterial({ vertexColors: true, clippingPlanes: clipping }));
+    const faceShade = new Float32Array(12), lightWorld = new THREE.Vector3();
     modules.frustumCulled = false;
     scene.add(modules);
-    const drawnModule = new Int32Array(Math.max(N, 1));  // instance -> module id
+    const faceModule = new Int32Array(maxFaces);  // face -> module id
+    let drawnCount = 0, faceCount = 0;
     scene.add(staticCells(geometry, solidSites, meta.colours.solid, clipping));
     scene.add(staticCells(geometry, objectSites, meta.colours.object, clipping));
     if (meta.floor) for (const mesh of floorMeshes(meta)) scene.add(mesh);
@@ -199,65 +223,119 @@
     episode.seek(T - 1); grow(episode.positions, N);
     grow(solidSites, solidSites.length / 3); grow(objectSites, objectSites.length / 3);
     if (!isFinite(lo[0])) { lo.fill(0); hi.fill(0); }
+    // occupancy of the sites around everything visited (outside it every site counts as free)
+    const gridLo = lo.map((v) => v - 2), gridSize = [0, 1, 2].map((k) => hi[k] - lo[k] + 5);
+    const gridVolume = gridSize[0] * gridSize[1] * gridSize[2];
+    const useGrid = gridVolume <= 64e6;
+    const grid = new Uint8Array(useGrid ? gridVolume : 1), staticGrid = new Uint8Array(grid.length);
+    const cellIndex = (x, y, z) => {
+      x -= gridLo[0]; y -= gridLo[1]; z -= gridLo[2];
+      if (x < 0 || y < 0 || z < 0 || x >= gridSize[0] || y >= gridSize[1] || z >= gridSize[2]) return -1;
+      return (x * gridSize[1] + y) * gridSize[2] + z;
+    };
+    if (useGrid) {
+      for (const sites of [solidSites, objectSites]) for (let i = 0; i < sites.length; i += 3) {
+        const at = cellIndex(sites[i], sites[i + 1], sites[i + 2]);
+        if (at >= 0) staticGrid[at] = 1;
+      }
+      if (meta.floor) for (let x = 0; x < gridSize[0]; x++) for (let y = 0; y < gridSize[1]; y++) for (let z = 0; z < gridSize[2] && z + gridLo[2] < 0; z++) staticGrid[(x * gridSize[1] + y) * gridSize[2] + z] = 1;
+    }
     const centre = new THREE.Vector3((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2);
     const radius = Math.max(3, 0.5 * Math.hypot(hi[0] - lo[0] + 2, hi[1] - lo[1] + 2, hi[2] - lo[2] + 2));
     const controls = new THREE.OrbitControls(camera, canvas);
     controls.target.copy(centre);
     controls.enableDamping = false;
     function frameView() {
-      const distance = 0.8 * radius / Math.sin(Math.PI / 180 * camera.fov / 2) / Math.min(1, camera.aspect);
+      const distance = 0.62 * radius / Math.sin(Math.PI / 180 * camera.fov / 2) / Math.min(1, camera.aspect);
       camera.position.copy(centre).addScaledVector(new THREE.Vector3(...meta.view_direction), distance);
       controls.target.copy(centre);
       controls.update();
     }
 
     // ---------------------------------------------------------------- drawing
-    let dirty = true;
+    let dirty = true, facesStale = true;
     const requestDraw = () => { dirty = true; };
-    controls.addEventListener('change', requestDraw);
+    controls.addEventListener('change', () => { facesStale = true; requestDraw(); });
 
+    const cutSide = new Float32Array(Math.max(N, 1));  // signed distance of each module's centre to the cut plane
+    function moduleColour(i, md, out, o) {
+      if (md === meta.search_mode && meta.n_channels > 0) {
+        const s = episode.scents[i];
+        const t = s < 0 ? 1 : Math.min(s / Math.max(meta.scent_scale, 1), 1);
+        for (let k = 0; k < 3; k++) out[o + k] = (1 - t) * searchDeep[k] + t * searchFar[k];
+      } else {
+        const rgb = palette[md];
+        out[o] = rgb[0]; out[o + 1] = rgb[1]; out[o + 2] = rgb[2];
+      }
+    }
+
+    /** Fill the face instances of the current frame: shown modules' faces onto free sites, turned to the camera. */
     function updateModules() {
-      const m = modules.instanceMatrix.array, c = modules.instanceColor.array;
-      const pos = episode.positions, mode = episode.modes, scent0 = episode.scents;
-      const scale = Math.max(meta.scent_scale, 1);
-      let k = 0;
+      const vp = faceGeometry.attributes.position.array, vc = faceGeometry.attributes.color.array;
+      camera.updateMatrixWorld();
+      lightWorld.set(...meta.light.direction_in_camera).normalize().transformDirection(camera.matrixWorld);
+      for (let d = 0; d < 12; d++) {
+        const n = faces[d].normal;
+        faceShade[d] = meta.light.ambient + (1 - meta.light.ambient) * Math.max(0, n[0] * lightWorld.x + n[1] * lightWorld.y + n[2] * lightWorld.z);
+      }
+      const pos = episode.positions, mode = episode.modes;
+      const cutting = clipping.length > 0;
+      if (useGrid) grid.set(staticGrid);
+      for (let i = 0; i < N; i++) {
+        const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
+        cutSide[i] = cutting ? cut.normal.x * x + cut.normal.y * y + cut.normal.z * z + cut.constant : 2;
+        if (!useGrid || !shown[mode[i]] || cutSide[i] < 1) continue;  // a cell the plane cuts hides nothing
+        const at = cellIndex(x, y, z);
+        if (at >= 0) grid[at] = 1;
+      }
+      const eye = camera.position;
+      const colour = [0, 0, 0];
+      let f = 0, k = 0;
       for (let i = 0; i < N; i++) {
         const md = mode[i];
-        if (!shown[md]) continue;
-        const o = 16 * k;
-        m[o] = 1; m[o + 1] = 0; m[o + 2] = 0; m[o + 3] = 0;
-        m[o + 4] = 0; m[o + 5] = 1; m[o + 6] = 0; m[o + 7] = 0;
-        m[o + 8] = 0; m[o + 9] = 0; m[o + 10] = 1; m[o + 11] = 0;
-        m[o + 12] = pos[3 * i]; m[o + 13] = pos[3 * i + 1]; m[o + 14] = pos[3 * i + 2]; m[o + 15] = 1;
-        let rgb = palette[md];
-        if (md === meta.search_mode && meta.n_channels > 0) {
-          const s = scent0[i];
-          const t = s < 0 ? 1 : Math.min(s / scale, 1);
-          c[3 * k] = (1 - t) * searchDeep[0] + t * searchFar[0];
-          c[3 * k + 1] = (1 - t) * searchDeep[1] + t * searchFar[1];
-          c[3 * k + 2] = (1 - t) * searchDeep[2] + t * searchFar[2];
-        } else {
-          c[3 * k] = rgb[0]; c[3 * k + 1] = rgb[1]; c[3 * k + 2] = rgb[2];
+        if (!shown[md] || cutSide[i] <= -1) continue;
+        const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
+        const ex = eye.x - x, ey = eye.y - y, ez = eye.z - z;
+        moduleColour(i, md, colour, 0);
+        k++;
+        for (let d = 0; d < 12; d++) {
+          const dir = directions[d];
+          if (dir[0] * ex + dir[1] * ey + dir[2] * ez <= 1) continue;  // turned away from the camera
+          if (useGrid) {
+            const at = cellIndex(x + dir[0], y + dir[1], z + dir[2]);
+            if (at >= 0 && grid[at]) continue;  // hidden by a neighbour
+          }
+          const corners = faces[d].corners, shade = faceShade[d];
+          const r = colour[0] * shade, g = colour[1] * shade, b = colour[2] * shade;
+          for (let v = 0, o = 12 * f; v < 12; v += 3, o += 3) {
+            vp[o] = x + corners[v]; vp[o + 1] = y + corners[v + 1]; vp[o + 2] = z + corners[v + 2];
+            vc[o] = r; vc[o + 1] = g; vc[o + 2] = b;
+          }
+          faceModule[f++] = i;
         }
-        drawnModule[k++] = i;
       }
-      modules.count = k;
-      modules.instanceMatrix.clearUpdateRanges();
-      modules.instanceMatrix.addUpdateRange(0, 16 * k);
-      modules.instanceMatrix.needsUpdate = true;
-      modules.instanceColor.clearUpdateRanges();
-      modules.instanceColor.addUpdateRange(0, 3 * k);
-      modules.instanceColor.needsUpdate = true;
+      faceGeometry.setDrawRange(0, 6 * f);
+      for (const name of ['position', 'color']) {
+        const attribute = faceGeometry.attributes[name];
+        attribute.clearUpdateRanges();
+        attribute.addUpdateRange(0, 12 * f);
+        attribute.needsUpdate = true;
+      }
+      faceGeometry.boundingSphere = null;  // recomputed when a click needs it
+      faceCount = f;
       if (picked >= 0) {
         marker.position.set(pos[3 * picked], pos[3 * picked + 1], pos[3 * picked + 2]);
         marker.visible = shown[mode[picked]];
       }
+      drawnCount = k;
       body.dataset.drawn = String(k);
-      return k;
+      body.dataset.faces = String(f);
+      facesStale = false;
     }
 
     let draws = 0;
     function draw() {
+      if (facesStale) updateModules();
       renderer.render(scene, camera);
       dirty = false;
       body.dataset.draws = String(++draws);
@@ -360,6 +438,7 @@
       } else {
         $('cut-readout').textContent = '';
       }
+      facesStale = true;
       requestDraw();
     }
     cutAxis.addEventListener('change', () => {
@@ -380,7 +459,7 @@
       const ndc = new THREE.Vector2(2 * (clientX - rect.left) / rect.width - 1, 1 - 2 * (clientY - rect.top) / rect.height);
       raycaster.setFromCamera(ndc, camera);
       const hits = raycaster.intersectObject(modules, false).filter((h) => clipping.every((p) => p.distanceToPoint(h.point) >= -1e-6));
-      select(hits.length ? drawnModule[hits[0].instanceId] : -1);
+      select(hits.length ? faceModule[Math.floor(hits[0].faceIndex / 2)] : -1);
     }
 
     function select(id) {
@@ -517,7 +596,7 @@
       },
       pick: pickAt, showMode: (m, on) => { shown[m] = on; refresh(); },
       state: () => ({ frame: episode.frame, cycle: meta.cycles[episode.frame], frames: T, modules: N,
-        drawn: modules.count, playing, modeCounts: modeCounts.slice(), errors: errors.slice() }),
+        drawn: drawnCount, faces: faceCount, playing, modeCounts: modeCounts.slice(), errors: errors.slice() }),
       three: { renderer, scene, camera, controls },
     };
     body.dataset.loadMs = performance.now().toFixed(1);
