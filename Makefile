@@ -23,7 +23,7 @@ bench: install
 	$(BIN)/python benchmarks/mobility.py
 
 eval: install
-	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval
+	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/learning.md --publish README.md
 
 # The multi-seed study of training/ppo.py at control level move (about 30 minutes on 2 cores),
 # then its evaluation: the table with the spread over training seeds goes into docs/eval/study,

@@ -15,7 +15,8 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    runs at: the same environment) and at ``move``, with its own split into environment step,
    observation encoding, rollout forward passes and PPO update (from its ``progress.csv``,
    after two warm-up updates). Its hyper-parameters come from ``--ppo-config`` (default
-   ``configs/train/ppo_<task>_move.yaml``), the environment from ``--env``.
+   ``configs/train/ppo_<task>_move.yaml``), the environment from ``--env``; with
+   ``--shared-one-epoch`` also at ``move`` with ``arch=shared`` and one epoch.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -115,8 +116,9 @@ def sb3_training(task: str, overrides: dict, steps: int, n_copies: int, *, profi
     return steps / seconds, {k: {"seconds": round(v, 2), "share": round(v / total, 3)} for k, v in parts.items()}
 
 
-def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config: str) -> dict:
-    """Agent-steps/s of ``training/ppo.py`` and the share of its time in each part (after two warm-up updates)."""
+def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config: str, variant=None) -> dict:
+    """Agent-steps/s of ``training/ppo.py`` and the share of its time in each part (after two warm-up
+    updates); ``variant``: arguments that replace the config's (for example ``{"arch": "shared"}``)."""
     import csv
     import dataclasses
     import tempfile
@@ -128,7 +130,7 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
     with tempfile.TemporaryDirectory() as tmp:
         args = dataclasses.replace(base, task=task, control=control, env=overrides, run_dir=f"{tmp}/run",
                                    total_steps=steps, checkpoint_every=10**12, time_limit_minutes=0.0,
-                                   tensorboard=False, progress_bar=False)
+                                   tensorboard=False, progress_bar=False, **(variant or {}))
         ppo.train(args)
         with open(f"{tmp}/run/progress.csv") as fh:
             rows = list(csv.DictReader(fh))
@@ -159,6 +161,8 @@ def main(argv=None) -> int:
                         "(default configs/train/ppo_<task>_move.yaml)")
     parser.add_argument("--only", choices=("all", "training"), default="all",
                         help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates")
+    parser.add_argument("--shared-one-epoch", action="store_true",
+                        help="also time training/ppo.py at move with arch=shared and n_epochs=1 (same run)")
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
@@ -192,6 +196,11 @@ def main(argv=None) -> int:
     result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
     result["ppo"] = {level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config)
                      for level in ("full", "move")}
+    if args.shared_one_epoch:
+        result["ppo"]["move, arch=shared, n_epochs=1"] = ppo_training(
+            *task, args.ppo_steps, control="move", config=ppo_config, variant={"arch": "shared", "n_epochs": 1})
+        result["ppo_move_shared_one_epoch_agent_steps_per_s"] = (
+            result["ppo"]["move, arch=shared, n_epochs=1"]["agent_steps_per_s"])
     result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
     result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
     result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
