@@ -5,12 +5,12 @@ from __future__ import annotations
 from .config import ConfigError, split_overrides
 from .tasks.base import Task
 from .tasks.branch import Branch
-from .tasks.chain import Chain
+from .tasks.chain import Chain, ChainV1
 from .tasks.grasp import Grasp
 from .tasks.sandbox import Sandbox
-from .tasks.table import Table
+from .tasks.table import Table, TableV1
 
-TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, Grasp, Table, Branch)}
+TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch)}
 """Registered task classes by id ``<name>-v<version>``."""
 
 

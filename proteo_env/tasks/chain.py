@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.lattice import hop_distance
 from ..core.structure import StructureProbe
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task
@@ -131,3 +132,28 @@ class Chain(Task):
 
     def success(self, world):
         return self._last["complete"]
+
+
+class ChainV1(Chain):
+    """``chain-v1``: the success bonus is the chain's straightness (module docstring, "Version 1")."""
+
+    version = 1
+
+    def after_cycle(self, world, cycle):
+        super().after_cycle(world, cycle)
+        self._last["straightness"] = straightness(world, self._probe.degree) if self._last["complete"] else 0.0
+
+    def reward_terms(self, world, moved):
+        return {**super().reward_terms(world, moved), "success": self._last["straightness"]}
+
+    def metrics(self, world):
+        return {**super().metrics(world), "straightness": self._last.get("straightness", 0.0)}
+
+
+def straightness(world, degree: np.ndarray) -> float:
+    """End-to-end hop span of a complete chain over ``N - 1``: 1 for a chain that is a shortest
+    lattice path between its two ends (straight, or zigzagging along one lattice axis), less for
+    one that winds. ``degree``: ``(N,)`` contacts per module (the two ends have 1)."""
+    ends = np.flatnonzero(degree[: world.n_modules] == 1)
+    positions = world.positions
+    return hop_distance(positions[ends[0]], positions[ends[-1]]) / (world.n_modules - 1)

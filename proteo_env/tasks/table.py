@@ -237,6 +237,8 @@ class Table(Task):
     Params = TableParams
     n_message_values = 15
     default_policy = "table"
+    carry_weight = False
+    """Success needs the legs to carry the weight (:func:`weight_carried`); True from v1."""
     plot_groups = {
         "legs and weight per region": ["legs_left", "legs_right", "weight_left", "weight_right"],
         "active roots per region": ["active_left", "active_right"],
@@ -271,7 +273,8 @@ class Table(Task):
             active=np.isin(world.mode[roots], ACTIVE), grounded=np.zeros(r, dtype=np.bool_),
             signature=np.zeros((2, r), dtype=np.bool_), clock=np.zeros(5, dtype=np.int64),
             weights=np.array(p.schedule[0][1:], dtype=np.float64), restabilise=np.full(len(p.schedule), -1.0),
-            scratch=np.zeros((3, world.n_modules), dtype=np.int64), stamp=np.zeros(1, dtype=np.int64))
+            scratch=np.zeros((3, world.n_modules), dtype=np.int64), stamp=np.zeros(1, dtype=np.int64),
+            f_max=float(p.f_max), carry=self.carry_weight)
         """The episode's bookkeeping (:class:`TableLedger`)."""
         book = self.ledger
         grounded_legs(world.grid, world.cell, world.mode, world.anchored, book)
@@ -281,7 +284,8 @@ class Table(Task):
         table_after_cycle(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
 
     def _complete(self) -> bool:
-        return bool(np.array_equal(self.ledger.active, self.ledger.grounded))
+        book = self.ledger
+        return bool(np.array_equal(book.active, book.grounded)) and (not book.carry or weight_carried(book))
 
     # ------------------------------------------------------------------ sensors
     def load(self, world):
@@ -329,6 +333,18 @@ class Table(Task):
         return bool(self.ledger.restabilise[-1] >= 0)
 
 
+class TableV1(Table):
+    """``table-v1``: success needs the legs to carry the weight, and the reward per cycle is
+    never positive, so that reaching the stable configuration (which ends the episode) never
+    earns less than going on without it (module docstring, "Version 1")."""
+
+    version = 1
+    carry_weight = True
+
+    def reward_terms(self, world, moved):
+        return {"unsupported": self._support() - 1.0, "legs": 0.0 - self.params.leg_cost * sum(self._legs())}
+
+
 # ---------------------------------------------------------------------- bookkeeping
 class TableLedger(NamedTuple):
     """The table episode's bookkeeping as the kernels below read and update it (R roots, K
@@ -341,7 +357,9 @@ class TableLedger(NamedTuple):
         down_delta: ``(4,)`` int64 grid offsets of the face sites one layer down.
         shift_cycles: ``(K,)`` int64 cycles at which the schedule's entries start.
         schedule_weights: ``(K, 2)`` float64 weights (left, right) of each entry.
-        depth, stable_window, load_cap: the task's parameters of those names.
+        depth, stable_window, load_cap, f_max: the task's parameters of those names.
+        carry: a complete signature also needs the legs to carry the weight
+            (:func:`weight_carried`; ``table-v1``); ``False`` in ``table-v0``.
         active: ``(R,)`` bool, the root is ROOT or AROOT (after the last cycle).
         grounded: ``(R,)`` bool, the root has a grounded leg (after the last cycle).
         signature: ``(2, R)`` bool, (active, grounded) since ``clock[SINCE]``.
@@ -368,6 +386,8 @@ class TableLedger(NamedTuple):
     restabilise: np.ndarray
     scratch: np.ndarray
     stamp: np.ndarray
+    f_max: float
+    carry: bool
 
     def copy(self) -> TableLedger:
         """A copy whose arrays are new."""
@@ -390,6 +410,26 @@ def region_loads(book):
         elif book.weights[region] > 0:
             loads[region] = book.load_cap
     return loads
+
+
+@kernel
+def weight_carried(book):
+    """Whether the grounded legs of :class:`TableLedger` ``book`` carry the weight as far as
+    the roots allow: in each region, ``min(W, f_max * G) == min(W, f_max * R)`` with ``G`` the
+    roots with a grounded leg and ``R`` all roots of the region (a region whose roots cannot
+    carry all of its weight needs every one of them grounded)."""
+    for region in range(2):
+        n_grounded = 0
+        n_roots = 0
+        for r in range(book.roots.shape[0]):
+            if book.left[r] == (region == 0):
+                n_roots += 1
+                if book.grounded[r]:
+                    n_grounded += 1
+        weight = book.weights[region]
+        if min(weight, book.f_max * n_grounded) < min(weight, book.f_max * n_roots):
+            return False
+    return True
 
 
 @kernel
@@ -455,6 +495,8 @@ def table_after_cycle(grid, cell, mode, anchored, cycle, book):
     for r in range(roots.shape[0]):
         changed |= signature[0, r] != active[r] or signature[1, r] != grounded[r]
         complete &= active[r] == grounded[r]
+    if book.carry:
+        complete = complete and weight_carried(book)
     if changed:
         signature[0] = active
         signature[1] = grounded
