@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install demo test bench eval
+.PHONY: install demo test bench eval learning-results
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -24,3 +24,11 @@ bench: install
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval
+
+# The multi-seed study of training/ppo.py at control level move (about 30 minutes on 2 cores),
+# then its evaluation: the table with the spread over training seeds goes into docs/eval/study,
+# docs/learning.md and README.md.
+learning-results: install
+	$(BIN)/python -m training.study --minutes 5 --parallel 2
+	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
+		--publish docs/learning.md --publish README.md

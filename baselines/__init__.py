@@ -1,5 +1,4 @@
-"""Baseline policies: the paper's hand-coded behaviours, the random floor and the
-never-move floor.
+"""Baseline policies: the paper's hand-coded behaviours and the random floor.
 
 ``POLICIES`` maps policy names to classes; :func:`make_policy` builds one for an env.
 """
@@ -11,10 +10,9 @@ from .branch import BranchPolicy
 from .chain import ChainPolicy
 from .grasp import GraspPolicy
 from .random_policy import RandomPolicy
-from .stay import StayPolicy
 from .table import TablePolicy
 
-POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, StayPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy)}
+POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy)}
 
 
 def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:

@@ -24,6 +24,8 @@ class Policy:
     """
 
     name = ""
+    levels: tuple[str, ...] = ("full",)
+    """The control levels (:mod:`proteo_env.control`) whose actions this policy gives."""
 
     def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
         self.layout = layout
@@ -34,6 +36,7 @@ class Policy:
     @classmethod
     def for_env(cls, env, *, seed: int | None = None, **params):
         """Build the policy from an environment's static interface (never its state)."""
+        check_level(cls, env)
         return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max,
                    seed=seed, **params)
 
@@ -51,6 +54,16 @@ class Policy:
             legal &= allowed[1:]
         choices = np.flatnonzero(legal)
         return int(self.rng.choice(choices)) + 1 if choices.size else 0
+
+
+def check_level(policy_cls, env) -> None:
+    """A ``ValueError`` when ``policy_cls`` gives no actions of ``env``'s control level."""
+    level = getattr(env, "control", "full")
+    if level not in policy_cls.levels:
+        raise ValueError(f"policy {policy_cls.name!r} gives actions at control level "
+                         f"{'/'.join(policy_cls.levels)}, not at the env's control={level!r}; allowed: an env made "
+                         f"with control={policy_cls.levels[0]!r}, or a policy of that level (random, a checkpoint "
+                         f"trained at {level!r})")
 
 
 FIELD_DTYPES = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8, "neighbour_mode": np.int32,

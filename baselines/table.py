@@ -73,7 +73,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import KernelPolicy, SlotMemory, stacked_fields
+from .base import KernelPolicy, SlotMemory, check_level, stacked_fields
 from .table_kernels import (AROOT, DISBAND, DISBAND_NOW, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP, SPOT_TAKEN,
                             TableRules, table_actions)
 
@@ -126,6 +126,7 @@ class TablePolicy(KernelPolicy):
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
         """Build from the env's static interface; rule parameters default to the task's."""
+        check_level(cls, env)
         task_params = env.task.params
         rules = {k: getattr(task_params, k) for k in RULE_PARAMS if hasattr(task_params, k)}
         return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,

@@ -1,209 +1,137 @@
-"""Does the reward rank the paper's behaviour first? The hand-coded rules against degenerate strategies.
+"""Does the reward prefer the paper's behaviour? The hand-coded policy against degenerate strategies.
 
-    python benchmarks/degenerate_strategies.py --tasks chain-v0,chain-v1,branch,table-v0,table-v1,grasp \\
-        --out docs/rewards/degenerate_eval.md
+    python benchmarks/degenerate_strategies.py                      # every task, both versions where two exist
+    python benchmarks/degenerate_strategies.py --tasks chain --seeds 20
 
-For each task id, the task's hand-coded policy and a set of degenerate strategies run one
-episode per held-out seed at the settings of an eval config (``configs/eval.yaml`` by default:
-the training sizes; ``configs/eval_larger.yaml`` for larger robots), the same seeds for every
-strategy. Per strategy: mean return with its 95 % t interval, successes, cycles to success
-(mean over the successful episodes) and return per cycle (mean over episodes of return /
-cycles). A reward is wrong when a degenerate strategy's return is above the hand-coded one.
+For each task, at the settings of ``configs/eval.yaml`` (the training sizes), on the held-out
+seeds 1000..1009, it runs the hand-coded policy and strategies a reward must not prefer:
 
-Degenerate strategies (the checkpoints are those named in ``docs/learning.md``):
+- ``idle``: every module stays and keeps its mode, relays scent, sends nothing;
+- ``random``: uniform over legal moves and every other field;
+- per task: the winding chain (the MaskablePPO checkpoint that folds the blob into a winding
+  path), every module switching to NODE (the branch shortcut the evolved network found), the
+  table that never settles (the MaskablePPO checkpoint that keeps creating and disbanding
+  legs), the table rules that never grow a leg (``p_max = p_min = 0``), the grasp learner that
+  approaches and never wraps (MaskablePPO).
 
-- every task: ``stay`` (never move, keep every mode: :class:`baselines.stay.StayPolicy`) and
-  ``random`` (:class:`baselines.random_policy.RandomPolicy`);
-- chain: the winding chain of MaskablePPO (``checkpoints/chain/sb3_ppo``) and of the evolved
-  network (``checkpoints/chain/cma_neural``);
-- branch: every module NODE at once (:class:`AllNode`), and the evolved network
-  (``checkpoints/branch/cma_neural``) that does nearly that;
-- table: never settle, as MaskablePPO does (``checkpoints/table/sb3_ppo``) and as the rules do
-  with thresholds that make every root grow and disband legs forever (:class:`Churn`); and
-  doing nothing, the rules with ``p_max = p_min = 0``;
-- grasp: approach with the rules, then retreat (:class:`ApproachRetreat`).
+and prints one markdown table per task id (every registered version of the task): mean return
+with a 95 % t interval, return per cycle, successes and cycles to success. ``--out FILE`` also
+writes the tables as JSON.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
-import time
+import json
+import sys
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from baselines import make_policy
-from baselines.base import Policy
-from baselines.table import TablePolicy
-from baselines.table_kernels import TableRules
-from proteo_env.core.lattice import DIRECTIONS
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-CHECKPOINTS = {
-    "chain": [("winding chain (MaskablePPO)", "checkpoints/chain/sb3_ppo"),
-              ("winding chain (evolved network)", "checkpoints/chain/cma_neural")],
-    "branch": [("nearly all NODE (evolved network)", "checkpoints/branch/cma_neural")],
-    "table": [("never settle (MaskablePPO)", "checkpoints/table/sb3_ppo")],
-}
-"""Checkpoints that embody a degenerate strategy, per task name: (label, path)."""
+import proteo_env  # noqa: E402
+from baselines import make_policy  # noqa: E402
+from baselines.base import Policy  # noqa: E402
+from proteo_env.rollout import run_episode  # noqa: E402
+from training.checkpoints import load_policy  # noqa: E402
+from training.evaluate import mean_ci  # noqa: E402
 
 
-class AllNode(Policy):
-    """Branch: every module switches to NODE at once and never moves (the evolved network's
-    shortcut: the whole blob counts as grown structure)."""
+class FixedModePolicy(Policy):
+    """Every module relays scent, sends nothing, and takes mode ``mode`` (``None``: keeps its own);
+    it moves at random over its legal moves when ``moving``, else stays."""
 
-    name = "all NODE"
+    name = "fixed-mode"
 
-    def act(self, observations):
-        node = self.modes.index("NODE")
-        return {agent: self.layout.encode(move=0, mode=node) for agent in observations}
-
-
-class Churn(TablePolicy):
-    """Table: the rules with thresholds no load can satisfy (``f_max = 0``, ``f_min`` above any
-    reading): every inactive root grows a leg with probability ``p_max`` per cycle and every
-    active one disbands its leg with probability ``p_min``, forever; the legs never settle."""
-
-    name = "never settle (rules, churning roots)"
-
-    @property
-    def rules(self) -> TableRules:
-        return TableRules(scent_max=int(self.scent_max), p_max=self.p_max, p_min=self.p_min, f_max=0.0,
-                          f_min=math.inf, p_random=self.p_random)
-
-
-class ApproachRetreat(Policy):
-    """Grasp: the hand-coded rules for ``approach`` cycles, then every module rolls away from
-    the object (the legal move most against the hint, keeping its mode), to collect the
-    approach's reward and see whether the reward takes it back."""
-
-    name = "approach, then retreat"
-
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, approach=60, rules=None):
+    def __init__(self, layout, modes, *, scent_max=65535, seed=None, mode=None, moving=False):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
-        self.approach = approach
-        self.rules = rules
-        self.cycle = 0
-
-    def reset(self, seed=None):
-        super().reset(seed)
-        self.rules.reset(seed)
-        self.cycle = 0
+        self.mode, self.moving = mode, moving
 
     def act(self, observations):
-        self.cycle += 1
-        if self.cycle <= self.approach:
-            return self.rules.act(observations)
         actions = {}
         for agent, obs in observations.items():
-            away = -(DIRECTIONS @ obs["hint"].astype(np.float64))  # (12,) how far each move goes from the object
-            away[obs["action_mask"][1:] == 0] = -np.inf
-            move = int(np.argmax(away)) + 1 if np.isfinite(away).any() and away.max() > 0 else 0
-            actions[agent] = self.layout.encode(move=move, mode=int(obs["own_mode"][0]))
+            mode = int(obs["own_mode"][0]) if self.mode is None else self.mode
+            move = self.random_legal_move(obs["action_mask"]) if self.moving else 0
+            actions[agent] = self.layout.encode(move=move, mode=mode)
         return actions
 
 
-def strategies(env, seed: int, root: Path):
-    """``[(label, kind, policy)]`` for the task of ``env``: hand-coded first, then the degenerate ones."""
-    from training.checkpoints import load_policy
+def strategies(name: str, env) -> dict:
+    """``{label: factory(seed) -> policy}`` of the strategies measured on task ``name``."""
+    def fixed(**kw):
+        return lambda seed: FixedModePolicy.for_env(env, seed=seed, **kw)
 
-    name = env.task.name
-    out = [("hand-coded rules", "hand-coded", make_policy(env.task.default_policy, env, seed=seed)),
-           ("stay (never move)", "degenerate", make_policy("stay", env, seed=seed)),
-           ("random", "degenerate", make_policy("random", env, seed=seed))]
+    def checkpoint(path):
+        return lambda seed: load_policy(path, env, seed=seed)
+
+    out = {"hand-coded": lambda seed: make_policy(name, env, seed=seed), "idle": fixed(),
+           "random": lambda seed: make_policy("random", env, seed=seed)}
+    if name == "chain":
+        out["winding chain (MaskablePPO, checkpoints/chain/sb3_ppo)"] = checkpoint("checkpoints/chain/sb3_ppo")
     if name == "branch":
-        out.append((AllNode.name, "degenerate", AllNode.for_env(env, seed=seed)))
+        node = env.task.mode_index("NODE")
+        out["every module NODE, staying"] = fixed(mode=node)
+        out["every module NODE, random moves"] = fixed(mode=node, moving=True)
     if name == "table":
-        out.append((Churn.name, "degenerate", Churn.for_env(env, seed=seed)))
-        out.append(("do nothing (rules, p_max = p_min = 0)", "degenerate",
-                    make_policy("table", env, seed=seed, p_max=0.0, p_min=0.0)))
+        out["never settle (MaskablePPO, checkpoints/table/sb3_ppo)"] = checkpoint("checkpoints/table/sb3_ppo")
+        out["rules that never grow a leg (p_max = p_min = 0)"] = (
+            lambda seed: make_policy("table", env, seed=seed, p_max=0.0, p_min=0.0))
     if name == "grasp":
-        rules = make_policy("grasp", env, seed=seed)
-        out.append((ApproachRetreat.name, "degenerate", ApproachRetreat.for_env(env, seed=seed, rules=rules)))
-    for label, path in CHECKPOINTS.get(name, []):
-        if (root / path).exists():
-            out.append((label, "checkpoint", load_policy(root / path, env, seed=seed)))
+        out["approach, never wrap (MaskablePPO, checkpoints/grasp/sb3_ppo)"] = checkpoint("checkpoints/grasp/sb3_ppo")
     return out
 
 
-def measure(task_id: str, overrides: dict, seeds: list[int], root: Path) -> list[dict]:
-    """One row per strategy: returns, successes, cycles over ``seeds``."""
-    import proteo_env
-    from proteo_env.rollout import run_episode
-
+def measure(task_id: str, overrides: dict, seeds: list[int]) -> list[dict]:
     env = proteo_env.make(task_id, **overrides)
     rows = []
-    for label, kind, policy in strategies(env, seeds[0], root):
-        started = time.perf_counter()
+    for label, factory in strategies(env.task.name, env).items():
+        policy = factory(seeds[0])
         episodes = [run_episode(env, policy, seed=s) for s in seeds]
-        rows.append({"task": env.task.task_id(), "strategy": label, "kind": kind,
-                     "returns": [e.total_reward for e in episodes], "successes": [e.success for e in episodes],
-                     "cycles": [e.cycles for e in episodes], "seconds": time.perf_counter() - started})
-    env.close()
+        returns = [e.total_reward for e in episodes]
+        mean, half = mean_ci(returns)
+        won = [e.cycles for e in episodes if e.success]
+        rows.append({"task": task_id, "strategy": label, "return": mean, "return_ci": half,
+                     "per_cycle": float(np.mean([e.total_reward / e.cycles for e in episodes])),
+                     "successes": len(won), "episodes": len(episodes),
+                     "cycles_to_success": float(np.mean(won)) if won else None})
     return rows
 
 
 def markdown(rows: list[dict]) -> str:
-    """The rows as a markdown table (the columns of the module docstring)."""
-    from training.evaluate import mean_ci
-
-    def fmt(mean, half, digits):
-        return f"{mean:.{digits}f}" + ("" if not np.isfinite(half) else f" ± {half:.{digits}f}")
-
-    lines = ["| task | strategy | return (95 % CI) | successes | cycles to success | return per cycle |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| strategy | return (95 % CI) | return per cycle | success | cycles to success |",
+             "|---|---|---|---|---|"]
+    best = max(r["return"] for r in rows if r["strategy"] != "hand-coded")
     for r in rows:
-        won = [c for c, s in zip(r["cycles"], r["successes"]) if s]
-        cycles = fmt(*mean_ci(won), 0) if won else "–"
-        per_cycle = float(np.mean(np.array(r["returns"]) / np.array(r["cycles"])))
-        lines.append(f"| {r['task']} | {r['strategy']} | {fmt(*mean_ci(r['returns']), 3)} | "
-                     f"{sum(r['successes'])}/{len(r['returns'])} | {cycles} | {per_cycle:.4f} |")
-    return "\n".join(lines)
-
-
-def beaten_by(rows: list[dict]) -> list[str]:
-    """The degenerate strategies whose mean return is at least the hand-coded one, per task."""
-    out = []
-    for task in dict.fromkeys(r["task"] for r in rows):
-        mine = [r for r in rows if r["task"] == task]
-        rules = np.mean(mine[0]["returns"])
-        out += [f"{task}: {r['strategy']}" for r in mine[1:] if np.mean(r["returns"]) >= rules]
-    return out
+        mark = " **(beats the rules)**" if r["strategy"] != "hand-coded" and r["return"] > rows[0]["return"] else ""
+        cycles = "–" if r["cycles_to_success"] is None else f"{r['cycles_to_success']:.0f}"
+        lines.append(f"| {r['strategy']}{mark} | {r['return']:.3f} ± {r['return_ci']:.3f} | {r['per_cycle']:.4f} | "
+                     f"{r['successes']}/{r['episodes']} | {cycles} |")
+    verdict = ("the hand-coded policy earns the most" if rows[0]["return"] > best
+               else "a degenerate strategy earns more than the hand-coded policy")
+    return "\n".join(lines) + f"\n\n{rows[0]['task']}: {verdict}."
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", default="chain,branch,table,grasp",
-                        help="comma-separated task ids or names (a name: its newest version)")
-    parser.add_argument("--config", default="configs/eval.yaml",
-                        help="eval config giving each task's settings and held-out seeds")
-    parser.add_argument("--seeds", type=int, default=None, help="episodes per strategy (default: the config's)")
-    parser.add_argument("--out", default=None, help="also write the table to this markdown file")
+    parser.add_argument("--tasks", default="chain,branch,table,grasp", help="comma-separated task names")
+    parser.add_argument("--seeds", type=int, default=10, help="episodes per strategy (seeds 1000..)")
+    parser.add_argument("--config", default="configs/eval.yaml", help="per-task settings (the eval config)")
+    parser.add_argument("--out", default=None, help="also write the rows as JSON here")
     args = parser.parse_args(argv)
-
-    from training.common import limit_threads
-    from training.evaluate import load_config
-
-    limit_threads(1)
-    root = Path(__file__).resolve().parent.parent
-    cfg = load_config(args.config)
-    n = args.seeds if args.seeds is not None else cfg["seeds"]
-    seeds = list(range(cfg["first_seed"], cfg["first_seed"] + n))
-    rows = []
-    for task_id in args.tasks.split(","):
-        overrides = dict((cfg["tasks"].get(task_id.split("-v")[0]) or {}).get("env") or {})
-        rows += measure(task_id, overrides, seeds, root)
-    table = markdown(rows)
-    losers = beaten_by(rows)
-    verdict = ("every degenerate strategy earns less than the hand-coded rules" if not losers
-               else "earn at least the hand-coded rules' return: " + "; ".join(losers))
-    text = f"{table}\n\nSeeds {seeds[0]}..{seeds[-1]}, settings of {args.config}; {verdict}.\n"
-    print(text)
+    settings = yaml.safe_load(Path(args.config).read_text())["tasks"]
+    seeds = list(range(1000, 1000 + args.seeds))
+    every = []
+    for name in args.tasks.split(","):
+        for task_id in sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name == name):
+            rows = measure(task_id, dict(settings.get(name, {}).get("env") or {}), seeds)
+            print(f"\n### {task_id}\n\n{markdown(rows)}\n", flush=True)
+            every += rows
     if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text)
+        Path(args.out).write_text(json.dumps(every, indent=1))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

@@ -2,6 +2,7 @@
 
     python benchmarks/training_throughput.py --modules 12 --steps 60000
     python benchmarks/training_throughput.py --task branch-v0 --env "{n_modules: 40, T: 4, B: 3}" --out docs/learning/throughput_branch.json
+    NUMBA_NUM_THREADS=1 python benchmarks/training_throughput.py --only training --out docs/learning/throughput_ppo_chain.json
 
 Prints (and writes to ``--out`` as JSON) agent-steps per second of:
 
@@ -9,7 +10,12 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
 2. the SB3 adapter (``ProteoVecEnv.step``: engine + observation encoding + resets);
 3. the TorchRL env (``ProteoTorchRLEnv.rollout`` with random actions);
 4. MaskablePPO training (rollouts + updates), with a cProfile breakdown of one run into
-   engine cycle, observation kernel, encoding, policy forward passes and PPO updates.
+   engine cycle, observation kernel, encoding, policy forward passes and PPO updates;
+5. the native trainer ``training/ppo.py`` at control level ``full`` (the level MaskablePPO
+   runs at: the same environment) and at ``move``, with its own split into environment step,
+   observation encoding, rollout forward passes and PPO update (from its ``progress.csv``,
+   after two warm-up updates). Its hyper-parameters come from ``--ppo-config`` (default
+   ``configs/train/ppo_<task>_move.yaml``), the environment from ``--env``.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -109,6 +115,37 @@ def sb3_training(task: str, overrides: dict, steps: int, n_copies: int, *, profi
     return steps / seconds, {k: {"seconds": round(v, 2), "share": round(v / total, 3)} for k, v in parts.items()}
 
 
+def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config: str) -> dict:
+    """Agent-steps/s of ``training/ppo.py`` and the share of its time in each part (after two warm-up updates)."""
+    import csv
+    import dataclasses
+    import tempfile
+
+    from training import ppo
+    from training.common import parse_args
+
+    base = parse_args(ppo.Args, ["--config", config]) if Path(config).is_file() else ppo.Args()
+    with tempfile.TemporaryDirectory() as tmp:
+        args = dataclasses.replace(base, task=task, control=control, env=overrides, run_dir=f"{tmp}/run",
+                                   total_steps=steps, checkpoint_every=10**12, time_limit_minutes=0.0,
+                                   tensorboard=False, progress_bar=False)
+        ppo.train(args)
+        with open(f"{tmp}/run/progress.csv") as fh:
+            rows = list(csv.DictReader(fh))
+    if len(rows) < 4:
+        raise ValueError(f"steps={steps} gave {len(rows)} updates; allowed: enough steps for at least 4")
+    first, timed = rows[1], rows[2:]
+    seconds = float(timed[-1]["seconds"]) - float(first["seconds"])
+    parts = {name: sum(float(r[f"time/{name}_seconds"]) for r in timed) for name in ("env", "encode", "forward", "update")}
+    return {"control": control, "config": config, "arch": args.arch, "hidden": list(args.hidden),
+            "n_envs": args.n_envs, "n_groups": args.n_groups, "n_steps": args.n_steps,
+            "minibatch_size": args.minibatch_size, "n_epochs": args.n_epochs,
+            "agent_steps": int(float(timed[-1]["agent_steps"]) - float(first["agent_steps"])), "seconds": round(seconds, 2),
+            "agent_steps_per_s": (float(timed[-1]["agent_steps"]) - float(first["agent_steps"])) / seconds,
+            "valid_share": float(np.mean([float(r["throughput/valid_share"]) for r in timed])),
+            "share": {k: round(v / seconds, 3) for k, v in parts.items()}}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="chain-v0")
@@ -117,9 +154,15 @@ def main(argv=None) -> int:
     parser.add_argument("--copies", type=int, default=4)
     parser.add_argument("--cycles", type=int, default=2000, help="cycles for the environment-only measurements")
     parser.add_argument("--steps", type=int, default=60000, help="agent-steps of MaskablePPO training")
+    parser.add_argument("--ppo-steps", type=int, default=1_500_000, help="agent-steps of training/ppo.py per level")
+    parser.add_argument("--ppo-config", default=None, help="hyper-parameters of training/ppo.py "
+                        "(default configs/train/ppo_<task>_move.yaml)")
+    parser.add_argument("--only", choices=("all", "training"), default="all",
+                        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates")
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
+    import sb3_contrib
     import torch
     import yaml
 
@@ -131,28 +174,41 @@ def main(argv=None) -> int:
     overrides.setdefault("max_cycles", 300)
     if args.modules is not None or args.task.startswith("chain"):
         overrides.setdefault("n_modules", args.modules or 12)
+    ppo_config = args.ppo_config or f"configs/train/ppo_{args.task.split('-v')[0]}_move.yaml"
 
     limit_threads(1)
     torch.manual_seed(0)
     result = {"machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(),
                           "python": platform.python_version(), "torch": torch.__version__,
+                          "sb3_contrib": sb3_contrib.__version__, "numpy": np.__version__,
+                          "numba_num_threads": os.environ.get("NUMBA_NUM_THREADS"),
                           "load_average_before": os.getloadavg()},
               "task": args.task, "env": overrides, "modules": overrides.get("n_modules"), "copies": args.copies}
     task = (args.task, overrides)
-    result["raw_env_agent_steps_per_s"] = raw_env(*task, args.cycles)
-    result["sb3_adapter_agent_steps_per_s"] = sb3_adapter(*task, args.cycles // args.copies, args.copies)
-    result["torchrl_env_agent_steps_per_s"] = torchrl_env(*task, args.cycles // args.copies, args.copies)
+    if args.only == "all":
+        result["raw_env_agent_steps_per_s"] = raw_env(*task, args.cycles)
+        result["sb3_adapter_agent_steps_per_s"] = sb3_adapter(*task, args.cycles // args.copies, args.copies)
+        result["torchrl_env_agent_steps_per_s"] = torchrl_env(*task, args.cycles // args.copies, args.copies)
     result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
-    result["sb3_training_profiled_agent_steps_per_s"], result["sb3_profile"] = sb3_training(
-        *task, args.steps, args.copies, profile=True)
-    result["raw_env_agent_steps_per_s_after"] = raw_env(*task, args.cycles)
+    result["ppo"] = {level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config)
+                     for level in ("full", "move")}
+    result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
+    result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
+    result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
+    if args.only == "all":
+        result["sb3_training_profiled_agent_steps_per_s"], result["sb3_profile"] = sb3_training(
+            *task, args.steps, args.copies, profile=True)
+        result["raw_env_agent_steps_per_s_after"] = raw_env(*task, args.cycles)
     result["machine"]["load_average_after"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2))
     for k, v in result.items():
-        if k.endswith("per_s"):
-            print(f"{k:45s} {v:10.0f}")
-    for k, v in (result["sb3_profile"] or {}).items():
+        if k.endswith("per_s") or k.endswith("over_sb3"):
+            print(f"{k:45s} {v:10.2f}")
+    for level, r in result["ppo"].items():
+        print(f"  training/ppo.py at {level}: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items())
+              + f" (valid samples {100 * r['valid_share']:.0f} %)")
+    for k, v in (result.get("sb3_profile") or {}).items():
         print(f"  {k:55s} {v['seconds']:8.2f} s  {100 * v['share']:5.1f} %")
     print(f"load average before/after: {result['machine']['load_average_before']} / "
           f"{result['machine']['load_average_after']}")

@@ -9,6 +9,10 @@ PettingZoo's per-agent dicts.
 
 Seeding: ``reset(seed=s)`` seeds world ``b`` with ``s + b``, so world ``b`` follows exactly the
 trajectory of a single ``ProteoEnv`` reset with seed ``s + b`` and fed the same actions.
+
+Control levels (:mod:`proteo_env.control`): at ``config.control`` = ``"move"`` or
+``"move+mode"`` an action row holds only the chosen fields (``(B, A, 1)`` or ``(B, A, 2)``),
+and the environment fills in the rest before the cycle.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .config import EnvConfig
+from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
 from .core.world import World
 from .layouts import Layout
@@ -31,7 +36,10 @@ class BatchedEnv:
         config: :class:`~proteo_env.config.EnvConfig`.
 
     Attributes:
-        action_layout: names the fields of an action row (:class:`~proteo_env.spaces.ActionLayout`).
+        action_layout: names the fields of the task's full action (:class:`~proteo_env.spaces.ActionLayout`).
+        level: the :class:`~proteo_env.control.ControlLevel` in force (``config.control``);
+            ``control``, ``control_fields`` and ``control_nvec`` are its name, the fields an
+            action row holds and their number of values.
         n_envs, n_agents: ``B`` and ``A``.
         engine: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
         cycle: cycles since reset (all worlds step together).
@@ -44,8 +52,18 @@ class BatchedEnv:
         self.tasks = list(tasks)
         self.config = config or EnvConfig()
         self.n_envs = len(tasks)
+        for task in self.tasks:
+            task.max_cycles = self.config.max_cycles
         task = tasks[0]
         self.action_layout = ActionLayout(len(task.modes), task.n_channels, task.n_message_values)
+        self.level = ControlLevel(self.config.control, self.action_layout)
+        self._mode_roles = task.mode_role_table()
+        self._autopilots = []
+        if self.level.name == "move":
+            factory = autopilot_factory(task.name)
+            self._autopilots = [factory(self, None) for _ in tasks]
+        self._observed: tuple[int, ObservationBuffers] | None = None
+        """The last observation and the cycle it was taken at (what the autopilots read)."""
         self.n_sites = 12 if self.config.obs_radius == 1 else 54
         probe = task.build_layout(np.random.default_rng(0))
         self.build_world(task, probe)  # checks the layout now, not at the first reset
@@ -68,6 +86,28 @@ class BatchedEnv:
     def worlds(self) -> list[World]:
         return self.engine.worlds
 
+    @property
+    def task(self) -> Task:
+        """The task of world 0 (every world runs the same task class and parameters)."""
+        return self.tasks[0]
+
+    @property
+    def control(self) -> str:
+        return self.level.name
+
+    @property
+    def control_fields(self) -> tuple[str, ...]:
+        return self.level.fields
+
+    @property
+    def control_nvec(self) -> np.ndarray:
+        return self.level.nvec
+
+    @property
+    def at_level(self) -> str:
+        """`` at control level '<name>'`` for error messages, empty at ``full`` (the default)."""
+        return "" if self.control == "full" else f" at control level {self.control!r}"
+
     def reset(self, seed: int | None = None) -> ObservationBuffers:
         """New start layouts for every world; world ``b`` is seeded with ``seed + b``."""
         if seed is not None:
@@ -85,41 +125,72 @@ class BatchedEnv:
         self.engine = WorldBatch(worlds)
         for task, world, rng in zip(self.tasks, worlds, self._rngs):
             task.reset(world, rng)
+        for pilot, rng in zip(self._autopilots, self._rngs):
+            pilot.reset(seed=int(rng.integers(2**63)))
         self.cycle = 0
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         return self.observe_arrays()
 
     def check_actions(self, actions) -> np.ndarray:
-        """Validate a ``(B, A, L)`` batch; a bad one raises ``ValueError`` naming world, agent and field."""
-        lay = self.action_layout
+        """Validate a ``(B, A, F)`` batch (``F`` fields of the control level); a bad one raises
+        ``ValueError`` naming world, agent and field."""
+        fields, nvec = self.control_fields, self.control_nvec
         actions = np.asarray(actions)
         if actions.dtype.kind not in "iu":
             raise ValueError(f"actions dtype {actions.dtype} is not allowed; allowed: integers")
-        expected = (self.n_envs, self.n_agents, lay.length)
+        expected = (self.n_envs, self.n_agents, len(fields))
         if actions.shape != expected:
-            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: {expected} "
-                             f"(worlds, agents, {lay.field_names})")
-        bad = (actions < 0) | (actions >= lay.nvec)
+            raise ValueError(f"actions shape {actions.shape} is not allowed{self.at_level}; allowed: {expected} "
+                             f"(worlds, agents, {list(fields)})")
+        bad = (actions < 0) | (actions >= nvec)
         if bad.any():
             b, a, f = np.argwhere(bad)[0]
             where = f"world {b}, " if self.n_envs > 1 else ""
-            raise ValueError(f"action of {where}module_{a}: {lay.field_names[f]}={actions[b, a, f]} is not "
-                             f"allowed; allowed: 0..{lay.nvec[f] - 1}")
+            raise ValueError(f"action of {where}module_{a}: {fields[f]}={actions[b, a, f]} is not "
+                             f"allowed; allowed: 0..{nvec[f] - 1}")
         return actions.astype(np.int64, copy=False)
 
+    def full_actions(self, actions: np.ndarray) -> np.ndarray:
+        """``(B, A, L)`` full actions from a checked ``(B, A, F)`` batch at the control level:
+        the chosen fields, and the rest from the autopilot (``move``) or the task's
+        mode-role table (``move+mode``)."""
+        if self.control == "full":
+            return actions
+        lay = self.action_layout
+        if self.control == "move+mode":
+            full = np.zeros(actions.shape[:2] + (lay.length,), dtype=np.int64)
+            full[..., :2] = actions
+            full[..., lay.roles] = self._mode_roles[actions[..., 1]]
+            return full
+        observed = self.last_observation()
+        a = self.n_agents
+        full = np.stack([pilot.act_arrays(observed.rows(b * a, (b + 1) * a))
+                         for b, pilot in enumerate(self._autopilots)])
+        full[..., lay.move] = actions[..., 0]
+        return full
+
+    def last_observation(self) -> ObservationBuffers:
+        """The observation of the current cycle: the one :meth:`observe_arrays` last returned,
+        or a fresh one when the world has stepped since."""
+        if self._observed is None or self._observed[0] != self.cycle:
+            self.observe_arrays()
+        return self._observed[1]
+
     def step_arrays(self, actions) -> list[dict[str, float]]:
-        """One cycle of every world from a ``(B, A, L)`` action array; the reward terms per world.
+        """One cycle of every world from a ``(B, A, F)`` action array (``F`` fields of the
+        control level; ``F = L`` at ``full``); the reward terms per world.
 
         A bad batch raises ``ValueError`` and changes nothing.
         """
         if self.engine is None:
             raise RuntimeError("no world yet; call reset() first")
-        actions = self.check_actions(actions)
+        actions = self.full_actions(self.check_actions(actions))
         lay = self.action_layout
         self.last_moved = self.engine.step(
             move=actions[..., lay.move], mode=actions[..., lay.mode], scent_role=actions[..., lay.roles],
             message_target=actions[..., lay.message_target], message_value=actions[..., lay.message_value])
         self.cycle += 1
+        self._observed = None
         terms = []
         for task, world, moved in zip(self.tasks, self.worlds, self.last_moved):
             task.after_cycle(world, self.cycle)
@@ -134,6 +205,7 @@ class BatchedEnv:
         for b, (task, world) in enumerate(zip(self.tasks, self.worlds)):
             buffers.load[b * a:(b + 1) * a, 0] = task.load(world)
             buffers.hint[b * a:(b + 1) * a] = task.hint(world)
+        self._observed = (self.cycle, buffers)
         return buffers
 
     def metrics(self) -> list[dict[str, float]]:

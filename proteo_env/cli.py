@@ -1,8 +1,9 @@
 """The ``proteo`` command line.
 
 ``proteo demo`` (the main job), ``proteo run TASK|CONFIG`` (run, record, render, plot),
-``proteo replay FILE`` (movie, still or plots of a recorded episode) and ``proteo figures``
-(the paper's figures into ``docs/figures``).
+``proteo replay FILE`` (movie, still or plots of a recorded episode), ``proteo view FILE`` (an
+interactive 3D page of a recorded episode) and ``proteo figures`` (the paper's figures into
+``docs/figures``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ STILL_SUFFIXES = (".png", ".jpg", ".jpeg", ".svg", ".pdf")
 
 def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out: Path | None, *,
          record: Path | None = None, movie: Path | None = None, plots: Path | None = None, camera=None,
-         fps: float = 20.0, max_frames: int | None = 300):
+         fps: float = 20.0, max_frames: int | None = 300, view: Path | None = None):
     from baselines import make_policy
 
     from . import make
@@ -38,7 +39,7 @@ def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out:
     env = make(task_id, **overrides)
     policy = make_policy(policy_name or env.task.default_policy, env, seed=seed)
     label = f"{env.task.task_id()} / {policy.name}"
-    wants_recording = any(x is not None for x in (out, record, movie, plots))
+    wants_recording = any(x is not None for x in (out, record, movie, plots, view))
     recorder = Recorder(env, task_id=env.task.task_id(), overrides=overrides, seed=seed,
                         policy=policy.name) if wants_recording else None
     with tqdm(total=env.max_cycles, desc=label, unit="cycle", leave=False) as bar:
@@ -48,17 +49,21 @@ def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out:
     if recorder is not None:
         recording = recorder.recording(success=result.success)
         _outputs(recording, label=label, out=out, record=record, movie=movie, plots=plots, camera=camera, fps=fps,
-                 max_frames=max_frames)
+                 max_frames=max_frames, view=view)
     return {"task": env.task.task_id(), "policy": policy.name, "modules": env.engine.n_modules,
             "cycles": result.cycles, "success": result.success, "reward": result.total_reward,
             "seconds": seconds, "metrics": result.metrics}
 
 
 def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=None, camera=None, fps=20.0,
-             max_frames=300, still=None, still_frame=-1) -> None:
-    """Write what was asked for from a recording: the file, demo pictures, a movie, a still, plots."""
+             max_frames=300, still=None, still_frame=-1, view=None) -> None:
+    """Write what was asked for from a recording: the file, demo pictures, a movie, a still, plots, a viewer page."""
     if record is not None:
         recording.save(record)
+    if view is not None:
+        from .render.webview import write_html
+
+        write_html(recording, view)
     if out is not None:
         from .render.replay import render_still
 
@@ -98,11 +103,11 @@ def _table(rows: list[dict]) -> str:
 
 
 def demo(args) -> int:
-    from .registry import TASKS
+    from .registry import newest_tasks
 
     out = Path(args.out)
     rows = []
-    for task_id, cls in sorted(TASKS.items()):
+    for task_id, cls in sorted(newest_tasks().items()):
         overrides = dict(DEMO_SETTINGS.get(cls.name, {}))
         if args.motion_model:
             overrides["motion_model"] = args.motion_model
@@ -165,9 +170,11 @@ def _camera(args) -> dict | None:
     return camera or None
 
 
-def _check_paths(record=None, movie=None) -> None:
+def _check_paths(record=None, movie=None, view=None) -> None:
     if record is not None and Path(record).suffix != ".npz":
         raise ValueError(f"--record {str(record)!r} is not allowed; allowed: a file name ending in .npz")
+    if view is not None and Path(view).suffix.lower() not in (".html", ".htm"):
+        raise ValueError(f"--view {str(view)!r} is not allowed; allowed: a file name ending in .html")
     if movie is not None:
         from .render.movie import check_movie_path
 
@@ -176,7 +183,7 @@ def _check_paths(record=None, movie=None) -> None:
 
 def run(args) -> int:
     task_id, overrides = _resolve_target(args.target, args.set)
-    _check_paths(args.record, args.render)
+    _check_paths(args.record, args.render, args.view)
     camera = _camera(args)
     many = args.episodes > 1
     rows = []
@@ -184,11 +191,12 @@ def run(args) -> int:
         rows.append(_run(task_id, overrides, args.policy, seed, Path(args.out) if args.out else None,
                          record=_per_episode(args.record, seed, many), movie=_per_episode(args.render, seed, many),
                          plots=_per_episode(args.plots, seed, many), camera=camera, fps=args.fps,
-                         max_frames=args.max_frames))
+                         max_frames=args.max_frames, view=_per_episode(args.view, seed, many)))
     print(_table(rows))
     successes = sum(r["success"] for r in rows)
     print(f"\nsuccess {successes}/{len(rows)}")
-    for what, path in (("recording", args.record), ("movie", args.render), ("plots", args.plots)):
+    for what, path in (("recording", args.record), ("movie", args.render), ("plots", args.plots),
+                       ("viewer page", args.view)):
         if path is not None:
             print(f"{what}: {path}" + (" (one per seed: -seed<N>)" if many else ""))
     return 0
@@ -228,6 +236,35 @@ def replay(args) -> int:
     for what, path in (("movie", movie), ("picture", still), ("plots", args.plots)):
         if path is not None:
             print(f"{what}: {path}")
+    return 0
+
+
+def view(args) -> int:
+    from .recording import load
+    from .render.webview import write_html
+
+    out = Path(args.out) if args.out else Path(args.file).with_suffix(".html")
+    _check_paths(view=out)
+    recording = load(args.file)
+    write_html(recording, out)
+    print(f"viewer page: {out} ({out.stat().st_size / 1e6:.1f} MB; {recording.positions.shape[1]} modules, "
+          f"{recording.n_frames} frames): open it in a browser, no network needed")
+    if args.screenshot:
+        from .render.browser import Chromium
+
+        width, sep, height = args.size.lower().partition("x")
+        if not (sep and width.isdigit() and height.isdigit()):
+            raise ValueError(f"--size {args.size!r} is not allowed; allowed: WIDTHxHEIGHT in pixels, e.g. 1200x800")
+        with Chromium(width=int(width), height=int(height)) as browser:
+            browser.open(out.resolve().as_uri() + (f"#cycle={args.cycle}" if args.cycle is not None else "#frame=-1"))
+            browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))",
+                             await_promise=True)
+            problems = browser.errors() + ([browser.evaluate("document.body.dataset.error")]
+                                           if browser.evaluate("document.body.dataset.errors") != "0" else [])
+            if problems:
+                raise RuntimeError(f"the viewer page reported errors: {problems}")
+            browser.screenshot(args.screenshot)
+        print(f"screenshot: {args.screenshot}")
     return 0
 
 
@@ -273,6 +310,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="folder for start and end pictures (none if omitted)")
     p.add_argument("--record", default=None, help="write the episode to this .npz file")
     p.add_argument("--render", default=None, help="write a movie of the episode (.gif or .mp4)")
+    p.add_argument("--view", default=None, help="write an interactive 3D viewer page of the episode (.html)")
     _picture_args(p)
     p.set_defaults(func=run)
 
@@ -282,6 +320,14 @@ def main(argv=None) -> int:
     p.add_argument("--cycle", type=int, default=None, help="cycle drawn in a picture (default: the last)")
     _picture_args(p)
     p.set_defaults(func=replay)
+
+    p = sub.add_parser("view", help="an interactive 3D page (one offline .html file) of a recorded episode")
+    p.add_argument("file", help="a recording written by proteo run --record")
+    p.add_argument("--out", default=None, help="the page to write (default: the recording's name with .html)")
+    p.add_argument("--screenshot", default=None, help="also write a PNG of the page (needs headless Chromium)")
+    p.add_argument("--cycle", type=int, default=None, help="cycle shown in the screenshot (default: the last)")
+    p.add_argument("--size", default="1200x800", help="screenshot size WIDTHxHEIGHT (default 1200x800)")
+    p.set_defaults(func=view)
 
     p = sub.add_parser("figures", help="reproduce the paper's figures (pictures and plots) into docs/figures")
     p.add_argument("--out", default="docs/figures")
@@ -300,6 +346,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/eval", help="folder for results.md, results.json and eval.png")
     p.add_argument("--deterministic", action="store_true", help="neural policies take arg-max actions")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--publish", action="append", default=None, metavar="FILE.md",
+                   help="also put the table into this markdown file, between its '<!-- proteo eval --out OUT -->' "
+                   "and '<!-- end of proteo eval table -->' markers (repeatable)")
+    p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
+                   "OUT/pictures/ (what it builds)")
     p.set_defaults(func=lambda a: __import__("training.evaluate", fromlist=["main"]).main(a))
     args = parser.parse_args(argv)
     try:

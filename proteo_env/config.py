@@ -20,6 +20,10 @@ from pathlib import Path
 from .core.world import Physics
 
 
+CONTROL_LEVELS = ("move", "move+mode", "full")
+"""The control levels (:mod:`proteo_env.control`), from the easiest to learn to the hardest."""
+
+
 class ConfigError(ValueError):
     """A config value or key that is not allowed (the message names field, value and allowed)."""
 
@@ -31,11 +35,14 @@ class EnvConfig:
     Attributes:
         max_cycles: cycle limit; reaching it sets ``truncated``.
         obs_radius: 1 (12 neighbour sites) or 2 (54 sites) in observations.
+        control: the control level, ``"move"``, ``"move+mode"`` or ``"full"``: which action
+            fields the agent chooses (:mod:`proteo_env.control`).
         physics: :class:`~proteo_env.core.world.Physics` (motion model, connectivity, scents).
     """
 
     max_cycles: int = 1000
     obs_radius: int = 1
+    control: str = "full"
     physics: Physics = dataclasses.field(default_factory=Physics)
 
     def __post_init__(self):
@@ -43,6 +50,9 @@ class EnvConfig:
             raise ConfigError(f"max_cycles={self.max_cycles!r} is not allowed; allowed: an integer >= 1")
         if self.obs_radius not in (1, 2):
             raise ConfigError(f"obs_radius={self.obs_radius!r} is not allowed; allowed: 1 or 2")
+        if self.control not in CONTROL_LEVELS:
+            raise ConfigError(f"control={self.control!r} is not allowed; allowed: "
+                              f"{', '.join(map(repr, CONTROL_LEVELS))}")
 
 
 ENV_KEYS = tuple(f.name for f in dataclasses.fields(EnvConfig) if f.name != "physics")

@@ -9,7 +9,7 @@ from pettingzoo import ParallelEnv
 
 from .config import EnvConfig
 from .core.world import World
-from .spaces import ObservationBuffers, observation_space
+from .spaces import ModuleActionSpace, ObservationBuffers, observation_space
 from .batched import BatchedEnv
 from .tasks.base import Task
 
@@ -72,7 +72,11 @@ class ProteoEnv(ParallelEnv):
 
     Spaces (the same objects on every call):
         observation ``Dict`` and action ``MultiDiscrete``, documented in :mod:`proteo_env.spaces`;
-        ``action_layout`` names the action fields.
+        ``action_layout`` names the fields of the task's full action. At the control level
+        ``config.control`` (:mod:`proteo_env.control`) the action holds only the chosen fields:
+        ``Discrete(13)`` (an int, the move) at ``"move"``, ``MultiDiscrete([13, n_modes])`` at
+        ``"move+mode"``, the full ``MultiDiscrete`` at ``"full"`` (the default);
+        ``control_fields`` names them.
 
     Returns of :meth:`step` (dicts keyed by agent name):
         observations, rewards (the task's team reward: the sum of its terms), terminations
@@ -107,7 +111,7 @@ class ProteoEnv(ParallelEnv):
         self.action_layout = self.batch.action_layout
         self.possible_agents = [f"module_{i}" for i in range(self.batch.n_agents)]
         self.agents: list[str] = []
-        self._action_space = self.action_layout.space()
+        self._action_space = self._level_space()
         self._observation_space = observation_space(
             n_sites=self.batch.n_sites, n_channels=task.n_channels, n_modes=len(task.modes),
             n_message_values=task.n_message_values, scent_max=self.config.physics.scent_max)
@@ -128,7 +132,26 @@ class ProteoEnv(ParallelEnv):
         """``(A,)`` bool: who moved in the last cycle."""
         return self.batch.last_moved[0]
 
+    @property
+    def control(self) -> str:
+        """The control level (``"move"``, ``"move+mode"`` or ``"full"``)."""
+        return self.batch.control
+
+    @property
+    def control_fields(self) -> tuple[str, ...]:
+        """The action fields the agent chooses at this level (a prefix of ``action_layout``'s)."""
+        return self.batch.control_fields
+
+    @property
+    def control_nvec(self) -> np.ndarray:
+        return self.batch.control_nvec
+
     # ------------------------------------------------------------------ spaces
+    def _level_space(self):
+        if self.control == "move":
+            return spaces.Discrete(int(self.control_nvec[0]))
+        return ModuleActionSpace(self.control_nvec)
+
     def observation_space(self, agent):
         return self._observation_space
 
@@ -139,7 +162,11 @@ class ProteoEnv(ParallelEnv):
     def reset(self, seed=None, options=None):
         buffers = self.batch.reset(seed)
         self.agents = list(self.possible_agents)
-        info = {"cycle": 0, **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()}}
+        # the same keys as every step's info (TorchRL builds its info spec from the reset's)
+        world = self.batch.worlds[0]
+        terms = self.task.reward_terms(world, np.zeros(world.n_agents, dtype=np.bool_))
+        info = {"cycle": 0, "moved": 0, **{f"reward/{k}": 0.0 for k in terms},
+                **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()}}
         return buffers.per_agent(self.agents), {a: info for a in self.agents}
 
     def step(self, actions):
@@ -166,8 +193,11 @@ class ProteoEnv(ParallelEnv):
         return observations, rewards, terminations, truncations, infos
 
     def _action_batch(self, actions: dict) -> np.ndarray:
-        """Stack the per-agent actions into ``(A, L)``; any problem raises a ``ValueError`` naming the agent."""
-        lay = self.action_layout
+        """Stack the per-agent actions into ``(A, F)`` (``F`` fields of the control level; an int,
+        or a ``(1,)`` array, per agent at ``"move"``); any problem raises a ``ValueError`` naming
+        the agent."""
+        fields = self.control_fields
+        scalar = self.control == "move"
         if len(actions) != len(self.agents) or not all(a in actions for a in self.agents):
             missing = [a for a in self.agents if a not in actions]
             if missing:
@@ -176,32 +206,35 @@ class ProteoEnv(ParallelEnv):
             unknown = [a for a in actions if a not in set(self.agents)]
             raise ValueError(f"actions for {len(unknown)} unknown agents (first: {unknown[0]!r}); "
                              "allowed: the agents in env.agents")
+        shapes = [(), (1,)] if scalar else [(len(fields),)]
         try:
             batch = np.asarray([actions[a] for a in self.agents])
         except (ValueError, TypeError):
             batch = None
-        if batch is None or batch.shape != (len(self.agents), lay.length) or batch.dtype.kind not in "iu":
+        if batch is None or batch.shape[1:] not in shapes or batch.dtype.kind not in "iu":
+            allowed = "an int, the move" if scalar else f"{shapes[0]} = {list(fields)}"
             for a in self.agents:
                 value = np.asarray(actions[a])
-                if value.shape != (lay.length,):
-                    raise ValueError(f"action of {a}: shape {value.shape} is not allowed; allowed: "
-                                     f"({lay.length},) = {lay.field_names}")
+                if value.shape not in shapes:
+                    raise ValueError(f"action of {a}: shape {value.shape} is not allowed{self.batch.at_level}; "
+                                     f"allowed: {allowed}")
                 if value.dtype.kind not in "iu":
                     raise ValueError(f"action of {a}: dtype {value.dtype} is not allowed; allowed: integers")
-        return batch.astype(np.int64, copy=False)
+        return batch.reshape(len(self.agents), len(fields)).astype(np.int64, copy=False)
 
     # ------------------------------------------------------------------ array API
     def step_arrays(self, actions: np.ndarray) -> dict[str, float]:
-        """One cycle from an ``(A, L)`` int array of actions (rows in agent order).
+        """One cycle from an ``(A, F)`` int array of actions (rows in agent order; ``F`` fields
+        of the control level, ``F = L`` at ``"full"``).
 
         Checks the batch first (a bad one raises ``ValueError`` and changes nothing), runs
         the cycle, and returns the task's reward terms. ``self.last_moved`` says who moved.
         """
         actions = np.asarray(actions)
-        expected = (self.batch.n_agents, self.action_layout.length)
+        expected = (self.batch.n_agents, len(self.control_fields))
         if actions.shape != expected:
-            raise ValueError(f"actions shape {actions.shape} is not allowed; allowed: {expected}, "
-                             "one row per agent")
+            raise ValueError(f"actions shape {actions.shape} is not allowed{self.batch.at_level}; "
+                             f"allowed: {expected}, one row per agent of {list(self.control_fields)}")
         return self.batch.step_arrays(actions[None])[0]
 
     def observe_arrays(self) -> ObservationBuffers:

@@ -14,6 +14,12 @@ TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, C
 """Registered task classes by id ``<name>-v<version>``."""
 
 
+def newest_tasks() -> dict[str, type[Task]]:
+    """The newest version of every task name, by id (what ``proteo demo`` runs)."""
+    newest = {cls.name: task_class(cls.name) for cls in TASKS.values()}
+    return {cls.task_id(): cls for cls in newest.values()}
+
+
 def task_class(task_id: str) -> type[Task]:
     """The class registered as ``task_id``; a bare name means its newest version."""
     if task_id in TASKS:

@@ -145,6 +145,13 @@ class ObservationBuffers:
         self.hint = np.zeros((a, 3), dtype=np.float32)
         self.action_mask = np.zeros((a, N_MOVES), dtype=np.int8)
 
+    def rows(self, start: int, stop: int) -> "ObservationBuffers":
+        """The agents ``start .. stop - 1`` as buffers of their own (views, not copies)."""
+        view = object.__new__(ObservationBuffers)
+        for f in self.FIELDS:
+            setattr(view, f, getattr(self, f)[start:stop])
+        return view
+
     def agent(self, i: int) -> dict[str, np.ndarray]:
         """The observation dict of agent ``i`` (views into the buffers)."""
         return {f: getattr(self, f)[i] for f in self.FIELDS}

@@ -240,6 +240,8 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
                             "--n-epochs", "1", "--checkpoint-every", "32"]),
     "torchrl": ("torchrl_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1",
                                 "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "ppo_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
+                     "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
                        "--checkpoint-every", "1"]),
 }
@@ -271,7 +273,9 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     eval_config.write_text(yaml.safe_dump({"seeds": 1, "first_seed": 0, "tasks": {task: {"env": json.loads(env)}}}))
     results = evaluate(config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval",
                        progress=False, plots=False)
-    assert [r.kind for r in results] == ["hand-coded", "random", "evolved" if module == "cma_es" else "learned"]
+    random_levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
+    assert [(r.kind, r.level) for r in results] == [("hand-coded", "full")] + [("random", lv) for lv in random_levels] \
+        + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
         from training.checkpoints import load_policy
 
@@ -330,10 +334,13 @@ def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped()
 def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
     """The committed checkpoints load where ``proteo eval --config configs/<config>`` runs them."""
     pytest.importorskip("sb3_contrib")
-    from training.checkpoints import load_policy
+    from training.checkpoints import load_policy, read_meta
     from training.evaluate import load_config
 
     for name, entry in load_config(Path("configs") / config)["tasks"].items():
-        env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), **(entry.get("env") or {}))
-        for path in entry.get("checkpoints") or []:
-            assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
+        for item in entry.get("checkpoints") or []:
+            for path in [item] if isinstance(item, str) else item["runs"]:
+                level = read_meta(path).get("control", "full")
+                env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), control=level,
+                                      **(entry.get("env") or {}))
+                assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped

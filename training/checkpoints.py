@@ -10,11 +10,12 @@ and the algorithm's files:
 ``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
 ``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
 ``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
+``ppo``              ``policy.pt``           the actor of :mod:`training.ppo` (MLP or lattice)
 ==================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
 ``final/`` checkpoint is used). Anything wrong (no such path, not a checkpoint, a damaged
-file, a checkpoint of another task or observation encoding) raises :class:`CheckpointError`,
+file, a checkpoint of another task, control level or observation encoding) raises :class:`CheckpointError`,
 one message naming the path, what was found and what is allowed.
 """
 
@@ -31,7 +32,7 @@ from proteo_env.adapters.flatten import ObservationEncoder
 from .common import CHECKPOINT_FORMAT, CHECKPOINT_VERSION, META_FILE
 from .policies import LogitsPolicy, NumpyMLP, torch_mlp
 
-ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules")
+ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo")
 
 
 class CheckpointError(ValueError):
@@ -77,12 +78,16 @@ def read_meta(path) -> dict:
 
 
 def _check_compatible(meta: dict, env) -> ObservationEncoder:
-    """The env's encoder, after checking the checkpoint was made for this task and encoding."""
+    """The env's encoder, after checking the checkpoint was made for this task, control level and encoding."""
     where = f"checkpoint {meta['dir']!r}"
     task = env.task.task_id()
     if meta["task"].split("-v")[0] != env.task.name:
         raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
-    nvec = [int(n) for n in env.action_layout.nvec]
+    trained, level = meta.get("control", "full"), getattr(env, "control", "full")
+    if trained != level:
+        raise CheckpointError(f"{where} was trained at control level {trained!r}; it cannot control {task!r} at "
+                              f"control level {level!r}; allowed: an env made with control={trained!r}")
+    nvec = [int(n) for n in getattr(env, "control_nvec", env.action_layout.nvec)]
     if meta["nvec"] != nvec:
         raise CheckpointError(f"{where}: action nvec {meta['nvec']} does not match the environment's {nvec}")
     encoder = ObservationEncoder.for_env(env, **({"scent_scale": meta["encoder"]["scent_scale"]}
@@ -125,10 +130,13 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         logits_fn = _sb3_logits(folder / "model.zip", encoder)
     elif algorithm == "torchrl-ppo":
         logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
+    elif algorithm == "ppo":
+        logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)
     else:
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
-                        encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic)
+                        encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic,
+                        nvec=meta["nvec"])
 
 
 def _need(file: Path) -> Path:
@@ -179,6 +187,28 @@ def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     def logits_fn(features: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             return net(torch.as_tensor(features)).numpy()
+
+    return logits_fn
+
+
+def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+    import torch
+
+    from training.ppo import ActorCritic
+
+    try:
+        net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]))
+        net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
+    except CheckpointError:
+        raise
+    except Exception as err:
+        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable ppo network (arch {meta.get('arch')!r}, "
+                              f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}") from None
+    net.eval()
+
+    def logits_fn(features: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return net.logits(torch.as_tensor(features)).numpy()
 
     return logits_fn
 

@@ -16,15 +16,24 @@ Settings per task and the checkpoints to compare come from a YAML file (``config
     tasks:
       chain:
         env: {n_modules: 12, max_cycles: 300}
-        checkpoints: [checkpoints/chain/sb3_ppo, checkpoints/chain/cma_rules]
+        checkpoints:
+          - checkpoints/chain/sb3_ppo                       # one checkpoint
+          - {label: ppo, runs: [runs/ppo_s0, runs/ppo_s1, runs/ppo_s2]}   # one per training seed
 
 A task not named there runs with its defaults and no checkpoints. ``--checkpoint PATH`` adds a
-checkpoint to the task it was trained on. Writes ``results.md`` (the table), ``results.json``
-(every episode) and ``eval.png`` (the three measures per task) into ``--out``.
+checkpoint to the task it was trained on. Each checkpoint runs at the control level it was
+trained at (``control`` in its ``proteo.json``; ``full`` for older ones), and for every level
+other than ``full`` that a checkpoint uses, the random policy runs at that level too (random
+moves under the task's rules at ``move``). A ``runs`` group is one row: the mean over its
+training seeds of each run's mean return, success rate and cycles to success, with a 95 % t
+interval *across training seeds* (the spread a new training seed would see), and the pooled
+success count; each run's own row is in a second table. Writes ``results.md`` (the tables),
+``results.json`` (every episode) and ``eval.png`` (the three measures per task) into ``--out``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -82,6 +91,10 @@ class PolicyResult:
     policy: str
     kind: str
     source: str
+    level: str = "full"
+    """The control level the policy acted at."""
+    group: str = ""
+    """The label of the group of training seeds this run belongs to ("" when none)."""
     returns: list = field(default_factory=list)
     successes: list = field(default_factory=list)
     cycles: list = field(default_factory=list)
@@ -100,28 +113,90 @@ class PolicyResult:
         lo, hi = wilson(k, self.n)
         won = [c for c, s in zip(self.cycles, self.successes) if s]
         c_mean, c_half = mean_ci(won)
-        return {"task": self.task, "policy": self.policy, "kind": self.kind, "episodes": self.n,
+        return {"task": self.task, "policy": self.policy, "kind": self.kind, "level": self.level,
+                "training_seeds": 1 if self.kind in ("learned", "evolved") else 0, "episodes": self.n,
                 "return_mean": mean, "return_ci": half, "successes": k, "success_rate": k / self.n if self.n else 0.0,
                 "success_lo": lo, "success_hi": hi, "cycles_to_success": c_mean, "cycles_ci": c_half,
                 "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"), "seconds": self.seconds}
+
+
+@dataclass
+class GroupResult:
+    """The runs of one configuration trained with several seeds, summarised across them."""
+
+    runs: list
+    """The :class:`PolicyResult` of each training seed."""
+    label: str
+
+    @property
+    def task(self) -> str:
+        return self.runs[0].task
+
+    @property
+    def kind(self) -> str:
+        return self.runs[0].kind
+
+    @property
+    def n(self) -> int:
+        return sum(r.n for r in self.runs)
+
+    def summary(self) -> dict:
+        per_run = [r.summary() for r in self.runs]
+        mean, half = mean_ci([s["return_mean"] for s in per_run])
+        rate, rate_half = mean_ci([s["success_rate"] for s in per_run])
+        c_mean, c_half = mean_ci([s["cycles_to_success"] for s in per_run if s["successes"]])
+        k = sum(s["successes"] for s in per_run)
+        lo, hi = wilson(k, self.n)
+        return {"task": self.task, "policy": self.label, "kind": self.kind, "level": self.runs[0].level,
+                "training_seeds": len(self.runs), "episodes": self.n, "return_mean": mean, "return_ci": half,
+                "successes": k, "success_rate": rate, "success_rate_ci": rate_half,
+                "success_lo": max(0.0, rate - rate_half) if len(self.runs) > 1 else lo,
+                "success_hi": min(1.0, rate + rate_half) if len(self.runs) > 1 else hi,
+                "cycles_to_success": c_mean, "cycles_ci": c_half,
+                "mean_cycles": float(np.mean([s["mean_cycles"] for s in per_run])),
+                "seconds": sum(s["seconds"] for s in per_run)}
+
+
+def grouped(results: list[PolicyResult]) -> list:
+    """The results with the runs of each training-seed group replaced by one :class:`GroupResult`
+    (at the place of the group's first run)."""
+    out, seen = [], {}
+    for r in results:
+        if not r.group:
+            out.append(r)
+        elif (r.task, r.group) in seen:
+            seen[(r.task, r.group)].runs.append(r)
+        else:
+            seen[(r.task, r.group)] = GroupResult(runs=[r], label=r.group)
+            out.append(seen[(r.task, r.group)])
+    return out
 
 
 def _fmt(x: float, digits: int = 3) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
 
 
-def markdown_table(results: list[PolicyResult]) -> str:
-    """The results as one markdown table (one row per task and policy)."""
-    head = ["task", "policy", "kind", "episodes", "return (95 % CI)", "success (95 % CI)",
-            "cycles to success (95 % CI)", "seconds"]
+def markdown_table(results: list) -> str:
+    """The results as one markdown table (one row per task and policy or training-seed group).
+
+    A group's intervals are across its training seeds: return and cycles to success are the
+    mean of the runs' means ± a 95 % t half-width, success is the mean rate ± its half-width
+    with the pooled count in brackets.
+    """
+    head = ["task", "policy", "kind", "level", "training seeds", "episodes", "return (95 % CI)",
+            "success (95 % CI)", "cycles to success (95 % CI)", "seconds"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         s = r.summary()
         ret = f"{_fmt(s['return_mean'])} ± {_fmt(s['return_ci'])}"
-        succ = f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
+        if s["training_seeds"] > 1:
+            succ = (f"{_fmt(s['success_rate'], 2)} ± {_fmt(s['success_rate_ci'], 2)} "
+                    f"({s['successes']}/{s['episodes']})")
+        else:
+            succ = f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
         cyc = "–" if not s["successes"] else f"{_fmt(s['cycles_to_success'], 0)} ± {_fmt(s['cycles_ci'], 0)}"
-        lines.append(f"| {s['task']} | {s['policy']} | {s['kind']} | {s['episodes']} | {ret} | {succ} | {cyc} | "
-                     f"{s['seconds']:.1f} |")
+        lines.append(f"| {s['task']} | {s['policy']} | {s['kind']} | {s['level']} | {s['training_seeds'] or '–'} | "
+                     f"{s['episodes']} | {ret} | {succ} | {cyc} | {s['seconds']:.1f} |")
     return "\n".join(lines)
 
 
@@ -184,6 +259,14 @@ def load_config(path) -> dict:
         bad = sorted(set(entry or {}) - {"env", "checkpoints"})
         if bad:
             raise ConfigError(f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env")
+        for k, item in enumerate((entry or {}).get("checkpoints") or []):
+            ok = isinstance(item, str) or (isinstance(item, dict) and set(item) == {"label", "runs"}
+                                           and isinstance(item["label"], str) and isinstance(item["runs"], list)
+                                           and item["runs"] and all(isinstance(r, str) for r in item["runs"]))
+            if not ok:
+                raise ConfigError(f"eval config {str(p)!r}: tasks.{name}.checkpoints[{k}] = {item!r} is not allowed; "
+                                  "allowed: a checkpoint path, or {label: NAME, runs: [PATH, ...]} (one path per "
+                                  "training seed)")
     return {"seeds": int(data.get("seeds", 10)), "first_seed": int(data.get("first_seed", 0)), "tasks": tasks}
 
 
@@ -196,8 +279,20 @@ def _name_apart(results: list[PolicyResult]) -> None:
             r.policy = f"{r.policy} ({Path(r.source).name})"
 
 
+def _picture(env, path: Path, caption: str) -> None:
+    """The world of ``env`` as it is now, drawn into ``path`` (PNG)."""
+    from proteo_env.render.renderer import Renderer
+    from proteo_env.render.scene import Scene
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    renderer = Renderer()
+    renderer.savefig(Scene.from_world(env.world, caption=caption), path)
+    renderer.close()
+
+
 def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
-             deterministic: bool = False, progress: bool = True, plots: bool = True) -> list[PolicyResult]:
+             deterministic: bool = False, progress: bool = True, plots: bool = True,
+             pictures: bool = False) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
     Args:
@@ -207,6 +302,11 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
         checkpoints: extra checkpoint paths; each goes to the task it was trained on.
         out: output folder.
         deterministic: learned and evolved neural policies take arg-max actions.
+        pictures: draw the end of each policy's first episode (what it builds) into
+            ``out/pictures/<task>_<policy>.png`` (the first run of a training-seed group).
+
+    Returns:
+        one :class:`PolicyResult` per policy, or :class:`GroupResult` per training-seed group.
     """
     from tqdm import tqdm
 
@@ -229,22 +329,31 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
     else:
         classes = [cls for _, cls in sorted(proteo_env.TASKS.items()) if cls.name not in EXCLUDED_TASKS]
         classes = [c for c in classes if proteo_env.TASKS.get(f"{c.name}-v{c.version}") is task_class(c.name)]
-    by_task: dict[str, list[str]] = {c.name: list((cfg["tasks"].get(c.name) or {}).get("checkpoints") or [])
-                                     for c in classes}
+    by_task: dict[str, list[tuple[str, str]]] = {c.name: [] for c in classes}
+    """(path, training-seed group label or "") of every checkpoint, per task name."""
+    for c in classes:
+        for item in (cfg["tasks"].get(c.name) or {}).get("checkpoints") or []:
+            by_task[c.name] += [(item, "")] if isinstance(item, str) else [(r, item["label"]) for r in item["runs"]]
     for path in checkpoints:
         name = read_meta(path)["task"].split("-v")[0]
         if name not in by_task:
             raise ConfigError(f"checkpoint {str(path)!r} was trained on task {name!r}, which is not evaluated; "
                               f"allowed: checkpoints of {', '.join(by_task)}")
-        by_task[name].append(str(path))
+        by_task[name].append((str(path), ""))
 
+    out_dir = Path(out)
     results: list[PolicyResult] = []
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
-        env = proteo_env.make(cls.task_id(), **overrides)
-        entries = [("hand-coded", env.task.default_policy, None), ("random", "random", None)]
-        entries += [(None, None, path) for path in by_task[cls.name]]
-        for kind, name, path in entries:
+        envs = {"full": proteo_env.make(cls.task_id(), **overrides)}
+        levels = {path: read_meta(path).get("control", "full") for path, _ in by_task[cls.name]}
+        for level in dict.fromkeys(levels.values()):
+            envs.setdefault(level, proteo_env.make(cls.task_id(), **{**overrides, "control": level}))
+        entries = [("hand-coded", envs["full"].task.default_policy, None, "full", "")]
+        entries += [("random", "random", None, level, "") for level in envs]
+        entries += [(None, None, path, levels[path], group) for path, group in by_task[cls.name]]
+        for kind, name, path, level, group in entries:
+            env = envs[level]
             if path is None:
                 policy = make_policy(name, env, seed=seed_list[0])
                 source = f"baselines.{name}"
@@ -253,7 +362,8 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                 policy = load_policy(path, env, seed=seed_list[0], deterministic=deterministic)
                 kind = "evolved" if meta["algorithm"].startswith("cma") else "learned"
                 source = str(path)
-            result = PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source)
+            result = PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level,
+                                  group=group)
             started = time.perf_counter()
             for seed in tqdm(seed_list, desc=f"{cls.task_id()} / {policy.name}", unit="episode", leave=False,
                              disable=not progress):
@@ -263,23 +373,58 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                 result.cycles.append(int(episode.cycles))
                 result.seeds.append(seed)
                 result.metrics.append({k: float(v) for k, v in episode.metrics.items()})
+                first_of_group = not group or not any(r.group == group and r.task == result.task for r in results)
+                if pictures and seed == seed_list[0] and first_of_group:
+                    label = group or (policy.name if path is None else Path(path).name)
+                    _picture(env, out_dir / "pictures" / f"{cls.name}_{label}_{level}.png".replace("+", "-"),
+                             f"{cls.task_id()} · {label} ({level}) · seed {seed} · cycle {episode.cycles}"
+                             f"{' · success' if episode.success else ''}")
             result.seconds = time.perf_counter() - started
             results.append(result)
-        env.close()
-        _name_apart([r for r in results if r.task == cls.task_id()])
+        for env in envs.values():
+            env.close()
+        _name_apart([r for r in results if r.task == cls.task_id() and not r.group])
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    table = markdown_table(results)
+    rows = grouped(results)
+    table = markdown_table(rows)
     settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
-    (out / "results.md").write_text(f"{table}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: "
+    runs = [r for r in results if r.group]
+    per_run = "" if not runs else (
+        "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
+        + markdown_table([dataclasses.replace(r, policy=f"{r.group} ({Path(r.source).name})") for r in runs]))
+    (out / "results.md").write_text(f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: "
                                     f"{json.dumps(settings)}\n")
     (out / "results.json").write_text(json.dumps(
         {"seeds": seed_list, "settings": settings, "deterministic": deterministic,
-         "results": [{**asdict(r), "summary": r.summary()} for r in results]}, indent=1, default=float))
+         "results": [{**asdict(r), "summary": r.summary()} for r in results],
+         "groups": [{"label": g.label, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
+                    for g in rows if isinstance(g, GroupResult)]}, indent=1, default=float))
     if plots:
-        plot(results, out / "eval.png")
-    return results
+        plot(rows, out / "eval.png")
+    return rows
+
+
+PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"
+PUBLISH_END = "<!-- end of proteo eval table -->"
+
+
+def publish(table: str, out, files) -> None:
+    """Put ``table`` between the markers :data:`PUBLISH_BEGIN` (naming the ``--out`` folder) and
+    :data:`PUBLISH_END` in each of ``files`` (a markdown page that shows the table); a file
+    without the begin marker is an error that says what to add, and nothing is written."""
+    begin = PUBLISH_BEGIN.format(out=Path(out).as_posix())
+    texts = {}
+    for f in map(Path, files):
+        text = f.read_text() if f.is_file() else ""
+        if begin not in text or PUBLISH_END not in text.split(begin, 1)[1]:
+            raise ValueError(f"--publish {str(f)!r}: no {begin!r} ... {PUBLISH_END!r} markers; allowed: a "
+                             "markdown file that has them where the table goes")
+        head, rest = text.split(begin, 1)
+        texts[f] = f"{head}{begin}\n{table}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
+    for f, text in texts.items():
+        f.write_text(text)
 
 
 def main(args) -> int:
@@ -289,7 +434,9 @@ def main(args) -> int:
         config = DEFAULT_CONFIG
     results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
                        checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
-                       plots=not args.no_plots)
+                       plots=not args.no_plots, pictures=args.pictures)
+    if args.publish:
+        publish(markdown_table(results), args.out, args.publish)
     print(markdown_table(results))
     print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
     return 0

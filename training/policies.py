@@ -50,14 +50,18 @@ class LogitsPolicy(Policy):
         logits_fn: the network.
         label: the name shown in tables (``"sb3-ppo"``, ``"cma-neural"``, ...).
         deterministic: take each field's arg-max instead of sampling.
+        nvec: values of each field the network chooses (default: every field of ``layout``);
+            at control level ``move`` only ``[13]``, and an action is then the move alone.
     """
 
     name = "learned"
 
     def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
                  encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
-                 deterministic: bool = False):
+                 deterministic: bool = False, nvec=None):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
+        self.levels = (self.level_of(layout, self.nvec),)
         self.encoder = encoder
         self.logits_fn = logits_fn
         self.name = label
@@ -68,14 +72,19 @@ class LogitsPolicy(Policy):
             return {}
         features = self.encoder.encode_observations(observations)
         mask = np.stack([o["action_mask"] for o in observations.values()])
-        actions = sample_actions(self.logits_fn(features), self.layout.nvec, mask, self.rng,
+        actions = sample_actions(self.logits_fn(features), self.nvec, mask, self.rng,
                                  deterministic=self.deterministic)
         return dict(zip(observations, actions))
 
     def act_arrays(self, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
         """Actions of a batch given encoded features and move masks (the array API's path)."""
-        return sample_actions(self.logits_fn(features), self.layout.nvec, move_mask, self.rng,
+        return sample_actions(self.logits_fn(features), self.nvec, move_mask, self.rng,
                               deterministic=self.deterministic)
+
+    @staticmethod
+    def level_of(layout, nvec) -> str:
+        """The control level whose action fields ``nvec`` are (a prefix of ``layout.nvec``)."""
+        return {1: "move", 2: "move+mode"}.get(len(nvec), "full")
 
 
 # ---------------------------------------------------------------------- networks

@@ -80,13 +80,6 @@ def neighbourhood_offsets(radius: int) -> np.ndarray:
     return np.array(offsets, dtype=np.int64)
 
 
-def hop_distance(a, b) -> int:
-    """The fewest face hops between FCC sites ``a`` and ``b`` (each ``(3,)``):
-    ``max(max_i |d_i|, sum_i |d_i| / 2)`` with ``d = b - a``."""
-    d = np.abs(np.asarray(b, dtype=np.int64) - np.asarray(a, dtype=np.int64))
-    return int(max(d.max(), d.sum() // 2))
-
-
 def is_site(point) -> bool:
     """True when ``point`` is an FCC site (integer coordinates with an even sum)."""
     return int(np.sum(point)) % 2 == 0

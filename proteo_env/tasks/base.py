@@ -24,7 +24,9 @@ class Task:
     (scent role of passive board modules per channel, default relay), ``n_message_values``
     (default 15), ``default_policy`` (name of the baseline ``proteo demo`` runs),
     ``plot_groups`` (plot title -> metric names drawn together in one plot; metrics in no group
-    are plotted alone; default none).
+    are plotted alone; default none), ``mode_roles`` (the scent role of a module on each channel
+    in each mode at the ``move+mode`` control level, ``mode_roles[mode][channel]``; default
+    relay everywhere; see :mod:`proteo_env.control`).
 
     Required hook:
         ``build_layout(rng) -> Layout``: the start layout for an episode.
@@ -51,6 +53,9 @@ class Task:
     n_message_values: int = 15
     default_policy: str = "random"
     plot_groups: dict[str, list[str]] = {}
+    max_cycles: int = 1000
+    """The environment's cycle limit, set by the environment on its task instances."""
+    mode_roles: tuple[tuple[int, ...], ...] | None = None
 
     def __init__(self, params=None):
         self.params = params if params is not None else self.Params()
@@ -65,6 +70,16 @@ class Task:
 
     def mode_index(self, name: str) -> int:
         return self.modes.index(name)
+
+    def mode_role_table(self) -> np.ndarray:
+        """``(n_modes, n_channels)`` int64: :attr:`mode_roles` as an array (relay, 1, where unset)."""
+        if self.mode_roles is None:
+            return np.ones((len(self.modes), self.n_channels), dtype=np.int64)
+        table = np.array(self.mode_roles, dtype=np.int64)
+        if table.shape != (len(self.modes), self.n_channels):
+            raise ValueError(f"{self.task_id()}: mode_roles has shape {table.shape}; allowed: "
+                             f"({len(self.modes)}, {self.n_channels}), one role per mode and channel")
+        return table
 
     # ------------------------------------------------------------------ hooks
     def build_layout(self, rng: np.random.Generator) -> Layout:

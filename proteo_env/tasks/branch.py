@@ -62,6 +62,7 @@ import numpy as np
 
 from ..core.jit import kernel
 from ..layouts import Layout, blob_sites, place_in_box
+from ..core.kernels import EMIT, RELAY
 from .base import Task
 
 SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
@@ -226,6 +227,8 @@ class Branch(Task):
     passive_role = (1, 1)
     n_message_values = 15
     default_policy = "branch"
+    mode_roles = ((RELAY, RELAY), (RELAY, RELAY), (EMIT, RELAY), (RELAY, RELAY), (EMIT, EMIT), (RELAY, EMIT))
+    """``move+mode``: SEED emits the regular scent, NODE both, INODE the node scent; the rest relay."""
     plot_groups = {"tree": ["branch_points", "levels", "nodes"]}
 
     def build_layout(self, rng):

@@ -14,7 +14,8 @@ Actions
 Reward (team reward, the sum of these terms each cycle)
     ``thin``    = ``(T_t - T_{t-1}) / N``, the change in the number ``T`` of modules with at
                   most two neighbours (a potential-based shaping term);
-    ``success`` = 1 on the cycle the chain is complete;
+    ``success`` = 1 on the cycle the chain is complete (``chain-v1``, the default: its
+                  straightness, end-to-end lattice distance over ``N - 1``; :class:`ChainV1`);
     ``time``    = ``-time_penalty`` (default 0.001).
 Metrics
     ``chain_length`` (largest one-module-thick connected piece), ``thin_share`` (``T / N``),
@@ -35,9 +36,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.lattice import hop_distance
 from ..core.structure import StructureProbe
 from ..layouts import Layout, blob_sites, place_in_box
+from ..core.kernels import EMIT, RELAY
 from .base import Task
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
@@ -89,6 +90,8 @@ class Chain(Task):
     Params = ChainParams
     n_message_values = 15
     default_policy = "chain"
+    mode_roles = ((RELAY,), (RELAY,), (EMIT,), (RELAY,))
+    """``move+mode``: the SEED emits the scent, every other mode relays it."""
 
     def build_layout(self, rng):
         p = self.params
@@ -106,6 +109,7 @@ class Chain(Task):
     def reset(self, world, rng):
         self._probe = StructureProbe(world.n_modules)
         self._last = self._measure(world)
+        self._previous = self._last
 
     def _measure(self, world):
         degree, edges, thin_piece = self._probe.measure(world)
@@ -134,26 +138,37 @@ class Chain(Task):
         return self._last["complete"]
 
 
+def fcc_hops(a: np.ndarray, b: np.ndarray) -> int:
+    """The fewest face-neighbour steps between sites ``a`` and ``b`` (3,) of the FCC lattice."""
+    d = np.abs(np.asarray(a, dtype=np.int64) - np.asarray(b, dtype=np.int64))
+    return int(max(d.max(), d.sum() // 2))
+
+
 class ChainV1(Chain):
-    """``chain-v1``: the success bonus is the chain's straightness (module docstring, "Version 1")."""
+    """``chain-v1``: the chain's success bonus is paid for a *straight* chain.
+
+    ``chain-v0`` paid the ``success`` bonus of 1 for any one-module-thick chain, and a learner
+    that folds the blob into a winding path finishes sooner and earns more than the paper's
+    straight chain (docs/tasks/chain.md, "Reward against degenerate strategies"). Here the
+    bonus is the chain's *straightness*: the lattice distance (fewest face steps) between its
+    two ends divided by ``N - 1``, 1 for a straight chain along one lattice direction, less
+    for a winding one. Dynamics, observation, actions, success test and the other terms are
+    those of ``chain-v0``; the metric ``straightness`` is added (0 until the chain is complete).
+    """
 
     version = 1
 
-    def after_cycle(self, world, cycle):
-        super().after_cycle(world, cycle)
-        self._last["straightness"] = straightness(world, self._probe.degree) if self._last["complete"] else 0.0
+    def straightness(self, world) -> float:
+        """End-to-end lattice distance over ``N - 1`` of the complete chain; 0 before it is complete."""
+        if not self._last["complete"]:
+            return 0.0
+        ends = np.flatnonzero(self._probe.degree[: world.n_modules] == 1)
+        return fcc_hops(world.positions[ends[0]], world.positions[ends[-1]]) / (world.n_modules - 1)
 
     def reward_terms(self, world, moved):
-        return {**super().reward_terms(world, moved), "success": self._last["straightness"]}
+        terms = super().reward_terms(world, moved)
+        terms["success"] = self.straightness(world) if self._last["complete"] else 0.0
+        return terms
 
     def metrics(self, world):
-        return {**super().metrics(world), "straightness": self._last.get("straightness", 0.0)}
-
-
-def straightness(world, degree: np.ndarray) -> float:
-    """End-to-end hop span of a complete chain over ``N - 1``: 1 for a chain that is a shortest
-    lattice path between its two ends (straight, or zigzagging along one lattice axis), less for
-    one that winds. ``degree``: ``(N,)`` contacts per module (the two ends have 1)."""
-    ends = np.flatnonzero(degree[: world.n_modules] == 1)
-    positions = world.positions
-    return hop_distance(positions[ends[0]], positions[ends[-1]]) / (world.n_modules - 1)
+        return {**super().metrics(world), "straightness": self.straightness(world)}

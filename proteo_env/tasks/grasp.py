@@ -66,6 +66,7 @@ import numpy as np
 from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
+from ..core.kernels import EMIT, RELAY
 from .base import Task
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
@@ -269,6 +270,8 @@ class Grasp(Task):
     passive_role = (1, 1)
     n_message_values = 15
     default_policy = "grasp"
+    mode_roles = ((RELAY, RELAY), (RELAY, RELAY), (EMIT, RELAY), (RELAY, RELAY), (EMIT, EMIT), (RELAY, RELAY))
+    """``move+mode``: SEED emits the seed scent, TOUCHSEED both scents; the rest relay."""
     plot_groups = {"coverage and surround": ["coverage", "surround"]}
 
     # ------------------------------------------------------------------ layout

@@ -1,0 +1,262 @@
+"""Control levels (``make(task, control=...)``): PettingZoo citizenship at every level, what
+fills the fields an agent does not choose, determinism, the TorchRL wrapper, and bad input."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+from pettingzoo.utils import parallel_to_aec
+
+import proteo_env
+from baselines import make_policy
+from baselines.autopilot import hand_coded_rules
+from proteo_env import control
+from proteo_env.config import ConfigError
+from proteo_env.core.kernels import EMIT, RELAY
+
+from conftest import small_overrides
+
+RULE_TASKS = sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox")
+LEVELS = ("move", "move+mode")  # "full" is every other test file's level
+
+
+def _make(task_id, level, **extra):
+    return proteo_env.make(task_id, **small_overrides(task_id, control=level, **extra))
+
+
+def _check_warnings(record):
+    expected = ("Observation is not a NumPy array", "Observation numpy array is all zeros",
+                "space for each agent probably should be gymnasium.spaces.box or gymnasium.spaces.discrete")
+    unexpected = [str(w.message) for w in record if not any(text in str(w.message) for text in expected)]
+    assert not unexpected, f"unexpected warnings: {unexpected}"
+
+
+# ---------------------------------------------------------------------- PettingZoo's own tests
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_pettingzoo_tests_pass_at_every_level(task_id, level):
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        parallel_api_test(_make(task_id, level), num_cycles=30)
+        api_test(parallel_to_aec(_make(task_id, level, max_cycles=25)), num_cycles=30)
+    _check_warnings(record)
+    parallel_seed_test(lambda: _make(task_id, level), num_cycles=20)
+
+
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_spaces_of_each_level(task_id):
+    move = _make(task_id, "move")
+    assert isinstance(move.action_space("module_0"), spaces.Discrete) and move.action_space("module_0").n == 13
+    assert move.control_fields == ("move",)
+    both = _make(task_id, "move+mode")
+    n_modes = len(both.task.modes)
+    assert list(both.action_space("module_0").nvec) == [13, n_modes]
+    assert both.control_fields == ("move", "mode")
+    full = _make(task_id, "full")
+    assert list(full.action_space("module_0").nvec) == list(full.action_layout.nvec)
+    # the controlled fields are a prefix of the full action
+    assert full.action_layout.field_names[:2] == list(both.control_fields)
+
+
+# ---------------------------------------------------------------------- many steps, bit for bit
+def _episode(env, seed, n_cycles, level):
+    """Positions and modes after each of ``n_cycles`` cycles of seeded random legal moves
+    (and random modes at ``move+mode``)."""
+    rng = np.random.default_rng(seed + 1)
+    observations, _ = env.reset(seed=seed)
+    trace = []
+    while env.agents and len(trace) < n_cycles:
+        actions = {}
+        for agent in env.agents:
+            move = rng.choice(np.flatnonzero(observations[agent]["action_mask"]))
+            actions[agent] = int(move) if level == "move" else np.array([move, rng.integers(len(env.task.modes))])
+        observations, *_ = env.step(actions)
+        trace.append((env.world.positions.copy(), env.world.modes.copy(), env.world.scents.copy()))
+    return trace
+
+
+@pytest.mark.parametrize("level", LEVELS)
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_same_seed_same_trajectory_over_many_cycles(task_id, level):
+    first = _episode(_make(task_id, level), 3, 40, level)
+    second = _episode(_make(task_id, level), 3, 40, level)
+    assert len(first) == len(second) > 10
+    for a, b in zip(first, second):
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_batched_world_follows_the_single_env_at_move_level(task_id):
+    overrides = small_overrides(task_id, control="move")
+    batch = proteo_env.make_batched(task_id, 3, **overrides)
+    buffers = batch.reset(seed=10)
+    singles = [proteo_env.make(task_id, **overrides) for _ in range(3)]
+    for b, env in enumerate(singles):
+        env.reset(seed=10 + b)
+    rng = np.random.default_rng(0)
+    a = batch.n_agents
+    for _ in range(30):
+        masks = buffers.action_mask.reshape(3, a, 13).astype(bool)
+        moves = np.array([[rng.choice(np.flatnonzero(m)) for m in world] for world in masks])
+        batch.step_arrays(moves[..., None])
+        buffers = batch.observe_arrays()
+        for b, env in enumerate(singles):
+            env.step_arrays(moves[b][:, None])
+            np.testing.assert_array_equal(batch.worlds[b].positions, env.engine.positions)
+            np.testing.assert_array_equal(batch.worlds[b].mode, env.engine.mode)
+
+
+# ---------------------------------------------------------------------- what fills the other fields
+class _Twin:
+    """An autopilot (the hand-coded rules) and a twin copy of the same rules with the same seed:
+    the twin proposes the moves the autopilot's rules would make."""
+
+    instances: list = []
+
+    def __init__(self, env, seed):
+        self.pilot = hand_coded_rules(env, seed)
+        self.twin = hand_coded_rules(env, seed)
+        self.seed = None
+        _Twin.instances.append(self)
+
+    def reset(self, seed=None):
+        self.seed = seed
+        self.pilot.reset(seed)
+        self.twin.reset(seed)
+
+    def act_arrays(self, buffers):
+        return self.pilot.act_arrays(buffers)
+
+
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_move_level_with_the_rules_moves_is_the_hand_coded_episode(task_id, monkeypatch):
+    """At ``move`` the autopilot is the task's hand-coded rules: an agent that moves as the rules
+    would reproduces, cycle for cycle, the hand-coded policy's episode at ``full``."""
+    name = proteo_env.TASKS[task_id].name
+    monkeypatch.setitem(control._autopilots, name, _Twin)
+    _Twin.instances.clear()
+    env = _make(task_id, "move", max_cycles=400)
+    (pilot,) = _Twin.instances
+    buffers = env.batch.reset(seed=5)
+    moved_trace = []
+    while True:
+        moves = pilot.twin.act_arrays(buffers)[:, :1]
+        env.batch.step_arrays(moves[None])
+        buffers = env.batch.observe_arrays()
+        moved_trace.append(env.engine.positions.copy())
+        if env.batch.success()[0] or env.cycle >= 150:
+            break
+    if name == "chain":
+        assert env.batch.success()[0], "the chain rules at move level finish the chain"
+    assert not np.array_equal(moved_trace[0], moved_trace[-1]), "the rules' moves moved modules"
+
+    reference = _make(task_id, "full", max_cycles=400)
+    policy = make_policy(name, reference, seed=pilot.seed)
+    buffers = reference.batch.reset(seed=5)
+    for positions in moved_trace:
+        reference.step_arrays(policy.act_arrays(buffers))
+        buffers = reference.observe_arrays()
+        np.testing.assert_array_equal(reference.engine.positions, positions)
+    assert reference.batch.success()[0] == env.batch.success()[0]
+
+
+def test_move_level_modes_follow_the_rules_while_nobody_moves():
+    """Chain at ``move`` with every agent staying: nobody moves, but the rules still wake the
+    SLEEP modules as the seed's scent spreads through the blob (the autopilot sets modes)."""
+    env = _make("chain-v0", "move")
+    env.reset(seed=0)
+    search = env.task.mode_index("SEARCH")
+    start = env.world.positions.copy()
+    for _ in range(12):
+        env.step({a: 0 for a in env.agents})
+    np.testing.assert_array_equal(env.world.positions, start)
+    assert (env.world.modes == search).sum() >= env.engine.n_agents - 2
+
+
+@pytest.mark.parametrize("task_id", RULE_TASKS)
+def test_move_plus_mode_roles_follow_the_mode_table(task_id):
+    env = _make(task_id, "move+mode")
+    obs, _ = env.reset(seed=0)
+    table = env.task.mode_role_table()
+    assert table.shape == (len(env.task.modes), env.task.n_channels)
+    assert (table == EMIT).any() and (table == RELAY).any()
+    emitting = int(np.flatnonzero((table == EMIT).any(axis=1))[0])
+    channel = int(np.flatnonzero(table[emitting] == EMIT)[0])
+    actions = {a: np.array([0, obs[a]["own_mode"][0]]) for a in env.agents}
+    actions["module_0"] = np.array([0, emitting])
+    obs, *_ = env.step(actions)
+    assert env.world.modes[0] == emitting
+    assert obs["module_0"]["own_scent"][channel] == 0, "a mode that emits by the table has scent 0"
+
+
+def test_move_plus_mode_needs_no_rules():
+    env = proteo_env.make("sandbox-v0", n_modules=8, control="move+mode")
+    env.reset(seed=0)
+    env.step({a: np.array([0, 1]) for a in env.agents})
+    assert (env.world.modes == 1).all()
+
+
+# ---------------------------------------------------------------------- TorchRL
+def test_torchrl_pettingzoo_wrapper_with_mask_at_move_level():
+    pytest.importorskip("torchrl")
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+    from torchrl.envs.utils import check_env_specs
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # TorchRL warns that it was tested with PettingZoo 1.24.3
+        env = PettingZooWrapper(_make("chain-v0", "move", max_cycles=20), use_mask=True, seed=0)
+        check_env_specs(env)
+        rollout = env.rollout(5)
+    mask = rollout["module", "action_mask"]
+    assert mask.shape[-1] == 13 and mask.dtype.is_floating_point is False
+    chosen = rollout["module", "action"]
+    assert mask.gather(-1, chosen.unsqueeze(-1)).all(), "a random rollout picks masked-in moves only"
+
+
+# ---------------------------------------------------------------------- bad input
+def test_unknown_level_is_one_clear_error():
+    with pytest.raises(ConfigError, match=r"control='fly' is not allowed; allowed: 'move', 'move\+mode', 'full'"):
+        proteo_env.make("chain-v0", control="fly")
+    with pytest.raises(ConfigError, match="control='fly'"):
+        proteo_env.make_batched("chain-v0", 2, control="fly")
+
+
+def test_move_level_without_rules_names_the_tasks_that_have_them():
+    with pytest.raises(ConfigError, match=r"task 'sandbox'.*allowed: tasks with rules \(branch, chain, grasp, table\)"):
+        proteo_env.make("sandbox-v0", control="move")
+
+
+def test_actions_that_do_not_fit_the_level_change_nothing():
+    env = _make("chain-v0", "move")
+    obs, _ = env.reset(seed=0)
+    policy = make_policy("chain", _make("chain-v0", "full"), seed=0)  # full actions: not this level's
+    before = env.world.positions.copy()
+    with pytest.raises(ValueError, match=r"module_0: shape \(5,\) is not allowed at control level 'move'; "
+                                         r"allowed: an int, the move"):
+        env.step(policy.act(obs))
+    with pytest.raises(ValueError, match=r"not allowed at control level 'move'; allowed: \(12, 1\)"):
+        env.step_arrays(np.zeros((12, 5), dtype=np.int64))
+    with pytest.raises(ValueError, match=r"module_3: move=13 is not allowed; allowed: 0..12"):
+        env.step({a: (13 if a == "module_3" else 0) for a in env.agents})
+    np.testing.assert_array_equal(env.world.positions, before)
+    assert env.cycle == 0
+    both = _make("chain-v0", "move+mode")
+    both.reset(seed=0)
+    with pytest.raises(ValueError, match=r"module_0: mode=4 is not allowed; allowed: 0..3"):
+        both.step({a: np.array([0, 4]) for a in both.agents})
+
+
+def test_policies_refuse_a_level_they_do_not_act_at():
+    env = _make("chain-v0", "move")
+    with pytest.raises(ValueError, match=r"policy 'chain' gives actions at control level full, not at the env's "
+                                         r"control='move'"):
+        make_policy("chain", env)
+    random = make_policy("random", env, seed=0)  # random moves under the rules
+    obs, _ = env.reset(seed=0)
+    obs, *_ = env.step(random.act(obs))
+    assert env.cycle == 1

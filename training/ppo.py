@@ -1,0 +1,506 @@
+"""PPO with one policy shared by every module, over the batched array API (no per-agent dicts).
+
+Every module of ``n_envs`` worlds is one sample: the worlds run as ``n_groups``
+:class:`~proteo_env.batched.BatchedEnv` s (``proteo_env.make_batched(task, n_envs // n_groups,
+control=level)``), the observation arrays of all modules are encoded at once
+(:class:`~proteo_env.adapters.flatten.ObservationEncoder`, the encoding every learner here
+uses), one forward pass gives every module's logits and value, illegal moves are masked out
+of the move logits (``action_mask``), and the sampled ``(B, A, F)`` action array goes back into
+``step_arrays``. ``total_steps`` counts agent-steps (module-cycles) that enter an update.
+
+    python -m training.ppo --config configs/train/ppo_chain_move.yaml
+    python -m training.ppo --config configs/train/ppo_chain_move.yaml --total-steps 2000000 --run-dir runs/try
+    python -m training.ppo --resume runs/try/checkpoints/step_0001001472 --total-steps 4000000
+    tensorboard --logdir runs
+
+Actions. One categorical head per controlled field of the control level (``control``):
+``move`` only at ``move``, ``move`` and ``mode`` at ``move+mode``, every field at ``full``.
+
+Networks (``arch``):
+
+- ``mlp``: a tanh MLP from the flat features to the logits of every head.
+- ``shared``: one tanh MLP trunk feeding both the policy's logits and the value (the critic
+  shares the actor's layers: one pass instead of two, in the rollout and the update).
+- ``lattice``: one small encoder shared by the 12 neighbour directions. Direction ``k``'s
+  token is what the module sees there (the site's kind, mode and scent blocks, the message
+  received from it, whether the move towards it is legal) and the direction's unit vector;
+  the tokens' embeddings are mean- and max-pooled and joined with the module's own features
+  (mode, scent, contact, load, hint) into a context; the logit of "move towards ``k``" is a
+  shared head on (token ``k``, context), the other heads read the context.
+
+The critic (at ``mlp`` and ``lattice``) is a separate tanh MLP on the same local features: one
+parameter-shared value per module estimating the team's return (every module receives the
+team reward).
+
+Episode ends. A world's episode ends at success or at ``max_cycles``; all worlds of a
+``BatchedEnv`` step together and ``reset`` rebuilds all of them, so a world that succeeds
+waits (stepped, its samples masked out of the update) until every world of its group has
+ended, and the group is then reset. Smaller groups waste fewer samples and cost more Python
+per cycle (``n_groups``; measured in docs/learning.md). At ``max_cycles`` the value of the
+last observation is bootstrapped (the observation holds no clock); success is terminal.
+
+Writes ``runs/<name>/`` (see :mod:`training.common`): ``progress.csv``, TensorBoard logs,
+checkpoints every ``checkpoint_every`` agent-steps and ``final/`` (``policy.pt``: the network's
+weights; ``trainer.pt``: optimiser and random state, ``args.yaml``: the arguments, for
+``--resume``); ``proteo eval
+--checkpoint runs/<name>`` evaluates the result at the control level it was trained at.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+import proteo_env
+from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.config import ConfigError
+from proteo_env.spaces import N_MOVES, ObservationBuffers
+from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
+                             seed_everything, write_checkpoint_meta)
+
+ALGORITHM = "ppo"
+ARCHS = ("mlp", "lattice", "shared")
+
+
+@dataclass(frozen=True)
+class Args:
+    """Native PPO with parameter sharing over all modules (arguments of training/ppo.py)."""
+
+    task: str = "chain-v0"
+    control: str = "move"
+    """Control level: move, move+mode or full (the fields the policy chooses)."""
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
+    seed: int = 0
+    total_steps: int = 10_000_000
+    """Agent-steps (module-cycles used for learning) to train for."""
+    n_envs: int = 64
+    """Worlds stepped together; samples per cycle = n_envs * modules."""
+    n_groups: int = 64
+    """BatchedEnvs the worlds are split into; a group resets when all its worlds have ended."""
+    n_steps: int = 32
+    """Cycles per world in one rollout."""
+    minibatch_size: int = 8192
+    n_epochs: int = 2
+    learning_rate: float = 1e-3
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    """Gradient norm limit, applied to the actor and to the critic separately (to all weights at arch=shared)."""
+    arch: str = "mlp"
+    """Actor network: mlp or lattice (see the module docstring)."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden sizes of the MLPs (actor at arch=mlp, critic always; lattice: embedding, head)."""
+    checkpoint_every: int = 1_000_000
+    run_dir: str | None = None
+    resume: str | None = None
+    """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
+    time_limit_minutes: float = 0.0
+    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
+    threads: int = 1
+    """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
+    tensorboard: bool = True
+    progress_bar: bool = True
+
+
+# ---------------------------------------------------------------------- networks
+def hidden_layers(in_dim: int, hidden: tuple[int, ...]) -> list[nn.Module]:
+    """Tanh layers of sizes ``hidden`` from ``in_dim`` inputs, orthogonally initialised."""
+    layers, last = [], in_dim
+    for h in hidden:
+        layers += [_orthogonal(nn.Linear(last, h), np.sqrt(2)), nn.Tanh()]
+        last = h
+    return layers
+
+
+def mlp(in_dim: int, out_dim: int, hidden: tuple[int, ...], *, out_gain: float) -> nn.Sequential:
+    """A tanh MLP with orthogonal initialisation; ``out_gain`` scales the last layer."""
+    last = hidden[-1] if hidden else in_dim
+    return nn.Sequential(*hidden_layers(in_dim, hidden), _orthogonal(nn.Linear(last, out_dim), out_gain))
+
+
+def _orthogonal(layer: nn.Linear, gain: float) -> nn.Linear:
+    nn.init.orthogonal_(layer.weight, gain=gain)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+class LatticeActor(nn.Module):
+    """Logits ``(N, sum(nvec))`` from flat features ``(N, D)`` through one encoder shared by the 12 directions.
+
+    Args:
+        encoder: the observation encoding (its named blocks are cut out of the features).
+        nvec: values of each controlled field (``nvec[0] = 13``, the move).
+        hidden: ``(embedding, head)`` sizes.
+    """
+
+    SITE_BLOCKS = ("neighbour_kind", "neighbour_mode", "neighbour_scent_present", "neighbour_scent_value",
+                   "neighbour_scent_delta", "messages")
+    OWN_BLOCKS = ("own_mode", "own_scent_present", "own_scent_value", "contact", "load", "hint")
+
+    def __init__(self, encoder: ObservationEncoder, nvec, hidden: tuple[int, ...] = (32, 64)):
+        super().__init__()
+        if encoder.n_sites != 12:
+            raise ConfigError(f"arch='lattice' needs the 12 face neighbours (obs_radius=1); the observation has "
+                              f"{encoder.n_sites} sites; allowed: obs_radius=1, or arch='mlp'")
+        embed, head = (tuple(hidden) + (32, 64))[:2]
+        self.nvec = [int(n) for n in nvec]
+        slices = encoder.slices
+        mask = slices["action_mask"]
+        # token k: every site block's columns of site k (blocks are site-major), then "move k+1 is legal"
+        columns = []
+        for k in range(12):
+            for name in self.SITE_BLOCKS:
+                s = slices[name]
+                width = (s.stop - s.start) // 12
+                columns += range(s.start + k * width, s.start + (k + 1) * width)
+            columns.append(mask.start + 1 + k)
+        self.register_buffer("token_columns", torch.tensor(columns))
+        own = [c for name in self.OWN_BLOCKS for c in range(slices[name].start, slices[name].stop)] + [mask.start]
+        self.register_buffer("own_columns", torch.tensor(own))
+        self.token_dim = len(columns) // 12
+        self.embed = _orthogonal(nn.Linear(self.token_dim, embed), np.sqrt(2))
+        self.direction = nn.Parameter(torch.zeros(12, embed))
+        """A learned embedding of each direction, added to its token's."""
+        self.context = _orthogonal(nn.Linear(2 * embed + len(own), head), np.sqrt(2))
+        self.move_token = _orthogonal(nn.Linear(embed, head), np.sqrt(2))
+        self.move_context = _orthogonal(nn.Linear(head, head), np.sqrt(2))
+        self.move_out = _orthogonal(nn.Linear(head, 1), 0.01)
+        self.stay_head = _orthogonal(nn.Linear(head, 1), 0.01)
+        self.other_heads = _orthogonal(nn.Linear(head, sum(self.nvec[1:])), 0.01) if len(self.nvec) > 1 else None
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        n = x.shape[0]
+        tokens = x.index_select(1, self.token_columns).reshape(n, 12, self.token_dim)
+        emb = torch.tanh(self.embed(tokens) + self.direction)  # (n, 12, embed)
+        pooled = torch.cat([emb.mean(dim=1), emb.amax(dim=1), x.index_select(1, self.own_columns)], dim=1)
+        ctx = torch.tanh(self.context(pooled))  # (n, head)
+        moves = self.move_out(torch.tanh(self.move_token(emb) + self.move_context(ctx)[:, None, :]))[..., 0]
+        parts = [self.stay_head(ctx), moves]
+        if self.other_heads is not None:
+            parts.append(self.other_heads(ctx))
+        return torch.cat(parts, dim=1)
+
+
+class ActorCritic(nn.Module):
+    """The shared policy: ``logits(x) (N, sum(nvec))`` and ``value(x) (N,)`` from flat features
+    ``x (N, D)``; ``net(x)`` gives both (one pass through the trunk at ``arch="shared"``)."""
+
+    def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64)):
+        super().__init__()
+        if arch not in ARCHS:
+            raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        self.nvec = [int(n) for n in nvec]
+        hidden = tuple(hidden)
+        if arch == "shared":
+            self.trunk = nn.Sequential(*hidden_layers(encoder.size, hidden))
+            self.actor = _orthogonal(nn.Linear(hidden[-1], sum(self.nvec)), 0.01)
+            self.critic = _orthogonal(nn.Linear(hidden[-1], 1), 1.0)
+        else:
+            self.trunk = nn.Identity()
+            self.actor = (mlp(encoder.size, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
+                          else LatticeActor(encoder, self.nvec, hidden))
+            self.critic = mlp(encoder.size, 1, hidden, out_gain=1.0)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = self.trunk(x)
+        return self.actor(h), self.critic(h)[:, 0]
+
+    def logits(self, x: torch.Tensor) -> torch.Tensor:
+        return self.actor(self.trunk(x))
+
+    def value(self, x: torch.Tensor) -> torch.Tensor:
+        return self.critic(self.trunk(x))[:, 0]
+
+
+def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[int]) -> list[torch.Tensor]:
+    """Per field, log-probabilities ``(N, nvec[k])``; illegal moves (``move_mask`` False) get ~zero probability."""
+    out, start = [], 0
+    for k, n in enumerate(nvec):
+        part = logits[:, start:start + n]
+        if k == 0:
+            part = part.masked_fill(~move_mask, -1e8)
+        out.append(torch.log_softmax(part, dim=1))
+        start += n
+    return out
+
+
+def sample(log_probs: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Actions ``(N, F)`` (Gumbel-max, torch's generator) and their joint log-probability ``(N,)``."""
+    actions = torch.stack([(lp - torch.log(-torch.log(torch.rand_like(lp)))).argmax(dim=1) for lp in log_probs], 1)
+    return actions, joint_log_prob(log_probs, actions)
+
+
+def joint_log_prob(log_probs: list[torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
+    return sum(lp.gather(1, actions[:, k:k + 1])[:, 0] for k, lp in enumerate(log_probs))
+
+
+def entropy(log_probs: list[torch.Tensor]) -> torch.Tensor:
+    """Sum over fields of each field's entropy ``(N,)``."""
+    return sum(-(lp.exp() * lp).sum(dim=1) for lp in log_probs)
+
+
+# ---------------------------------------------------------------------- environment side
+class Worlds:
+    """``n_envs`` worlds as ``n_groups`` BatchedEnvs, with their episode bookkeeping.
+
+    Rows are world-major across groups: sample ``w * A + i`` is module ``i`` of world ``w``,
+    world ``w`` is world ``w % b`` of group ``w // b`` (``b = n_envs // n_groups``).
+    """
+
+    def __init__(self, args: Args, env_seed: int):
+        if args.n_groups < 1 or args.n_envs % args.n_groups:
+            raise ConfigError(f"n_groups={args.n_groups!r} is not allowed with n_envs={args.n_envs}; allowed: a "
+                              "divisor of n_envs")
+        overrides = dict(args.env)
+        self.b = args.n_envs // args.n_groups
+        self.groups = [proteo_env.make_batched(args.task, self.b, control=args.control, **overrides)
+                       for _ in range(args.n_groups)]
+        first = self.groups[0]
+        self.task_id = first.task.task_id()
+        self.max_cycles = first.config.max_cycles
+        self.n_envs, self.n_agents = args.n_envs, first.n_agents
+        self.nvec = first.control_nvec
+        self.encoder = ObservationEncoder(n_sites=first.n_sites, n_channels=first.task.n_channels,
+                                          n_modes=len(first.task.modes), n_message_values=first.task.n_message_values,
+                                          scent_max=first.config.physics.scent_max)
+        self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
+        self.ended = np.zeros(self.n_envs, dtype=bool)
+        self.episode_return = np.zeros(self.n_envs)
+        self.env_seconds = 0.0
+        self.encode_seconds = 0.0
+
+    def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
+        """Write every module's features ``(N, D)`` and legal moves ``(N, 13)`` into the given arrays
+        (one encoding call over the observation fields of all groups)."""
+        started = time.perf_counter()
+        fields = {name: np.concatenate([getattr(b, name) for b in self.buffers]) for name in ObservationBuffers.FIELDS}
+        features[:] = self.encoder.encode_fields(fields)
+        move_mask[:] = fields["action_mask"]
+        self.encode_seconds += time.perf_counter() - started
+
+    def step(self, actions: np.ndarray, finished: list[dict]):
+        """One cycle of every world from ``(n_envs, A, F)`` actions.
+
+        Returns ``(reward, valid, terminal, truncated)`` per world (``(n_envs,)`` each): ``valid``
+        marks worlds whose episode was still running (their samples count); a world's
+        ``truncated`` is set at ``max_cycles``. Ended episodes are appended to ``finished``;
+        groups whose worlds have all ended are reset.
+        """
+        started = time.perf_counter()
+        valid = ~self.ended
+        reward = np.zeros(self.n_envs)
+        terminal = np.zeros(self.n_envs, dtype=bool)
+        truncated = np.zeros(self.n_envs, dtype=bool)
+        for k, group in enumerate(self.groups):
+            worlds = slice(k * self.b, (k + 1) * self.b)
+            terms = group.step_arrays(actions[worlds])
+            reward[worlds] = [sum(t.values()) for t in terms]
+            terminal[worlds] = group.success()
+            truncated[worlds] = group.cycle >= self.max_cycles
+        terminal &= valid
+        truncated &= valid & ~terminal
+        self.episode_return += np.where(valid, reward, 0.0)
+        cycles = np.repeat([g.cycle for g in self.groups], self.b)
+        for w in np.flatnonzero(terminal | truncated):
+            finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
+        self.ended |= terminal | truncated
+        self.final_buffers = {}
+        for k, group in enumerate(self.groups):
+            worlds = slice(k * self.b, (k + 1) * self.b)
+            observed = group.observe_arrays()
+            if self.ended[worlds].all():
+                if truncated[worlds].any():
+                    self.final_buffers[k] = observed  # the value at max_cycles is bootstrapped from it
+                observed = group.reset()
+                self.ended[worlds] = False
+                self.episode_return[worlds] = 0.0
+            self.buffers[k] = observed
+        self.env_seconds += time.perf_counter() - started
+        return reward, valid, terminal, truncated
+
+
+# ---------------------------------------------------------------------- training
+def gae(rewards, values, next_values, valid, terminal, done, gamma: float, lam: float) -> torch.Tensor:
+    """Advantages ``(T, N)`` by GAE over cycles, per module.
+
+    All arguments ``(T, N)``: ``values`` at each step, ``next_values`` of the observation after
+    it (the bootstrap at ``max_cycles``; ignored where ``terminal``), ``valid`` the samples of
+    running episodes, ``done`` where an episode ended (success or ``max_cycles``): the
+    recursion does not carry across it, nor through invalid samples.
+    """
+    advantages = torch.zeros_like(values)
+    carry = torch.zeros_like(values[0])
+    for t in reversed(range(values.shape[0])):
+        delta = rewards[t] + gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
+        carry = torch.where(valid[t], delta + gamma * lam * (1.0 - done[t]) * carry, 0.0)
+        advantages[t] = carry
+    return advantages
+
+
+def main(argv=None) -> Path:
+    """Parse the arguments and train. ``--resume CHECKPOINT`` without ``--config`` starts from the
+    arguments the checkpoint was trained with (its ``args.yaml``); flags given override them."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    given = argparse.ArgumentParser(add_help=False)
+    given.add_argument("--resume")
+    given.add_argument("--config")
+    known, _ = given.parse_known_args(argv)
+    if known.resume and not known.config:
+        from training.checkpoints import checkpoint_dir
+
+        argv = ["--config", str(checkpoint_dir(known.resume) / "args.yaml"), *argv]
+    return train(parse_args(Args, argv))
+
+
+def train(args: Args) -> Path:
+    """Train; returns the final checkpoint's folder."""
+    from training.checkpoints import CheckpointError, read_meta
+
+    seed_everything(args.seed, threads=args.threads)
+    if args.arch not in ARCHS:
+        raise ConfigError(f"arch={args.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+    resume_meta = read_meta(args.resume) if args.resume else None
+    if resume_meta is not None and resume_meta["algorithm"] != ALGORITHM:
+        raise CheckpointError(f"resume={args.resume!r} is a {resume_meta['algorithm']!r} checkpoint; "
+                              f"allowed: a checkpoint of training/ppo.py")
+    agent_steps = int(resume_meta["agent_steps"]) if resume_meta else 0
+    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
+                           f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
+                           resume=resume_meta is not None)
+    save_args(args, run_dir)
+    worlds = Worlds(args, env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
+    enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
+    net = ActorCritic(enc, nvec, args.arch, args.hidden)
+    optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
+    if resume_meta is not None:
+        folder = Path(resume_meta["dir"])
+        net.load_state_dict(torch.load(folder / "policy.pt", weights_only=True))
+        state = torch.load(folder / "trainer.pt", weights_only=False)
+        optimiser.load_state_dict(state["optimiser"])
+        torch.set_rng_state(state["torch_rng"])
+
+    t_steps, n = args.n_steps, args.n_envs * a
+    features = np.zeros((t_steps, n, enc.size), dtype=np.float32)
+    move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
+    obs_t, mask_t = torch.from_numpy(features), torch.from_numpy(move_mask)
+    actions_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
+    logp_t, values_t, bootstrap_t = (torch.zeros((t_steps, n)) for _ in range(3))
+    rewards_w, valid_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d)
+                                                   for d in (np.float32, bool, bool, bool))
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+
+    def save(folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        torch.save(net.state_dict(), folder / "policy.pt")
+        torch.save({"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state()}, folder / "trainer.pt")
+        save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
+        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
+                              encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
+                              extra={"label": f"ppo-{args.arch}", "control": args.control, "arch": args.arch,
+                                     "hidden": list(args.hidden), "run_dir": str(run_dir), "args": asdict(args)})
+
+    bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM,
+               disable=not args.progress_bar)
+    next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
+    finished: list[dict] = []
+    while agent_steps < args.total_steps:
+        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+            break
+        started = time.perf_counter()
+        env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
+        # ---- rollout: t_steps cycles of every world
+        with torch.no_grad():
+            for t in range(t_steps):
+                worlds.encode(features[t], move_mask[t])
+                logits, values = net(obs_t[t])
+                actions, logp = sample(masked_log_probs(logits, mask_t[t], nvec))
+                actions_t[t], logp_t[t], values_t[t] = actions, logp, values
+                reward, valid, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1),
+                                                                 finished)
+                rewards_w[t], valid_w[t], terminal_w[t] = reward, valid, terminal
+                truncated_w[t] = truncated
+                for k, buffers in worlds.final_buffers.items():  # the value at max_cycles, bootstrapped
+                    rows = slice(k * worlds.b * a, (k + 1) * worlds.b * a)
+                    bootstrap_t[t, rows] = net.value(torch.from_numpy(enc.encode_buffers(buffers)))
+            last = np.zeros((n, enc.size), dtype=np.float32)
+            worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
+            last_value = net.value(torch.from_numpy(last))
+        collected = time.perf_counter()
+        valid, terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
+                                               for w in (valid_w, terminal_w, truncated_w, rewards_w))
+        next_values = torch.where(truncated, bootstrap_t, torch.cat([values_t[1:], last_value[None]]))
+        advantages = gae(rewards, values_t, next_values, valid, terminal.float(), (terminal | truncated).float(),
+                         args.gamma, args.gae_lambda)
+        returns = advantages + values_t
+        # ---- update on the valid samples
+        index = torch.nonzero(valid.reshape(-1))[:, 0]
+        flat = (obs_t.reshape(-1, enc.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
+                logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1))
+        stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": []}
+        for _ in range(args.n_epochs):
+            order = index[torch.randperm(len(index))]
+            for start in range(0, len(order), args.minibatch_size):
+                mb = order[start:start + args.minibatch_size]
+                x, m, act, old_logp, adv, ret = (v[mb] for v in flat)
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                logits, values = net(x)
+                log_probs = masked_log_probs(logits, m, nvec)
+                ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
+                policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
+                value_loss = 0.5 * (values - ret).pow(2).mean()
+                ent = entropy(log_probs).mean()
+                loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                if args.arch == "shared":
+                    nn.utils.clip_grad_norm_(net.parameters(), args.max_grad_norm)
+                else:
+                    nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
+                    nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
+                optimiser.step()
+                with torch.no_grad():
+                    stats["loss/policy"].append(policy_loss.item())
+                    stats["loss/value"].append(value_loss.item())
+                    stats["loss/entropy"].append(ent.item())
+                    stats["loss/approx_kl"].append(((ratio - 1) - torch.log(ratio)).mean().item())
+                    stats["loss/clip_fraction"].append(((ratio - 1).abs() > args.clip_range).float().mean().item())
+        updated = time.perf_counter()
+        used = len(index)
+        agent_steps += used
+        bar.update(used)
+        env_time, enc_time = worlds.env_seconds - env_s, worlds.encode_seconds - enc_s
+        seconds = updated - started
+        v, r = values_t.reshape(-1)[index], returns.reshape(-1)[index]
+        log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items()},
+                              "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
+                              "time/env_seconds": env_time, "time/encode_seconds": enc_time,
+                              "time/forward_seconds": collected - started - env_time - enc_time,
+                              "time/update_seconds": updated - collected,
+                              "throughput/agent_steps_per_s": used / seconds,
+                              "throughput/valid_share": used / (t_steps * n)})
+        finished = []
+        if agent_steps >= next_checkpoint:
+            save(checkpoint_folder(run_dir, agent_steps))
+            next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
+    bar.close()
+    save(run_dir / "final")
+    log.close()
+    print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
+    return run_dir / "final"
+
+
+if __name__ == "__main__":
+    main()
