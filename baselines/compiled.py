@@ -212,7 +212,7 @@ def _placeholder_ledger() -> TableLedger:
                        active=np.zeros(0, dtype=np.bool_), grounded=np.zeros(0, dtype=np.bool_),
                        signature=np.zeros((2, 0), dtype=np.bool_), clock=np.zeros(5, dtype=np.int64),
                        weights=np.zeros(2), restabilise=np.zeros(1), scratch=np.zeros((3, 0), dtype=np.int64),
-                       stamp=np.zeros(1, dtype=np.int64))
+                       stamp=np.zeros(1, dtype=np.int64), f_max=0.0, carry=False)
 
 
 def _placeholder_surface() -> GraspSurface:

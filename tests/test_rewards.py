@@ -77,3 +77,50 @@ def test_table_v1_does_not_count_doing_nothing_as_success():
         result = run_episode(env, make_policy("table", env, seed=0, p_max=0.0, p_min=0.0), seed=0)
         assert result.success is expected, task_id
         assert result.total_reward == 0.0
+
+
+class _IdleThenRules:
+    """The table rules with ``p_max = p_min = 0`` (no leg) for ``idle`` cycles, then the rules."""
+
+    def __init__(self, env, idle: int):
+        self.idle = make_policy("table", env, seed=0, p_max=0.0, p_min=0.0)
+        self.rules = make_policy("table", env, seed=0)
+        self.idle_cycles = idle
+
+    def reset(self, seed):
+        self.idle.reset(seed)
+        self.rules.reset(seed)
+        self.cycle = 0
+
+    def act(self, observations):
+        self.cycle += 1
+        return (self.idle if self.cycle <= self.idle_cycles else self.rules).act(observations)
+
+
+def test_table_v1_success_is_a_stable_configuration_whose_legs_carry_the_weight():
+    # Idle past the last shift plus stable_window: the empty signature has been stable that long
+    # (table-v0 would end here). Legs grown afterwards must settle again before success.
+    idle = TABLE["schedule"][-1][0] + TABLE["stable_window"] + 10
+    env = proteo_env.make("table-v1", **TABLE)
+    result = run_episode(env, _IdleThenRules(env, idle), seed=1)
+    assert result.success
+    assert result.metrics["stable"] == 1.0  # not merely the first cycle every region had a leg
+    assert result.cycles >= idle + TABLE["stable_window"]
+    book = env.task.ledger
+    legs = np.array([(book.grounded & book.left).sum(), (book.grounded & ~book.left).sum()])
+    roots = np.array([book.left.sum(), (~book.left).sum()])
+    f_max = env.task.params.f_max
+    assert (np.minimum(book.weights, f_max * legs) == np.minimum(book.weights, f_max * roots)).all()
+
+
+def test_table_v1_compiled_rollout_ends_where_the_env_does():
+    from baselines.compiled import CompiledRollout
+
+    env = proteo_env.make("table-v1", **TABLE)
+    policy = make_policy("table", env, seed=2)
+    env.reset(seed=2)
+    policy.reset(2)
+    compiled = CompiledRollout(env, policy).run(TABLE["max_cycles"])
+    stepped = run_episode(env, make_policy("table", env, seed=2), seed=2)
+    assert stepped.success
+    assert (compiled.success, compiled.cycles) == (stepped.success, stepped.cycles)
