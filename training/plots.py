@@ -49,8 +49,9 @@ def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | N
     for label, run in runs.items():
         data = read_progress(run)
         for ax, (x, y, _) in zip(axes, panels):
-            xs = data[x] / (60.0 if x == "seconds" else 1.0)
-            ax.plot(xs, _smooth(data[y], window), label=label)
+            xs, ys = data[x] / (60.0 if x == "seconds" else 1.0), _smooth(data[y], window)
+            shown = np.isfinite(ys)  # log rows in which no episode ended carry no episode measures
+            ax.plot(xs[shown], ys[shown], label=label)
     for ax, (x, y, panel_title) in zip(axes, panels):
         if reference and y in reference:
             ax.axhline(reference[y], color="k", ls="--", lw=1, label="hand-coded")
