@@ -1,0 +1,22 @@
+"""training/study.py: several training seeds run, their checkpoints and progress are kept where
+configs/eval_study.yaml and the docs read them (a tiny budget)."""
+
+from __future__ import annotations
+
+import json
+
+from training import study
+from training.checkpoints import read_meta
+
+
+def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path):
+    keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
+    study.main(["--tasks", "[chain]", "--seeds", "[0, 1]", "--minutes", "0.02", "--parallel", "2",
+                "--runs-dir", str(tmp_path / "runs"), "--keep-dir", str(keep), "--docs-dir", str(docs)])
+    summary = json.loads((docs / "study_move.json").read_text())
+    assert [(r["task"], r["seed"]) for r in summary] == [("chain", 0), ("chain", 1)]
+    for seed in (0, 1):
+        meta = read_meta(keep / "chain" / "ppo_move" / f"seed_{seed}")
+        assert meta["seed"] == seed and meta["control"] == "move" and meta["agent_steps"] > 0
+        assert (docs / "progress" / f"ppo_chain_move_s{seed}.csv").is_file()
+    assert (docs / "curves_ppo_chain_move.png").stat().st_size > 0
