@@ -181,7 +181,7 @@ def test_plot_groups_and_weight_shifts(recording, monkeypatch, tmp_path):
 
 # ---------------------------------------------------------------------- command line
 def test_run_record_render_and_replay(tmp_path, capsys):
-    from proteo_env.cli import main
+    from training.cli import main
 
     ep, movie, plots = tmp_path / "ep.npz", tmp_path / "movie.gif", tmp_path / "plots"
     assert main(["run", "chain-v0", "--set", "n_modules=8", "--set", "max_cycles=12", "--policy", "chain",

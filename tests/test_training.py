@@ -201,7 +201,7 @@ def test_eval_covers_every_task_with_a_reward():
 
 
 def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
-    from proteo_env.cli import main
+    from training.cli import main
     from training.checkpoints import CheckpointError, load_policy
 
     env = proteo_env.make("chain-v0", **TINY)

@@ -15,7 +15,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from proteo_env.cli import main
+from training.cli import main
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.layouts import blob_sites, place_in_box
 from proteo_env.recording import Recording, load

@@ -428,7 +428,7 @@ def publish(table: str, out, files) -> None:
 
 
 def main(args) -> int:
-    """Entry point of ``proteo eval`` (arguments parsed in :mod:`proteo_env.cli`)."""
+    """Entry point of ``proteo eval`` (arguments parsed in :mod:`training.cli`)."""
     config = args.config
     if config is None and Path(DEFAULT_CONFIG).is_file():
         config = DEFAULT_CONFIG

@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from .camera import Camera, side_azimuth
+from proteo_env.render.camera import Camera, side_azimuth
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,7 +83,7 @@ def _last_still(what: str):
 
 
 def _table_stills(rec) -> list[Still]:
-    from .plots import weight_shifts
+    from proteo_env.render.plots import weight_shifts
 
     shifts = weight_shifts(rec)
     if shifts:
@@ -141,9 +141,9 @@ def record_figure(figure: PaperFigure, seed: int):
 
     from baselines import make_policy
 
-    from ..recording import Recorder
-    from ..registry import make, task_class
-    from ..rollout import run_episode
+    from proteo_env.recording import Recorder
+    from proteo_env.registry import make, task_class
+    from proteo_env.rollout import run_episode
 
     cls = task_class(figure.task)
     overrides = {**figure.overrides, **_paper_params(figure, cls)}
@@ -160,7 +160,7 @@ def draw_figure(figure: PaperFigure, recording, out: Path) -> Path:
     """Write ``<name>.png``: the figure's stills side by side."""
     from PIL import Image
 
-    from .renderer import Renderer
+    from proteo_env.render.renderer import Renderer
 
     panels = []
     for still in figure.stills(recording):
@@ -180,10 +180,10 @@ def make_figures(out: Path, *, seed: int = 0, only=None, redraw: bool = False) -
 
     ``redraw``: draw from ``out/<name>.npz`` where it exists instead of running the episode.
     """
-    from ..recording import load
-    from ..registry import TASKS
-    from .plots import plot_overview
-    from .replay import render_movie
+    from proteo_env.recording import load
+    from proteo_env.registry import TASKS
+    from proteo_env.render.plots import plot_overview
+    from proteo_env.render.replay import render_movie
 
     names = [f.name for f in FIGURES]
     unknown = [n for n in only or [] if n not in names]

@@ -30,9 +30,9 @@ def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out:
          fps: float = 20.0, max_frames: int | None = 300, view: Path | None = None):
     from baselines import make_policy
 
-    from . import make
-    from .recording import Recorder
-    from .rollout import run_episode
+    from proteo_env import make
+    from proteo_env.recording import Recorder
+    from proteo_env.rollout import run_episode
 
     from tqdm import tqdm
 
@@ -61,11 +61,11 @@ def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=
     if record is not None:
         recording.save(record)
     if view is not None:
-        from .render.webview import write_html
+        from proteo_env.render.webview import write_html
 
         write_html(recording, view)
     if out is not None:
-        from .render.replay import render_still
+        from proteo_env.render.replay import render_still
 
         name = recording.task_id.rsplit("-v", 1)[0]
         render_still(recording, out / f"{name}_start.png", frame=0, camera=camera,
@@ -76,18 +76,18 @@ def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=
     if movie is not None:
         from tqdm import tqdm
 
-        from .render.replay import frame_indices, render_movie
+        from proteo_env.render.replay import frame_indices, render_movie
 
         total = len(frame_indices(recording.n_frames, max_frames))
         with tqdm(total=total, desc=f"rendering {movie.name}", unit="frame", leave=False) as bar:
             render_movie(recording, movie, camera=camera, fps=fps, max_frames=max_frames,
                          progress=lambda: bar.update(1))
     if still is not None:
-        from .render.replay import render_still
+        from proteo_env.render.replay import render_still
 
         render_still(recording, still, frame=still_frame, camera=camera)
     if plots is not None:
-        from .render.plots import plot_recording
+        from proteo_env.render.plots import plot_recording
 
         plot_recording(recording, plots)
 
@@ -103,7 +103,7 @@ def _table(rows: list[dict]) -> str:
 
 
 def demo(args) -> int:
-    from .registry import newest_tasks
+    from proteo_env.registry import newest_tasks
 
     out = Path(args.out)
     rows = []
@@ -133,8 +133,8 @@ def _parse_sets(items) -> dict:
 
 def _resolve_target(target: str, sets) -> tuple[str, dict]:
     """A task id or a YAML config path to ``(task_id, overrides)``, with ``--set`` overrides applied."""
-    from .config import ConfigError, load_run_config
-    from .registry import task_class
+    from proteo_env.config import ConfigError, load_run_config
+    from proteo_env.registry import task_class
 
     path = Path(target)
     if path.suffix in (".yaml", ".yml") or path.is_file():
@@ -164,7 +164,7 @@ def _camera(args) -> dict | None:
             raise ValueError(f"--size {args.size!r} is not allowed; allowed: WIDTHxHEIGHT in pixels, e.g. 800x600")
         camera.update(width=int(width), height=int(height))
     if camera:
-        from .render.camera import Camera
+        from proteo_env.render.camera import Camera
 
         Camera.from_options(camera)  # bad settings fail now, before the episode runs
     return camera or None
@@ -176,7 +176,7 @@ def _check_paths(record=None, movie=None, view=None) -> None:
     if view is not None and Path(view).suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"--view {str(view)!r} is not allowed; allowed: a file name ending in .html")
     if movie is not None:
-        from .render.movie import check_movie_path
+        from proteo_env.render.movie import check_movie_path
 
         check_movie_path(movie)
 
@@ -204,8 +204,8 @@ def run(args) -> int:
 
 # ---------------------------------------------------------------------- replay
 def replay(args) -> int:
-    from . import __version__
-    from .recording import load
+    from proteo_env import __version__
+    from proteo_env.recording import load
 
     if args.out is None and args.plots is None:
         raise ValueError("replay needs --out (a .gif/.mp4 movie or a .png still) or --plots DIR; "
@@ -240,8 +240,8 @@ def replay(args) -> int:
 
 
 def view(args) -> int:
-    from .recording import load
-    from .render.webview import write_html
+    from proteo_env.recording import load
+    from proteo_env.render.webview import write_html
 
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".html")
     _check_paths(view=out)
@@ -250,7 +250,7 @@ def view(args) -> int:
     print(f"viewer page: {out} ({out.stat().st_size / 1e6:.1f} MB; {recording.positions.shape[1]} modules, "
           f"{recording.n_frames} frames): open it in a browser, no network needed")
     if args.screenshot:
-        from .render.browser import Chromium
+        from proteo_env.render.browser import Chromium
 
         width, sep, height = args.size.lower().partition("x")
         if not (sep and width.isdigit() and height.isdigit()):
@@ -268,8 +268,14 @@ def view(args) -> int:
     return 0
 
 
+def evaluate(args) -> int:
+    from training.evaluate import main as evaluate_main
+
+    return evaluate_main(args)
+
+
 def figures(args) -> int:
-    from .render.figures import make_figures
+    from baselines.figures import make_figures
 
     make_figures(Path(args.out), seed=args.seed, only=args.only, redraw=args.redraw)
     return 0
@@ -351,7 +357,7 @@ def main(argv=None) -> int:
                    "and '<!-- end of proteo eval table -->' markers (repeatable)")
     p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
                    "OUT/pictures/ (what it builds)")
-    p.set_defaults(func=lambda a: __import__("training.evaluate", fromlist=["main"]).main(a))
+    p.set_defaults(func=evaluate)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
