@@ -25,10 +25,11 @@ bench: install
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/learning.md --publish README.md
 
-# The multi-seed study of training/ppo.py at control level move (about 30 minutes on 2 cores),
+# The multi-seed study of training/ppo.py at control level move (16 M agent-steps per run, about
+# 30 minutes on 2 cores),
 # then its evaluation: the table with the spread over training seeds goes into docs/eval/study,
 # docs/learning.md and README.md.
 learning-results: install
-	$(BIN)/python -m training.study --minutes 5 --parallel 2
+	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
 		--publish docs/learning.md --publish README.md

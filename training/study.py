@@ -2,9 +2,11 @@
 
     python -m training.study                                  # every task at move, seeds 0 1 2
     python -m training.study --tasks "[chain]" --seeds "[0, 1, 2, 3, 4]" --minutes 8 --parallel 2
+    python -m training.study --total-steps 16000000 --minutes 0      # the published study
 
-For each task and seed it trains ``configs/train/ppo_<task>_<level>.yaml`` with ``--seed S`` and
-the time limit ``minutes`` (``parallel`` runs at a time, one thread each), then keeps:
+For each task and seed it trains ``configs/train/ppo_<task>_<level>.yaml`` with ``--seed S`` for
+``total_steps`` agent-steps or the time limit ``minutes`` (``parallel`` runs at a time, one
+thread each), then keeps:
 
 - the final checkpoint in ``checkpoints/<task>/ppo_<level>/seed_<S>/`` (what
   ``configs/eval_study.yaml`` names, one ``{label, runs}`` group per task);
@@ -38,8 +40,10 @@ class Args:
     level: str = "move"
     """Control level; the config of each run is configs/train/ppo_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
+    total_steps: int = 0
+    """Agent-steps of each run (0: the config's total_steps)."""
     minutes: float = 6.0
-    """Wall-clock limit of each run (the config's total_steps still applies)."""
+    """Wall-clock limit of each run (0: none; then every run trains for its steps, whatever the machine's load)."""
     parallel: int = 2
     """Runs at a time (each uses one thread)."""
     runs_dir: str = "runs/study"
@@ -66,7 +70,7 @@ def main(argv=None) -> int:
             run_dir = Path(args.runs_dir) / f"ppo_{task}_{level}_s{seed}"
             cmd = [sys.executable, "-m", "training.ppo", "--config", str(config), "--seed", str(seed),
                    "--run-dir", str(run_dir), "--time-limit-minutes", str(args.minutes),
-                   "--progress-bar", "false"]
+                   "--progress-bar", "false"] + (["--total-steps", str(args.total_steps)] if args.total_steps else [])
             print(f"started {task} seed {seed}: {' '.join(cmd)}", flush=True)
             running.append((task, seed, run_dir, time.perf_counter(), subprocess.Popen(cmd)))
         time.sleep(1.0)
