@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from proteo_env.spaces import ActionLayout
@@ -64,6 +66,21 @@ def check_level(policy_cls, env) -> None:
                          f"{'/'.join(policy_cls.levels)}, not at the env's control={level!r}; allowed: an env made "
                          f"with control={policy_cls.levels[0]!r}, or a policy of that level (random, a checkpoint "
                          f"trained at {level!r})")
+
+
+def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
+    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree."""
+    out: dict[str, inspect.Parameter] = {}
+    for cls in policy_cls.__mro__:
+        if "__init__" not in vars(cls):
+            continue
+        signature = inspect.signature(cls.__init__).parameters
+        for name, p in signature.items():
+            if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD:
+                out.setdefault(name, p)
+        if not any(p.kind is p.VAR_KEYWORD for p in signature.values()):
+            break
+    return out
 
 
 FIELD_DTYPES = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8, "neighbour_mode": np.int32,
