@@ -176,6 +176,8 @@ class KernelPolicy(Policy):
         self._slots: dict = {}
         """Memory slot of each agent name seen by :meth:`act`."""
         self._keyed_by: str | None = None
+        self._row_slots = np.zeros(0, dtype=np.int64)
+        """The slots of rows ``0 .. A-1`` (kept between calls of :meth:`act_arrays`)."""
 
     def reset(self, seed=None):
         super().reset(seed)
@@ -217,10 +219,13 @@ class KernelPolicy(Policy):
                                "and by row in act_arrays())")
         self._keyed_by = keyed_by
         if keyed_by == "row":
-            slots = np.arange(len(keys), dtype=np.int64)
+            if len(self._row_slots) != len(keys):
+                self._row_slots = np.arange(len(keys), dtype=np.int64)
+            slots = self._row_slots
         else:
             slots = np.array([self._slots.setdefault(k, len(self._slots)) for k in keys], dtype=np.int64)
-        self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
+        if len(slots) and slots[-1] >= self.memory.n_slots or keyed_by == "name":
+            self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
         return slots
 
     def memory_rows(self, agents) -> SlotMemory:

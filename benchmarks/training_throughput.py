@@ -16,7 +16,8 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    observation encoding, rollout forward passes and PPO update (from its ``progress.csv``,
    after two warm-up updates). Its hyper-parameters come from ``--ppo-config`` (default
    ``configs/train/ppo_<task>_move.yaml``), the environment from ``--env``; with
-   ``--shared-one-epoch`` also at ``move`` with ``arch=shared`` and one epoch.
+   ``--former-network`` also at ``move`` with the networks the configs used before (separate
+   MLP actor and critic, two epochs, messages one-hot per direction).
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -142,9 +143,9 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
     return {"control": control, "config": config, "arch": args.arch, "hidden": list(args.hidden),
             "n_envs": args.n_envs, "n_groups": args.n_groups, "n_steps": args.n_steps,
             "minibatch_size": args.minibatch_size, "n_epochs": args.n_epochs,
+            "message_encoding": args.message_encoding,
             "agent_steps": int(float(timed[-1]["agent_steps"]) - float(first["agent_steps"])), "seconds": round(seconds, 2),
             "agent_steps_per_s": (float(timed[-1]["agent_steps"]) - float(first["agent_steps"])) / seconds,
-            "valid_share": float(np.mean([float(r["throughput/valid_share"]) for r in timed])),
             "share": {k: round(v / seconds, 3) for k, v in parts.items()}}
 
 
@@ -161,8 +162,9 @@ def main(argv=None) -> int:
                         "(default configs/train/ppo_<task>_move.yaml)")
     parser.add_argument("--only", choices=("all", "training"), default="all",
                         help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates")
-    parser.add_argument("--shared-one-epoch", action="store_true",
-                        help="also time training/ppo.py at move with arch=shared and n_epochs=1 (same run)")
+    parser.add_argument("--former-network", action="store_true",
+                        help="also time training/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
+                        "message features (the configs' former networks; same run)")
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
@@ -196,11 +198,11 @@ def main(argv=None) -> int:
     result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
     result["ppo"] = {level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config)
                      for level in ("full", "move")}
-    if args.shared_one_epoch:
-        result["ppo"]["move, arch=shared, n_epochs=1"] = ppo_training(
-            *task, args.ppo_steps, control="move", config=ppo_config, variant={"arch": "shared", "n_epochs": 1})
-        result["ppo_move_shared_one_epoch_agent_steps_per_s"] = (
-            result["ppo"]["move, arch=shared, n_epochs=1"]["agent_steps_per_s"])
+    if args.former_network:
+        former = "move, arch=mlp, n_epochs=2, per-direction messages"
+        result["ppo"][former] = ppo_training(*task, args.ppo_steps, control="move", config=ppo_config,
+                                             variant={"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"})
+        result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
     result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
     result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
     result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
@@ -215,8 +217,7 @@ def main(argv=None) -> int:
         if k.endswith("per_s") or k.endswith("over_sb3"):
             print(f"{k:45s} {v:10.2f}")
     for level, r in result["ppo"].items():
-        print(f"  training/ppo.py at {level}: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items())
-              + f" (valid samples {100 * r['valid_share']:.0f} %)")
+        print(f"  training/ppo.py at {level}: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items()))
     for k, v in (result.get("sb3_profile") or {}).items():
         print(f"  {k:55s} {v['seconds']:8.2f} s  {100 * v['share']:5.1f} %")
     print(f"load average before/after: {result['machine']['load_average_before']} / "

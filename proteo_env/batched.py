@@ -9,6 +9,9 @@ PettingZoo's per-agent dicts.
 
 Seeding: ``reset(seed=s)`` seeds world ``b`` with ``s + b``, so world ``b`` follows exactly the
 trajectory of a single ``ProteoEnv`` reset with seed ``s + b`` and fed the same actions.
+:meth:`BatchedEnv.reset_worlds` starts a new episode in some worlds while the others run on
+(what a trainer does when an episode ends); world ``b``'s next episode is then the one a single
+env gets from ``reset()`` without a seed, from the same generator.
 
 Control levels (:mod:`proteo_env.control`): at ``config.control`` = ``"move"`` or
 ``"move+mode"`` an action row holds only the chosen fields (``(B, A, 1)`` or ``(B, A, 2)``),
@@ -42,7 +45,9 @@ class BatchedEnv:
             action row holds and their number of values.
         n_envs, n_agents: ``B`` and ``A``.
         engine: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
-        cycle: cycles since reset (all worlds step together).
+        cycles: ``(B,)`` int, cycles of each world's current episode (the cycle number the
+            task sees); all equal unless :meth:`reset_worlds` restarted some worlds.
+        cycle: cycles since the last :meth:`reset` (every world steps once per call).
         last_moved: ``(B, A)`` bool, who moved in the last cycle.
     """
 
@@ -62,8 +67,8 @@ class BatchedEnv:
         if self.level.name == "move":
             factory = autopilot_factory(task.name)
             self._autopilots = [factory(self, None) for _ in tasks]
-        self._observed: tuple[int, ObservationBuffers] | None = None
-        """The last observation and the cycle it was taken at (what the autopilots read)."""
+        self._observed: ObservationBuffers | None = None
+        """The observation of the current cycle, once taken (what the autopilots read)."""
         self.n_sites = 12 if self.config.obs_radius == 1 else 54
         probe = task.build_layout(np.random.default_rng(0))
         self.build_world(task, probe)  # checks the layout now, not at the first reset
@@ -71,6 +76,7 @@ class BatchedEnv:
         self.n_modules = len(probe.positions)
         self.engine: WorldBatch | None = None
         self.cycle = 0
+        self.cycles = np.zeros(self.n_envs, dtype=np.int64)
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         self._rngs = [np.random.default_rng() for _ in tasks]
 
@@ -112,24 +118,65 @@ class BatchedEnv:
         """New start layouts for every world; world ``b`` is seeded with ``seed + b``."""
         if seed is not None:
             self._rngs = [np.random.default_rng(seed + b) for b in range(self.n_envs)]
-        layouts = [task.build_layout(rng) for task, rng in zip(self.tasks, self._rngs)]
-        for layout in layouts:
-            if layout.n_agents != self.n_agents or len(layout.positions) != self.n_modules:
-                raise ValueError(f"task {self.tasks[0].task_id()} built {layout.n_agents} agents and "
-                                 f"{len(layout.positions)} modules after {self.n_agents} and "
-                                 f"{self.n_modules} at construction; the counts must stay fixed")
+        layouts = [self._build_layout(b) for b in range(self.n_envs)]
         extent = tuple(np.max([layout.size for layout in layouts], axis=0))
         worlds = [self.build_world(task, layout, extent) for task, layout in zip(self.tasks, layouts)]
         for world, rng in zip(worlds, self._rngs):
             world.seed(int(rng.integers(2**63)))
         self.engine = WorldBatch(worlds)
-        for task, world, rng in zip(self.tasks, worlds, self._rngs):
-            task.reset(world, rng)
-        for pilot, rng in zip(self._autopilots, self._rngs):
-            pilot.reset(seed=int(rng.integers(2**63)))
+        for b in range(self.n_envs):
+            self._start_episode(b)
         self.cycle = 0
+        self.cycles[:] = 0
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         return self.observe_arrays()
+
+    def reset_worlds(self, which) -> ObservationBuffers:
+        """New episodes in the worlds ``which`` (``(B,)`` bool or world indices); the others run on.
+
+        World ``b``'s new episode is drawn from its own generator, as a single env's ``reset()``
+        without a seed would draw it. A start layout larger than the batch's grid moves every
+        running world onto a larger grid first (:meth:`~proteo_env.core.world.World.regrid`;
+        their trajectories do not change). Returns fresh observations of every world.
+        """
+        if self.engine is None:
+            raise RuntimeError("no world yet; call reset() first")
+        which = np.asarray(which)
+        rows = np.flatnonzero(which) if which.dtype == np.bool_ else which.astype(np.int64).reshape(-1)
+        if rows.size and (rows.min() < 0 or rows.max() >= self.n_envs):
+            raise ValueError(f"world {int(rows.max() if rows.max() >= self.n_envs else rows.min())} is not "
+                             f"allowed; allowed: 0..{self.n_envs - 1}")
+        layouts = {int(b): self._build_layout(int(b)) for b in rows}
+        extent = self.worlds[0].shape.extent
+        needed = tuple(np.max([extent] + [layout.size for layout in layouts.values()], axis=0))
+        if needed != extent:
+            self.engine = WorldBatch([world.regrid(needed) for world in self.worlds])
+            for task, world in zip(self.tasks, self.worlds):
+                task.regrid(world)
+        for b, layout in layouts.items():
+            world = self.build_world(self.tasks[b], layout, needed)
+            world.seed(int(self._rngs[b].integers(2**63)))
+            self.engine.replace(b, world)
+            self._start_episode(b)
+        self.cycles[rows] = 0
+        self.last_moved[rows] = False
+        self._observed = None
+        return self.observe_arrays()
+
+    def _build_layout(self, b: int) -> Layout:
+        """World ``b``'s next start layout, from its generator; its module and agent counts checked."""
+        layout = self.tasks[b].build_layout(self._rngs[b])
+        if layout.n_agents != self.n_agents or len(layout.positions) != self.n_modules:
+            raise ValueError(f"task {self.tasks[0].task_id()} built {layout.n_agents} agents and "
+                             f"{len(layout.positions)} modules after {self.n_agents} and "
+                             f"{self.n_modules} at construction; the counts must stay fixed")
+        return layout
+
+    def _start_episode(self, b: int) -> None:
+        """The task's and the autopilot's episode state of world ``b`` (its world seeded and in place)."""
+        self.tasks[b].reset(self.worlds[b], self._rngs[b])
+        if self._autopilots:
+            self._autopilots[b].reset(seed=int(self._rngs[b].integers(2**63)))
 
     def check_actions(self, actions) -> np.ndarray:
         """Validate a ``(B, A, F)`` batch (``F`` fields of the control level); a bad one raises
@@ -164,17 +211,18 @@ class BatchedEnv:
             return full
         observed = self.last_observation()
         a = self.n_agents
-        full = np.stack([pilot.act_arrays(observed.rows(b * a, (b + 1) * a))
-                         for b, pilot in enumerate(self._autopilots)])
+        full = np.empty(actions.shape[:2] + (lay.length,), dtype=np.int64)
+        for b, pilot in enumerate(self._autopilots):
+            full[b] = pilot.act_arrays(observed.rows(b * a, (b + 1) * a))
         full[..., lay.move] = actions[..., 0]
         return full
 
     def last_observation(self) -> ObservationBuffers:
         """The observation of the current cycle: the one :meth:`observe_arrays` last returned,
         or a fresh one when the world has stepped since."""
-        if self._observed is None or self._observed[0] != self.cycle:
+        if self._observed is None:
             self.observe_arrays()
-        return self._observed[1]
+        return self._observed
 
     def step_arrays(self, actions) -> list[dict[str, float]]:
         """One cycle of every world from a ``(B, A, F)`` action array (``F`` fields of the
@@ -190,10 +238,11 @@ class BatchedEnv:
             move=actions[..., lay.move], mode=actions[..., lay.mode], scent_role=actions[..., lay.roles],
             message_target=actions[..., lay.message_target], message_value=actions[..., lay.message_value])
         self.cycle += 1
+        self.cycles += 1
         self._observed = None
         terms = []
-        for task, world, moved in zip(self.tasks, self.worlds, self.last_moved):
-            task.after_cycle(world, self.cycle)
+        for task, world, moved, cycle in zip(self.tasks, self.worlds, self.last_moved, self.cycles.tolist()):
+            task.after_cycle(world, cycle)
             terms.append(task.reward_terms(world, moved))
         return terms
 
@@ -205,7 +254,7 @@ class BatchedEnv:
         for b, (task, world) in enumerate(zip(self.tasks, self.worlds)):
             buffers.load[b * a:(b + 1) * a, 0] = task.load(world)
             buffers.hint[b * a:(b + 1) * a] = task.hint(world)
-        self._observed = (self.cycle, buffers)
+        self._observed = buffers
         return buffers
 
     def metrics(self) -> list[dict[str, float]]:

@@ -50,6 +50,57 @@ def test_batch_matches_single_envs(task_id, motion_model):
         assert batched.metrics() == [env.batch.metrics()[0] for env in singles]
 
 
+RESET_EVERY = (5, 8, 13)
+"""World ``b`` of the per-world reset test starts a new episode every ``RESET_EVERY[b]`` cycles."""
+
+
+@pytest.mark.parametrize("task_id,control", [(t, c) for t in sorted(proteo_env.TASKS) for c in ("full", "move")
+                                               if c == "full" or proteo_env.TASKS[t].name != "sandbox"])
+def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
+    """reset_worlds restarts some worlds while the others run on; world b's episodes are those
+    of a single env reset with seed 7 + b and then reset() without a seed, also across a move
+    of every world onto a larger grid (start layouts of chain, branch and grasp vary in size;
+    sandbox has no hand-coded rules, so no move level)."""
+    name = proteo_env.TASKS[task_id].name
+    overrides = {**SMALL_OVERRIDES.get(name, {}), "control": control}
+    batched = proteo_env.make_batched(task_id, N_ENVS, **overrides)
+    singles = [proteo_env.make(task_id, **overrides) for _ in range(N_ENVS)]
+    obs = batched.reset(seed=7)
+    for b, env in enumerate(singles):
+        env.reset(seed=7 + b)
+    extent = batched.worlds[0].shape.extent
+    a, lay, rng = batched.n_agents, batched.action_layout, np.random.default_rng(0)
+    for cycle in range(1, 61):
+        actions = _random_actions(lay, obs.action_mask, rng)[:, :len(batched.control_nvec)]
+        actions = actions.reshape(N_ENVS, a, -1)
+        terms = batched.step_arrays(actions)
+        restart = np.array([cycle % every == 0 for every in RESET_EVERY])
+        obs = batched.reset_worlds(restart) if restart.any() else batched.observe_arrays()
+        for b, env in enumerate(singles):
+            assert env.step_arrays(actions[b]) == terms[b]
+            if restart[b]:
+                env.reset()
+            single_obs = env.observe_arrays()
+            for field in ObservationBuffers.FIELDS:
+                np.testing.assert_array_equal(getattr(obs, field)[b * a:(b + 1) * a], getattr(single_obs, field),
+                                              err_msg=field)
+            for key, value in env.engine.snapshot().items():
+                np.testing.assert_array_equal(batched.worlds[b].snapshot()[key], value, err_msg=key)
+            assert batched.cycles[b] == env.cycle
+        assert batched.metrics() == [env.batch.metrics()[0] for env in singles]
+    if name in ("chain", "branch", "grasp"):
+        assert batched.worlds[0].shape.extent != extent, "no start layout outgrew the batch's grid"
+
+
+def test_reset_worlds_names_a_bad_world():
+    batched = proteo_env.make_batched("sandbox-v0", 2, n_modules=10)
+    with pytest.raises(RuntimeError, match="call reset"):
+        batched.reset_worlds([0])
+    batched.reset(seed=0)
+    with pytest.raises(ValueError, match=r"world 2 is not allowed; allowed: 0\.\.1"):
+        batched.reset_worlds([2])
+
+
 def test_batch_survives_pickling():
     batched = proteo_env.make_batched("sandbox-v0", N_ENVS, n_modules=15)
     obs = batched.reset(seed=1)

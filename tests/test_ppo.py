@@ -111,10 +111,9 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
     """Move-level chain of 12 modules (the training size): after ~20 s of training the learned moves
     earn more than random moves under the rules, by more than 3 standard errors, and finish sooner."""
     env = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
-    final = ppo.main(["--task", "chain-v0", "--control", "move", "--env", json.dumps(env), "--seed", "0",
-                      "--n-envs", "64", "--n-groups", "64", "--n-steps", "32", "--minibatch-size", "8192",
-                      "--total-steps", "600000", "--run-dir", str(tmp_path / "run"), "--tensorboard", "false",
-                      "--progress-bar", "false"])
+    final = ppo.main(["--config", "configs/train/ppo_chain_move.yaml", "--task", "chain-v0", "--env", json.dumps(env),
+                      "--total-steps", "600000", "--time-limit-minutes", "0", "--run-dir", str(tmp_path / "run"),
+                      "--tensorboard", "false", "--progress-bar", "false"])
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 20, "first_seed": 2000, "tasks": {"chain": {"env": env}}}))
     rows = evaluate(config=config, tasks=["chain"], checkpoints=[str(final)], out=tmp_path / "eval",
@@ -129,6 +128,40 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
     assert gap > 3 * math.hypot(standard_error(learned.returns), standard_error(random_moves.returns)), \
         (learned.returns, random_moves.returns)
     assert np.mean(learned.cycles) < np.mean(random_moves.cycles)
+
+
+def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episode():
+    """Every world of the trainer's batch is a single env seeded env_seed + w; an ended episode
+    restarts its world at once (reset() without a seed), and the features of its last
+    observation are kept for the value bootstrap."""
+    env = {"n_modules": 8, "max_cycles": 5}
+    args = ppo.Args(task="chain-v1", control="move", env=env, n_envs=3, n_groups=1, message_encoding="compact")
+    worlds = ppo.Worlds(args, env_seed=11)
+    singles = [proteo_env.make("chain-v1", control="move", **env) for _ in range(3)]
+    for w, single in enumerate(singles):
+        single.reset(seed=11 + w)
+    a, enc, rng = worlds.n_agents, worlds.encoder, np.random.default_rng(0)
+    n_truncated = 0
+    for cycle in range(1, 8):
+        mask = np.concatenate([b.action_mask for b in worlds.buffers]).astype(bool)
+        moves = np.argmax(mask * rng.random(mask.shape), axis=1).reshape(3, a, 1)
+        finished = []
+        reward, terminal, truncated = worlds.step(moves, finished)
+        for w, single in enumerate(singles):
+            single.step_arrays(moves[w])
+            ended = bool(single.batch.success()[0]) or single.cycle >= 5
+            assert bool(terminal[w] or truncated[w]) == ended
+            if truncated[w]:
+                rows = np.flatnonzero(np.isin(worlds.final_rows, np.arange(w * a, (w + 1) * a)))
+                np.testing.assert_array_equal(worlds.final_features[rows], enc.encode_buffers(single.observe_arrays()))
+            if ended:
+                single.reset()
+            np.testing.assert_array_equal(enc.encode_buffers(worlds.buffers[0].rows(w * a, (w + 1) * a)),
+                                          enc.encode_buffers(single.observe_arrays()))
+        assert len(finished) == int((terminal | truncated).sum())
+        n_truncated += int(truncated.sum())
+    assert n_truncated > 0
+    assert worlds.groups[0].cycles.tolist() == [single.cycle for single in singles]
 
 
 def test_shared_trunk_feeds_both_heads_and_its_checkpoint_loads(tmp_path):

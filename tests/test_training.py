@@ -18,6 +18,7 @@ import pytest
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
+from proteo_env.spaces import ObservationBuffers
 
 TINY = {"n_modules": 6, "max_cycles": 8}
 TINY_FLAG = "{n_modules: 6, max_cycles: 8}"
@@ -41,6 +42,32 @@ def test_encoder_blocks_are_named_and_match_both_inputs():
         np.testing.assert_array_equal(a[i, slices["action_mask"]], observations[agent]["action_mask"])
         assert a[i, slices["own_mode"]].sum() == 1.0
         assert a[i, slices["neighbour_kind"]].sum() == enc.n_sites  # one kind per site
+
+
+def test_compact_message_encoding_says_who_sent_and_what():
+    env = proteo_env.make("chain-v0", **TINY)
+    env.reset(seed=0)
+    fields = {name: getattr(env.observe_arrays(), name).copy() for name in ObservationBuffers.FIELDS}
+    fields["messages"][:] = 0
+    fields["messages"][0, 3] = 2
+    fields["messages"][0, 7] = 5
+    fields["messages"][1, 0] = 5
+    full = ObservationEncoder.for_env(env)
+    compact = ObservationEncoder.for_env(env, message_encoding="compact")
+    v = env.task.n_message_values
+    assert compact.size == full.size - 12 * (v + 1) + 12 + v
+    x, sl = compact.encode_fields(fields), compact.slices
+    np.testing.assert_array_equal(np.flatnonzero(x[0, sl["message_from"]]), [3, 7])
+    np.testing.assert_array_equal(np.flatnonzero(x[0, sl["message_value"]]) + 1, [2, 5])
+    np.testing.assert_array_equal(np.flatnonzero(x[1, sl["message_value"]]) + 1, [5])
+    assert not x[2:, sl["message_from"]].any() and not x[2:, sl["message_value"]].any()
+    y = full.encode_fields(fields)  # every other block is the same in both encodings
+    for name in sl:
+        if name in full.slices:
+            np.testing.assert_array_equal(x[:, sl[name]], y[:, full.slices[name]], err_msg=name)
+    with pytest.raises(ValueError, match=r"message_encoding='sparse' is not allowed; allowed: 'per_direction', "
+                                         r"'compact'"):
+        ObservationEncoder.for_env(env, message_encoding="sparse")
 
 
 def test_flat_action_mask_layout():

@@ -44,10 +44,12 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     nvec = [int(n) for n in getattr(env, "control_nvec", env.action_layout.nvec)]
     if meta["nvec"] != nvec:
         raise CheckpointError(f"{where}: action nvec {meta['nvec']} does not match the environment's {nvec}")
-    encoder = ObservationEncoder.for_env(env, **({"scent_scale": meta["encoder"]["scent_scale"]}
-                                                 if meta.get("encoder") else {}))
-    if meta.get("encoder") is not None and meta["encoder"] != encoder.spec():
-        diff = {k: (meta["encoder"].get(k), v) for k, v in encoder.spec().items() if meta["encoder"].get(k) != v}
+    # checkpoints written before an encoder option existed used its default
+    saved = None if meta.get("encoder") is None else {"message_encoding": "per_direction", **meta["encoder"]}
+    options = ("scent_scale", "message_encoding")
+    encoder = ObservationEncoder.for_env(env, **({k: saved[k] for k in options} if saved else {}))
+    if saved is not None and saved != encoder.spec():
+        diff = {k: (saved.get(k), v) for k, v in encoder.spec().items() if saved.get(k) != v}
         raise CheckpointError(f"{where}: observation encoding does not match the environment "
                               f"(field: (checkpoint, env)) {diff}")
     return encoder

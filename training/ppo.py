@@ -1,8 +1,8 @@
 """PPO with one policy shared by every module, over the batched array API (no per-agent dicts).
 
-Every module of ``n_envs`` worlds is one sample: the worlds run as ``n_groups``
-:class:`~proteo_env.batched.BatchedEnv` s (``proteo_env.make_batched(task, n_envs // n_groups,
-control=level)``), the observation arrays of all modules are encoded at once
+Every module of ``n_envs`` worlds is one sample: the worlds run as one
+:class:`~proteo_env.batched.BatchedEnv` (``proteo_env.make_batched(task, n_envs,
+control=level)``; ``n_groups`` splits them into several), the observation arrays of all modules are encoded at once
 (:class:`~proteo_env.adapters.flatten.ObservationEncoder`, the encoding every learner here
 uses), one forward pass gives every module's logits and value, illegal moves are masked out
 of the move logits (``action_mask``), and the sampled ``(B, A, F)`` action array goes back into
@@ -32,12 +32,10 @@ The critic (at ``mlp`` and ``lattice``) is a separate tanh MLP on the same local
 parameter-shared value per module estimating the team's return (every module receives the
 team reward).
 
-Episode ends. A world's episode ends at success or at ``max_cycles``; all worlds of a
-``BatchedEnv`` step together and ``reset`` rebuilds all of them, so a world that succeeds
-waits (stepped, its samples masked out of the update) until every world of its group has
-ended, and the group is then reset. Smaller groups waste fewer samples and cost more Python
-per cycle (``n_groups``; measured in docs/learning.md). At ``max_cycles`` the value of the
-last observation is bootstrapped (the observation holds no clock); success is terminal.
+Episode ends. A world's episode ends at success or at ``max_cycles``, and the world starts
+its next episode at once (``BatchedEnv.reset_worlds``) while the others run on, so every
+sample of every cycle enters the update. At ``max_cycles`` the value of the last observation
+is bootstrapped (the observation holds no clock); success is terminal.
 
 Writes ``runs/<name>/`` (see :mod:`training.common`): ``progress.csv``, TensorBoard logs,
 checkpoints every ``checkpoint_every`` agent-steps and ``final/`` (``policy.pt``: the network's
@@ -85,8 +83,8 @@ class Args:
     """Agent-steps (module-cycles used for learning) to train for."""
     n_envs: int = 64
     """Worlds stepped together; samples per cycle = n_envs * modules."""
-    n_groups: int = 64
-    """BatchedEnvs the worlds are split into; a group resets when all its worlds have ended."""
+    n_groups: int = 1
+    """BatchedEnvs the worlds are split into (1 is fastest: one engine call per cycle for all worlds)."""
     n_steps: int = 32
     """Cycles per world in one rollout."""
     minibatch_size: int = 8192
@@ -99,6 +97,8 @@ class Args:
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
     """Gradient norm limit, applied to the actor and to the critic separately (to all weights at arch=shared)."""
+    message_encoding: str = "per_direction"
+    """How the features encode the messages received: per_direction or compact (proteo_env.adapters.flatten)."""
     arch: str = "mlp"
     """Actor network: mlp or lattice (see the module docstring)."""
     hidden: tuple[int, ...] = (64, 64)
@@ -147,7 +147,7 @@ class LatticeActor(nn.Module):
     """
 
     SITE_BLOCKS = ("neighbour_kind", "neighbour_mode", "neighbour_scent_present", "neighbour_scent_value",
-                   "neighbour_scent_delta", "messages")
+                   "neighbour_scent_delta")
     OWN_BLOCKS = ("own_mode", "own_scent_present", "own_scent_value", "contact", "load", "hint")
 
     def __init__(self, encoder: ObservationEncoder, nvec, hidden: tuple[int, ...] = (32, 64)):
@@ -159,16 +159,19 @@ class LatticeActor(nn.Module):
         self.nvec = [int(n) for n in nvec]
         slices = encoder.slices
         mask = slices["action_mask"]
+        compact = encoder.message_encoding == "compact"
+        site_blocks = self.SITE_BLOCKS + (("message_from",) if compact else ("messages",))
+        own_blocks = self.OWN_BLOCKS + (("message_value",) if compact else ())
         # token k: every site block's columns of site k (blocks are site-major), then "move k+1 is legal"
         columns = []
         for k in range(12):
-            for name in self.SITE_BLOCKS:
+            for name in site_blocks:
                 s = slices[name]
                 width = (s.stop - s.start) // 12
                 columns += range(s.start + k * width, s.start + (k + 1) * width)
             columns.append(mask.start + 1 + k)
         self.register_buffer("token_columns", torch.tensor(columns))
-        own = [c for name in self.OWN_BLOCKS for c in range(slices[name].start, slices[name].stop)] + [mask.start]
+        own = [c for name in own_blocks for c in range(slices[name].start, slices[name].stop)] + [mask.start]
         self.register_buffer("own_columns", torch.tensor(own))
         self.token_dim = len(columns) // 12
         self.embed = _orthogonal(nn.Linear(self.token_dim, embed), np.sqrt(2))
@@ -254,10 +257,12 @@ def entropy(log_probs: list[torch.Tensor]) -> torch.Tensor:
 
 # ---------------------------------------------------------------------- environment side
 class Worlds:
-    """``n_envs`` worlds as ``n_groups`` BatchedEnvs, with their episode bookkeeping.
+    """``n_envs`` worlds as ``n_groups`` BatchedEnvs, each world restarted as soon as its episode ends.
 
     Rows are world-major across groups: sample ``w * A + i`` is module ``i`` of world ``w``,
-    world ``w`` is world ``w % b`` of group ``w // b`` (``b = n_envs // n_groups``).
+    world ``w`` is world ``w % b`` of group ``w // b`` (``b = n_envs // n_groups``). World ``w``
+    is seeded with ``env_seed + w``; its later episodes continue its own generator
+    (:meth:`~proteo_env.batched.BatchedEnv.reset_worlds`).
     """
 
     def __init__(self, args: Args, env_seed: int):
@@ -275,10 +280,14 @@ class Worlds:
         self.nvec = first.control_nvec
         self.encoder = ObservationEncoder(n_sites=first.n_sites, n_channels=first.task.n_channels,
                                           n_modes=len(first.task.modes), n_message_values=first.task.n_message_values,
-                                          scent_max=first.config.physics.scent_max)
+                                          scent_max=first.config.physics.scent_max,
+                                          message_encoding=args.message_encoding)
         self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
-        self.ended = np.zeros(self.n_envs, dtype=bool)
         self.episode_return = np.zeros(self.n_envs)
+        self.final_rows = np.zeros(0, dtype=np.int64)
+        """Sample rows of the worlds truncated in the last :meth:`step` (their episodes hit ``max_cycles``)."""
+        self.final_features = np.zeros((0, self.encoder.size), dtype=np.float32)
+        """``(len(final_rows), D)`` features of those rows' last observation (the value there is bootstrapped)."""
         self.env_seconds = 0.0
         self.encode_seconds = 0.0
 
@@ -286,7 +295,11 @@ class Worlds:
         """Write every module's features ``(N, D)`` and legal moves ``(N, 13)`` into the given arrays
         (one encoding call over the observation fields of all groups)."""
         started = time.perf_counter()
-        fields = {name: np.concatenate([getattr(b, name) for b in self.buffers]) for name in ObservationBuffers.FIELDS}
+        if len(self.buffers) == 1:
+            fields = {name: getattr(self.buffers[0], name) for name in ObservationBuffers.FIELDS}
+        else:
+            fields = {name: np.concatenate([getattr(b, name) for b in self.buffers])
+                      for name in ObservationBuffers.FIELDS}
         features[:] = self.encoder.encode_fields(fields)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
@@ -294,58 +307,58 @@ class Worlds:
     def step(self, actions: np.ndarray, finished: list[dict]):
         """One cycle of every world from ``(n_envs, A, F)`` actions.
 
-        Returns ``(reward, valid, terminal, truncated)`` per world (``(n_envs,)`` each): ``valid``
-        marks worlds whose episode was still running (their samples count); a world's
-        ``truncated`` is set at ``max_cycles``. Ended episodes are appended to ``finished``;
-        groups whose worlds have all ended are reset.
+        Returns ``(reward, terminal, truncated)`` per world (``(n_envs,)`` each): ``terminal`` at
+        success, ``truncated`` at ``max_cycles`` without success. Ended episodes are appended to
+        ``finished`` and their worlds restarted; :attr:`final_rows` and :attr:`final_features`
+        hold the truncated worlds' last observation.
         """
         started = time.perf_counter()
-        valid = ~self.ended
+        a = self.n_agents
         reward = np.zeros(self.n_envs)
         terminal = np.zeros(self.n_envs, dtype=bool)
-        truncated = np.zeros(self.n_envs, dtype=bool)
+        cycles = np.zeros(self.n_envs, dtype=np.int64)
         for k, group in enumerate(self.groups):
             worlds = slice(k * self.b, (k + 1) * self.b)
             terms = group.step_arrays(actions[worlds])
             reward[worlds] = [sum(t.values()) for t in terms]
             terminal[worlds] = group.success()
-            truncated[worlds] = group.cycle >= self.max_cycles
-        terminal &= valid
-        truncated &= valid & ~terminal
-        self.episode_return += np.where(valid, reward, 0.0)
-        cycles = np.repeat([g.cycle for g in self.groups], self.b)
-        for w in np.flatnonzero(terminal | truncated):
+            cycles[worlds] = group.cycles
+        truncated = (cycles >= self.max_cycles) & ~terminal
+        ended = terminal | truncated
+        self.episode_return += reward
+        for w in np.flatnonzero(ended):
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
-        self.ended |= terminal | truncated
-        self.final_buffers = {}
+        self.episode_return[ended] = 0.0
+        rows, features = [], []
         for k, group in enumerate(self.groups):
-            worlds = slice(k * self.b, (k + 1) * self.b)
+            restart = ended[k * self.b:(k + 1) * self.b]
+            if not restart.any():
+                self.buffers[k] = group.observe_arrays()
+                continue
             observed = group.observe_arrays()
-            if self.ended[worlds].all():
-                if truncated[worlds].any():
-                    self.final_buffers[k] = observed  # the value at max_cycles is bootstrapped from it
-                observed = group.reset()
-                self.ended[worlds] = False
-                self.episode_return[worlds] = 0.0
-            self.buffers[k] = observed
+            for j in np.flatnonzero(truncated[k * self.b:(k + 1) * self.b]):
+                rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
+                features.append(self.encoder.encode_buffers(observed.rows(j * a, (j + 1) * a)))
+            self.buffers[k] = group.reset_worlds(restart)
+        self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
+        self.final_features = np.concatenate(features) if features else self.final_features[:0]
         self.env_seconds += time.perf_counter() - started
-        return reward, valid, terminal, truncated
+        return reward, terminal, truncated
 
 
 # ---------------------------------------------------------------------- training
-def gae(rewards, values, next_values, valid, terminal, done, gamma: float, lam: float) -> torch.Tensor:
+def gae(rewards, values, next_values, terminal, done, gamma: float, lam: float) -> torch.Tensor:
     """Advantages ``(T, N)`` by GAE over cycles, per module.
 
     All arguments ``(T, N)``: ``values`` at each step, ``next_values`` of the observation after
-    it (the bootstrap at ``max_cycles``; ignored where ``terminal``), ``valid`` the samples of
-    running episodes, ``done`` where an episode ended (success or ``max_cycles``): the
-    recursion does not carry across it, nor through invalid samples.
+    it (the bootstrap at ``max_cycles``; ignored where ``terminal``), ``done`` where an episode
+    ended (success or ``max_cycles``): the recursion does not carry across it.
     """
     advantages = torch.zeros_like(values)
     carry = torch.zeros_like(values[0])
     for t in reversed(range(values.shape[0])):
         delta = rewards[t] + gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
-        carry = torch.where(valid[t], delta + gamma * lam * (1.0 - done[t]) * carry, 0.0)
+        carry = delta + gamma * lam * (1.0 - done[t]) * carry
         advantages[t] = carry
     return advantages
 
@@ -398,8 +411,7 @@ def train(args: Args) -> Path:
     obs_t, mask_t = torch.from_numpy(features), torch.from_numpy(move_mask)
     actions_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
     logp_t, values_t, bootstrap_t = (torch.zeros((t_steps, n)) for _ in range(3))
-    rewards_w, valid_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d)
-                                                   for d in (np.float32, bool, bool, bool))
+    rewards_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d) for d in (np.float32, bool, bool))
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
 
     def save(folder: Path) -> None:
@@ -428,30 +440,27 @@ def train(args: Args) -> Path:
                 logits, values = net(obs_t[t])
                 actions, logp = sample(masked_log_probs(logits, mask_t[t], nvec))
                 actions_t[t], logp_t[t], values_t[t] = actions, logp, values
-                reward, valid, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1),
-                                                                 finished)
-                rewards_w[t], valid_w[t], terminal_w[t] = reward, valid, terminal
-                truncated_w[t] = truncated
-                for k, buffers in worlds.final_buffers.items():  # the value at max_cycles, bootstrapped
-                    rows = slice(k * worlds.b * a, (k + 1) * worlds.b * a)
-                    bootstrap_t[t, rows] = net.value(torch.from_numpy(enc.encode_buffers(buffers)))
+                reward, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1), finished)
+                rewards_w[t], terminal_w[t], truncated_w[t] = reward, terminal, truncated
+                if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
+                    bootstrap_t[t, worlds.final_rows] = net.value(torch.from_numpy(worlds.final_features))
             last = np.zeros((n, enc.size), dtype=np.float32)
             worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
             last_value = net.value(torch.from_numpy(last))
         collected = time.perf_counter()
-        valid, terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
-                                               for w in (valid_w, terminal_w, truncated_w, rewards_w))
+        terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
+                                        for w in (terminal_w, truncated_w, rewards_w))
         next_values = torch.where(truncated, bootstrap_t, torch.cat([values_t[1:], last_value[None]]))
-        advantages = gae(rewards, values_t, next_values, valid, terminal.float(), (terminal | truncated).float(),
+        advantages = gae(rewards, values_t, next_values, terminal.float(), (terminal | truncated).float(),
                          args.gamma, args.gae_lambda)
         returns = advantages + values_t
-        # ---- update on the valid samples
-        index = torch.nonzero(valid.reshape(-1))[:, 0]
+        # ---- update
+        used = t_steps * n
         flat = (obs_t.reshape(-1, enc.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
                 logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1))
         stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": []}
         for _ in range(args.n_epochs):
-            order = index[torch.randperm(len(index))]
+            order = torch.randperm(used)
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start:start + args.minibatch_size]
                 x, m, act, old_logp, adv, ret = (v[mb] for v in flat)
@@ -478,19 +487,17 @@ def train(args: Args) -> Path:
                     stats["loss/approx_kl"].append(((ratio - 1) - torch.log(ratio)).mean().item())
                     stats["loss/clip_fraction"].append(((ratio - 1).abs() > args.clip_range).float().mean().item())
         updated = time.perf_counter()
-        used = len(index)
         agent_steps += used
         bar.update(used)
         env_time, enc_time = worlds.env_seconds - env_s, worlds.encode_seconds - enc_s
         seconds = updated - started
-        v, r = values_t.reshape(-1)[index], returns.reshape(-1)[index]
+        v, r = values_t.reshape(-1), returns.reshape(-1)
         log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items()},
                               "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
                               "time/env_seconds": env_time, "time/encode_seconds": enc_time,
                               "time/forward_seconds": collected - started - env_time - enc_time,
                               "time/update_seconds": updated - collected,
-                              "throughput/agent_steps_per_s": used / seconds,
-                              "throughput/valid_share": used / (t_steps * n)})
+                              "throughput/agent_steps_per_s": used / seconds})
         finished = []
         if agent_steps >= next_checkpoint:
             save(checkpoint_folder(run_dir, agent_steps))

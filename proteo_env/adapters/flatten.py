@@ -20,11 +20,20 @@ block                      size      value
 ``own_scent_present``      C         1 where this module carries scent
 ``own_scent_value``        C         ``min(scent, scent_scale) / scent_scale``; 1 where none
 ``messages``               12*(V+1)  one-hot of the value received from each direction
+                                     (``message_encoding="per_direction"``, the default);
+                                     with ``"compact"`` two blocks instead:
+``message_from``           12        1 where a message arrived from that direction
+``message_value``          V         1 where value ``1..V`` arrived from some direction
 ``contact``                2         touching the ground, touching the object
 ``load``                   1         ``log1p(load)``
 ``hint``                   3         the task's global hint
 ``action_mask``            13        the legal moves (stay, then the 12 directions)
 ========================== ========= ========================================================
+
+The compact message encoding (``12 + V`` features instead of ``12 * (V + 1)``, 27 against
+192 for the paper's tasks) loses only which direction sent which value when two messages
+arrive in one cycle; learners that feed the features to a dense first layer spend most of
+their arithmetic there, so it roughly halves it.
 
 Sites and channels are site-major: block ``neighbour_scent_delta`` holds site 0's channels,
 then site 1's, and so on. The encoder's :meth:`ObservationEncoder.spec` is stored with
@@ -55,6 +64,7 @@ class ObservationEncoder:
         n_message_values: largest message value ``V``.
         scent_max: the scent value meaning "no scent".
         scent_scale: see :data:`SCENT_SCALE`.
+        message_encoding: one of :data:`MESSAGE_ENCODINGS` (see the module docstring).
     """
 
     n_sites: int
@@ -63,14 +73,22 @@ class ObservationEncoder:
     n_message_values: int
     scent_max: int
     scent_scale: int = SCENT_SCALE
+    message_encoding: str = "per_direction"
+
+    def __post_init__(self):
+        if self.message_encoding not in MESSAGE_ENCODINGS:
+            raise ValueError(f"message_encoding={self.message_encoding!r} is not allowed; allowed: "
+                             f"{', '.join(map(repr, MESSAGE_ENCODINGS))}")
 
     @classmethod
-    def for_env(cls, env, *, scent_scale: int = SCENT_SCALE) -> "ObservationEncoder":
+    def for_env(cls, env, *, scent_scale: int = SCENT_SCALE,
+                message_encoding: str = "per_direction") -> "ObservationEncoder":
         """The encoder of a :class:`~proteo_env.env.ProteoEnv` (from its static interface only)."""
         space = env.observation_space(env.possible_agents[0])
         return cls(n_sites=space["neighbour_kind"].shape[0], n_channels=env.task.n_channels,
-                   n_modes=len(env.task.modes), n_message_values=env.task.n_message_values,
-                   scent_max=env.config.physics.scent_max, scent_scale=scent_scale)
+                   n_modes=len(env.task.modes),
+                   n_message_values=env.task.n_message_values, scent_max=env.config.physics.scent_max,
+                   scent_scale=scent_scale, message_encoding=message_encoding)
 
     # ------------------------------------------------------------------ layout
     @property
@@ -80,8 +98,16 @@ class ObservationEncoder:
         return (("neighbour_kind", k * 4), ("neighbour_mode", k * (m + 1)),
                 ("neighbour_scent_present", k * c), ("neighbour_scent_value", k * c),
                 ("neighbour_scent_delta", k * c), ("own_mode", m), ("own_scent_present", c),
-                ("own_scent_value", c), ("messages", 12 * (v + 1)), ("contact", 2), ("load", 1),
-                ("hint", 3), ("action_mask", N_MOVES))
+                ("own_scent_value", c)) + self.message_blocks + (
+                ("contact", 2), ("load", 1), ("hint", 3), ("action_mask", N_MOVES))
+
+    @property
+    def message_blocks(self) -> tuple[tuple[str, int], ...]:
+        """``(name, size)`` of the message blocks of :attr:`message_encoding`."""
+        v = self.n_message_values
+        if self.message_encoding == "compact":
+            return (("message_from", 12), ("message_value", v))
+        return (("messages", 12 * (v + 1)),)
 
     @property
     def slices(self) -> dict[str, slice]:
@@ -147,9 +173,15 @@ class ObservationEncoder:
         out[:, sl["own_scent_value"]] = (np.minimum(own, self.scent_scale) / self.scent_scale).reshape(b, c)
 
         messages = np.clip(np.asarray(fields["messages"]), 0, v)
-        view = np.zeros((b, 12, v + 1), dtype=np.float32)
-        view[rows, np.arange(12)[None, :], messages] = 1.0
-        out[:, sl["messages"]] = view.reshape(b, -1)
+        if self.message_encoding == "compact":
+            out[:, sl["message_from"]] = messages > 0
+            value = np.zeros((b, v + 1), dtype=np.float32)
+            value[rows, messages] = 1.0
+            out[:, sl["message_value"]] = value[:, 1:]
+        else:
+            view = np.zeros((b, 12, v + 1), dtype=np.float32)
+            view[rows, np.arange(12)[None, :], messages] = 1.0
+            out[:, sl["messages"]] = view.reshape(b, -1)
 
         out[:, sl["contact"]] = np.asarray(fields["contact"]).reshape(b, 2)
         out[:, sl["load"]] = np.log1p(np.maximum(np.asarray(fields["load"]).reshape(b, 1), 0.0))
@@ -157,6 +189,9 @@ class ObservationEncoder:
         out[:, sl["action_mask"]] = np.asarray(fields["action_mask"]).reshape(b, N_MOVES)
         return out
 
+
+MESSAGE_ENCODINGS = ("per_direction", "compact")
+"""How :class:`ObservationEncoder` encodes the messages received (module docstring)."""
 
 _FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent", "messages",
            "contact", "load", "hint", "action_mask")

@@ -79,13 +79,27 @@ class WorldBatch:
             setattr(self.scratch, name, np.stack([getattr(w.scratch, name) for w in worlds]))
         self._rehome()
 
-    def _rehome(self) -> None:
-        """Point every world's arrays at its row of the stacked arrays."""
-        for b, w in enumerate(self.worlds):
+    def _rehome(self, rows=None) -> None:
+        """Point every world's arrays (or those of ``rows``) at its row of the stacked arrays."""
+        for b in range(self.n_worlds) if rows is None else rows:
+            w = self.worlds[b]
             for name in World.STATE:
                 setattr(w, name, getattr(self, name)[b])
             for name in Scratch.NAMES:
                 setattr(w.scratch, name, getattr(self.scratch, name)[b])
+
+    def replace(self, b: int, world: World) -> None:
+        """Put ``world`` (built on this batch's grid layout) in row ``b``, state copied into the row."""
+        first = self.worlds[0]
+        if (world.shape.padded != first.shape.padded or world.n_modules != first.n_modules
+                or world.n_agents != first.n_agents):
+            raise ValueError("a world replacing one of a batch must share its grid extent, module and agent counts")
+        for name in World.STATE:
+            getattr(self, name)[b] = getattr(world, name)
+        for name in Scratch.NAMES:
+            getattr(self.scratch, name)[b] = getattr(world.scratch, name)
+        self.worlds[b] = world
+        self._rehome([b])
 
     def __setstate__(self, state):
         # pickling copies the row views into separate arrays; make them views again

@@ -302,6 +302,23 @@ class World:
                               out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
                               out.own_scent, out.messages, out.contact, out.action_mask)
 
+    def regrid(self, extent) -> "World":
+        """This world, same state, on a grid of a larger ``extent`` (a fresh ``World``).
+
+        The box, the modules' sites, modes, scents, inbox and move-order generator are
+        kept; only the padding (and so every grid cell index) changes, so the trajectory from
+        here is the one the world would have followed on its old grid.
+        """
+        world = World(size=self.shape.size, positions=self.positions, n_agents=self.n_agents,
+                      physics=self.physics, anchored=self.anchored.copy(), solid=self.solid_sites,
+                      object_sites=self.object_sites, floor=self.floor, n_channels=self.n_channels,
+                      surface_channels=self.surface_channels, passive_role=self.passive_role,
+                      modes=self.mode.copy(), obs_radius=self.obs_radius, extent=extent)
+        world.scent[:] = self.scent
+        world.inbox[:] = self.inbox
+        world.rng_state[:] = self.rng_state
+        return world
+
     # ------------------------------------------------------------------ snapshots
     def snapshot(self) -> dict:
         """Copies of the mutable state, independent of the grid layout (for checks)."""

@@ -61,6 +61,9 @@ class Task:
         ``initial_modes(layout) -> (N,) int``: start modes of all modules (world order).
         ``reset(world, rng)``: per-episode task state.
         ``after_cycle(world, cycle)``: task-side changes after each cycle (weight schedule).
+        ``regrid(world)``: the running ``world`` moved onto a larger grid (a batch restarting
+        some of its worlds, :meth:`~proteo_env.batched.BatchedEnv.reset_worlds`); recompute
+        what the task keeps as grid cell indices.
         ``load(world) -> (A,) float32``: weight each agent carries (observation ``load``).
         ``hint(world) -> (A, 3) float32``: the global hint of each agent (observation ``hint``).
         ``reward_terms(world, moved) -> dict[str, float]``: named team reward terms; the reward
@@ -120,6 +123,9 @@ class Task:
         pass
 
     def after_cycle(self, world: World, cycle: int) -> None:
+        pass
+
+    def regrid(self, world: World) -> None:
         pass
 
     def load(self, world: World) -> np.ndarray:

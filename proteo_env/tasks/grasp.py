@@ -315,6 +315,18 @@ class Grasp(Task):
         if layout is None:
             raise RuntimeError("grasp: reset() before build_layout()")
         self._hint = np.asarray(layout.hint, dtype=np.float32)
+        self._direction = layout.direction
+        self._index_surface(world)
+        self._last = self._measure(world)
+        self._previous = self._last
+        self._gap0 = max(self._last["gap"], 1)
+
+    def regrid(self, world):
+        self._index_surface(world)
+
+    def _index_surface(self, world) -> None:
+        """The object's surface sites as cells of ``world``'s grid (:attr:`surface`) and the hop
+        field to them."""
         obj = world.object_sites
         shape = world.shape
         grid = world.grid
@@ -331,7 +343,7 @@ class Grasp(Task):
         rel = rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
         # ties (a site on a sector boundary) go to the sector facing the base most, so a
         # site on the object's equator is never credited to its far side
-        towards_base = -(SIDES @ np.asarray(layout.direction, dtype=np.float64))
+        towards_base = -(SIDES @ np.asarray(self._direction, dtype=np.float64))
         side = np.argmax(rel @ SIDES.T + 1e-6 * towards_base[None, :], axis=1).astype(np.int64)
         p = self.params
         self.surface = GraspSurface(cell=np.ascontiguousarray(self._surface_cell, dtype=np.int64), side=side,
@@ -339,9 +351,6 @@ class Grasp(Task):
                                     surround_threshold=float(p.surround_threshold))
         """The object's surface sites and the success thresholds (:class:`GraspSurface`)."""
         self._gap_field = self._hop_field(world)
-        self._last = self._measure(world)
-        self._previous = self._last
-        self._gap0 = max(self._last["gap"], 1)
 
     def _hop_field(self, world) -> np.ndarray:
         """Hop distance of every grid cell to the nearest surface site through non-object cells."""
