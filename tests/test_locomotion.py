@@ -15,7 +15,7 @@ from baselines.locomotion import LocomotionPolicy
 from proteo_env.config import ConfigError
 from test_compiled_rollout import assert_same_trajectory, drive
 
-SMALL = dict(n_modules=16, distance=2, max_cycles=600)
+SMALL = dict(n_modules=16, step_height=0, distance=2, max_cycles=600)
 
 
 def centroid_advance(env, policy, cycles):
@@ -42,7 +42,7 @@ def test_the_robot_advances_more_than_the_random_policy():
 
 @pytest.mark.parametrize("overrides", [{}, {"step_height": 2}, {"tunnel_height": 2}])
 def test_moves_are_legal_and_the_robot_stays_connected(overrides):
-    env = proteo_env.make("locomotion-v0", **SMALL, **overrides)
+    env = proteo_env.make("locomotion-v0", **{**SMALL, **overrides})
     env.reset(seed=1)
     policy = LocomotionPolicy.for_env(env, seed=1)
     solid = {tuple(s) for s in env.engine.solid_sites}
@@ -63,7 +63,7 @@ def test_moves_are_legal_and_the_robot_stays_connected(overrides):
 
 @pytest.mark.parametrize("overrides", [{}, {"step_height": 2}])
 def test_success_means_the_whole_robot_is_beyond_the_line(overrides):
-    env = proteo_env.make("locomotion-v0", **SMALL, **overrides)
+    env = proteo_env.make("locomotion-v0", **{**SMALL, **overrides})
     for seed in range(6):
         env.reset(seed=seed)
         assert not env.task.success(env.engine)

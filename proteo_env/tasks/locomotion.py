@@ -76,8 +76,8 @@ class LocomotionParams:
         time_penalty: reward lost per cycle.
     """
 
-    n_modules: int = 30
-    step_height: int = 0
+    n_modules: int = 20
+    step_height: int = 2
     distance: int = 3
     tunnel_height: int = 0
     tunnel_length: int = 6
