@@ -9,10 +9,12 @@ from .base import Policy
 from .branch import BranchPolicy
 from .chain import ChainPolicy
 from .grasp import GraspPolicy
+from .locomotion import LocomotionPolicy
 from .random_policy import RandomPolicy
 from .table import TablePolicy
 
-POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy)}
+POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy,
+                                                        LocomotionPolicy)}
 
 
 def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:

@@ -10,20 +10,13 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+from . import POLICIES
 from .base import KernelPolicy
-from .branch import BranchPolicy
-from .chain import ChainPolicy
-from .grasp import GraspPolicy
-from .table import TablePolicy
-
-RULES: dict[str, type[KernelPolicy]] = {"chain": ChainPolicy, "branch": BranchPolicy, "table": TablePolicy,
-                                        "grasp": GraspPolicy}
-"""The hand-coded policy of each task name."""
 
 
 def hand_coded_rules(env, seed: int | None = None) -> KernelPolicy:
-    """The task's hand-coded policy for ``env`` (anything with ``action_layout``, ``task`` and
-    ``config``), with the task's rule parameters; its :meth:`~baselines.base.KernelPolicy.act_arrays`
+    """The task's hand-coded policy (the policy of :data:`baselines.POLICIES` named as the task) for
+    ``env`` (anything with ``action_layout``, ``task`` and ``config``), with the task's rule parameters; its :meth:`~baselines.base.KernelPolicy.act_arrays`
     gives full actions, whatever the env's control level."""
     full = SimpleNamespace(action_layout=env.action_layout, task=env.task, config=env.config)
-    return RULES[env.task.name].for_env(full, seed=seed)
+    return POLICIES[env.task.name].for_env(full, seed=seed)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import inspect
+from typing import NamedTuple
+
 import numpy as np
 
 from proteo_env.spaces import ActionLayout
@@ -66,10 +69,46 @@ def check_level(policy_cls, env) -> None:
                          f"trained at {level!r})")
 
 
+def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
+    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree."""
+    out: dict[str, inspect.Parameter] = {}
+    for cls in policy_cls.__mro__:
+        if "__init__" not in vars(cls):
+            continue
+        signature = inspect.signature(cls.__init__).parameters
+        for name, p in signature.items():
+            if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD:
+                out.setdefault(name, p)
+        if not any(p.kind is p.VAR_KEYWORD for p in signature.values()):
+            break
+    return out
+
+
 FIELD_DTYPES = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8, "neighbour_mode": np.int32,
                 "neighbour_scent": np.int32, "own_scent": np.int32, "action_mask": np.int8, "contact": np.int8,
                 "load": np.float32, "hint": np.float32}
 """The dtype in which the rule kernels take each observation field (those of :mod:`proteo_env.spaces`)."""
+
+
+class Observed(NamedTuple):
+    """Every observation field stacked over agents (A agents, K neighbourhood sites, C
+    channels), as a rule kernel (:attr:`KernelPolicy.rule`) reads them (dtypes: :data:`FIELD_DTYPES`).
+
+    ``own_mode`` (A, 1), ``messages`` (A, 12), ``neighbour_kind`` (A, K), ``neighbour_mode``
+    (A, K), ``neighbour_scent`` (A, K, C), ``own_scent`` (A, C), ``action_mask`` (A, 13),
+    ``contact`` (A, 2), ``load`` (A, 1), ``hint`` (A, 3): the fields of :mod:`proteo_env.spaces`.
+    """
+
+    own_mode: np.ndarray
+    messages: np.ndarray
+    neighbour_kind: np.ndarray
+    neighbour_mode: np.ndarray
+    neighbour_scent: np.ndarray
+    own_scent: np.ndarray
+    action_mask: np.ndarray
+    contact: np.ndarray
+    load: np.ndarray
+    hint: np.ndarray
 
 
 def stacked_fields(field, names) -> tuple[np.ndarray, ...]:
@@ -105,16 +144,32 @@ class SlotMemory:
     def n_slots(self) -> int:
         return len(getattr(self, next(iter(self.FIELDS))))
 
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The ``(S,)`` arrays of ``FIELDS``, in their order (the ``memory`` a rule kernel reads)."""
+        return tuple(getattr(self, name) for name in self.FIELDS)
+
 
 class KernelPolicy(Policy):
     """A policy whose rule is a numba kernel over observation fields stacked over agents.
 
-    Subclasses set ``memory`` (a :class:`SlotMemory`) and implement :meth:`_act`. Private
+    A subclass is one behaviour's rule, given by:
+
+    - ``rule``: the rule as a numba kernel (a ``staticmethod``),
+      ``rule(seen, slots, memory, rules, rng, actions)``: ``seen`` an :class:`Observed` of A
+      agent rows, ``slots`` (A,) int64 the memory slot of each row, ``memory`` the tuple
+      :meth:`SlotMemory.arrays` (each (S,)), ``rules`` :attr:`kernel_rules`, ``rng`` the
+      policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions;
+    - ``memory``: a :class:`SlotMemory` (set in ``__init__``);
+    - :attr:`kernel_rules`: the parameters as ``rule`` reads them (default ``self.rules``).
+
+    The same kernel runs here (:meth:`act`, :meth:`act_arrays`) and inside the compiled
+    rollout (:mod:`baselines.compiled`), which is how a new behaviour gets both. Private
     memory is one slot per agent: keyed by agent name in :meth:`act`, by row in
     :meth:`act_arrays`; use one of the two between resets (the other raises ``RuntimeError``).
     """
 
     memory: SlotMemory
+    rule = None
 
     def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
@@ -187,7 +242,15 @@ class KernelPolicy(Policy):
             getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
         return rows
 
+    @property
+    def kernel_rules(self):
+        """The rule's parameters as :attr:`rule` reads them."""
+        return self.rules
+
     def _act(self, slots: np.ndarray, field) -> np.ndarray:
         """``(A, L)`` actions of the agents with memory ``slots`` (A,), in row order; ``field(name)``
         gives an observation field stacked over them."""
-        raise NotImplementedError
+        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
+        seen = Observed(*stacked_fields(field, Observed._fields))
+        self.rule(seen, slots, self.memory.arrays(), self.kernel_rules, self.rng, actions)
+        return actions

@@ -16,7 +16,7 @@ one action out, plus the module's own private memory; nothing else is read):
   legal move. With ``p_seed > 0`` a SLEEP module that detects no scent becomes a SEED with
   that probability each cycle (the paper's decentralised start; the task's default is one
   seed picked centrally).
-- SEARCH, "move along scent gradient" (``_climb`` in :mod:`baselines.kernels`): the value of a
+- SEARCH, "move along scent gradient" (``_climb`` in :mod:`baselines.chain_kernels`): the value of a
   site is one more than the smallest scent next to it. A module sees only 4 of a target
   site's neighbours (those next to both sites), so no single roll is ever *seen* to lower its
   value; the gradient says which neighbour is lowest and the module rolls over that
@@ -60,7 +60,7 @@ one action out, plus the module's own private memory; nothing else is read):
   90 degrees from the old one whose site touches no FINAL module it can see.
 - FINAL: relays scent and never moves.
 
-The rules run as the numba kernels of :mod:`baselines.kernels` (:func:`~baselines.kernels.chain_actions`)
+The rules run as the numba kernels of :mod:`baselines.chain_kernels` (:func:`~baselines.chain_kernels.chain_actions`)
 on the observation fields stacked over modules; the private memory is one row per module
 (:class:`ModuleMemory`).
 """
@@ -69,16 +69,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import KernelPolicy, SlotMemory, stacked_fields
-from .kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_actions
+from .base import KernelPolicy, SlotMemory
+from .chain_kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
 ON_STUCK = ("stay", "random")
-OBSERVED = ("own_mode", "messages", "neighbour_kind", "neighbour_mode", "neighbour_scent", "own_scent", "action_mask")
-"""The observation fields the chain and branch rule kernels read, in their argument order."""
-
-
 class ModuleMemory(SlotMemory):
     """The chain rule's private memory of every module, one entry per memory slot.
 
@@ -129,6 +125,7 @@ class ChainPolicy(KernelPolicy):
     """
 
     name = "chain"
+    rule = staticmethod(chain_decide)
 
     def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_seed=0.0, p_random=0.05,
                  on_stuck="stay", fewer_neighbours=True, horizontal=True, clean_exit=True, turn=True,
@@ -164,7 +161,7 @@ class ChainPolicy(KernelPolicy):
 
     @property
     def rules(self) -> ChainRules:
-        """The parameters as the kernels of :mod:`baselines.kernels` read them."""
+        """The parameters as the kernels of :mod:`baselines.chain_kernels` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
         return ChainRules(
             scent_max=int(self.scent_max), p_seed=float(self.p_seed), p_random=float(self.p_random),
@@ -173,10 +170,3 @@ class ChainPolicy(KernelPolicy):
             greedy_approach=bool(self.greedy_approach), wake_when_free=bool(self.wake_when_free),
             directed=bool(self.directed), momentum=float(self.momentum), queue=bool(self.queue),
             prefer_chain=bool(self.prefer_chain), avoid_octahedra=octahedra)
-
-    def _act(self, slots, field) -> np.ndarray:
-        obs = stacked_fields(field, OBSERVED)
-        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
-        m = self.memory
-        chain_actions(*obs, slots, m.heading, m.growth, m.asked, self.rules, self.rng, actions)
-        return actions

@@ -87,14 +87,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import KernelPolicy, SlotMemory, stacked_fields
+from .base import KernelPolicy, SlotMemory
 from .grasp_kernels import (FINAL, PASS_SEED, SEARCH, SEED, SET_FINAL, SET_TOUCH, SLEEP, TOUCH, TOUCHSEED,
-                            GraspRules, grasp_actions)
-
-OBSERVED = ("own_mode", "messages", "neighbour_kind", "neighbour_mode", "neighbour_scent", "own_scent", "action_mask",
-            "contact", "hint")
-"""The observation fields :func:`~baselines.grasp_kernels.grasp_actions` reads, in its argument order."""
-
+                            GraspRules, grasp_decide)
 
 class GraspMemory(SlotMemory):
     """The grasp rule's private memory of every module, one entry per memory slot.
@@ -143,6 +138,7 @@ class GraspPolicy(KernelPolicy):
     """
 
     name = "grasp"
+    rule = staticmethod(grasp_decide)
 
     def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_random=0.05, on_flat="stay",
                  patience=30, touch_first=True, greedy_approach=True, relocate=True, touch_patience=30,
@@ -184,13 +180,6 @@ class GraspPolicy(KernelPolicy):
                           retire=bool(self.retire), retire_after=int(self.retire_after),
                           touch_channel=1 if self.prefer_touch else -1, straight=bool(self.straight),
                           wrap_forward=bool(self.wrap_forward))
-
-    def _act(self, slots, field) -> np.ndarray:
-        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
-        m = self.memory
-        grasp_actions(*stacked_fields(field, OBSERVED), slots, m.growth, m.waited, m.stuck, m.age, m.previous,
-                      self.rules, self.rng, actions)
-        return actions
 
 
 __all__ = ["FINAL", "PASS_SEED", "SEARCH", "SEED", "SET_FINAL", "SET_TOUCH", "SLEEP", "TOUCH", "TOUCHSEED",

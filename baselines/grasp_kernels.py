@@ -10,7 +10,7 @@ come in this order:
 
 1. SLEEP rows (no draws);
 2. the climbing SEARCH rows (no SEED or TOUCHSEED next to them): one "random legal roll
-   instead?" uniform each, then 12 uniforms each (:func:`~baselines.kernels.random_pick`);
+   instead?" uniform each, then 12 uniforms each (:func:`~baselines.primitives.random_pick`);
 3. the other SEARCH rows in row order: a roll towards a seed's growth spot or around a
    TOUCHSEED, one ``rng.integers`` pick when there are several;
 4. SEED rows in row order: a new growth site, one ``rng.integers`` pick (``straight``) or one
@@ -20,7 +20,7 @@ come in this order:
 6. TOUCH rows told to take the role (no draws).
 
 Array shapes (A agents, K neighbourhood sites, C = 2 scent channels, S memory slots,
-L = 6 action fields): the chain's (:mod:`baselines.kernels`), plus ``contact`` (A, 2) int8
+L = 6 action fields): the chain's (:mod:`baselines.chain_kernels`), plus ``contact`` (A, 2) int8
 (``contact[:, 1]``: touching the object), ``hint`` (A, 3) float32, and the memory (S,) int64
 ``growth`` (-1 none), ``waited``, ``stuck``, ``age`` (0 none) and ``previous`` (-1 none).
 """
@@ -36,7 +36,7 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
 
-from .kernels import AROUND_BITS, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick, write_action
+from .primitives import AROUND_BITS, FAR, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick, write_action
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
@@ -46,7 +46,6 @@ SET_TOUCH = 14
 """Message value: "go TOUCH" (a searcher touching the object to the SEED or TOUCHSEED it replaces)."""
 PASS_SEED = 15
 """Message value: "become TOUCHSEED" (a stuck TOUCHSEED to a TOUCH neighbour; ``relocate`` only)."""
-_FAR = np.iinfo(np.int64).max
 
 
 class GraspRules(NamedTuple):
@@ -107,7 +106,7 @@ def _climb_pool(neighbour_kind, neighbour_scent, action_mask, i, rules):
             if neighbour_kind[i, k] == KIND_MODULE and neighbour_scent[i, k, rules.touch_channel] < smax:
                 channel = rules.touch_channel
     scent = np.empty(12, dtype=np.int64)
-    here = _FAR
+    here = FAR
     for k in range(12):
         scent[k] = neighbour_scent[i, k, channel] if neighbour_kind[i, k] == KIND_MODULE else smax
         here = min(here, scent[k])
@@ -347,3 +346,13 @@ def grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
             if own_mode[i, 0] == TOUCH and _heard(messages, i, PASS_SEED):
                 waited[slots[i]] = 0
                 write_action(actions, i, 0, TOUCHSEED, EMIT, EMIT, 0, 0)
+
+
+@kernel
+def grasp_decide(seen, slots, memory, rules, rng, actions):
+    """:func:`grasp_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
+    ``memory`` is ``(growth, waited, stuck, age, previous)``, ``rules`` a :class:`GraspRules`."""
+    growth, waited, stuck, age, previous = memory
+    grasp_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
+                  seen.own_scent, seen.action_mask, seen.contact, seen.hint, slots, growth, waited, stuck, age,
+                  previous, rules, rng, actions)

@@ -73,16 +73,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import KernelPolicy, SlotMemory, check_level, stacked_fields
+from .base import KernelPolicy, SlotMemory, check_level
 from .table_kernels import (AROOT, DISBAND, DISBAND_NOW, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP, SPOT_TAKEN,
-                            TableRules, table_actions)
+                            TableRules, table_decide)
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
-OBSERVED = ("own_mode", "messages", "neighbour_kind", "neighbour_mode", "neighbour_scent", "own_scent", "action_mask",
-            "contact", "load")
-"""The observation fields :func:`~baselines.table_kernels.table_actions` reads, in its argument order."""
-
-
 class TableMemory(SlotMemory):
     """The table rule's private memory of every module, one entry per memory slot.
 
@@ -109,6 +104,7 @@ class TablePolicy(KernelPolicy):
     """
 
     name = "table"
+    rule = staticmethod(table_decide)
 
     def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_max=0.05, p_min=0.05, f_max=2.0,
                  f_min=1.0, p_random=0.05):
@@ -137,13 +133,6 @@ class TablePolicy(KernelPolicy):
         """The parameters as :func:`~baselines.table_kernels.table_actions` reads them."""
         return TableRules(scent_max=int(self.scent_max), p_max=self.p_max, p_min=self.p_min, f_max=self.f_max,
                           f_min=self.f_min, p_random=self.p_random)
-
-    def _act(self, slots, field) -> np.ndarray:
-        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
-        m = self.memory
-        table_actions(*stacked_fields(field, OBSERVED), slots, m.spot, m.parent, m.child, self.rules, self.rng,
-                      actions)
-        return actions
 
 
 __all__ = ["AROOT", "DISBAND", "DISBAND_NOW", "FINAL", "FIXED", "IROOT", "ROOT", "SEARCH", "SEED", "SLEEP",

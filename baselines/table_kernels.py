@@ -9,15 +9,15 @@ Draws from the policy's ``numpy.random.Generator``, in row order, then for the c
 
 - an IROOT over ``f_max``: one uniform ("grow a leg?"); a ROOT under ``f_min``: one uniform;
 - a seed (AROOT or SEED) choosing a growth spot among several: one ``rng.integers`` pick
-  (:func:`~baselines.kernels.uniform_pick`);
+  (:func:`~baselines.primitives.uniform_pick`);
 - a SEARCH module next to a seed it has heard: a pick among the lowest such seeds, a pick
   among the rolls towards the spot, and when it has none and ``p_random > 0`` one uniform
   and, if that says so and it has a legal roll, a pick among those;
 - after all rows, the climbing SEARCH modules (no seed next to them): one "random legal roll
-  instead?" uniform each, then 12 uniforms each (:func:`~baselines.kernels.random_pick`).
+  instead?" uniform each, then 12 uniforms each (:func:`~baselines.primitives.random_pick`).
 
 Array shapes (A agents, K neighbourhood sites, C = 1 scent channel, S memory slots,
-L = 5 action fields): the chain's (:mod:`baselines.kernels`), plus
+L = 5 action fields): the chain's (:mod:`baselines.chain_kernels`), plus
 
 ========== ======= ==================================================
 ``contact`` (A, 2) int8, ``contact[:, 0]``: touching the floor
@@ -39,7 +39,7 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .kernels import (approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick,
+from .primitives import (FAR, approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick,
                       write_action)
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
@@ -60,7 +60,6 @@ def _zigzag() -> np.ndarray:
 
 ZIGZAG = _zigzag()
 """For a parent in direction ``k`` (up), the down direction on the opposite side of the leg."""
-_FAR = np.iinfo(np.int64).max
 
 
 class TableRules(NamedTuple):
@@ -176,7 +175,7 @@ def _gradient_pool(neighbour_kind, neighbour_scent, action_mask, i, scent_max):
     """The legal rolls of row ``i`` that keep the lowest scent next to the target, when that is
     no worse than here (the chain's SEARCH rule, staying when stuck, no bias), as a bit set."""
     scent = np.empty(12, dtype=np.int64)
-    here = _FAR
+    here = FAR
     for k in range(12):
         scent[k] = neighbour_scent[i, k, 0] if neighbour_kind[i, k] == KIND_MODULE else scent_max
         here = min(here, scent[k])
@@ -255,3 +254,13 @@ def table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
             pools[j] = legal_bits(action_mask, climbers[j])
     for j in range(n_climbers):
         actions[climbers[j], 0] = random_pick(rng, pools[j]) + 1
+
+
+@kernel
+def table_decide(seen, slots, memory, rules, rng, actions):
+    """:func:`table_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
+    ``memory`` is ``(spot, parent, child)``, ``rules`` a :class:`TableRules`."""
+    spot, parent, child = memory
+    table_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
+                  seen.own_scent, seen.action_mask, seen.contact, seen.load, slots, spot, parent, child, rules, rng,
+                  actions)

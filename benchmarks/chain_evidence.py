@@ -54,7 +54,6 @@ def run_one(job: dict) -> dict:
     ``max_cycles``. Returns the job with ``success``, ``cycles`` and ``seconds``."""
     import proteo_env
     from baselines.chain import ChainPolicy
-    from baselines.primitives import random_pick
 
     env = proteo_env.make("chain", n_modules=job["n"], motion_model=job["model"], max_cycles=job["max_cycles"])
     env.reset(seed=job["seed"])
@@ -69,7 +68,9 @@ def run_one(job: dict) -> dict:
 
         def act(buffers):
             actions = rng.integers(0, nvec, size=(buffers.action_mask.shape[0], len(nvec)))
-            actions[:, 0] = random_pick(buffers.action_mask.astype(bool), rng)  # staying is legal
+            keys = rng.random(buffers.action_mask.shape)  # a uniform legal move (staying is legal)
+            keys[buffers.action_mask == 0] = -1.0
+            actions[:, 0] = keys.argmax(axis=1)
             return actions
 
     while env.cycle < job["max_cycles"]:

@@ -133,8 +133,8 @@ def profile(n: int, cycles: int) -> dict:
     """
     import numba
 
-    from baselines.compiled import is_chain
-    from baselines.kernels import chain_actions
+    from proteo_env.tasks.chain_kernels import is_chain
+    from baselines.chain_kernels import chain_actions
     from proteo_env.core import kernels
     from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
     from proteo_env.core.world import LOCAL_ADJACENCY_BITS

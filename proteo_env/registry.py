@@ -7,10 +7,11 @@ from .tasks.base import Task
 from .tasks.branch import Branch
 from .tasks.chain import Chain, ChainV1
 from .tasks.grasp import Grasp
+from .tasks.locomotion import Locomotion
 from .tasks.sandbox import Sandbox
 from .tasks.table import Table, TableV1
 
-TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch)}
+TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, Locomotion)}
 """Registered task classes by id ``<name>-v<version>``."""
 
 

@@ -159,8 +159,10 @@ def test_seed_turns_instead_of_thickening():
     side = int(np.flatnonzero((DIRECTIONS == [1, 0, 1]).all(axis=1))[0])
     o["neighbour_kind"][side], o["neighbour_mode"][side] = 1, 3
     rng = np.random.default_rng(0)
+    kinds = np.ascontiguousarray(o["neighbour_kind"], dtype=np.int8)[None]
+    modes = np.ascontiguousarray(o["neighbour_mode"], dtype=np.int32)[None]
     for _ in range(20):
-        g = growth_direction(o, rng, horizontal=True, previous=previous, avoid_modes=(3,))
+        g = growth_direction(kinds, modes, 0, rng, True, previous, 1 << 3, True)
         assert g >= 0 and g != previous and DIRECTIONS[g][2] == 0
         assert DIRECTIONS[g] @ DIRECTIONS[previous] >= 0  # no fold back onto the predecessor
         spot = DIRECTIONS[g]

@@ -1,7 +1,9 @@
-"""Dependencies run one way: ``proteo_env/core`` <- ``proteo_env`` <- ``baselines`` <- ``training``.
+"""Dependencies run one way: ``proteo_env/core`` <- ``proteo_env`` <- ``baselines`` <- ``training``,
+and no two project modules import each other, directly or through others.
 
 Reads every import statement (module level and inside functions) of the four layers with
-``ast`` and fails on one that reaches a layer above its own.
+``ast``; fails on one that reaches a layer above its own, and on a cycle in the graph of
+imports between project modules.
 """
 
 from __future__ import annotations
@@ -29,27 +31,106 @@ def module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imports(path: Path) -> list[tuple[int, str]]:
-    """``(line, absolute module)`` of every import in ``path`` (relative imports resolved)."""
+def import_statements(path: Path) -> list[tuple[ast.stmt, str]]:
+    """``(statement, absolute module)`` of every ``import``/``from .. import`` in ``path``; the
+    module is that of a ``from`` statement (relative ones resolved), empty for ``import``."""
     here = module_name(path)
     package = here if path.name == "__init__.py" else here.rsplit(".", 1)[0]
     found = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
-            found += [(node.lineno, alias.name) for alias in node.names]
+            found.append((node, ""))
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
                 parent = package.split(".")
                 parent = parent[: len(parent) - (node.level - 1)]
                 base = ".".join(parent + ([base] if base else []))
-            found.append((node.lineno, base))
+            found.append((node, base))
+    return found
+
+
+def imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, absolute module)`` of every import in ``path`` (relative imports resolved)."""
+    found = []
+    for node, base in import_statements(path):
+        found += [(node.lineno, alias.name) for alias in node.names] if isinstance(node, ast.Import) else [(node.lineno, base)]
     return found
 
 
 def project_files():
     for top in ("proteo_env", "baselines", "training"):
         yield from sorted((ROOT / top).rglob("*.py"))
+
+
+def import_graph() -> dict[str, set[str]]:
+    """The project modules each project module imports (``from package import submodule``
+    counts as importing the submodule, not the package)."""
+    modules = {module_name(path): path for path in project_files()}
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for node, base in import_statements(path):
+            if isinstance(node, ast.Import):
+                targets.update(alias.name for alias in node.names if alias.name in modules)
+                continue
+            subs = [f"{base}.{alias.name}" for alias in node.names if f"{base}.{alias.name}" in modules]
+            targets.update(subs)
+            if len(subs) < len(node.names) and base in modules:
+                targets.add(base)
+        graph[name] = targets - {name}
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One cycle ``[a, b, .., a]`` through each group of modules that import each other
+    (Tarjan's strongly connected components of ``graph``)."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                group.add(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                cycles.append(path_within(graph, group, v))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def path_within(graph, group, start) -> list[str]:
+    """A shortest cycle from ``start`` back to it through modules of ``group``."""
+    previous, frontier = {start: None}, [start]
+    while frontier:
+        following = []
+        for v in frontier:
+            for w in sorted(graph[v] & group):
+                if w == start:
+                    path = [v]
+                    while previous[path[-1]] is not None:
+                        path.append(previous[path[-1]])
+                    return path[::-1] + [start]
+                if w not in previous:
+                    previous[w] = v
+                    following.append(w)
+        frontier = following
+    return [start]
 
 
 def test_layer_of_a_module_and_relative_imports(tmp_path):
@@ -66,3 +147,14 @@ def test_no_module_imports_a_layer_above_its_own(path):
     above = [f"{path.relative_to(ROOT)}:{line} imports {name}" for line, name in imports(path)
              if layer(name) is not None and layer(name) > own]
     assert not above, "dependencies must run core <- proteo_env <- baselines <- training: " + "; ".join(above)
+
+
+def test_cycles_are_found_and_reported():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert import_cycles(graph) == [["a", "b", "c", "a"]]
+    assert import_cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycles_between_project_modules():
+    cycles = import_cycles(import_graph())
+    assert not cycles, "project modules must not import each other: " + "; ".join(" -> ".join(c) for c in cycles)

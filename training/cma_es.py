@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from baselines.base import constructor_parameters
 from training.common import (ProgressLog, checkpoint_folder, make_run_dir, parse_args, save_args, seed_everything,
                              write_checkpoint_meta)
 
@@ -108,21 +109,6 @@ class Param:
         if self.kind == "choice":
             return (self.options.index(value) + 0.5) / len(self.options)
         return float(np.clip((value - self.low) / (self.high - self.low), 0.0, 1.0))
-
-
-def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
-    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree."""
-    out: dict[str, inspect.Parameter] = {}
-    for cls in policy_cls.__mro__:
-        if "__init__" not in vars(cls):
-            continue
-        signature = inspect.signature(cls.__init__).parameters
-        for name, p in signature.items():
-            if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD:
-                out.setdefault(name, p)
-        if not any(p.kind is p.VAR_KEYWORD for p in signature.values()):
-            break
-    return out
 
 
 def rule_params(policy_cls, args: Args, defaults: dict | None = None) -> list[Param]:

@@ -170,6 +170,51 @@ class ProgressLog:
 
 
 # ---------------------------------------------------------------------- checkpoints
+ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo")
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be loaded (the message names the path and the problem)."""
+
+
+def checkpoint_dir(path) -> Path:
+    """The checkpoint folder that ``path`` names (folder, file inside it, or run folder)."""
+    p = Path(path)
+    if not p.exists():
+        raise CheckpointError(f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
+                              f"(with {META_FILE}), a file in one, or a run folder with final/")
+    if p.is_file():
+        p = p.parent
+    if not (p / META_FILE).is_file() and (p / "final" / META_FILE).is_file():
+        p = p / "final"
+    if not (p / META_FILE).is_file():
+        raise CheckpointError(f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
+                              "allowed: a folder written by a script in training/")
+    return p
+
+
+def read_meta(path) -> dict:
+    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added)."""
+    folder = checkpoint_dir(path)
+    try:
+        meta = json.loads((folder / META_FILE).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
+    if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} has format "
+                              f"{meta.get('format') if isinstance(meta, dict) else None!r}; allowed: {CHECKPOINT_FORMAT!r}")
+    if meta.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; "
+                              f"allowed: {CHECKPOINT_VERSION}")
+    if meta.get("algorithm") not in ALGORITHMS:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "
+                              f"allowed: {', '.join(ALGORITHMS)}")
+    for key in ("task", "nvec"):
+        if key not in meta:
+            raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} lacks {key!r}")
+    return {**meta, "dir": str(folder)}
+
+
 def write_checkpoint_meta(folder: Path, *, algorithm: str, task: str, env_overrides: dict, encoder_spec: dict | None,
                           nvec, agent_steps: int, seed: int, extra: dict | None = None) -> None:
     """Write ``proteo.json`` into a checkpoint folder (its payload files are the caller's)."""

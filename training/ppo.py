@@ -372,7 +372,7 @@ def main(argv=None) -> Path:
     given.add_argument("--config")
     known, _ = given.parse_known_args(argv)
     if known.resume and not known.config:
-        from training.checkpoints import checkpoint_dir
+        from training.common import checkpoint_dir
 
         argv = ["--config", str(checkpoint_dir(known.resume) / "args.yaml"), *argv]
     return train(parse_args(Args, argv))
@@ -380,7 +380,7 @@ def main(argv=None) -> Path:
 
 def train(args: Args) -> Path:
     """Train; returns the final checkpoint's folder."""
-    from training.checkpoints import CheckpointError, read_meta
+    from training.common import CheckpointError, read_meta
 
     seed_everything(args.seed, threads=args.threads)
     if args.arch not in ARCHS:

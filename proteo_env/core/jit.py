@@ -13,6 +13,10 @@ import numba
 kernel = numba.njit(cache=True, nogil=True, boundscheck=False)
 """Decorator for the compute kernels: nopython, cached, GIL released."""
 
+generated_kernel = numba.njit(nogil=True, boundscheck=False)
+"""Decorator for kernels made at run time that close over other kernels (the compiled rollout's
+loop, one per behaviour): compiled once per process, since numba caches no closure on disk."""
+
 parallel_kernel = numba.njit(cache=True, nogil=True, boundscheck=False, parallel=True)
 """Decorator for kernels that loop over worlds with ``prange`` (threads: ``NUMBA_NUM_THREADS``)."""
 

@@ -3,11 +3,37 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..core.jit import kernel
 from ..core.world import World
 from ..layouts import Layout
+
+
+@kernel
+def no_sensor(state, load):
+    """The ``sense`` of a task whose agents carry no load: leaves ``load`` (A, 1) as it is."""
+
+
+class TaskKernels(NamedTuple):
+    """A task as a compiled rollout runs it (:mod:`baselines.compiled`), cycle after cycle.
+
+    Attributes:
+        sense: numba kernel ``sense(state, load)``, called after the engine's observation:
+            writes the task's sensor reading into ``load`` (A, 1) float32 (the ``load`` field);
+            :func:`no_sensor` for a task without one.
+        settle: numba kernel ``settle(grid, cell, mode, anchored, dir_delta, cycle, state) -> bool``,
+            called after each cycle (``cycle`` counted like ``env.cycle``): the task's
+            bookkeeping, then its success test (what :meth:`Task.success` would say).
+        state: what the two read and update (numbers, arrays, tuples or NamedTuples of them);
+            a copy, so the environment's own bookkeeping never changes.
+    """
+
+    sense: Callable
+    settle: Callable
+    state: object
 
 
 class Task:
@@ -44,6 +70,8 @@ class Task:
         of every agent is their sum.
         ``metrics(world) -> dict[str, float]``: named metrics reported in ``infos``.
         ``success(world) -> bool``: sets ``terminated`` for every agent.
+        ``kernels(world) -> TaskKernels | None``: the task's bookkeeping and success test as
+        numba kernels, for compiled rollouts (default ``None``: the task has no compiled form).
     """
 
     name: str = ""
@@ -114,3 +142,6 @@ class Task:
 
     def success(self, world: World) -> bool:
         return False
+
+    def kernels(self, world: World) -> TaskKernels | None:
+        return None

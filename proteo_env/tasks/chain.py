@@ -39,7 +39,8 @@ import numpy as np
 from ..core.structure import StructureProbe
 from ..layouts import Layout, blob_sites, place_in_box
 from ..core.kernels import EMIT, RELAY
-from .base import Task
+from .base import Task, TaskKernels, no_sensor
+from .chain_kernels import chain_settle
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
@@ -136,6 +137,9 @@ class Chain(Task):
 
     def success(self, world):
         return self._last["complete"]
+
+    def kernels(self, world):
+        return TaskKernels(no_sensor, chain_settle, np.zeros((3, world.n_modules), dtype=np.int64))
 
 
 def fcc_hops(a: np.ndarray, b: np.ndarray) -> int:

@@ -59,15 +59,14 @@ Paper section
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
-from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from ..core.kernels import EMIT, RELAY
-from .base import Task
+from .base import Task, TaskKernels, no_sensor
+from .grasp_kernels import GraspSurface, grasp_hold, grasp_settle
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 SHAPES = ("sphere", "box", "blob")
@@ -396,6 +395,9 @@ class Grasp(Task):
         return {"gap": float(m["gap"]), "contact": float(m["contact"]), "coverage": float(m["coverage"]),
                 "surround": float(m["surround"]), "success": float(m["success"])}
 
+    def kernels(self, world):
+        return TaskKernels(no_sensor, grasp_settle, self.surface)
+
     def success(self, world):
         return bool(self._last["success"])
 
@@ -403,40 +405,3 @@ class Grasp(Task):
     def surface_sites(self) -> np.ndarray:
         """``(S, 3)`` the surface sites of this episode's object (after :meth:`reset`)."""
         return self._surface_sites
-
-
-class GraspSurface(NamedTuple):
-    """The object's surface as :func:`grasp_hold` reads it (S surface sites); the compiled rollout
-    of the hand-coded behaviour (:mod:`baselines.compiled`) tests success with it too.
-
-    Attributes:
-        cell: ``(S,)`` int64 grid cell of each surface site.
-        side: ``(S,)`` int64 side (0..11, :data:`SIDES`) of each surface site.
-        n_sides: the number of sides that hold a surface site.
-        coverage_threshold, surround_threshold: the task's parameters of those names.
-    """
-
-    cell: np.ndarray
-    side: np.ndarray
-    n_sides: int
-    coverage_threshold: float
-    surround_threshold: float
-
-
-@kernel
-def grasp_hold(grid, surface):
-    """``(contact, coverage, surround, success)`` of the modules on :class:`GraspSurface`
-    ``surface``: modules on surface sites, their share of the sites, the share of the sides held,
-    and both thresholds met with some contact."""
-    held_side = np.zeros(12, dtype=np.bool_)
-    contact, sides = 0, 0
-    for j in range(surface.cell.shape[0]):
-        if grid[surface.cell[j]] >= 0:
-            contact += 1
-            if not held_side[surface.side[j]]:
-                held_side[surface.side[j]] = True
-                sides += 1
-    coverage = contact / max(surface.cell.shape[0], 1)
-    surround = sides / max(surface.n_sides, 1)
-    success = coverage >= surface.coverage_threshold and surround >= surface.surround_threshold and contact > 0
-    return contact, coverage, surround, success

@@ -1,0 +1,181 @@
+"""Locomotion: move the robot's centroid in a goal direction, over a step or through a tunnel.
+
+Description
+    The paper's reason for chains: "moving over steps, snaking into holes". The robot starts
+    as a random connected blob of modules lying on a floor (ground under ``z = 0``). Ahead of
+    it, ``distance`` empty sites from its foremost module along the goal direction ``+x``,
+    lies an obstacle across the whole width of the box: a *step*, solid ground ``step_height``
+    sites high from its face on to the far end of the box, and, as an option, a *tunnel*: a
+    solid roof ``tunnel_height`` free layers above the ground (or the step) over
+    ``tunnel_length`` sites. The *finish line* is the step's face, or the tunnel's exit; with
+    neither (``step_height=0``, ``tunnel_height=0``) it lies where the face would be. The
+    robot must get every module beyond it, rolling its modules over each other: a roll needs
+    a module to pivot on (never the ground), so a lone module cannot move and the robot
+    travels like a tread, its modules climbing over the others to the front.
+Agents
+    Every module (``module_0`` ... ``module_{N-1}``).
+Observation
+    The common observation (:mod:`proteo_env.spaces`) with one scent channel. ``hint`` is the
+    goal direction ``(1, 0, 0)`` for every agent (the paper's global hint, as in grasp);
+    ``contact[0]`` fires next to the ground, the step or the roof.
+Actions
+    The common action. Modes: 0 SEARCH, 1 SEED (a module at the front).
+Reward (team reward, the sum of these terms each cycle)
+    ``progress`` = ``(c_t - c_{t-1}) / course``: the centroid's advance along the goal
+                   direction, ``c_t`` the mean ``x`` of the modules, over ``course``, the
+                   distance from the start centroid to the finish line (potential-based;
+                   sums to 1 when the centroid reaches the line);
+    ``success``  = 1 on the cycle the whole robot is beyond the finish line;
+    ``time``     = ``-time_penalty``.
+Metrics
+    ``distance``   centroid advance since the start (sites, along ``+x``);
+    ``speed``      ``distance`` per cycle (sites per cycle);
+    ``beyond``     share of the modules beyond the finish line;
+    ``components`` connected pieces of the robot (1: connected);
+    ``success``    1 when every module is beyond the finish line.
+Termination
+    Success: every module's ``x`` is at least the finish line's. Truncation at ``max_cycles``.
+Parameters
+    See :class:`LocomotionParams`.
+Paper section
+    1 and 4.1 (chains "for moving over steps, snaking into holes"), 2.2 (directed random
+    moves).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.kernels import EMIT, RELAY
+from ..core.lattice import PAD
+from ..layouts import Layout, blob_sites
+from .base import Task, TaskKernels, no_sensor
+from .locomotion_kernels import all_beyond, locomotion_settle
+
+SEARCH, SEED = range(2)
+GOAL = np.array([1.0, 0.0, 0.0], dtype=np.float32)
+"""The goal direction, ``+x``."""
+
+
+@dataclass(frozen=True)
+class LocomotionParams:
+    """Parameters of the locomotion task (lengths in sites along the box's axes).
+
+    Attributes:
+        n_modules: modules in the robot.
+        step_height: height of the step (solid layers ``z = 0 .. step_height - 1``); 0: flat.
+        distance: empty sites between the robot's foremost module and the step's face.
+        tunnel_height: free layers under the tunnel's roof (above the ground or the step); 0:
+            no tunnel.
+        tunnel_length: the roof's extent along ``+x`` from the step's face.
+        margin: free sites on each side of the robot across the goal direction and above the
+            highest of the robot, the step and the roof.
+        room: free sites beyond the finish line (None: ``n_modules // 2 + margin``).
+        time_penalty: reward lost per cycle.
+    """
+
+    n_modules: int = 20
+    step_height: int = 2
+    distance: int = 3
+    tunnel_height: int = 0
+    tunnel_length: int = 6
+    margin: int = 3
+    room: int | None = None
+    time_penalty: float = 0.001
+
+    def __post_init__(self):
+        def bad(name, allowed):
+            raise ValueError(f"{name}={getattr(self, name)!r} is not allowed; allowed: {allowed}")
+
+        if not isinstance(self.n_modules, int) or self.n_modules < 2:
+            bad("n_modules", "an integer >= 2")
+        for name, low in (("step_height", 0), ("distance", 1), ("tunnel_height", 0), ("tunnel_length", 1),
+                          ("margin", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                bad(name, f"an integer >= {low}")
+        if self.tunnel_height == 1:
+            bad("tunnel_height", "0 (no tunnel) or an integer >= 2 (one free layer leaves no module a pivot)")
+        if self.room is not None and (isinstance(self.room, bool) or not isinstance(self.room, int)
+                                      or self.room < 1):
+            bad("room", "None or an integer >= 1")
+        if self.time_penalty < 0:
+            bad("time_penalty", "a number >= 0")
+
+
+class Locomotion(Task):
+    name = "locomotion"
+    version = 0
+    modes = ("SEARCH", "SEED")
+    Params = LocomotionParams
+    default_policy = "locomotion"
+    mode_roles = ((RELAY,), (EMIT,))
+    """``move+mode``: a SEED emits the scent, a SEARCH module relays it."""
+
+    def build_layout(self, rng):
+        p = self.params
+        blob = blob_sites(p.n_modules, rng, flat=True)
+        blob = blob - blob.min(axis=0) + np.array([p.margin, p.margin, 0])
+        if blob.sum(axis=1)[0] % 2:
+            blob[:, 0] += 1
+        face = int(blob[:, 0].max()) + 1 + p.distance
+        finish = face + (p.tunnel_length if p.tunnel_height else 0)
+        room = p.n_modules // 2 + p.margin if p.room is None else p.room
+        roof = p.step_height + p.tunnel_height
+        top = max(int(blob[:, 2].max()), p.step_height, roof if p.tunnel_height else 0)
+        size = (finish + room, int(blob[:, 1].max()) + 1 + p.margin, top + 1 + p.margin)
+        grid = np.mgrid[face:size[0], 0:size[1], 0:size[2]].reshape(3, -1).T
+        grid = grid[grid.sum(axis=1) % 2 == 0]
+        solid = grid[(grid[:, 2] < p.step_height)
+                     | (bool(p.tunnel_height) & (grid[:, 2] == roof) & (grid[:, 0] < face + p.tunnel_length))]
+        self._finish = finish
+        return Layout(size=size, modules=blob, solid=solid, floor=True)
+
+    def reset(self, world, rng):
+        self._start = self._centroid(world)
+        self._course = max(self._finish - self._start, 1.0)
+        self._last = self._previous = self._start
+        self._success = False
+        self._cycles = 0
+
+    @staticmethod
+    def _centroid(world) -> float:
+        return float(world.positions[:, 0].mean())
+
+    @property
+    def finish(self) -> int:
+        """The finish line: the ``x`` every module must reach (after :meth:`build_layout`)."""
+        return self._finish
+
+    def finish_cell(self, world) -> int:
+        """The first grid cell of ``world`` at the finish line: a module is beyond the line exactly
+        when its cell index is at least this (cells are ordered by ``x`` first)."""
+        return int((self._finish + PAD) * world.shape.strides[0])
+
+    def after_cycle(self, world, cycle):
+        self._cycles = cycle
+        self._previous, self._last = self._last, self._centroid(world)
+        self._success = bool(all_beyond(world.cell[: world.n_modules], self.finish_cell(world)))
+
+    def hint(self, world):
+        return np.broadcast_to(GOAL, (world.n_agents, 3))
+
+    def reward_terms(self, world, moved):
+        return {"progress": (self._last - self._previous) / self._course,
+                "success": 1.0 if self._success else 0.0,
+                "time": -self.params.time_penalty}
+
+    def metrics(self, world):
+        x = world.positions[:, 0]
+        distance = self._last - self._start
+        return {"distance": distance, "speed": distance / max(self._cycles, 1),
+                "beyond": float((x >= self._finish).mean()), "components": float(world.n_components()),
+                "success": float(self._success)}
+
+    def success(self, world):
+        return self._success
+
+    def kernels(self, world):
+        return TaskKernels(no_sensor, locomotion_settle, self.finish_cell(world))
