@@ -298,6 +298,8 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 
 
 def main(argv=None) -> int:
+    from training.distributed import add_ray_flags
+
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="run every registered task with its default policy")
@@ -357,6 +359,9 @@ def main(argv=None) -> int:
                    "and '<!-- end of proteo eval table -->' markers (repeatable)")
     p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
                    "OUT/pictures/ (what it builds)")
+    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted run in --out "
+                   "(default: resume it)")
+    add_ray_flags(p)
     p.set_defaults(func=evaluate)
     args = parser.parse_args(argv)
     try:
