@@ -2,8 +2,9 @@
 
 ``proteo demo`` (the main job), ``proteo run TASK|CONFIG`` (run, record, render, plot),
 ``proteo replay FILE`` (movie, still or plots of a recorded episode), ``proteo view FILE`` (an
-interactive 3D page of a recorded episode) and ``proteo figures`` (the paper's figures into
-``docs/figures``).
+interactive 3D page of a recorded episode), ``proteo figures`` (the paper's figures into
+``docs/figures``), ``proteo eval`` (the comparison table) and ``proteo sweep CONFIG`` (a grid
+of settings, policies and seeds).
 """
 
 from __future__ import annotations
@@ -274,6 +275,12 @@ def evaluate(args) -> int:
     return evaluate_main(args)
 
 
+def sweep(args) -> int:
+    from training.sweep import main as sweep_main
+
+    return sweep_main(args)
+
+
 def figures(args) -> int:
     from baselines.figures import make_figures
 
@@ -363,6 +370,15 @@ def main(argv=None) -> int:
                    "(default: resume it)")
     add_ray_flags(p)
     p.set_defaults(func=evaluate)
+
+    p = sub.add_parser("sweep", help="a task over a grid of settings, policies and seeds: tidy tables and a plot")
+    p.add_argument("config", help="a sweep config (YAML; see configs/sweeps/)")
+    p.add_argument("--out", default=None, help="folder for episodes.csv, summary.csv and sweep.png "
+                   "(default: out/sweeps/<config name>)")
+    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted sweep in --out "
+                   "(default: resume it)")
+    add_ray_flags(p)
+    p.set_defaults(func=sweep)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
