@@ -81,6 +81,7 @@ class Journal:
 
     def __init__(self, path, fingerprint: dict, *, fresh: bool = False, what: str = "run"):
         self.path = Path(path)
+        fingerprint = json.loads(json.dumps(fingerprint, default=str))  # as it reads back (tuples: lists)
         self.done: dict[str, object] = {}
         self.resumed = False
         if self.path.is_file() and not fresh:
