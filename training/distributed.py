@@ -201,6 +201,7 @@ class _Ledger:
 def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int) -> None:
     ray = connect(**options)
     ledger = ray.remote(num_cpus=0)(_Ledger).remote()
+    ray.get(ledger.retried.remote())  # started before any task needs it
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=False)(_attempt)
     slots = options.get("workers") or max(1, int(ray.cluster_resources().get("CPU", 1)))
     pending: dict = {}
