@@ -18,6 +18,7 @@ ray = pytest.importorskip("ray")
 EVAL_CONFIG = {"seeds": 3, "first_seed": 5, "tasks": {
     "chain": {"env": {"n_modules": 8, "max_cycles": 60}},
     "table": {"env": {"board_size": 6, "depth": 2, "n_spares": 8, "motion_model": "minimal", "max_cycles": 40}}}}
+TASKS = ["chain", "table"]
 CMA = ["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2", "--popsize", "4",
        "--episodes-per-candidate", "2", "--env", "{n_modules: 8, max_cycles: 60}", "--tensorboard", "false"]
 
@@ -64,24 +65,24 @@ def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path,
     from training import evaluate as ev
 
     config = _eval_config(tmp_path)
-    ev.evaluate(config=config, out=tmp_path / "whole", progress=False, plots=False)
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "whole", progress=False, plots=False)
     original, calls = ev.run_episode_job, []
     monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 7, calls))
     with pytest.raises(Interrupt):
-        ev.evaluate(config=config, out=tmp_path / "cut", progress=False, plots=False)
+        ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
     assert not (tmp_path / "cut" / "results.md").exists()  # no partial table
     with (tmp_path / "cut" / "episodes.jsonl").open("a") as fh:
         fh.write('{"key": "torn')  # the driver died while writing
     with pytest.raises(ConfigError, match="unfinished evaluation with other settings.*seeds"):
-        ev.evaluate(config=config, seeds=2, out=tmp_path / "cut", progress=False, plots=False)
+        ev.evaluate(config=config, tasks=TASKS, seeds=2, out=tmp_path / "cut", progress=False, plots=False)
     calls.clear()
     monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 10**6, calls))
-    ev.evaluate(config=config, out=tmp_path / "cut", progress=False, plots=False)
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
     total = len(_episodes(tmp_path / "whole")) * 3
     assert len(calls) == total - 7  # only the missing episodes ran
     assert _episodes(tmp_path / "cut") == _episodes(tmp_path / "whole")
     calls.clear()
-    ev.evaluate(config=config, out=tmp_path / "cut", progress=False, plots=False)
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
     assert len(calls) == total  # a finished evaluation runs anew
 
 
@@ -107,11 +108,11 @@ def test_eval_on_ray_equals_serial(tmp_path, local_ray, capsys):
     from training.cli import main
 
     config = _eval_config(tmp_path)
-    assert main(["eval", "--config", str(config), "--out", str(tmp_path / "serial"), "--no-plots"]) == 0
-    assert main(["eval", "--config", str(config), "--out", str(tmp_path / "ray"), "--no-plots", "--ray",
-                 "--workers", "2"]) == 0
+    flags = ["eval", "--config", str(config), "--tasks", ",".join(TASKS), "--no-plots"]
+    assert main([*flags, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*flags, "--out", str(tmp_path / "ray"), "--ray", "--workers", "2"]) == 0
     assert _episodes(tmp_path / "ray") == _episodes(tmp_path / "serial")
-    assert len(_episodes(tmp_path / "ray")) == 6  # chain and table: hand-coded and random
+    assert [len(r["returns"]) for r in _episodes(tmp_path / "ray")] == [3] * 4  # 2 tasks x hand-coded, random
 
 
 def test_cma_es_on_ray_equals_serial(tmp_path, local_ray):
