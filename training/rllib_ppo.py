@@ -48,6 +48,8 @@ class Args:
     task: str = "chain-v1"
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
     """Overrides passed to ``proteo_env.make`` (``control`` is always ``move``)."""
+    control: str = "move"
+    """The control level the policy acts at (only ``move``: one Discrete(13) action per module)."""
     seed: int = 0
     iterations: int = 50
     """PPO iterations (each samples ``train_batch_size`` cycles, then updates)."""
@@ -204,12 +206,17 @@ def main(argv=None) -> Path:
     from proteo_env.config import ConfigError
     from training.distributed import connect
 
+    if args.control != "move":
+        raise ConfigError(f"control={args.control!r} is not allowed; allowed: move")
     if args.env_runners < 0 or args.iterations < 1:
         raise ConfigError(f"env_runners={args.env_runners!r}, iterations={args.iterations!r} are not allowed; "
                           "allowed: env_runners >= 0, iterations >= 1")
     seed_everything(args.seed, threads=1)
     run_dir = make_run_dir(args.run_dir, f"rllib_ppo_{args.task.split('-v')[0]}_s{args.seed}", resume=False)
     save_args(args, run_dir)
+    import ray
+
+    started_ray = not ray.is_initialized()
     connect(address=args.address, workers=None if args.address else max(1, args.env_runners) + 1)
 
     algo = build_config(args).build_algo()
@@ -238,6 +245,8 @@ def main(argv=None) -> Path:
     finally:
         algo.stop()
         log.close()
+        if started_ray:
+            ray.shutdown()
     print(f"final checkpoint: {final}  ({iteration} iterations, {agent_steps} agent-steps, {log.seconds:.0f} s)")
     return final
 
