@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install demo test bench eval learning-results
+.PHONY: install install-distributed demo test bench eval learning-results
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -12,10 +12,14 @@ install: $(BIN)/python
 	$(BIN)/pip install -q -c constraints.txt torch==2.13.0
 	$(BIN)/pip install -q -c constraints.txt -e ".[test,train]"
 
+# The tests also cover Ray (the distributed extra, docs/distributed.md).
+install-distributed: install
+	$(BIN)/pip install -q -c constraints.txt -e ".[test,train,distributed]"
+
 demo: install
 	$(BIN)/proteo demo
 
-test: install
+test: install-distributed
 	$(BIN)/python -m pytest
 
 bench: install

@@ -271,6 +271,8 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
                      "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
                        "--checkpoint-every", "1"]),
+    "rllib": ("rllib_ppo", ["--iterations", "1", "--env-runners", "1", "--train-batch-size", "32",
+                            "--minibatch-size", "16", "--epochs", "1", "--checkpoint-every", "1"]),
 }
 
 

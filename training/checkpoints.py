@@ -11,6 +11,7 @@ and the algorithm's files:
 ``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
 ``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
 ``ppo``              ``policy.pt``           the actor of :mod:`training.ppo` (MLP or lattice)
+``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
 ==================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
@@ -84,7 +85,7 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
     label = meta.get("label", algorithm)
     if algorithm == "sb3-maskable-ppo":
         logits_fn = _sb3_logits(folder / "model.zip", encoder)
-    elif algorithm == "torchrl-ppo":
+    elif algorithm in ("torchrl-ppo", "rllib-ppo"):
         logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
     elif algorithm == "ppo":
         logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)

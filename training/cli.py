@@ -2,8 +2,9 @@
 
 ``proteo demo`` (the main job), ``proteo run TASK|CONFIG`` (run, record, render, plot),
 ``proteo replay FILE`` (movie, still or plots of a recorded episode), ``proteo view FILE`` (an
-interactive 3D page of a recorded episode) and ``proteo figures`` (the paper's figures into
-``docs/figures``).
+interactive 3D page of a recorded episode), ``proteo figures`` (the paper's figures into
+``docs/figures``), ``proteo eval`` (the comparison table) and ``proteo sweep CONFIG`` (a grid
+of settings, policies and seeds).
 """
 
 from __future__ import annotations
@@ -274,6 +275,12 @@ def evaluate(args) -> int:
     return evaluate_main(args)
 
 
+def sweep(args) -> int:
+    from training.sweep import main as sweep_main
+
+    return sweep_main(args)
+
+
 def figures(args) -> int:
     from baselines.figures import make_figures
 
@@ -298,6 +305,8 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 
 
 def main(argv=None) -> int:
+    from training.distributed import add_ray_flags
+
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="run every registered task with its default policy")
@@ -357,7 +366,19 @@ def main(argv=None) -> int:
                    "and '<!-- end of proteo eval table -->' markers (repeatable)")
     p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
                    "OUT/pictures/ (what it builds)")
+    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted run in --out "
+                   "(default: resume it)")
+    add_ray_flags(p)
     p.set_defaults(func=evaluate)
+
+    p = sub.add_parser("sweep", help="a task over a grid of settings, policies and seeds: tidy tables and a plot")
+    p.add_argument("config", help="a sweep config (YAML; see configs/sweeps/)")
+    p.add_argument("--out", default=None, help="folder for episodes.csv, summary.csv and sweep.png "
+                   "(default: out/sweeps/<config name>)")
+    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted sweep in --out "
+                   "(default: resume it)")
+    add_ray_flags(p)
+    p.set_defaults(func=sweep)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

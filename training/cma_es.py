@@ -33,6 +33,8 @@ the mean was mapped into the bounds, see :func:`distribution_mean`, hold clipped
 from __future__ import annotations
 
 import inspect
+import json
+import os
 import pickle
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -80,6 +82,12 @@ class Args:
     resume: str | None = None
     threads: int = 1
     tensorboard: bool = True
+    ray: bool = False
+    """Evaluate the population's episodes as Ray tasks (same results as serially)."""
+    address: str | None = None
+    """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
+    workers: int | None = None
+    """CPUs of the local Ray instance, or tasks at once on a cluster (with ``ray``)."""
 
 
 # ---------------------------------------------------------------------- the rules' parameter space
@@ -180,6 +188,74 @@ def distribution_mean(es) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- fitness
+@dataclass(frozen=True)
+class CandidateEpisode:
+    """One episode of one candidate (picklable; a Ray task when ``--ray``).
+
+    ``genome`` is the candidate ``x`` (``(n,)`` floats: the unit cube for rules, weights for
+    neural); ``params`` the rules' parameter space (empty for neural).
+    """
+
+    task: str
+    env: str
+    """The JSON of the ``proteo_env.make`` overrides."""
+    controller: str
+    policy: str
+    params: tuple
+    hidden: tuple
+    genome: tuple
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """The journal key: a hash of the candidate and the seed (generation-independent)."""
+        import hashlib
+
+        return f"{hashlib.sha256(np.asarray(self.genome, dtype=np.float64).tobytes()).hexdigest()[:16]}|{self.seed}"
+
+
+_ENVS: dict = {}
+"""The environment (and encoder) per (task, overrides), built once per process."""
+
+
+def _env(task: str, overrides: str):
+    if (task, overrides) not in _ENVS:
+        import proteo_env
+        from proteo_env.adapters.flatten import ObservationEncoder
+        from training.common import limit_threads
+
+        limit_threads(1)
+        env = proteo_env.make(task, **json.loads(overrides))
+        _ENVS[(task, overrides)] = (env, ObservationEncoder.for_env(env))
+    return _ENVS[(task, overrides)]
+
+
+def build_policy(job: CandidateEpisode):
+    """The candidate's policy in this process's environment (``ValueError``: parameters rejected)."""
+    env, encoder = _env(job.task, job.env)
+    if job.controller == "rules":
+        from baselines import make_policy
+
+        return env, make_policy(job.policy, env, seed=job.seed,
+                                **{p.name: p.decode(v) for p, v in zip(job.params, job.genome)})
+    from training.policies import LogitsPolicy, NumpyMLP
+
+    nvec = env.action_layout.nvec
+    net = NumpyMLP(encoder.size, int(nvec.sum()), job.hidden).set_flat(np.asarray(job.genome))
+    return env, LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max,
+                             seed=job.seed, encoder=encoder, logits_fn=net, label="cma-neural")
+
+
+def candidate_episode(job: CandidateEpisode) -> list | None:
+    """``[return, success, cycles]`` of the episode, or ``None`` when the policy rejects the parameters."""
+    try:
+        env, policy = build_policy(job)
+    except ValueError:  # parameters the policy rejects (e.g. f_min > f_max): scored below
+        return None
+    total, success, cycles = episode_return(env, policy, job.seed)
+    return [float(total), bool(success), int(cycles)]
+
+
 def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
     """Return, success and cycles of one episode (array API for neural controllers)."""
     from training.policies import LogitsPolicy
@@ -201,12 +277,19 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
             return total, success, env.cycle
 
 
+RESUME_INDEPENDENT = ("generations", "time_limit_minutes", "checkpoint_every", "run_dir", "resume", "threads",
+                      "tensorboard", "ray", "address", "workers")
+"""Arguments that may change when an interrupted run is rerun (the others must stay)."""
+
+
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     from proteo_env.config import ConfigError
+    from training.distributed import Journal, ray_options, run_jobs
 
     if args.controller not in ("rules", "neural"):
         raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
+    ray = ray_options(args)
     seed_everything(args.seed, threads=args.threads)
 
     import cma
@@ -215,54 +298,64 @@ def main(argv=None) -> Path:
     from baselines import POLICIES, make_policy
     from proteo_env.adapters.flatten import ObservationEncoder
     from training.checkpoints import read_meta
-    from training.policies import LogitsPolicy, NumpyMLP
+    from training.policies import NumpyMLP
 
     env = proteo_env.make(args.task, **args.env)
     encoder = ObservationEncoder.for_env(env)
     nvec = env.action_layout.nvec
     algorithm = f"cma-{args.controller}"
     resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
-                           f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}",
-                           resume=resume_meta is not None)
+    run_dir = Path(args.run_dir or (resume_meta or {}).get("run_dir")
+                   or Path("runs") / f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}")
+    state_file = run_dir / "state.pkl"
+    """The state after the last finished generation; an interrupted run (no final/) resumes from it."""
+    interrupted = state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
+    run_dir = make_run_dir(str(run_dir), run_dir.name, resume=resume_meta is not None or interrupted)
+    fingerprint = {k: v for k, v in asdict(args).items() if k not in RESUME_INDEPENDENT}
+    if interrupted:
+        state = pickle.loads(state_file.read_bytes())
+        if state["fingerprint"] != fingerprint:
+            diff = sorted(k for k in fingerprint if state["fingerprint"].get(k) != fingerprint[k])
+            raise ConfigError(f"run_dir {str(run_dir)!r} holds an interrupted run with other arguments (differing: "
+                              f"{', '.join(diff)}); allowed: the same arguments to resume it, or another run_dir")
     save_args(args, run_dir)
 
     # ------------------------------------------------------------------ genome <-> policy
+    params: tuple = ()
+    policy_name = ""
     if args.controller == "rules":
         policy_name = args.policy or env.task.default_policy
         if policy_name not in POLICIES:
             raise ValueError(f"policy {policy_name!r} is not registered; allowed: {', '.join(sorted(POLICIES))}")
         hand_coded = make_policy(policy_name, env)
-        params = rule_params(POLICIES[policy_name], args, defaults=policy_defaults(hand_coded))
+        params = tuple(rule_params(POLICIES[policy_name], args, defaults=policy_defaults(hand_coded)))
 
         def decode(x):
             return {p.name: p.decode(v) for p, v in zip(params, x)}
 
-        def build(x, seed):
-            return make_policy(policy_name, env, seed=seed, **decode(x))
-
         x0 = np.array([p.encode(p.default) for p in params])
         options = {"bounds": [0.0, 1.0], "popsize": args.popsize, "seed": args.seed + 1, "verbose": -9}
     else:
-        net = NumpyMLP(encoder.size, int(nvec.sum()), args.hidden)
-
-        def build(x, seed):
-            return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
-                                encoder=encoder, logits_fn=NumpyMLP(encoder.size, int(nvec.sum()), args.hidden).set_flat(x),
-                                label="cma-neural")
-
-        x0 = net.init_genome(np.random.default_rng(args.seed))
+        x0 = NumpyMLP(encoder.size, int(nvec.sum()), args.hidden).init_genome(np.random.default_rng(args.seed))
         options = {"popsize": args.popsize, "seed": args.seed + 1, "verbose": -9, "CMA_diagonal": True}
 
-    if resume_meta is not None:
+    rng = np.random.default_rng(args.seed)
+    agent_steps = 0
+    if interrupted:
+        es, agent_steps = state["es"], state["agent_steps"]
+        rng.bit_generator.state = state["rng"]
+        np.random.set_state(state["np_random"])  # CMA-ES samples its candidates from numpy's global generator
+        print(f"resuming the interrupted run in {run_dir} after generation {es.countiter}")
+    elif resume_meta is not None:
         es = pickle.loads((Path(resume_meta["dir"]) / "es.pkl").read_bytes())
-        if es.N != len(x0):
-            evolved = sorted(resume_meta.get("params", {}))
-            raise ConfigError(f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
-                              f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
-                              f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run")
+        agent_steps = int(resume_meta["agent_steps"])
     else:
         es = cma.CMAEvolutionStrategy(x0, args.sigma0, options)
+    if es.N != len(x0):
+        evolved = sorted((resume_meta or {}).get("params", {}))
+        raise ConfigError(f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
+                          f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
+                          f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run")
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -278,23 +371,35 @@ def main(argv=None) -> Path:
                               encoder_spec=encoder.spec() if args.controller == "neural" else None, nvec=nvec,
                               agent_steps=agent_steps, seed=args.seed, extra=extra)
 
+    def save_state() -> None:
+        tmp = state_file.with_suffix(".tmp")
+        tmp.write_bytes(pickle.dumps({"es": es, "agent_steps": agent_steps, "rng": rng.bit_generator.state,
+                                      "np_random": np.random.get_state(), "fingerprint": fingerprint}))
+        os.replace(tmp, state_file)
+
     # ------------------------------------------------------------------ evolve
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
-    agent_steps = int(resume_meta["agent_steps"]) if resume_meta else 0
+    if interrupted:
+        log.drop_after("cma/generation", es.countiter)
+    journal = Journal(run_dir / "episodes.jsonl", fingerprint, what="CMA-ES run")
+    """Every finished episode of this run (by candidate and seed): an interrupted generation resumes."""
     n_agents = len(env.possible_agents)
-    rng = np.random.default_rng(args.seed)
     bar = tqdm(total=args.generations, initial=es.countiter, unit="generation", desc=algorithm)
+    overrides = json.dumps(args.env, sort_keys=True)
     while es.countiter < args.generations:
         seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
         candidates = es.ask()
+        jobs = [CandidateEpisode(task=args.task, env=overrides, controller=args.controller, policy=policy_name,
+                                 params=params, hidden=tuple(args.hidden), genome=tuple(float(v) for v in x), seed=s)
+                for x in candidates for s in seeds]
+        episodes = run_jobs(candidate_episode, jobs, [j.key for j in jobs], ray=ray, journal=journal,
+                            desc=f"generation {es.countiter + 1}", progress=True)
         fitness, outcomes = [], []
-        for x in candidates:
-            try:
-                policies = [build(x, s) for s in seeds]
-            except ValueError:  # parameters the policy rejects (e.g. f_min > f_max): scored below
+        for c in range(len(candidates)):
+            results = episodes[c * len(seeds):(c + 1) * len(seeds)]
+            if any(r is None for r in results):
                 fitness.append(None)
                 continue
-            results = [episode_return(env, policy, s) for policy, s in zip(policies, seeds)]
             agent_steps += sum(r[2] for r in results) * n_agents
             outcomes += results
             fitness.append(float(np.mean([r[0] for r in results])))
@@ -308,16 +413,18 @@ def main(argv=None) -> Path:
         values = {"episode/return": float(np.mean(valid)), "episode/best_candidate_return": max(valid),
                   "episode/success": float(np.mean([r[1] for r in outcomes])),
                   "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma),
-                  "cma/rejected": float(len(fitness) - len(valid))}
+                  "cma/rejected": float(len(fitness) - len(valid)), "cma/generation": float(es.countiter)}
         if args.controller == "rules":
             values.update({f"param/{k}": float(v) for k, v in decode(distribution_mean(es)).items() if not isinstance(v, str)})
         log.log(agent_steps, values)
         if es.countiter % args.checkpoint_every == 0:
             save(checkpoint_folder(run_dir, agent_steps))
+        save_state()
         if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
             break
     bar.close()
     save(run_dir / "final")
+    journal.complete()
     log.close()
     print(f"final checkpoint: {run_dir / 'final'}  ({es.countiter} generations, {agent_steps} agent-steps, "
           f"{log.seconds:.0f} s)")

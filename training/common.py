@@ -145,6 +145,20 @@ class ProgressLog:
     def seconds(self) -> float:
         return self.offset + time.perf_counter() - self.started
 
+    def drop_after(self, column: str, value: float) -> None:
+        """Remove the rows whose ``column`` exceeds ``value`` (logged after the state a run resumes from)."""
+        if not self.path.exists():
+            return
+        with self.path.open() as fh:
+            reader = csv.DictReader(fh)
+            header, rows = reader.fieldnames, list(reader)
+        kept = [r for r in rows if not r.get(column) or float(r[column]) <= value]
+        with self.path.open("w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=header)
+            writer.writeheader()
+            writer.writerows(kept)
+        self.offset = float(kept[-1]["seconds"]) if kept else 0.0
+
     def log(self, agent_steps: int, values: dict) -> None:
         row = {"agent_steps": agent_steps, "seconds": round(self.seconds, 3),
                **{k: (float(v) if v is not None else "") for k, v in values.items()}}
@@ -170,7 +184,7 @@ class ProgressLog:
 
 
 # ---------------------------------------------------------------------- checkpoints
-ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo")
+ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo", "rllib-ppo")
 
 
 class CheckpointError(ValueError):

@@ -29,6 +29,12 @@ training seeds of each run's mean return, success rate and cycles to success, wi
 interval *across training seeds* (the spread a new training seed would see), and the pooled
 success count; each run's own row is in a second table. Writes ``results.md`` (the tables),
 ``results.json`` (every episode) and ``eval.png`` (the three measures per task) into ``--out``.
+
+Each episode is one job (:class:`EpisodeJob`): ``--ray`` runs them as Ray tasks, on a local
+Ray instance (``--workers N`` CPUs) or a cluster (``--address``), with results identical to
+the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
+an interrupted evaluation with the same settings runs only the missing episodes
+(``--fresh`` starts over). See docs/distributed.md.
 """
 
 from __future__ import annotations
@@ -279,21 +285,105 @@ def _name_apart(results: list[PolicyResult]) -> None:
             r.policy = f"{r.policy} ({Path(r.source).name})"
 
 
-def _picture(env, path: Path, caption: str) -> None:
-    """The world of ``env`` as it is now, drawn into ``path`` (PNG)."""
+def _picture_png(env, caption: str) -> str:
+    """The world of ``env`` as it is now, as a base64-encoded PNG."""
+    import base64
+    import tempfile
+
     from proteo_env.render.renderer import Renderer
     from proteo_env.render.scene import Scene
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    renderer = Renderer()
-    renderer.savefig(Scene.from_world(env.world, caption=caption), path)
-    renderer.close()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "picture.png"
+        renderer = Renderer()
+        renderer.savefig(Scene.from_world(env.world, caption=caption), path)
+        renderer.close()
+        return base64.b64encode(path.read_bytes()).decode()
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    """One episode: everything its result depends on (picklable; sent to Ray workers as it is).
+
+    ``policy`` is a registered policy name (``checkpoint=False``) or a checkpoint path;
+    ``overrides`` is the JSON of the ``proteo_env.make`` overrides; ``picture`` a caption: when
+    not empty the end of the episode is drawn and returned.
+    """
+
+    task_id: str
+    overrides: str
+    level: str
+    policy: str
+    checkpoint: bool
+    seed: int
+    policy_seed: int
+    deterministic: bool = False
+    picture: str = ""
+
+    @property
+    def key(self) -> str:
+        """The job's name in a journal: task, settings, level, policy and seed."""
+        return f"{self.task_id}|{self.overrides}|{self.level}|{self.policy}|{self.seed}"
+
+
+_BUILT: dict = {}
+"""(env, policy) per (task, overrides, level, policy): built once per process, reused across episodes."""
+
+
+def built(job: EpisodeJob):
+    """The environment and policy ``job`` runs (cached per process; at most 4 kept)."""
+    spec = (job.task_id, job.overrides, job.level, job.policy, job.checkpoint, job.policy_seed, job.deterministic)
+    if spec not in _BUILT:
+        import proteo_env
+        from baselines import make_policy
+        from training.checkpoints import load_policy
+        from training.common import limit_threads
+
+        limit_threads(1)
+        while len(_BUILT) >= 4:
+            _BUILT.pop(next(iter(_BUILT)))[0].close()
+        overrides = json.loads(job.overrides)
+        env = proteo_env.make(job.task_id, **overrides, **({} if job.level == "full" else {"control": job.level}))
+        policy = (load_policy(job.policy, env, seed=job.policy_seed, deterministic=job.deterministic)
+                  if job.checkpoint else make_policy(job.policy, env, seed=job.policy_seed))
+        _BUILT[spec] = (env, policy)
+    return _BUILT[spec]
+
+
+def run_episode_job(job: EpisodeJob) -> dict:
+    """Run one episode: ``{"return", "success", "cycles", "metrics", "seconds", "picture"}`` (JSON-ready)."""
+    from proteo_env.rollout import run_episode
+
+    env, policy = built(job)
+    started = time.perf_counter()
+    episode = run_episode(env, policy, seed=job.seed)
+    out = {"return": float(episode.total_reward), "success": bool(episode.success), "cycles": int(episode.cycles),
+           "metrics": {k: float(v) for k, v in episode.metrics.items()}, "seconds": time.perf_counter() - started,
+           "picture": None}
+    if job.picture:
+        out["picture"] = _picture_png(env, f"{job.picture} · seed {job.seed} · cycle {episode.cycles}"
+                                           f"{' · success' if episode.success else ''}")
+    return out
+
+
+def _checkpoint_identity(path) -> str:
+    """A hash of a checkpoint's ``proteo.json`` (it changes whenever the checkpoint is written again)."""
+    import hashlib
+
+    from training.common import META_FILE, checkpoint_dir
+
+    return hashlib.sha256((checkpoint_dir(path) / META_FILE).read_bytes()).hexdigest()[:16]
 
 
 def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
              deterministic: bool = False, progress: bool = True, plots: bool = True,
-             pictures: bool = False) -> list:
+             pictures: bool = False, ray: dict | None = None, fresh: bool = False) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
+
+    Every episode is one :class:`EpisodeJob`, run serially or as a Ray task (``ray``), and
+    recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
+    the same settings resumes it (see :class:`training.distributed.Journal`). The tables are
+    written only when every episode has finished.
 
     Args:
         config: path of the YAML settings (see the module docstring) or ``None``.
@@ -304,21 +394,21 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
         deterministic: learned and evolved neural policies take arg-max actions.
         pictures: draw the end of each policy's first episode (what it builds) into
             ``out/pictures/<task>_<policy>.png`` (the first run of a training-seed group).
+        ray: ``None`` (serial) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`).
+        fresh: discard the episodes of an unfinished earlier run in ``out`` instead of resuming it.
 
     Returns:
         one :class:`PolicyResult` per policy, or :class:`GroupResult` per training-seed group.
     """
-    from tqdm import tqdm
+    import base64
 
     import proteo_env
     from baselines import make_policy
     from proteo_env.config import ConfigError
     from proteo_env.registry import task_class
-    from proteo_env.rollout import run_episode
     from training.checkpoints import load_policy, read_meta
-    from training.common import limit_threads
+    from training.distributed import Journal, run_jobs
 
-    limit_threads(1)
     cfg = load_config(config)
     n_seeds = seeds if seeds is not None else cfg["seeds"]
     if n_seeds < 1:
@@ -341,8 +431,10 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                               f"allowed: checkpoints of {', '.join(by_task)}")
         by_task[name].append((str(path), ""))
 
-    out_dir = Path(out)
+    # Every policy's result row and its episodes as jobs; policies are built here once, so that a
+    # bad checkpoint fails before any episode runs.
     results: list[PolicyResult] = []
+    jobs: list[tuple[int, EpisodeJob]] = []
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
         envs = {"full": proteo_env.make(cls.task_id(), **overrides)}
@@ -352,6 +444,7 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
         entries = [("hand-coded", envs["full"].task.default_policy, None, "full", "")]
         entries += [("random", "random", None, level, "") for level in envs]
         entries += [(None, None, path, levels[path], group) for path, group in by_task[cls.name]]
+        first_task_row = len(results)
         for kind, name, path, level, group in entries:
             env = envs[level]
             if path is None:
@@ -362,47 +455,61 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                 policy = load_policy(path, env, seed=seed_list[0], deterministic=deterministic)
                 kind = "evolved" if meta["algorithm"].startswith("cma") else "learned"
                 source = str(path)
-            result = PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level,
-                                  group=group)
-            started = time.perf_counter()
-            for seed in tqdm(seed_list, desc=f"{cls.task_id()} / {policy.name}", unit="episode", leave=False,
-                             disable=not progress):
-                episode = run_episode(env, policy, seed=seed)
-                result.returns.append(float(episode.total_reward))
-                result.successes.append(bool(episode.success))
-                result.cycles.append(int(episode.cycles))
-                result.seeds.append(seed)
-                result.metrics.append({k: float(v) for k, v in episode.metrics.items()})
-                first_of_group = not group or not any(r.group == group and r.task == result.task for r in results)
-                if pictures and seed == seed_list[0] and first_of_group:
-                    label = group or (policy.name if path is None else Path(path).name)
-                    _picture(env, out_dir / "pictures" / f"{cls.name}_{label}_{level}.png".replace("+", "-"),
-                             f"{cls.task_id()} · {label} ({level}) · seed {seed} · cycle {episode.cycles}"
-                             f"{' · success' if episode.success else ''}")
-            result.seconds = time.perf_counter() - started
-            results.append(result)
+            first_of_group = not group or not any(r.group == group and r.task == cls.task_id() for r in results)
+            label = group or (policy.name if path is None else Path(path).name)
+            results.append(PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level,
+                                        group=group))
+            for seed in seed_list:
+                picture = (f"{cls.task_id()} · {label} ({level})"
+                           if pictures and seed == seed_list[0] and first_of_group else "")
+                jobs.append((len(results) - 1, EpisodeJob(
+                    task_id=cls.task_id(), overrides=json.dumps(overrides, sort_keys=True), level=level,
+                    policy=name if path is None else str(path), checkpoint=path is not None, seed=seed,
+                    policy_seed=seed_list[0], deterministic=deterministic, picture=picture)))
         for env in envs.values():
             env.close()
-        _name_apart([r for r in results if r.task == cls.task_id() and not r.group])
+        _name_apart([r for r in results[first_task_row:] if not r.group])
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out_dir = Path(out)
+    settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
+    fingerprint = {"seeds": seed_list, "settings": settings, "deterministic": deterministic, "pictures": pictures,
+                   "jobs": len(jobs), "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values()
+                                                      for p, _ in ps}}
+    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
+    episodes = run_jobs(run_episode_job, [j for _, j in jobs], [j.key for _, j in jobs], ray=ray, journal=journal,
+                        desc="episodes", progress=progress)
+    for (row, job), episode in zip(jobs, episodes):
+        result = results[row]
+        result.returns.append(episode["return"])
+        result.successes.append(episode["success"])
+        result.cycles.append(episode["cycles"])
+        result.seeds.append(job.seed)
+        result.metrics.append(episode["metrics"])
+        result.seconds += episode["seconds"]
+        if episode["picture"]:
+            file = out_dir / "pictures" / (f"{job.task_id.split('-v')[0]}_"
+                                           f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
+                                           f"_{job.level}.png").replace("+", "-")
+            file.parent.mkdir(parents=True, exist_ok=True)
+            file.write_bytes(base64.b64decode(episode["picture"]))
+
+    out_dir.mkdir(parents=True, exist_ok=True)
     rows = grouped(results)
     table = markdown_table(rows)
-    settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
     runs = [r for r in results if r.group]
     per_run = "" if not runs else (
         "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
         + markdown_table([dataclasses.replace(r, policy=f"{r.group} ({Path(r.source).name})") for r in runs]))
-    (out / "results.md").write_text(f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: "
-                                    f"{json.dumps(settings)}\n")
-    (out / "results.json").write_text(json.dumps(
+    (out_dir / "results.md").write_text(f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per "
+                                        f"task: {json.dumps(settings)}\n")
+    (out_dir / "results.json").write_text(json.dumps(
         {"seeds": seed_list, "settings": settings, "deterministic": deterministic,
          "results": [{**asdict(r), "summary": r.summary()} for r in results],
          "groups": [{"label": g.label, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
                     for g in rows if isinstance(g, GroupResult)]}, indent=1, default=float))
     if plots:
-        plot(rows, out / "eval.png")
+        plot(rows, out_dir / "eval.png")
+    journal.complete()
     return rows
 
 
@@ -432,9 +539,11 @@ def main(args) -> int:
     config = args.config
     if config is None and Path(DEFAULT_CONFIG).is_file():
         config = DEFAULT_CONFIG
+    from training.distributed import ray_options
+
     results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
                        checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
-                       plots=not args.no_plots, pictures=args.pictures)
+                       plots=not args.no_plots, pictures=args.pictures, ray=ray_options(args), fresh=args.fresh)
     if args.publish:
         publish(markdown_table(results), args.out, args.publish)
     print(markdown_table(results))

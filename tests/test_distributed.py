@@ -1,0 +1,182 @@
+"""Episodes as jobs: serial and Ray runs agree, interrupted runs resume, sweeps check their
+configs, and RLlib trains one iteration whose checkpoint ``proteo eval`` loads.
+
+Ray runs here on a local instance with 2 CPUs (tests/test_ray_cluster.py simulates two nodes).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from proteo_env.config import ConfigError
+
+ray = pytest.importorskip("ray")
+
+EVAL_CONFIG = {"seeds": 3, "first_seed": 5, "tasks": {
+    "chain": {"env": {"n_modules": 8, "max_cycles": 60}},
+    "table": {"env": {"board_size": 6, "depth": 2, "n_spares": 8, "motion_model": "minimal", "max_cycles": 40}}}}
+TASKS = ["chain", "table"]
+CMA = ["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2", "--popsize", "4",
+       "--episodes-per-candidate", "2", "--env", "{n_modules: 8, max_cycles: 60}", "--tensorboard", "false"]
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def _eval_config(tmp_path):
+    path = tmp_path / "eval.yaml"
+    path.write_text(json.dumps(EVAL_CONFIG))
+    return path
+
+
+def _episodes(out) -> list:
+    """Every episode of an evaluation, without its wall-clock time."""
+    data = json.loads((out / "results.json").read_text())
+    return [{k: v for k, v in r.items() if k not in ("seconds", "summary")} for r in data["results"]]
+
+
+def _progress(run_dir) -> list:
+    with (run_dir / "progress.csv").open() as fh:
+        return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(fh)]
+
+
+class Interrupt(Exception):
+    """Stands for Ctrl-C or a killed driver in the middle of a run."""
+
+
+def _interrupting(fn, after: int, calls: list):
+    def wrapped(job):
+        if len(calls) == after:
+            raise Interrupt
+        calls.append(job)
+        return fn(job)
+    return wrapped
+
+
+# ---------------------------------------------------------------------- resume (serial)
+def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path, monkeypatch):
+    from training import evaluate as ev
+
+    config = _eval_config(tmp_path)
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "whole", progress=False, plots=False)
+    original, calls = ev.run_episode_job, []
+    monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 7, calls))
+    with pytest.raises(Interrupt):
+        ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
+    assert not (tmp_path / "cut" / "results.md").exists()  # no partial table
+    with (tmp_path / "cut" / "episodes.jsonl").open("a") as fh:
+        fh.write('{"key": "torn')  # the driver died while writing
+    with pytest.raises(ConfigError, match="unfinished evaluation with other settings.*seeds"):
+        ev.evaluate(config=config, tasks=TASKS, seeds=2, out=tmp_path / "cut", progress=False, plots=False)
+    calls.clear()
+    monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 10**6, calls))
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
+    total = len(_episodes(tmp_path / "whole")) * 3
+    assert len(calls) == total - 7  # only the missing episodes ran
+    assert _episodes(tmp_path / "cut") == _episodes(tmp_path / "whole")
+    calls.clear()
+    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
+    assert len(calls) == total  # a finished evaluation runs anew
+
+
+def test_interrupted_cma_es_resumes_mid_generation(tmp_path, monkeypatch):
+    from training import cma_es
+
+    cma_es.main([*CMA, "--run-dir", str(tmp_path / "whole")])
+    original, calls = cma_es.candidate_episode, []
+    monkeypatch.setattr(cma_es, "candidate_episode", _interrupting(original, 11, calls))  # 8 per generation
+    with pytest.raises(Interrupt):
+        cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
+    calls.clear()
+    monkeypatch.setattr(cma_es, "candidate_episode", _interrupting(original, 10**6, calls))
+    cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
+    assert len(calls) == 16 - 11
+    assert _progress(tmp_path / "cut") == _progress(tmp_path / "whole")
+    with pytest.raises(ConfigError, match="not empty"):  # a finished run is not resumed by accident
+        cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
+
+
+# ---------------------------------------------------------------------- Ray == serial
+def test_eval_on_ray_equals_serial(tmp_path, local_ray, capsys):
+    from training.cli import main
+
+    config = _eval_config(tmp_path)
+    flags = ["eval", "--config", str(config), "--tasks", ",".join(TASKS), "--no-plots"]
+    assert main([*flags, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*flags, "--out", str(tmp_path / "ray"), "--ray", "--workers", "2"]) == 0
+    assert _episodes(tmp_path / "ray") == _episodes(tmp_path / "serial")
+    assert [len(r["returns"]) for r in _episodes(tmp_path / "ray")] == [3] * 4  # 2 tasks x hand-coded, random
+
+
+def test_cma_es_on_ray_equals_serial(tmp_path, local_ray):
+    from training import cma_es
+
+    cma_es.main([*CMA, "--run-dir", str(tmp_path / "serial")])
+    cma_es.main([*CMA, "--run-dir", str(tmp_path / "ray"), "--ray", "true"])
+    assert _progress(tmp_path / "ray") == _progress(tmp_path / "serial")
+    meta = [json.loads((tmp_path / d / "final" / "proteo.json").read_text()) for d in ("serial", "ray")]
+    assert meta[0]["params"] == meta[1]["params"]
+
+
+# ---------------------------------------------------------------------- sweep configs
+SWEEP = "task: chain-v1\nenv: {max_cycles: 40}\ngrid:\n  n_modules: [6, 8]\nseeds: 2\nplot: {x: n_modules}\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    (SWEEP + "colour: red\n", "unknown key 'colour'; allowed: env, first_seed, grid"),
+    (SWEEP.replace("[6, 8]", "[]"), r"grid.n_modules=\[\] is not allowed; allowed: a non-empty list"),
+    ("task: chain-v1\ngrid: {}\n", "grid={} is empty"),
+    (SWEEP.replace("n_modules", "n_modlues"), "grid point .*unknown key 'n_modlues'"),
+    (SWEEP + "search: random\nsamples: 5\n", r"samples=5 is not allowed with search: random; allowed: 1..2"),
+    (SWEEP.replace("seeds: 2", "seeds: 2\npolicies: [chian]"), "policies: 'chian' is not allowed; allowed: default, branch, chain"),
+    (SWEEP.replace("{x: n_modules}", "{x: size}"), "plot.x='size' is not allowed; allowed: n_modules, policy"),
+])
+def test_bad_sweep_config_is_one_clear_error(tmp_path, text, message):
+    from training.sweep import sweep
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        sweep(path, out=tmp_path / "out", progress=False)
+    assert not (tmp_path / "out" / "summary.csv").exists()
+
+
+def test_sweep_tables_tie_settings_and_sample_points(tmp_path):
+    from training.sweep import sweep
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text("task: table-v1\nenv: {board_size: 6, depth: 2, n_spares: 8, motion_model: minimal, "
+                    "max_cycles: 30}\ngrid:\n  p_max=p_min: [0.1, 0.5, 0.9]\n  f_max: [2.0, 3.0]\nseeds: 2\n"
+                    "search: random\nsamples: 3\nplot: {x: p_max=p_min, y: support, hue: f_max}\n")
+    summary = sweep(path, out=tmp_path / "out", progress=False)
+    assert len(summary) == 3 and all(r["episodes"] == 2 and r["y"] == "support" for r in summary)
+    with (tmp_path / "out" / "episodes.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and {"p_max=p_min", "f_max", "seed", "return", "success", "support"} <= set(rows[0])
+    assert (tmp_path / "out" / "sweep.png").stat().st_size > 1000
+
+
+# ---------------------------------------------------------------------- RLlib
+def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
+    from training import rllib_ppo
+    from training.evaluate import evaluate
+
+    final = rllib_ppo.main(["--iterations", "1", "--env-runners", "2", "--train-batch-size", "128",
+                            "--minibatch-size", "64", "--epochs", "1", "--env", "{n_modules: 6, max_cycles: 16}",
+                            "--run-dir", str(tmp_path / "run"), "--tensorboard", "false"])
+    meta = json.loads((final / "proteo.json").read_text())
+    assert meta["algorithm"] == "rllib-ppo" and meta["control"] == "move" and meta["agent_steps"] >= 128 * 6
+    assert (final / "rllib").is_dir()
+    config = tmp_path / "eval.yaml"
+    config.write_text(json.dumps({"tasks": {"chain": {"env": {"n_modules": 6, "max_cycles": 16}}}}))
+    rows = evaluate(config=config, tasks=["chain"], seeds=2, checkpoints=[str(final)], out=tmp_path / "eval",
+                    progress=False, plots=False)
+    learned = [r for r in rows if r.kind == "learned"]
+    assert len(learned) == 1 and learned[0].level == "move" and learned[0].n == 2
