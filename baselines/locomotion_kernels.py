@@ -23,9 +23,10 @@ import numpy as np
 
 from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS
-from proteo_env.spaces import EMIT, KIND_MODULE, KIND_SOLID, RELAY
+from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
 
-from .primitives import detects_scent, legal_bits, lowest_rolls, random_pick, seen_scent, write_action
+from .primitives import (detects_scent, kind_bits, legal_bits, lowest_rolls, module_bits, random_pick, seen_scent,
+                         write_action)
 
 SEARCH, SEED = range(2)
 
@@ -58,16 +59,6 @@ def _direction_bits(hint, i):
 
 
 @kernel
-def _kind_bits(neighbour_kind, i, kind):
-    """The face slots of row ``i`` whose site is of ``kind``, as a bit set."""
-    bits = 0
-    for k in range(12):
-        if neighbour_kind[i, k] == kind:
-            bits |= 1 << k
-    return bits
-
-
-@kernel
 def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, hint, slots, idle, rules, rng,
                        actions):
     """Write every row's locomotion action into ``actions`` (A, 5) and update its ``idle`` count.
@@ -77,14 +68,14 @@ def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, 
     scent = np.empty(12, dtype=np.int64)
     for i in range(own_scent.shape[0]):
         ahead, level, up = _direction_bits(hint, i)
-        modules = _kind_bits(neighbour_kind, i, KIND_MODULE)
+        modules = module_bits(neighbour_kind, i)
         legal = legal_bits(action_mask, i)
         seed = (modules & ahead) == 0 and (rules.seed_on_top == 0 or (modules & up) == 0)
         if seed:  # the front: a directed random roll ahead, down first; against an obstacle, up
             pool = legal & ahead
             if pool & ~up & rules.low_first:
                 pool &= ~up
-            if pool == 0 and _kind_bits(neighbour_kind, i, KIND_SOLID) & ahead:
+            if pool == 0 and kind_bits(neighbour_kind, i, KIND_SOLID) & ahead:
                 pool = legal & up & (ahead | level)
         elif detects_scent(own_scent, neighbour_kind, neighbour_scent, i, rules.scent_max):
             for k in range(12):

@@ -153,13 +153,19 @@ def legal_bits(action_mask, i):
 
 
 @kernel
-def module_bits(neighbour_kind, i):
-    """Bit set of the face slots of row ``i`` that hold a module."""
+def kind_bits(neighbour_kind, i, kind):
+    """Bit set of the face slots of row ``i`` whose site is of ``kind`` (a ``KIND_*`` code)."""
     bits = 0
     for k in range(12):
-        if neighbour_kind[i, k] == KIND_MODULE:
+        if neighbour_kind[i, k] == kind:
             bits |= 1 << k
     return bits
+
+
+@kernel
+def module_bits(neighbour_kind, i):
+    """Bit set of the face slots of row ``i`` that hold a module."""
+    return kind_bits(neighbour_kind, i, KIND_MODULE)
 
 
 @kernel

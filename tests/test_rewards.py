@@ -22,7 +22,7 @@ TABLE = {"board_size": 9, "depth": 2, "n_spares": 16, "schedule": ((0, 8, 2), (1
 def test_versions_are_registered_and_bare_names_mean_the_newest():
     assert {"chain-v0", "chain-v1", "table-v0", "table-v1"} <= set(proteo_env.TASKS)
     assert task_class("chain").task_id() == "chain-v1" and task_class("table").task_id() == "table-v1"
-    assert set(newest_tasks()) == {"sandbox-v0", "chain-v1", "branch-v0", "table-v1", "grasp-v0"}
+    assert set(newest_tasks()) == {"sandbox-v0", "chain-v1", "branch-v0", "table-v1", "grasp-v0", "locomotion-v0"}
 
 
 def test_fcc_hops():
