@@ -1,6 +1,6 @@
 """Does the reward prefer the paper's behaviour? The hand-coded policy against degenerate strategies.
 
-    python benchmarks/degenerate_strategies.py                      # every task, both versions where two exist
+    python benchmarks/degenerate_strategies.py                      # every task with rules, every version
     python benchmarks/degenerate_strategies.py --tasks chain --seeds 20
 
 For each task, at the settings of ``configs/eval.yaml`` (the training sizes), on the held-out
@@ -32,7 +32,7 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import proteo_env  # noqa: E402
-from baselines import make_policy  # noqa: E402
+from baselines import POLICIES, make_policy  # noqa: E402
 from baselines.base import Policy  # noqa: E402
 from proteo_env.rollout import run_episode  # noqa: E402
 from training.checkpoints import load_policy  # noqa: E402
@@ -115,7 +115,9 @@ def markdown(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", default="chain,branch,table,grasp", help="comma-separated task names")
+    parser.add_argument("--tasks", default=",".join(sorted({cls.name for cls in proteo_env.TASKS.values()}
+                                                          & set(POLICIES))),
+                        help="comma-separated task names (default: every task with a hand-coded policy)")
     parser.add_argument("--seeds", type=int, default=10, help="episodes per strategy (seeds 1000..)")
     parser.add_argument("--config", default="configs/eval.yaml", help="per-task settings (the eval config)")
     parser.add_argument("--out", default=None, help="also write the rows as JSON here")
