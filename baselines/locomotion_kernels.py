@@ -25,8 +25,8 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
 
-from .primitives import (detects_scent, kind_bits, legal_bits, lowest_rolls, module_bits, random_pick, seen_scent,
-                         write_action)
+from .primitives import (AROUND_BITS, BIT_COUNT, detects_scent, kind_bits, legal_bits, lowest_rolls, module_bits,
+                         random_pick, seen_scent, write_action)
 
 SEARCH, SEED = range(2)
 
@@ -40,6 +40,7 @@ class LocomotionRules(NamedTuple):
     patience: int
     seed_on_top: int
     low_first: int
+    contacts: int
 
 
 @kernel
@@ -94,6 +95,12 @@ def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, 
                 pool &= ahead | level
         else:
             pool = legal & ahead
+        held = 0  # no strands: rolls whose target keeps at least `contacts` of the modules seen next to it
+        for k in range(12):
+            if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] >= rules.contacts:
+                held |= 1 << k
+        if held:
+            pool = held
         s = slots[i]
         idle[s] = idle[s] + 1 if pool == 0 else 0
         wild = rng.random() < rules.p_random or idle[s] > rules.patience
