@@ -32,8 +32,9 @@ eval: install
 # The multi-seed study of training/ppo.py at control level move (16 M agent-steps per run, about
 # 30 minutes on 2 cores),
 # then its evaluation: the table with the spread over training seeds goes into docs/eval/study,
-# docs/learning.md and README.md.
+# docs/learning.md and README.md; the same checkpoints at twice their size into docs/eval/study_larger.
 learning-results: install
 	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
 		--publish docs/learning.md --publish README.md
+	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger

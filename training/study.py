@@ -13,7 +13,7 @@ thread each), then keeps:
 - its ``progress.csv`` in ``docs/learning/progress/ppo_<task>_<level>_s<S>.csv`` and one figure
   of the learning curves of all seeds per task, ``docs/learning/curves_ppo_<task>_<level>.png``;
 - ``docs/learning/study_<level>.json``: per run the agent-steps, the wall-clock and the final
-  checkpoint.
+  checkpoint (runs of other tasks or seeds already recorded there are kept).
 
 Then ``proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures`` gives
 the table with the spread over training seeds (``make learning-results`` runs both).
@@ -36,7 +36,7 @@ from training.common import parse_args
 class Args:
     """Train ``training/ppo.py`` on several tasks and training seeds (arguments of training/study.py)."""
 
-    tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp")
+    tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     level: str = "move"
     """Control level; the config of each run is configs/train/ppo_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
@@ -94,7 +94,11 @@ def main(argv=None) -> int:
         meta = json.loads((keep / "proteo.json").read_text())
         summary.append({"task": task, "seed": seed, "level": args.level, "agent_steps": meta.get("agent_steps"),
                         "wall_clock_minutes": round(seconds / 60.0, 2), "checkpoint": str(keep)})
-    (docs / f"study_{level}.json").write_text(json.dumps(summary, indent=1))
+    record = docs / f"study_{level}.json"
+    kept = json.loads(record.read_text()) if record.is_file() else []
+    trained = {(run["task"], run["seed"]) for run in summary}
+    runs = [run for run in kept if (run["task"], run["seed"]) not in trained] + summary
+    record.write_text(json.dumps(sorted(runs, key=lambda run: (run["task"], run["seed"])), indent=1))
 
     from training.plots import plot_runs
 
