@@ -104,14 +104,14 @@
     return geometry;
   }
 
-  /** Corners (4 x 3 per face, wound to face outwards) and unit normals of the 12 faces of a cell at the origin. */
+  /** Corners (4 x 3 per face, wound to face outwards, in half units: integers) and unit normals of the 12 faces of a cell at the origin. */
   function faceCorners(faceQuads) {
     return faceQuads.map((quad) => {
       const [a, b, c] = quad.map((p) => new THREE.Vector3(...p));
       const centre = quad.reduce((sum, p) => sum.add(new THREE.Vector3(...p)), new THREE.Vector3()).multiplyScalar(0.25);
       const outward = new THREE.Vector3().subVectors(b, a).cross(new THREE.Vector3().subVectors(c, a)).dot(centre) > 0;
       const order = outward ? quad : [quad[0], quad[3], quad[2], quad[1]];
-      return { corners: order.flat(), normal: centre.clone().normalize().toArray() };
+      return { corners: order.flat().map((v) => Math.round(2 * v)), normal: centre.clone().normalize().toArray() };
     });
   }
 
@@ -186,13 +186,25 @@
     const cut = new THREE.Plane(new THREE.Vector3(-1, 0, 0), 0);
     const clipping = [];
     const geometry = cellGeometry(meta.face_quads);
+
+    // framing: the box of every site visited (every frame's modules, obstacles, object)
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    const grow = (sites, n) => { for (let i = 0; i < n; i++) for (let k = 0; k < 3; k++) { const v = sites[3 * i + k]; if (v < lo[k]) lo[k] = v; if (v > hi[k]) hi[k] = v; } };
+    for (let t = 0; t < T; t += Math.max(1, Math.floor(T / 64))) { episode.seek(t); grow(episode.positions, N); }
+    episode.seek(T - 1); grow(episode.positions, N);
+    grow(solidSites, solidSites.length / 3); grow(objectSites, objectSites.length / 3);
+    if (!isFinite(lo[0])) { lo.fill(0); hi.fill(0); }
+
     // modules are drawn face by face, in one mesh rebuilt per picture: only the faces that look onto a
-    // free site and towards the camera (a software WebGL draws one big mesh far faster than instances)
+    // free site and towards the camera (a software WebGL draws one big mesh far faster than instances).
+    // Colours travel as normalised bytes, RGBA (SwiftShader converts 3-byte and 16-bit vertex formats on the
+    // CPU, which costs more than it saves); corners are kept in half units, which are integers (the mesh is
+    // scaled by 1/2).
     const directions = meta.directions, faces = faceCorners(meta.face_quads);
     const maxFaces = Math.max(N * 12, 1);
     const faceGeometry = new THREE.BufferGeometry();
-    for (const name of ['position', 'color']) {
-      const attribute = new THREE.BufferAttribute(new Float32Array(maxFaces * 12), 3);
+    for (const [name, array, size, normalized] of [['position', new Float32Array(maxFaces * 12), 3, false], ['color', new Uint8Array(maxFaces * 16), 4, true]]) {
+      const attribute = new THREE.BufferAttribute(array, size, normalized);
       attribute.setUsage(THREE.DynamicDrawUsage);
       faceGeometry.setAttribute(name, attribute);
     }
@@ -203,6 +215,7 @@
     // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light))
     const modules = new THREE.Mesh(faceGeometry, new THREE.MeshBasicMaterial({ vertexColors: true, clippingPlanes: clipping }));
     const faceShade = new Float32Array(12), lightWorld = new THREE.Vector3();
+    modules.scale.setScalar(0.5);
     modules.frustumCulled = false;
     scene.add(modules);
     const faceModule = new Int32Array(maxFaces);  // face -> module id
@@ -216,13 +229,6 @@
     scene.add(marker);
     let picked = -1;
 
-    // framing: the box of every site visited (every frame's modules, obstacles, object)
-    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    const grow = (sites, n) => { for (let i = 0; i < n; i++) for (let k = 0; k < 3; k++) { const v = sites[3 * i + k]; if (v < lo[k]) lo[k] = v; if (v > hi[k]) hi[k] = v; } };
-    for (let t = 0; t < T; t += Math.max(1, Math.floor(T / 64))) { episode.seek(t); grow(episode.positions, N); }
-    episode.seek(T - 1); grow(episode.positions, N);
-    grow(solidSites, solidSites.length / 3); grow(objectSites, objectSites.length / 3);
-    if (!isFinite(lo[0])) { lo.fill(0); hi.fill(0); }
     // occupancy of the sites around everything visited (outside it every site counts as free)
     const gridLo = lo.map((v) => v - 2), gridSize = [0, 1, 2].map((k) => hi[k] - lo[k] + 5);
     const gridVolume = gridSize[0] * gridSize[1] * gridSize[2];
@@ -276,7 +282,7 @@
       lightWorld.set(...meta.light.direction_in_camera).normalize().transformDirection(camera.matrixWorld);
       for (let d = 0; d < 12; d++) {
         const n = faces[d].normal;
-        faceShade[d] = meta.light.ambient + (1 - meta.light.ambient) * Math.max(0, n[0] * lightWorld.x + n[1] * lightWorld.y + n[2] * lightWorld.z);
+        faceShade[d] = 255 * (meta.light.ambient + (1 - meta.light.ambient) * Math.max(0, n[0] * lightWorld.x + n[1] * lightWorld.y + n[2] * lightWorld.z));
       }
       const pos = episode.positions, mode = episode.modes;
       const cutting = clipping.length > 0;
@@ -297,6 +303,7 @@
         const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
         const ex = eye.x - x, ey = eye.y - y, ez = eye.z - z;
         moduleColour(i, md, colour, 0);
+        const x2 = 2 * x, y2 = 2 * y, z2 = 2 * z;
         k++;
         for (let d = 0; d < 12; d++) {
           const dir = directions[d];
@@ -306,10 +313,10 @@
             if (at >= 0 && grid[at]) continue;  // hidden by a neighbour
           }
           const corners = faces[d].corners, shade = faceShade[d];
-          const r = colour[0] * shade, g = colour[1] * shade, b = colour[2] * shade;
-          for (let v = 0, o = 12 * f; v < 12; v += 3, o += 3) {
-            vp[o] = x + corners[v]; vp[o + 1] = y + corners[v + 1]; vp[o + 2] = z + corners[v + 2];
-            vc[o] = r; vc[o + 1] = g; vc[o + 2] = b;
+          const r = colour[0] * shade + 0.5, g = colour[1] * shade + 0.5, b = colour[2] * shade + 0.5;  // bytes: truncated
+          for (let v = 0, o = 12 * f, c = 16 * f; v < 12; v += 3, o += 3, c += 4) {
+            vp[o] = x2 + corners[v]; vp[o + 1] = y2 + corners[v + 1]; vp[o + 2] = z2 + corners[v + 2];
+            vc[c] = r; vc[c + 1] = g; vc[c + 2] = b; vc[c + 3] = 255;
           }
           faceModule[f++] = i;
         }
@@ -318,7 +325,7 @@
       for (const name of ['position', 'color']) {
         const attribute = faceGeometry.attributes[name];
         attribute.clearUpdateRanges();
-        attribute.addUpdateRange(0, 12 * f);
+        attribute.addUpdateRange(0, 4 * attribute.itemSize * f);
         attribute.needsUpdate = true;
       }
       faceGeometry.boundingSphere = null;  // recomputed when a click needs it
