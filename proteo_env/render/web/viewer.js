@@ -259,9 +259,18 @@
     }
 
     // ---------------------------------------------------------------- drawing
-    let dirty = true, facesStale = true;
+    let dirty = true, facesStale = true, orderStale = true;
     const requestDraw = () => { dirty = true; };
-    controls.addEventListener('change', () => { facesStale = true; requestDraw(); });
+    controls.addEventListener('change', () => { facesStale = orderStale = true; requestDraw(); });
+    // modules nearest the camera first, so that the depth test spares the pixels of the faces they hide
+    // (sorted when the camera moves; modules stepping meanwhile only make the order a little less good)
+    const order = new Uint32Array(N).map((_, i) => i), depth = new Float32Array(N);
+    function sortByDepth() {
+      const p = episode.positions, e = camera.position;
+      for (let i = 0; i < N; i++) depth[i] = (p[3 * i] - e.x) ** 2 + (p[3 * i + 1] - e.y) ** 2 + (p[3 * i + 2] - e.z) ** 2;
+      order.sort((a, b) => depth[a] - depth[b]);
+      orderStale = false;
+    }
 
     const cutSide = new Float32Array(Math.max(N, 1));  // signed distance of each module's centre to the cut plane
     function moduleColour(i, md, out, o) {
@@ -294,11 +303,12 @@
         const at = cellIndex(x, y, z);
         if (at >= 0) grid[at] = 1;
       }
+      if (orderStale) sortByDepth();
       const eye = camera.position;
       const colour = [0, 0, 0];
       let f = 0, k = 0;
-      for (let i = 0; i < N; i++) {
-        const md = mode[i];
+      for (let j = 0; j < N; j++) {
+        const i = order[j], md = mode[i];
         if (!shown[md] || cutSide[i] <= -1) continue;
         const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
         const ex = eye.x - x, ey = eye.y - y, ez = eye.z - z;
