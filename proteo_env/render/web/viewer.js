@@ -359,11 +359,12 @@
     }
 
     // ---------------------------------------------------------------- chart
-    const chart = $('chart'), chartCtx = chart.getContext('2d');
+    // the curves are drawn once (again on resize and toggles); playing only moves the cursor element and
+    // changes the legend's numbers, so that a picture costs no canvas drawing and no layout
+    const chart = $('chart'), chartCtx = chart.getContext('2d'), cursor = $('cursor');
     const LINE_COLOURS = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
     const seriesNames = Object.keys(meta.series);
     const seriesOn = seriesNames.map((name) => meta.metric_names.length ? meta.metric_names.includes(name) : true);
-    let curves = null;  // offscreen canvas with the curves, redrawn on resize and toggles
     const legend = $('legend');
     const legendValues = seriesNames.map((name, k) => {
       const row = document.createElement('div');
@@ -372,17 +373,19 @@
       row.querySelector('.name').textContent = name;
       row.title = `${name}: click to show or hide`;
       row.classList.toggle('off', !seriesOn[k]);
-      row.addEventListener('click', () => { seriesOn[k] = !seriesOn[k]; row.classList.toggle('off', !seriesOn[k]); curves = null; drawChart(); });
+      row.addEventListener('click', () => { seriesOn[k] = !seriesOn[k]; row.classList.toggle('off', !seriesOn[k]); drawChart(); });
       legend.appendChild(row);
       return row.querySelector('.value');
     });
 
+    /** Where frame's cycle is on the chart, in pixels from its left, in a chart width pixels wide. */
     function chartX(frame, width) { return T > 1 ? 4 + (width - 8) * frame / (T - 1) : width / 2; }
 
-    function drawCurves(width, height) {
-      const off = document.createElement('canvas');
-      off.width = width; off.height = height;
-      const ctx = off.getContext('2d');
+    function drawChart() {
+      const ratio = window.devicePixelRatio || 1;
+      const width = Math.max(1, Math.round(chart.clientWidth * ratio)), height = Math.max(1, Math.round(chart.clientHeight * ratio));
+      chart.width = width; chart.height = height;
+      const ctx = chartCtx;
       ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, width, height);
       seriesNames.forEach((name, k) => {
         if (!seriesOn[k]) return;
@@ -402,23 +405,21 @@
         });
         ctx.stroke();
       });
-      return off;
+      chartWidth = width / ratio;
+      moveCursor();
     }
 
-    function drawChart() {
-      const ratio = window.devicePixelRatio || 1;
-      const width = Math.max(1, Math.round(chart.clientWidth * ratio)), height = Math.max(1, Math.round(chart.clientHeight * ratio));
-      if (chart.width !== width || chart.height !== height) { chart.width = width; chart.height = height; curves = null; }
-      if (!curves) curves = drawCurves(width, height);
-      chartCtx.drawImage(curves, 0, 0);
-      const x = chartX(episode.frame, width);
-      chartCtx.strokeStyle = '#222'; chartCtx.lineWidth = ratio;
-      chartCtx.beginPath(); chartCtx.moveTo(x, 0); chartCtx.lineTo(x, height); chartCtx.stroke();
+    let chartWidth = 1;  // CSS pixels, as of the last drawChart
+    function moveCursor() {
+      cursor.style.transform = `translateX(${chartX(episode.frame, chartWidth).toFixed(1)}px)`;
       seriesNames.forEach((name, k) => {
         const v = meta.series[name][episode.frame];
-        legendValues[k].textContent = v === null ? '–' : (Number.isInteger(v) ? String(v) : v.toPrecision(3));
+        setText(legendValues[k], v === null ? '–' : (Number.isInteger(v) ? String(v) : v.toPrecision(3)));
       });
     }
+
+    /** Change an element's text only when it differs (an unchanged text then costs no layout). */
+    function setText(element, text) { if (element.textContent !== text) element.textContent = text; }
 
     function seekFromChart(event) {
       const rect = chart.getBoundingClientRect();
@@ -516,7 +517,7 @@
     });
 
     // ---------------------------------------------------------------- timeline and playback
-    const timeline = $('timeline'), playButton = $('play'), speedSelect = $('speed');
+    const timeline = $('timeline'), playButton = $('play'), speedSelect = $('speed'), cycleReadout = $('cycle-readout');
     timeline.max = String(T - 1);
     const SPEEDS = [1, 2, 5, 10, 20, 50, 100, 200, 500];
     for (const s of SPEEDS) speedSelect.add(new Option(`${s} cycles/s`, String(s)));
@@ -526,16 +527,16 @@
     function refresh() {
       modeCounts.fill(0);
       for (let i = 0; i < N; i++) modeCounts[episode.modes[i]]++;
-      countCells.forEach((cell, m) => { cell.textContent = String(modeCounts[m]); });
+      countCells.forEach((cell, m) => setText(cell, String(modeCounts[m])));
       updateModules();
       const cycle = meta.cycles[episode.frame];
       timeline.value = String(episode.frame);
-      $('cycle-readout').textContent = `cycle ${cycle} / ${meta.cycles[T - 1]}`;
+      setText(cycleReadout, `cycle ${cycle} / ${meta.cycles[T - 1]}`);
       body.dataset.frame = String(episode.frame);
       body.dataset.cycle = String(cycle);
       document.title = errors.length ? document.title : `proteo · ${meta.task_id} · cycle ${cycle} / ${meta.cycles[T - 1]} · ${N} modules`;
       if (picked >= 0) showPicked();
-      drawChart();
+      moveCursor();
       requestDraw();
     }
 
