@@ -104,14 +104,14 @@
     return geometry;
   }
 
-  /** Corners (4 x 3 per face, wound to face outwards, in half units: integers) and unit normals of the 12 faces of a cell at the origin. */
+  /** Corners (4 x 3 per face, wound to face outwards) and unit normals of the 12 faces of a cell at the origin. */
   function faceCorners(faceQuads) {
     return faceQuads.map((quad) => {
       const [a, b, c] = quad.map((p) => new THREE.Vector3(...p));
       const centre = quad.reduce((sum, p) => sum.add(new THREE.Vector3(...p)), new THREE.Vector3()).multiplyScalar(0.25);
       const outward = new THREE.Vector3().subVectors(b, a).cross(new THREE.Vector3().subVectors(c, a)).dot(centre) > 0;
       const order = outward ? quad : [quad[0], quad[3], quad[2], quad[1]];
-      return { corners: order.flat().map((v) => Math.round(2 * v)), normal: centre.clone().normalize().toArray() };
+      return { corners: order.flat(), normal: centre.clone().normalize().toArray() };
     });
   }
 
@@ -186,20 +186,10 @@
     const cut = new THREE.Plane(new THREE.Vector3(-1, 0, 0), 0);
     const clipping = [];
     const geometry = cellGeometry(meta.face_quads);
-
-    // framing: the box of every site visited (every frame's modules, obstacles, object)
-    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    const grow = (sites, n) => { for (let i = 0; i < n; i++) for (let k = 0; k < 3; k++) { const v = sites[3 * i + k]; if (v < lo[k]) lo[k] = v; if (v > hi[k]) hi[k] = v; } };
-    for (let t = 0; t < T; t += Math.max(1, Math.floor(T / 64))) { episode.seek(t); grow(episode.positions, N); }
-    episode.seek(T - 1); grow(episode.positions, N);
-    grow(solidSites, solidSites.length / 3); grow(objectSites, objectSites.length / 3);
-    if (!isFinite(lo[0])) { lo.fill(0); hi.fill(0); }
-
     // modules are drawn face by face, in one mesh rebuilt per picture: only the faces that look onto a
     // free site and towards the camera (a software WebGL draws one big mesh far faster than instances).
-    // Colours travel as normalised bytes, RGBA (SwiftShader converts 3-byte and 16-bit vertex formats on the
-    // CPU, which costs more than it saves); corners are kept in half units, which are integers (the mesh is
-    // scaled by 1/2).
+    // Colours travel as normalised bytes, RGBA: a third of the float triples' bytes copied to the GPU per
+    // picture (3-byte colours are slower, as SwiftShader converts them on the CPU).
     const directions = meta.directions, faces = faceCorners(meta.face_quads);
     const maxFaces = Math.max(N * 12, 1);
     const faceGeometry = new THREE.BufferGeometry();
@@ -212,10 +202,9 @@
     for (let f = 0; f < maxFaces; f++) index.set([4 * f, 4 * f + 1, 4 * f + 2, 4 * f, 4 * f + 2, 4 * f + 3], 6 * f);
     faceGeometry.setIndex(new THREE.BufferAttribute(index, 1));
     // faces are flat and the light turns with the camera, so each face's shade is computed here, once per
-    // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light))
+    // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light)), in bytes
     const modules = new THREE.Mesh(faceGeometry, new THREE.MeshBasicMaterial({ vertexColors: true, clippingPlanes: clipping }));
     const faceShade = new Float32Array(12), lightWorld = new THREE.Vector3();
-    modules.scale.setScalar(0.5);
     modules.frustumCulled = false;
     scene.add(modules);
     const faceModule = new Int32Array(maxFaces);  // face -> module id
@@ -229,6 +218,13 @@
     scene.add(marker);
     let picked = -1;
 
+    // framing: the box of every site visited (every frame's modules, obstacles, object)
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    const grow = (sites, n) => { for (let i = 0; i < n; i++) for (let k = 0; k < 3; k++) { const v = sites[3 * i + k]; if (v < lo[k]) lo[k] = v; if (v > hi[k]) hi[k] = v; } };
+    for (let t = 0; t < T; t += Math.max(1, Math.floor(T / 64))) { episode.seek(t); grow(episode.positions, N); }
+    episode.seek(T - 1); grow(episode.positions, N);
+    grow(solidSites, solidSites.length / 3); grow(objectSites, objectSites.length / 3);
+    if (!isFinite(lo[0])) { lo.fill(0); hi.fill(0); }
     // occupancy of the sites around everything visited (outside it every site counts as free)
     const gridLo = lo.map((v) => v - 2), gridSize = [0, 1, 2].map((k) => hi[k] - lo[k] + 5);
     const gridVolume = gridSize[0] * gridSize[1] * gridSize[2];
@@ -313,7 +309,6 @@
         const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
         const ex = eye.x - x, ey = eye.y - y, ez = eye.z - z;
         moduleColour(i, md, colour, 0);
-        const x2 = 2 * x, y2 = 2 * y, z2 = 2 * z;
         k++;
         for (let d = 0; d < 12; d++) {
           const dir = directions[d];
@@ -323,9 +318,9 @@
             if (at >= 0 && grid[at]) continue;  // hidden by a neighbour
           }
           const corners = faces[d].corners, shade = faceShade[d];
-          const r = colour[0] * shade + 0.5, g = colour[1] * shade + 0.5, b = colour[2] * shade + 0.5;  // bytes: truncated
+          const r = colour[0] * shade + 0.5, g = colour[1] * shade + 0.5, b = colour[2] * shade + 0.5;  // rounded, as bytes truncate
           for (let v = 0, o = 12 * f, c = 16 * f; v < 12; v += 3, o += 3, c += 4) {
-            vp[o] = x2 + corners[v]; vp[o + 1] = y2 + corners[v + 1]; vp[o + 2] = z2 + corners[v + 2];
+            vp[o] = x + corners[v]; vp[o + 1] = y + corners[v + 1]; vp[o + 2] = z + corners[v + 2];
             vc[c] = r; vc[c + 1] = g; vc[c + 2] = b; vc[c + 3] = 255;
           }
           faceModule[f++] = i;
