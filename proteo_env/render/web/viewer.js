@@ -189,7 +189,7 @@
     // modules are drawn face by face, in one mesh rebuilt per picture: only the faces that look onto a
     // free site and towards the camera (a software WebGL draws one big mesh far faster than instances).
     // Colours travel as normalised bytes, RGBA: a third of the float triples' bytes copied to the GPU per
-    // picture (3-byte colours are slower, as SwiftShader converts them on the CPU).
+    // picture (3-byte colours with 16-bit corners were much slower in SwiftShader).
     const directions = meta.directions, faces = faceCorners(meta.face_quads);
     const maxFaces = Math.max(N * 12, 1);
     const faceGeometry = new THREE.BufferGeometry();
