@@ -187,12 +187,14 @@
     const clipping = [];
     const geometry = cellGeometry(meta.face_quads);
     // modules are drawn face by face, in one mesh rebuilt per picture: only the faces that look onto a
-    // free site and towards the camera (a software WebGL draws one big mesh far faster than instances)
+    // free site and towards the camera (a software WebGL draws one big mesh far faster than instances).
+    // Colours travel as normalised bytes, RGBA: a third of the float triples' bytes copied to the GPU per
+    // picture (3-byte colours with 16-bit corners were much slower in SwiftShader).
     const directions = meta.directions, faces = faceCorners(meta.face_quads);
     const maxFaces = Math.max(N * 12, 1);
     const faceGeometry = new THREE.BufferGeometry();
-    for (const name of ['position', 'color']) {
-      const attribute = new THREE.BufferAttribute(new Float32Array(maxFaces * 12), 3);
+    for (const [name, array, size, normalized] of [['position', new Float32Array(maxFaces * 12), 3, false], ['color', new Uint8Array(maxFaces * 16), 4, true]]) {
+      const attribute = new THREE.BufferAttribute(array, size, normalized);
       attribute.setUsage(THREE.DynamicDrawUsage);
       faceGeometry.setAttribute(name, attribute);
     }
@@ -200,7 +202,7 @@
     for (let f = 0; f < maxFaces; f++) index.set([4 * f, 4 * f + 1, 4 * f + 2, 4 * f, 4 * f + 2, 4 * f + 3], 6 * f);
     faceGeometry.setIndex(new THREE.BufferAttribute(index, 1));
     // faces are flat and the light turns with the camera, so each face's shade is computed here, once per
-    // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light))
+    // face and picture, as in the pictures: colour x (ambient + (1 - ambient) x max(0, normal . light)), in bytes
     const modules = new THREE.Mesh(faceGeometry, new THREE.MeshBasicMaterial({ vertexColors: true, clippingPlanes: clipping }));
     const faceShade = new Float32Array(12), lightWorld = new THREE.Vector3();
     modules.frustumCulled = false;
@@ -253,9 +255,18 @@
     }
 
     // ---------------------------------------------------------------- drawing
-    let dirty = true, facesStale = true;
+    let dirty = true, facesStale = true, orderStale = true;
     const requestDraw = () => { dirty = true; };
-    controls.addEventListener('change', () => { facesStale = true; requestDraw(); });
+    controls.addEventListener('change', () => { facesStale = orderStale = true; requestDraw(); });
+    // modules nearest the camera first, so that the depth test spares the pixels of the faces they hide
+    // (sorted when the camera moves; modules stepping meanwhile only make the order a little less good)
+    const order = new Uint32Array(N).map((_, i) => i), depth = new Float32Array(N);
+    function sortByDepth() {
+      const p = episode.positions, e = camera.position;
+      for (let i = 0; i < N; i++) depth[i] = (p[3 * i] - e.x) ** 2 + (p[3 * i + 1] - e.y) ** 2 + (p[3 * i + 2] - e.z) ** 2;
+      order.sort((a, b) => depth[a] - depth[b]);
+      orderStale = false;
+    }
 
     const cutSide = new Float32Array(Math.max(N, 1));  // signed distance of each module's centre to the cut plane
     function moduleColour(i, md, out, o) {
@@ -276,7 +287,7 @@
       lightWorld.set(...meta.light.direction_in_camera).normalize().transformDirection(camera.matrixWorld);
       for (let d = 0; d < 12; d++) {
         const n = faces[d].normal;
-        faceShade[d] = meta.light.ambient + (1 - meta.light.ambient) * Math.max(0, n[0] * lightWorld.x + n[1] * lightWorld.y + n[2] * lightWorld.z);
+        faceShade[d] = 255 * (meta.light.ambient + (1 - meta.light.ambient) * Math.max(0, n[0] * lightWorld.x + n[1] * lightWorld.y + n[2] * lightWorld.z));
       }
       const pos = episode.positions, mode = episode.modes;
       const cutting = clipping.length > 0;
@@ -288,11 +299,12 @@
         const at = cellIndex(x, y, z);
         if (at >= 0) grid[at] = 1;
       }
+      if (orderStale) sortByDepth();
       const eye = camera.position;
       const colour = [0, 0, 0];
       let f = 0, k = 0;
-      for (let i = 0; i < N; i++) {
-        const md = mode[i];
+      for (let j = 0; j < N; j++) {
+        const i = order[j], md = mode[i];
         if (!shown[md] || cutSide[i] <= -1) continue;
         const x = pos[3 * i], y = pos[3 * i + 1], z = pos[3 * i + 2];
         const ex = eye.x - x, ey = eye.y - y, ez = eye.z - z;
@@ -306,10 +318,10 @@
             if (at >= 0 && grid[at]) continue;  // hidden by a neighbour
           }
           const corners = faces[d].corners, shade = faceShade[d];
-          const r = colour[0] * shade, g = colour[1] * shade, b = colour[2] * shade;
-          for (let v = 0, o = 12 * f; v < 12; v += 3, o += 3) {
+          const r = colour[0] * shade + 0.5, g = colour[1] * shade + 0.5, b = colour[2] * shade + 0.5;  // rounded, as bytes truncate
+          for (let v = 0, o = 12 * f, c = 16 * f; v < 12; v += 3, o += 3, c += 4) {
             vp[o] = x + corners[v]; vp[o + 1] = y + corners[v + 1]; vp[o + 2] = z + corners[v + 2];
-            vc[o] = r; vc[o + 1] = g; vc[o + 2] = b;
+            vc[c] = r; vc[c + 1] = g; vc[c + 2] = b; vc[c + 3] = 255;
           }
           faceModule[f++] = i;
         }
@@ -318,7 +330,7 @@
       for (const name of ['position', 'color']) {
         const attribute = faceGeometry.attributes[name];
         attribute.clearUpdateRanges();
-        attribute.addUpdateRange(0, 12 * f);
+        attribute.addUpdateRange(0, 4 * attribute.itemSize * f);
         attribute.needsUpdate = true;
       }
       faceGeometry.boundingSphere = null;  // recomputed when a click needs it
@@ -342,11 +354,12 @@
     }
 
     // ---------------------------------------------------------------- chart
-    const chart = $('chart'), chartCtx = chart.getContext('2d');
+    // the curves are drawn once (again on resize and toggles); playing only moves the cursor element and
+    // changes the legend's numbers, so that a picture costs no canvas drawing and no layout
+    const chart = $('chart'), chartCtx = chart.getContext('2d'), cursor = $('cursor');
     const LINE_COLOURS = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
     const seriesNames = Object.keys(meta.series);
     const seriesOn = seriesNames.map((name) => meta.metric_names.length ? meta.metric_names.includes(name) : true);
-    let curves = null;  // offscreen canvas with the curves, redrawn on resize and toggles
     const legend = $('legend');
     const legendValues = seriesNames.map((name, k) => {
       const row = document.createElement('div');
@@ -355,17 +368,19 @@
       row.querySelector('.name').textContent = name;
       row.title = `${name}: click to show or hide`;
       row.classList.toggle('off', !seriesOn[k]);
-      row.addEventListener('click', () => { seriesOn[k] = !seriesOn[k]; row.classList.toggle('off', !seriesOn[k]); curves = null; drawChart(); });
+      row.addEventListener('click', () => { seriesOn[k] = !seriesOn[k]; row.classList.toggle('off', !seriesOn[k]); drawChart(); });
       legend.appendChild(row);
       return row.querySelector('.value');
     });
 
+    /** Where frame's cycle is on the chart, in pixels from its left, in a chart width pixels wide. */
     function chartX(frame, width) { return T > 1 ? 4 + (width - 8) * frame / (T - 1) : width / 2; }
 
-    function drawCurves(width, height) {
-      const off = document.createElement('canvas');
-      off.width = width; off.height = height;
-      const ctx = off.getContext('2d');
+    function drawChart() {
+      const ratio = window.devicePixelRatio || 1;
+      const width = Math.max(1, Math.round(chart.clientWidth * ratio)), height = Math.max(1, Math.round(chart.clientHeight * ratio));
+      chart.width = width; chart.height = height;
+      const ctx = chartCtx;
       ctx.fillStyle = '#ffffff'; ctx.fillRect(0, 0, width, height);
       seriesNames.forEach((name, k) => {
         if (!seriesOn[k]) return;
@@ -385,23 +400,21 @@
         });
         ctx.stroke();
       });
-      return off;
+      chartWidth = width / ratio;
+      moveCursor();
     }
 
-    function drawChart() {
-      const ratio = window.devicePixelRatio || 1;
-      const width = Math.max(1, Math.round(chart.clientWidth * ratio)), height = Math.max(1, Math.round(chart.clientHeight * ratio));
-      if (chart.width !== width || chart.height !== height) { chart.width = width; chart.height = height; curves = null; }
-      if (!curves) curves = drawCurves(width, height);
-      chartCtx.drawImage(curves, 0, 0);
-      const x = chartX(episode.frame, width);
-      chartCtx.strokeStyle = '#222'; chartCtx.lineWidth = ratio;
-      chartCtx.beginPath(); chartCtx.moveTo(x, 0); chartCtx.lineTo(x, height); chartCtx.stroke();
+    let chartWidth = 1;  // CSS pixels, as of the last drawChart
+    function moveCursor() {
+      cursor.style.transform = `translateX(${chartX(episode.frame, chartWidth).toFixed(1)}px)`;
       seriesNames.forEach((name, k) => {
         const v = meta.series[name][episode.frame];
-        legendValues[k].textContent = v === null ? '–' : (Number.isInteger(v) ? String(v) : v.toPrecision(3));
+        setText(legendValues[k], v === null ? '–' : (Number.isInteger(v) ? String(v) : v.toPrecision(3)));
       });
     }
+
+    /** Change an element's text only when it differs (an unchanged text then costs no layout). */
+    function setText(element, text) { if (element.textContent !== text) element.textContent = text; }
 
     function seekFromChart(event) {
       const rect = chart.getBoundingClientRect();
@@ -499,7 +512,7 @@
     });
 
     // ---------------------------------------------------------------- timeline and playback
-    const timeline = $('timeline'), playButton = $('play'), speedSelect = $('speed');
+    const timeline = $('timeline'), playButton = $('play'), speedSelect = $('speed'), cycleReadout = $('cycle-readout');
     timeline.max = String(T - 1);
     const SPEEDS = [1, 2, 5, 10, 20, 50, 100, 200, 500];
     for (const s of SPEEDS) speedSelect.add(new Option(`${s} cycles/s`, String(s)));
@@ -509,16 +522,16 @@
     function refresh() {
       modeCounts.fill(0);
       for (let i = 0; i < N; i++) modeCounts[episode.modes[i]]++;
-      countCells.forEach((cell, m) => { cell.textContent = String(modeCounts[m]); });
+      countCells.forEach((cell, m) => setText(cell, String(modeCounts[m])));
       updateModules();
       const cycle = meta.cycles[episode.frame];
       timeline.value = String(episode.frame);
-      $('cycle-readout').textContent = `cycle ${cycle} / ${meta.cycles[T - 1]}`;
+      setText(cycleReadout, `cycle ${cycle} / ${meta.cycles[T - 1]}`);
       body.dataset.frame = String(episode.frame);
       body.dataset.cycle = String(cycle);
       document.title = errors.length ? document.title : `proteo · ${meta.task_id} · cycle ${cycle} / ${meta.cycles[T - 1]} · ${N} modules`;
       if (picked >= 0) showPicked();
-      drawChart();
+      moveCursor();
       requestDraw();
     }
 
