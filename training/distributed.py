@@ -177,10 +177,13 @@ def run_jobs(fn: Callable, jobs: Sequence, keys: Sequence[str], *, ray: dict | N
 
 
 def _attempt(fn, job, key: str, ledger):
-    """The Ray task: note the attempt in the ledger, then run the job."""
-    import ray
+    """The Ray task: note the attempt in the ledger, then run the job.
 
-    ray.get(ledger.start.remote(key))
+    The note is sent without waiting for its answer: a task blocked in ``ray.get`` gives its
+    CPU back, and Ray then starts another worker process for the next task, which pays for
+    the imports and the JIT cache again (that made Ray slower than serial on two cores).
+    """
+    ledger.start.remote(key)
     return fn(job)
 
 
@@ -197,11 +200,17 @@ class _Ledger:
     def retried(self) -> dict[str, int]:
         return {k: n - 1 for k, n in self.attempts.items() if n > 1}
 
+    def clear(self) -> None:
+        self.attempts.clear()
+
 
 def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int) -> None:
     ray = connect(**options)
-    ledger = ray.remote(num_cpus=0)(_Ledger).remote()
-    ray.get(ledger.retried.remote())  # started before any task needs it
+    # one ledger per driver, kept between runs: an actor is a process of its own, and starting
+    # one per run costs about a second of CPU, which two cores feel
+    name = f"proteo-ledger-{ray.get_runtime_context().get_job_id()}"
+    ledger = ray.remote(num_cpus=0)(_Ledger).options(name=name, get_if_exists=True).remote()
+    ray.get(ledger.clear.remote())  # started, and empty, before any task needs it
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=False)(_attempt)
     slots = options.get("workers") or max(1, int(ray.cluster_resources().get("CPU", 1)))
     pending: dict = {}
@@ -231,7 +240,6 @@ def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int)
                   + ", ".join(f"{k} ({n}x)" for k, n in sorted(retried.items())), file=sys.stderr)
         for ref in pending:
             ray.cancel(ref)
-        ray.kill(ledger)
 
 
 # ---------------------------------------------------------------------- connecting
