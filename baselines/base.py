@@ -135,10 +135,11 @@ class SlotMemory:
 
     def reserve(self, n_slots: int) -> None:
         """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
+        if n_slots <= self.n_slots:
+            return
         for name, (dtype, empty) in self.FIELDS.items():
             values = getattr(self, name)
-            if n_slots > len(values):
-                setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
+            setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
 
     @property
     def n_slots(self) -> int:
@@ -224,8 +225,7 @@ class KernelPolicy(Policy):
             slots = self._row_slots
         else:
             slots = np.array([self._slots.setdefault(k, len(self._slots)) for k in keys], dtype=np.int64)
-        if len(slots) and slots[-1] >= self.memory.n_slots or keyed_by == "name":
-            self.memory.reserve(int(slots.max()) + 1 if len(slots) else 0)
+        self.memory.reserve(len(slots) if keyed_by == "row" else len(self._slots))
         return slots
 
     def memory_rows(self, agents) -> SlotMemory:

@@ -47,7 +47,6 @@ class BatchedEnv:
         engine: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
         cycles: ``(B,)`` int, cycles of each world's current episode (the cycle number the
             task sees); all equal unless :meth:`reset_worlds` restarted some worlds.
-        cycle: cycles since the last :meth:`reset` (every world steps once per call).
         last_moved: ``(B, A)`` bool, who moved in the last cycle.
     """
 
@@ -75,7 +74,6 @@ class BatchedEnv:
         self.n_agents = probe.n_agents
         self.n_modules = len(probe.positions)
         self.engine: WorldBatch | None = None
-        self.cycle = 0
         self.cycles = np.zeros(self.n_envs, dtype=np.int64)
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         self._rngs = [np.random.default_rng() for _ in tasks]
@@ -126,7 +124,6 @@ class BatchedEnv:
         self.engine = WorldBatch(worlds)
         for b in range(self.n_envs):
             self._start_episode(b)
-        self.cycle = 0
         self.cycles[:] = 0
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         return self.observe_arrays()
@@ -137,7 +134,9 @@ class BatchedEnv:
         World ``b``'s new episode is drawn from its own generator, as a single env's ``reset()``
         without a seed would draw it. A start layout larger than the batch's grid moves every
         running world onto a larger grid first (:meth:`~proteo_env.core.world.World.regrid`;
-        their trajectories do not change). Returns fresh observations of every world.
+        their trajectories do not change). Returns fresh observations of every world: when the
+        current cycle was observed already, only the restarted worlds are observed anew (into a
+        copy; buffers returned before are not changed).
         """
         if self.engine is None:
             raise RuntimeError("no world yet; call reset() first")
@@ -149,6 +148,7 @@ class BatchedEnv:
         layouts = {int(b): self._build_layout(int(b)) for b in rows}
         extent = self.worlds[0].shape.extent
         needed = tuple(np.max([extent] + [layout.size for layout in layouts.values()], axis=0))
+        observed = None if needed != extent or self._observed is None else self._observed.copy()
         if needed != extent:
             self.engine = WorldBatch([world.regrid(needed) for world in self.worlds])
             for task, world in zip(self.tasks, self.worlds):
@@ -160,8 +160,15 @@ class BatchedEnv:
             self._start_episode(b)
         self.cycles[rows] = 0
         self.last_moved[rows] = False
-        self._observed = None
-        return self.observe_arrays()
+        if observed is None:
+            return self.observe_arrays()
+        a = self.n_agents
+        for b in layouts:
+            view = observed.rows(b * a, (b + 1) * a)
+            self.worlds[b].observe(view)
+            self._sense(b, view)
+        self._observed = observed
+        return observed
 
     def _build_layout(self, b: int) -> Layout:
         """World ``b``'s next start layout, from its generator; its module and agent counts checked."""
@@ -237,7 +244,6 @@ class BatchedEnv:
         self.last_moved = self.engine.step(
             move=actions[..., lay.move], mode=actions[..., lay.mode], scent_role=actions[..., lay.roles],
             message_target=actions[..., lay.message_target], message_value=actions[..., lay.message_value])
-        self.cycle += 1
         self.cycles += 1
         self._observed = None
         terms = []
@@ -251,11 +257,15 @@ class BatchedEnv:
         a = self.n_agents
         buffers = ObservationBuffers(self.n_envs * a, self.n_sites, self.tasks[0].n_channels)
         self.engine.observe(buffers)
-        for b, (task, world) in enumerate(zip(self.tasks, self.worlds)):
-            buffers.load[b * a:(b + 1) * a, 0] = task.load(world)
-            buffers.hint[b * a:(b + 1) * a] = task.hint(world)
+        for b in range(self.n_envs):
+            self._sense(b, buffers.rows(b * a, (b + 1) * a))
         self._observed = buffers
         return buffers
+
+    def _sense(self, b: int, view: ObservationBuffers) -> None:
+        """The task's sensors of world ``b`` (load, hint) into ``view``, its rows of an observation."""
+        view.load[:, 0] = self.tasks[b].load(self.worlds[b])
+        view.hint[:] = self.tasks[b].hint(self.worlds[b])
 
     def metrics(self) -> list[dict[str, float]]:
         """The task's metrics of every world."""

@@ -125,7 +125,7 @@ class ProteoEnv(ParallelEnv):
 
     @property
     def cycle(self) -> int:
-        return self.batch.cycle
+        return int(self.batch.cycles[0])
 
     @property
     def last_moved(self) -> np.ndarray:

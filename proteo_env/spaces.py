@@ -152,6 +152,13 @@ class ObservationBuffers:
             setattr(view, f, getattr(self, f)[start:stop])
         return view
 
+    def copy(self) -> "ObservationBuffers":
+        """Buffers of their own with the same values."""
+        twin = object.__new__(ObservationBuffers)
+        for f in self.FIELDS:
+            setattr(twin, f, getattr(self, f).copy())
+        return twin
+
     def agent(self, i: int) -> dict[str, np.ndarray]:
         """The observation dict of agent ``i`` (views into the buffers)."""
         return {f: getattr(self, f)[i] for f in self.FIELDS}

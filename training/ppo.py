@@ -332,14 +332,12 @@ class Worlds:
         rows, features = [], []
         for k, group in enumerate(self.groups):
             restart = ended[k * self.b:(k + 1) * self.b]
-            if not restart.any():
-                self.buffers[k] = group.observe_arrays()
-                continue
-            observed = group.observe_arrays()
+            self.buffers[k] = group.observe_arrays()
             for j in np.flatnonzero(truncated[k * self.b:(k + 1) * self.b]):
                 rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
-                features.append(self.encoder.encode_buffers(observed.rows(j * a, (j + 1) * a)))
-            self.buffers[k] = group.reset_worlds(restart)
+                features.append(self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)))
+            if restart.any():
+                self.buffers[k] = group.reset_worlds(restart)
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
         self.final_features = np.concatenate(features) if features else self.final_features[:0]
         self.env_seconds += time.perf_counter() - started
