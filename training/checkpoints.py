@@ -12,6 +12,7 @@ and the algorithm's files:
 ``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
 ``ppo``              ``policy.pt``           the actor of :mod:`training.ppo` (MLP or lattice)
 ``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
+``imitation``        ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
 ==================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
@@ -87,7 +88,7 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         logits_fn = _sb3_logits(folder / "model.zip", encoder)
     elif algorithm in ("torchrl-ppo", "rllib-ppo"):
         logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
-    elif algorithm == "ppo":
+    elif algorithm in ("ppo", "imitation"):
         logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)
     else:
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)

@@ -184,7 +184,7 @@ class ProgressLog:
 
 
 # ---------------------------------------------------------------------- checkpoints
-ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo", "rllib-ppo")
+ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo", "rllib-ppo", "imitation")
 
 
 class CheckpointError(ValueError):

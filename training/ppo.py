@@ -11,6 +11,7 @@ of the move logits (``action_mask``), and the sampled ``(B, A, F)`` action array
     python -m training.ppo --config configs/train/ppo_chain_move.yaml
     python -m training.ppo --config configs/train/ppo_chain_move.yaml --total-steps 2000000 --run-dir runs/try
     python -m training.ppo --resume runs/try/checkpoints/step_0001001472 --total-steps 4000000
+    python -m training.ppo --config configs/train/kickstart_grasp_move.yaml --init runs/bc_grasp
     tensorboard --logdir runs
 
 Actions. One categorical head per controlled field of the control level (``control``):
@@ -31,6 +32,14 @@ Networks (``arch``):
 The critic (at ``mlp`` and ``lattice``) is a separate tanh MLP on the same local features: one
 parameter-shared value per module estimating the team's return (every module receives the
 team reward).
+
+Kickstarting. ``init`` starts from the network of another checkpoint (a clone from
+:mod:`training.imitate`, or a PPO run) of the same task, level, encoding and network shape.
+``distill_coef > 0`` adds to the loss the cross-entropy between the policy and the teacher's
+action (:mod:`training.teachers`, the task's rules by default) on the learner's own states,
+weighted by ``distill_coef``, which falls linearly to zero over the first ``distill_steps``
+agent-steps (0: it stays); after that the teacher is no longer consulted and the learner is
+free to leave it behind.
 
 Episode ends. A world's episode ends at success or at ``max_cycles``, and the world starts
 its next episode at once (``BatchedEnv.reset_worlds``) while the others run on, so every
@@ -113,6 +122,21 @@ class Args:
     """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
     tensorboard: bool = True
     progress_bar: bool = True
+    init: str | None = None
+    """Start from this checkpoint's network (training/imitate.py or training/ppo.py; same task, level,
+    encoding, arch and hidden): kickstarting from a clone."""
+    teacher: str = "rules"
+    """The policy of the distillation term: rules (the task's hand-coded policy) or the task's name."""
+    distill_coef: float = 0.0
+    """Weight of the cross-entropy to the teacher's action on the learner's states at the start (0: off)."""
+    distill_steps: int = 0
+    """Agent-steps over which distill_coef falls linearly to zero (0: it stays)."""
+
+    def distill_weight(self, agent_steps: int) -> float:
+        """The distillation weight after ``agent_steps`` agent-steps."""
+        if self.distill_steps <= 0:
+            return self.distill_coef
+        return self.distill_coef * max(0.0, 1.0 - agent_steps / self.distill_steps)
 
 
 # ---------------------------------------------------------------------- networks
@@ -250,6 +274,13 @@ def joint_log_prob(log_probs: list[torch.Tensor], actions: torch.Tensor) -> torc
     return sum(lp.gather(1, actions[:, k:k + 1])[:, 0] for k, lp in enumerate(log_probs))
 
 
+def teacher_cross_entropy(log_probs: list[torch.Tensor], labels: torch.Tensor, move_mask: torch.Tensor) -> torch.Tensor:
+    """Mean over samples of ``-log pi(label)`` summed over fields, for labels ``(N, F)``; samples
+    whose labelled move is illegal under ``move_mask (N, 13)`` count zero."""
+    legal = move_mask.gather(1, labels[:, :1])[:, 0].float()
+    return -(joint_log_prob(log_probs, labels) * legal).sum() / legal.sum().clamp(min=1.0)
+
+
 def entropy(log_probs: list[torch.Tensor]) -> torch.Tensor:
     """Sum over fields of each field's entropy ``(N,)``."""
     return sum(-(lp.exp() * lp).sum(dim=1) for lp in log_probs)
@@ -361,6 +392,28 @@ def gae(rewards, values, next_values, terminal, done, gamma: float, lam: float) 
     return advantages
 
 
+def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> dict:
+    """The network weights of checkpoint ``args.init``, after checking that it was trained by
+    training/imitate.py or training/ppo.py on the same task, control level, observation encoding
+    and network shape; a :class:`~training.common.CheckpointError` naming what differs."""
+    from training.common import CheckpointError, read_meta
+
+    meta = read_meta(args.init)
+    where = f"init={args.init!r}"
+    if meta["algorithm"] not in ("imitation", ALGORITHM):
+        raise CheckpointError(f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
+                              "training/imitate.py or training/ppo.py")
+    wanted = {"task": task_id.split("-v")[0], "control": args.control, "arch": args.arch,
+              "hidden": list(args.hidden), "encoder": encoder.spec()}
+    found = {"task": meta["task"].split("-v")[0], "control": meta.get("control"), "arch": meta.get("arch"),
+             "hidden": meta.get("hidden"), "encoder": meta.get("encoder")}
+    for key, value in wanted.items():
+        if found[key] != value:
+            raise CheckpointError(f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
+                                  f"allowed: a checkpoint with {key}={value!r}")
+    return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
+
+
 def main(argv=None) -> Path:
     """Parse the arguments and train. ``--resume CHECKPOINT`` without ``--config`` starts from the
     arguments the checkpoint was trained with (its ``args.yaml``); flags given override them."""
@@ -395,7 +448,15 @@ def train(args: Args) -> Path:
     worlds = Worlds(args, env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
     net = ActorCritic(enc, nvec, args.arch, args.hidden)
+    if args.init and resume_meta is None:
+        net.load_state_dict(initial_weights(args, worlds.task_id, enc))
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
+    teachers = None
+    if args.distill_coef > 0:
+        from training.teachers import Teachers
+
+        teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed + agent_steps,
+                            n_fields=len(nvec))
     if resume_meta is not None:
         folder = Path(resume_meta["dir"])
         net.load_state_dict(torch.load(folder / "policy.pt", weights_only=True))
@@ -408,6 +469,7 @@ def train(args: Args) -> Path:
     move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
     obs_t, mask_t = torch.from_numpy(features), torch.from_numpy(move_mask)
     actions_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
+    labels_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
     logp_t, values_t, bootstrap_t = (torch.zeros((t_steps, n)) for _ in range(3))
     rewards_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d) for d in (np.float32, bool, bool))
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
@@ -431,15 +493,20 @@ def train(args: Args) -> Path:
             break
         started = time.perf_counter()
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
+        distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
         # ---- rollout: t_steps cycles of every world
         with torch.no_grad():
             for t in range(t_steps):
                 worlds.encode(features[t], move_mask[t])
+                if distill > 0:
+                    labels_t[t] = torch.from_numpy(teachers.labels(worlds.buffers))
                 logits, values = net(obs_t[t])
                 actions, logp = sample(masked_log_probs(logits, mask_t[t], nvec))
                 actions_t[t], logp_t[t], values_t[t] = actions, logp, values
                 reward, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1), finished)
                 rewards_w[t], terminal_w[t], truncated_w[t] = reward, terminal, truncated
+                if distill > 0:
+                    teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
                     bootstrap_t[t, worlds.final_rows] = net.value(torch.from_numpy(worlds.final_features))
             last = np.zeros((n, enc.size), dtype=np.float32)
@@ -455,13 +522,14 @@ def train(args: Args) -> Path:
         # ---- update
         used = t_steps * n
         flat = (obs_t.reshape(-1, enc.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
-                logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1))
-        stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": []}
+                logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1), labels_t.reshape(-1, len(nvec)))
+        stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": [],
+                 "loss/distill": []}
         for _ in range(args.n_epochs):
             order = torch.randperm(used)
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start:start + args.minibatch_size]
-                x, m, act, old_logp, adv, ret = (v[mb] for v in flat)
+                x, m, act, old_logp, adv, ret, labels = (v[mb] for v in flat)
                 adv = (adv - adv.mean()) / (adv.std() + 1e-8)
                 logits, values = net(x)
                 log_probs = masked_log_probs(logits, m, nvec)
@@ -470,6 +538,10 @@ def train(args: Args) -> Path:
                 value_loss = 0.5 * (values - ret).pow(2).mean()
                 ent = entropy(log_probs).mean()
                 loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
+                if distill > 0:
+                    distill_loss = teacher_cross_entropy(log_probs, labels, m)
+                    loss = loss + distill * distill_loss
+                    stats["loss/distill"].append(distill_loss.item())
                 optimiser.zero_grad(set_to_none=True)
                 loss.backward()
                 if args.arch == "shared":
@@ -490,7 +562,8 @@ def train(args: Args) -> Path:
         env_time, enc_time = worlds.env_seconds - env_s, worlds.encode_seconds - enc_s
         seconds = updated - started
         v, r = values_t.reshape(-1), returns.reshape(-1)
-        log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items()},
+        log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items() if x},
+                              "loss/distill_weight": distill,
                               "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
                               "time/env_seconds": env_time, "time/encode_seconds": enc_time,
                               "time/forward_seconds": collected - started - env_time - enc_time,

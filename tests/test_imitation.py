@@ -1,0 +1,108 @@
+"""training/imitate.py and kickstarting in training/ppo.py: the clone learns the rules' moves,
+its checkpoint evaluates and starts PPO, the distillation term anneals, and bad input is refused."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import proteo_env  # noqa: E402
+from proteo_env.config import ConfigError  # noqa: E402
+from training import imitate, ppo  # noqa: E402
+from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
+from training.teachers import Teachers  # noqa: E402
+
+SMALL_ENV = {"n_modules": 8, "max_cycles": 100}
+
+
+def tiny_clone(run_dir, *extra: str):
+    argv = ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--seed", "5", "--n-envs", "16",
+            "--rounds", "2", "--cycles-per-round", "150", "--epochs", "8", "--minibatch-size", "512",
+            "--hidden", "[32, 32]", "--run-dir", str(run_dir), "--tensorboard", "false", "--progress-bar", "false",
+            *extra]
+    return imitate.main(argv)
+
+
+@pytest.fixture(scope="module")
+def clone(tmp_path_factory):
+    return tiny_clone(tmp_path_factory.mktemp("imitate") / "run")
+
+
+def rows(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_the_teacher_driven_round_is_the_rules_and_the_clone_agrees_with_them_on_held_out_states(clone):
+    log = rows(clone.parent / "progress.csv")
+    assert [float(r["beta"]) for r in log] == [1.0, 0.5, 0.25]
+    assert float(log[0]["episode/success"]) == 1.0  # round 0: the rules drive, and the rules build chains
+    # agreement is measured on each new round's states before the clone is trained on them
+    assert all(float(r["imitation/agreement_move"]) > 0.55 for r in log[1:])
+    meta = read_meta(clone)
+    assert meta["algorithm"] == "imitation" and meta["control"] == "move" and meta["teacher"] == "rules"
+
+
+def test_the_clone_agrees_with_the_rules_far_more_than_an_untrained_network(clone):
+    env = proteo_env.make_batched("chain-v0", 4, control="move", **SMALL_ENV)
+    teachers = Teachers(env, 4, seed=123)
+    trained = load_policy(clone, proteo_env.make("chain-v0", control="move", **SMALL_ENV))
+    meta = read_meta(clone)
+    fresh = ppo.ActorCritic(trained.encoder, [13], "shared", tuple(meta["hidden"]))
+    buffers, hits = env.reset(seed=900), {"clone": [], "fresh": []}
+    for _ in range(40):
+        labels = teachers.labels([buffers])[:, 0]
+        features = trained.encoder.encode_buffers(buffers)
+        choice = buffers.action_mask.sum(axis=1) > 1
+        with torch.no_grad():
+            fresh_logits = fresh.logits(torch.from_numpy(features)).numpy()
+        for name, logits in (("clone", trained.logits_fn(features)), ("fresh", fresh_logits)):
+            best = np.where(buffers.action_mask.astype(bool), logits, -np.inf).argmax(axis=1)
+            hits[name] += list((best == labels)[choice])
+        env.step_arrays(labels.reshape(4, -1, 1))
+        teachers.restart(env.success() | (env.cycles >= SMALL_ENV["max_cycles"]))
+        buffers = env.observe_arrays()
+    assert np.mean(hits["clone"]) > np.mean(hits["fresh"]) + 0.25
+
+
+def test_imitation_is_deterministic_for_a_seed(clone, tmp_path):
+    again = tiny_clone(tmp_path / "again")
+    first, second = (torch.load(p / "policy.pt", weights_only=True) for p in (clone, again))
+    assert all(torch.equal(first[k], second[k]) for k in first)
+
+
+def test_kickstarting_starts_from_the_clone_and_anneals_the_distillation_term(clone, tmp_path):
+    hidden = json.dumps(read_meta(clone)["hidden"])
+    common = ["--task", "chain-v0", "--control", "move", "--env", json.dumps(SMALL_ENV), "--n-envs", "8",
+              "--n-steps", "16", "--minibatch-size", "256", "--arch", "shared", "--message-encoding", "compact",
+              "--hidden", hidden, "--tensorboard", "false", "--progress-bar", "false", "--init", str(clone)]
+    start = ppo.main(common + ["--total-steps", "0", "--run-dir", str(tmp_path / "zero")])
+    kept, loaded = (torch.load(p / "policy.pt", weights_only=True) for p in (clone, start))
+    assert all(torch.equal(kept[k], loaded[k]) for k in kept)
+    run = ppo.main(common + ["--total-steps", "6000", "--distill-coef", "1.0", "--distill-steps", "3000",
+                             "--run-dir", str(tmp_path / "kick")])
+    log = rows(run.parent / "progress.csv")
+    weights = [float(r["loss/distill_weight"]) for r in log]
+    assert weights[0] == 1.0 and weights == sorted(weights, reverse=True) and weights[-1] == 0.0
+    distilled = [float(r["loss/distill"]) for r in log if r["loss/distill"]]
+    assert distilled and all(np.isfinite(distilled))
+
+
+def test_bad_teacher_and_init_are_refused_naming_the_field(clone, tmp_path):
+    with pytest.raises(ConfigError, match=r"teacher='grasp' does not fit task 'chain'.*'rules'"):
+        tiny_clone(tmp_path / "a", "--teacher", "grasp")
+    with pytest.raises(ConfigError, match=r"rounds=-1 is not allowed"):
+        tiny_clone(tmp_path / "b", "--rounds", "-1")
+    with pytest.raises(ConfigError, match=r"beta=1.5 is not allowed"):
+        tiny_clone(tmp_path / "c", "--beta", "1.5")
+    base = ["--control", "move", "--n-envs", "2", "--total-steps", "0", "--tensorboard", "false",
+            "--progress-bar", "false", "--arch", "shared", "--message-encoding", "compact", "--init", str(clone)]
+    with pytest.raises(CheckpointError, match=r"task='chain'; this run has task='branch'"):
+        ppo.main(base + ["--task", "branch-v0", "--hidden", "[32, 32]", "--run-dir", str(tmp_path / "d")])
+    with pytest.raises(CheckpointError, match=r"hidden=\[32, 32\]; this run has hidden=\[64, 64\]"):
+        ppo.main(base + ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--run-dir", str(tmp_path / "e")])

@@ -1,0 +1,234 @@
+"""Imitation of the hand-coded rules: behaviour cloning with DAgger over the batched array API.
+
+Every module of ``n_envs`` worlds is one sample, as in :mod:`training.ppo`, and the network is
+the same :class:`~training.ppo.ActorCritic` (its policy head is trained here; its value head is
+left for PPO), so a checkpoint of this script is evaluated by ``proteo eval --checkpoint`` and
+starts ``training/ppo.py --init`` (kickstarting).
+
+    python -m training.imitate --config configs/train/bc_grasp_move.yaml
+    python -m training.imitate --config configs/train/bc_grasp_move.yaml --rounds 2 --run-dir runs/try
+    proteo eval --config configs/eval.yaml --tasks grasp --checkpoint runs/try
+
+The loop (Ross, Gordon & Bagnell's DAgger, with one policy shared by all modules):
+
+- round 0: the teacher (:mod:`training.teachers`, the task's rules by default) drives every
+  world for ``cycles_per_round`` cycles; every module's observation is stored with the
+  teacher's action for it (plain behaviour cloning);
+- round ``i >= 1``: the learner drives, except that each module plays the teacher's action
+  with probability ``beta * beta_decay ** (i - 1)``; the teacher labels every visited state
+  (also those the learner chose), the new samples join the aggregate, and the network is
+  trained on the whole aggregate again;
+- training: ``epochs`` passes of cross-entropy between the network's masked logits
+  (illegal moves get probability zero, as when acting) and the teacher's action, summed over
+  the controlled fields.
+
+At control level ``move`` only modules with a choice (at least two legal moves) are stored: a
+module that can only stay teaches nothing. ``samples_per_round`` caps what one round adds
+(a uniform subsample).
+
+Measured each round and logged (``progress.csv``, TensorBoard): the **agreement** of the
+network trained so far with the teacher on the new round's states before they are trained on
+(states of worlds and seeds it has not seen: a held-out measure; the arg-max move against the
+teacher's move, and the whole action at other levels), the loss, and the success rate and
+cycles of the episodes that ended during the round (the learner driving, mixed with the
+teacher at the round's ``beta``).
+
+Writes ``runs/<name>/`` like every training script (:mod:`training.common`), with
+``final/policy.pt`` (the :class:`~training.ppo.ActorCritic` weights) and ``proteo.json``
+(algorithm ``imitation``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from proteo_env.config import ConfigError
+from proteo_env.spaces import N_MOVES
+from training.common import ProgressLog, make_run_dir, parse_args, save_args, seed_everything, write_checkpoint_meta
+from training.ppo import ARCHS, ActorCritic, Worlds, masked_log_probs, sample, teacher_cross_entropy
+from training.teachers import DEFAULT_TEACHER, Teachers
+
+ALGORITHM = "imitation"
+
+
+@dataclass(frozen=True)
+class Args:
+    """Behaviour cloning with DAgger from the hand-coded rules (arguments of training/imitate.py)."""
+
+    task: str = "chain-v0"
+    control: str = "move"
+    """Control level: move, move+mode or full (the fields the network chooses and is taught)."""
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
+    teacher: str = DEFAULT_TEACHER
+    """The policy imitated: ``rules`` (the task's hand-coded policy) or the task's name."""
+    seed: int = 0
+    n_envs: int = 16
+    """Worlds stepped together."""
+    n_groups: int = 1
+    """BatchedEnvs the worlds are split into."""
+    rounds: int = 4
+    """DAgger rounds after round 0 (0: behaviour cloning only)."""
+    cycles_per_round: int = 300
+    """Cycles of every world per round (worlds restart as their episodes end)."""
+    beta: float = 0.5
+    """Probability that a module plays the teacher's action in round 1 (round 0: 1)."""
+    beta_decay: float = 0.5
+    """Factor on ``beta`` per later round."""
+    samples_per_round: int = 200_000
+    """At most this many samples join the aggregate per round (a uniform subsample)."""
+    epochs: int = 4
+    """Passes over the aggregate after each round."""
+    minibatch_size: int = 4096
+    learning_rate: float = 1e-3
+    message_encoding: str = "compact"
+    """How the features encode the messages received (proteo_env.adapters.flatten)."""
+    arch: str = "shared"
+    """Network: mlp, shared or lattice (training/ppo.py)."""
+    hidden: tuple[int, ...] = (128, 128)
+    run_dir: str | None = None
+    threads: int = 1
+    tensorboard: bool = True
+    progress_bar: bool = True
+
+    def __post_init__(self):
+        for name in ("rounds", "cycles_per_round", "samples_per_round", "epochs", "minibatch_size", "n_envs"):
+            value, least = getattr(self, name), 0 if name == "rounds" else 1
+            if not isinstance(value, int) or value < least:
+                raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {least}")
+        for name in ("beta", "beta_decay"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
+        if self.arch not in ARCHS:
+            raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+
+
+def round_beta(args: Args, round_index: int) -> float:
+    """Probability that a module plays the teacher's action in round ``round_index``."""
+    return 1.0 if round_index == 0 else args.beta * args.beta_decay ** (round_index - 1)
+
+
+def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[float, float]:
+    """``(move, whole action)``: the share of samples whose arg-max move, and whose arg-max of
+    every field, equals the label ``(N, F)``."""
+    with torch.no_grad():
+        best = torch.stack([lp.argmax(dim=1) for lp in masked_log_probs(net.logits(features), move_mask, nvec)], 1)
+    same = best == labels
+    return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean())
+
+
+def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args,
+            bar) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+    """``cycles`` cycles of every world with each module playing the teacher's action with
+    probability ``beta``, else the network's sample. Returns the stored samples' features
+    ``(S, D)``, move masks ``(S, 13)``, teacher labels ``(S, F)``, and the episodes that ended."""
+    n, a, nvec = worlds.n_envs * worlds.n_agents, worlds.n_agents, [int(v) for v in worlds.nvec]
+    features = np.zeros((n, worlds.encoder.size), dtype=np.float32)
+    move_mask = np.zeros((n, N_MOVES), dtype=bool)
+    kept_x, kept_m, kept_y, finished = [], [], [], []
+    for _ in range(cycles):
+        worlds.encode(features, move_mask)
+        labels = teachers.labels(worlds.buffers)
+        legal_label = move_mask[np.arange(n), labels[:, 0]]
+        keep = legal_label & (move_mask.sum(axis=1) > 1 if args.control == "move" else True)
+        kept_x.append(features[keep].copy())
+        kept_m.append(move_mask[keep].copy())
+        kept_y.append(labels[keep])
+        actions = labels.copy()
+        if beta < 1.0:
+            with torch.no_grad():
+                learned, _ = sample(masked_log_probs(net.logits(torch.from_numpy(features)),
+                                                     torch.from_numpy(move_mask), nvec))
+            play_learned = rng.random(n) >= beta
+            actions[play_learned] = learned.numpy()[play_learned]
+        _, terminal, truncated = worlds.step(actions.reshape(worlds.n_envs, a, -1), finished)
+        teachers.restart(terminal | truncated)
+        bar.update(1)
+    x, m, y = np.concatenate(kept_x), np.concatenate(kept_m), np.concatenate(kept_y)
+    if len(x) > args.samples_per_round:
+        pick = np.sort(rng.choice(len(x), args.samples_per_round, replace=False))
+        x, m, y = x[pick], m[pick], y[pick]
+    return x, m, y, finished
+
+
+def main(argv=None) -> Path:
+    """Parse the arguments (``--config FILE`` and ``--<field> VALUE``) and train."""
+    return train(parse_args(Args, argv))
+
+
+def train(args: Args) -> Path:
+    """Run round 0 and ``args.rounds`` DAgger rounds; returns the final checkpoint's folder."""
+    seed_everything(args.seed, threads=args.threads)
+    run_dir = make_run_dir(args.run_dir, f"imitate_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}"
+                                         f"_s{args.seed}", resume=False)
+    save_args(args, run_dir)
+    worlds = Worlds(args, env_seed=args.seed)
+    enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
+    teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
+    net = ActorCritic(enc, nvec, args.arch, args.hidden)
+    optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
+    rng = np.random.default_rng(args.seed)
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    data_x, data_m, data_y = [], [], []
+    agent_steps = 0
+    measured: dict = {}
+    bar = tqdm(total=(args.rounds + 1) * args.cycles_per_round, unit="cycle", desc="imitate",
+               disable=not args.progress_bar)
+    for round_index in range(args.rounds + 1):
+        started = time.perf_counter()
+        beta = round_beta(args, round_index)
+        net.eval()
+        x, m, y, finished = collect(worlds, teachers, net, beta, args.cycles_per_round, rng, args, bar)
+        agent_steps += args.cycles_per_round * worlds.n_envs * worlds.n_agents
+        x_t, m_t, y_t = torch.from_numpy(x), torch.from_numpy(m), torch.from_numpy(y)
+        held_out = agreement(net, x_t, m_t, y_t, nvec) if round_index else (float("nan"), float("nan"))
+        data_x.append(x_t), data_m.append(m_t), data_y.append(y_t)
+        all_x, all_m, all_y = torch.cat(data_x), torch.cat(data_m), torch.cat(data_y)
+        collected = time.perf_counter()
+        net.train()
+        losses = []
+        for _ in range(args.epochs):
+            order = torch.randperm(len(all_x))
+            for start in range(0, len(order), args.minibatch_size):
+                mb = order[start:start + args.minibatch_size]
+                loss = teacher_cross_entropy(masked_log_probs(net.logits(all_x[mb]), all_m[mb], nvec), all_y[mb],
+                                             all_m[mb])
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                optimiser.step()
+                losses.append(loss.item())
+        successes = [e["success"] for e in finished]
+        measured = {"round": round_index, "beta": beta, "samples/new": len(x), "samples/total": len(all_x),
+                    "imitation/loss": float(np.mean(losses)), "imitation/agreement_move": held_out[0],
+                    "imitation/agreement_action": held_out[1],
+                    "episode/success": float(np.mean(successes)) if successes else None,
+                    "episode/cycles": float(np.mean([e["l"] for e in finished])) if finished else None,
+                    "episode/count": len(finished),
+                    "time/collect_seconds": collected - started, "time/train_seconds": time.perf_counter() - collected}
+        log.log(agent_steps, measured)
+        bar.set_postfix(agreement=f"{held_out[0]:.3f}", success=measured["episode/success"])
+    bar.close()
+    final = run_dir / "final"
+    final.mkdir(parents=True, exist_ok=True)
+    torch.save(net.state_dict(), final / "policy.pt")
+    save_args(dataclasses.replace(args, run_dir=str(run_dir)), final)
+    write_checkpoint_meta(final, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
+                          encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
+                          extra={"label": "imitation", "control": args.control, "arch": args.arch,
+                                 "hidden": list(args.hidden), "run_dir": str(run_dir), "teacher": args.teacher,
+                                 "last_round": measured, "args": asdict(args)})
+    log.close()
+    print(f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s, held-out agreement "
+          f"{measured['imitation/agreement_move']:.3f})")
+    return final
+
+
+if __name__ == "__main__":
+    main()

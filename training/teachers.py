@@ -1,0 +1,80 @@
+"""A teacher for every world of a batch: the hand-coded rules' action for every module's observation.
+
+Imitation (:mod:`training.imitate`) labels the states the learner visits with the teacher's
+action, and kickstarting (:mod:`training.ppo` with ``distill_coef``) pulls the learner towards
+it. The teacher is a policy of :data:`baselines.POLICIES` by name: ``"rules"`` (the default)
+is the task's own hand-coded policy with the task's rule parameters, as the ``move`` level's
+autopilot builds it (:func:`baselines.autopilot.hand_coded_rules`); naming the task
+(``"grasp"`` for ``grasp-v0``) is the same. Another behaviour's rules do not fit the task and
+are refused.
+
+Each world has its own teacher instance with its own private memory (the rules' heading,
+growth direction, whether they asked to move), fed every cycle with that world's
+observation, and reset with the world's episode. That memory records the moves the teacher
+*proposed*, not the ones the learner made: the label is what the rules would do next from
+where they believe they are, the same convention as the autopilot's (:mod:`proteo_env.control`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from baselines import POLICIES
+from baselines.autopilot import hand_coded_rules
+from proteo_env.config import ConfigError
+
+DEFAULT_TEACHER = "rules"
+
+
+def check_teacher(name: str, task_name: str) -> str:
+    """The policy name ``name`` stands for on task ``task_name``; a :class:`ConfigError` naming
+    the teacher, the task and the allowed names when it does not fit."""
+    allowed = (DEFAULT_TEACHER, task_name)
+    if name in allowed and task_name in POLICIES:
+        return task_name
+    if task_name not in POLICIES:
+        raise ConfigError(f"teacher={name!r}: task {task_name!r} has no hand-coded rules to teach; allowed: a task "
+                          f"with rules ({', '.join(sorted(set(POLICIES) - {'random'}))})")
+    raise ConfigError(f"teacher={name!r} does not fit task {task_name!r}; allowed: "
+                      f"{', '.join(map(repr, allowed))} (the task's hand-coded rules)")
+
+
+class Teachers:
+    """One teacher per world of a :class:`~proteo_env.batched.BatchedEnv` (``n_envs`` worlds of
+    ``n_agents`` modules; observation rows world-major, as the batch hands them out).
+
+    Args:
+        env: a batched env of the task (its task, full action layout and physics build the teachers).
+        n_envs: worlds taught (those of one or several such envs, in order).
+        name: the teacher (:func:`check_teacher`).
+        seed: teacher ``b``'s ``e``-th episode is seeded from ``(seed, b, e)``.
+        n_fields: how many leading fields of the full action a label holds (the control level's).
+    """
+
+    def __init__(self, env, n_envs: int, name: str = DEFAULT_TEACHER, *, seed: int = 0, n_fields: int = 1):
+        check_teacher(name, env.task.name)
+        self.n_agents, self.n_fields, self.seed = env.n_agents, n_fields, seed
+        self.policies = [hand_coded_rules(env) for _ in range(n_envs)]
+        self.episodes = np.zeros(n_envs, dtype=np.int64)
+        for b in range(n_envs):
+            self._reset(b)
+
+    def _reset(self, b: int) -> None:
+        self.policies[b].reset(seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])])
+                                        .generate_state(1, np.uint64)[0] >> 1))
+        self.episodes[b] += 1
+
+    def labels(self, groups) -> np.ndarray:
+        """``(n_envs * n_agents, n_fields)`` int64: every module's teacher action for the
+        observations ``groups`` (a list of :class:`~proteo_env.spaces.ObservationBuffers`, one
+        per env, world-major, together ``n_envs`` worlds). Call once per cycle, in order: the
+        teachers' memory advances with each call."""
+        a = self.n_agents
+        rows = [buffers.rows(b * a, (b + 1) * a) for buffers in groups for b in range(len(buffers.own_mode) // a)]
+        return np.concatenate([p.act_arrays(r)[:, :self.n_fields] for p, r in zip(self.policies, rows, strict=True)])
+
+    def restart(self, worlds) -> None:
+        """New episodes for the teachers of ``worlds`` (indices or ``(n_envs,)`` bool)."""
+        worlds = np.asarray(worlds)
+        for b in (np.flatnonzero(worlds) if worlds.dtype == np.bool_ else worlds):
+            self._reset(int(b))
