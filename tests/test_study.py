@@ -20,3 +20,19 @@ def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path)
         assert meta["seed"] == seed and meta["control"] == "move" and meta["agent_steps"] > 0
         assert (docs / "progress" / f"ppo_chain_move_s{seed}.csv").is_file()
     assert (docs / "curves_ppo_chain_move.png").stat().st_size > 0
+
+
+def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
+    keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
+    tiny = ["--n-envs", "4", "--env", "{n_modules: 6, max_cycles: 40}"]
+    study.main(["--tasks", "[chain]", "--seeds", "[0]", "--recipes", "[imitation, kickstart]", "--minutes", "0.02",
+                "--parallel", "2", "--runs-dir", str(tmp_path / "runs"), "--keep-dir", str(keep), "--docs-dir",
+                str(docs), "--flags", json.dumps({"imitation": ["--rounds", "1", "--cycles-per-round", "20", *tiny],
+                                                  "kickstart": tiny})])
+    summary = json.loads((docs / "study_move.json").read_text())
+    assert [(r["recipe"], r["task"]) for r in summary] == [("imitation", "chain"), ("kickstart", "chain")]
+    clone = read_meta(keep / "chain" / "imitation_move" / "seed_0")
+    kicked = read_meta(keep / "chain" / "kickstart_move" / "seed_0")
+    assert clone["algorithm"] == "imitation" and kicked["algorithm"] == "ppo"
+    assert kicked["args"]["init"] == str(keep / "chain" / "imitation_move" / "seed_0")
+    assert (docs / "curves_imitation_chain_move.png").is_file() and (docs / "curves_kickstart_chain_move.png").is_file()

@@ -208,6 +208,7 @@ def train(args: Args) -> Path:
         measured = {"round": round_index, "beta": beta, "samples/new": len(x), "samples/total": len(all_x),
                     "imitation/loss": float(np.mean(losses)), "imitation/agreement_move": held_out[0],
                     "imitation/agreement_action": held_out[1],
+                    "episode/return": float(np.mean([e["r"] for e in finished])) if finished else None,
                     "episode/success": float(np.mean(successes)) if successes else None,
                     "episode/cycles": float(np.mean([e["l"] for e in finished])) if finished else None,
                     "episode/count": len(finished),
