@@ -12,6 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import proteo_env  # noqa: E402
+from proteo_env.adapters.flatten import ObservationEncoder  # noqa: E402
 from proteo_env.config import ConfigError  # noqa: E402
 from training import imitate, ppo  # noqa: E402
 from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
@@ -106,3 +107,44 @@ def test_bad_teacher_and_init_are_refused_naming_the_field(clone, tmp_path):
         ppo.main(base + ["--task", "branch-v0", "--hidden", "[32, 32]", "--run-dir", str(tmp_path / "d")])
     with pytest.raises(CheckpointError, match=r"hidden=\[32, 32\]; this run has hidden=\[64, 64\]"):
         ppo.main(base + ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--run-dir", str(tmp_path / "e")])
+
+
+def test_last_move_memory_feeds_each_agent_its_own_previous_move_and_resets_with_the_episode():
+    from training.policies import LogitsPolicy
+
+    env = proteo_env.make("chain-v0", control="move", **SMALL_ENV)
+    seen = []
+
+    def logits_fn(features):
+        seen.append(features.copy())
+        return np.zeros((len(features), 13))
+
+    encoder = ObservationEncoder.for_env(env)
+    policy = LogitsPolicy(env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn,
+                          nvec=[13], memory="last_move")
+    observations, _ = env.reset(seed=3)
+    policy.reset(3)
+    first = policy.act(observations)
+    assert seen[0].shape == (len(observations), encoder.size + 13)
+    assert np.all(seen[0][:, encoder.size:] == np.eye(13)[[0] * len(observations)])  # nothing remembered yet
+    observations, *_ = env.step(first)
+    policy.act(observations)
+    remembered = seen[1][:, encoder.size:].argmax(axis=1)
+    assert list(remembered) == [int(first[a][0]) for a in observations]  # by agent name, in row order
+    policy.reset(4)
+    policy.act(observations)
+    assert np.all(seen[2][:, encoder.size:].argmax(axis=1) == 0)
+
+
+def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_path):
+    clone = tiny_clone(tmp_path / "memory", "--memory", "last_move", "--rounds", "0")
+    meta = read_meta(clone)
+    assert meta["memory"] == "last_move"
+    policy = load_policy(clone, proteo_env.make("chain-v0", control="move", **SMALL_ENV))
+    assert policy.memory == "last_move"
+    with pytest.raises(CheckpointError, match=r"memory='last_move'; this run has memory='none'"):
+        ppo.main(["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--n-envs", "2", "--total-steps", "0",
+                  "--arch", "shared", "--message-encoding", "compact", "--hidden", "[32, 32]", "--init", str(clone),
+                  "--tensorboard", "false", "--progress-bar", "false", "--run-dir", str(tmp_path / "run")])
+    with pytest.raises(ValueError, match=r"memory='recurrent' is not allowed; allowed: 'none', 'last_move'"):
+        tiny_clone(tmp_path / "bad", "--memory", "recurrent")

@@ -269,6 +269,10 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
                                 "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "ppo_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
                      "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "kickstart_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
+                           "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "bc_": ("imitate", ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--epochs", "1",
+                        "--minibatch-size", "32"]),
     "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
                        "--checkpoint-every", "1"]),
     "rllib": ("rllib_ppo", ["--iterations", "1", "--env-runners", "1", "--train-batch-size", "32",
@@ -294,8 +298,8 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     env = json.dumps({**SMALL_OVERRIDES.get(task, {}), "max_cycles": 6,
                       **({"motion_model": settings["env"]["motion_model"]} if "motion_model" in settings["env"] else {})})
     final = importlib.import_module(f"training.{module}").main(
-        ["--config", f"configs/train/{config}", *flags, "--env", env, "--time-limit-minutes", "0",
-         "--tensorboard", "false", "--run-dir", str(tmp_path / "run")])
+        ["--config", f"configs/train/{config}", *flags, "--env", env, "--tensorboard", "false",
+         "--run-dir", str(tmp_path / "run"), *(["--time-limit-minutes", "0"] if module != "imitate" else [])])
     meta = json.loads((final / "proteo.json").read_text())
     assert meta["task"] == settings["task"] and meta["agent_steps"] > 0
     eval_config = tmp_path / "eval.yaml"

@@ -94,7 +94,7 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
                         encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic,
-                        nvec=meta["nvec"])
+                        nvec=meta["nvec"], memory=meta.get("memory", "none"))
 
 
 def _need(file: Path) -> Path:
@@ -155,7 +155,8 @@ def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     from training.ppo import ActorCritic
 
     try:
-        net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]))
+        net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]),
+                          memory=meta.get("memory", "none"))
         net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise

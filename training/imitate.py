@@ -53,6 +53,7 @@ from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
 from training.common import ProgressLog, make_run_dir, parse_args, save_args, seed_everything, write_checkpoint_meta
 from training.ppo import ARCHS, ActorCritic, Worlds, masked_log_probs, sample, teacher_cross_entropy
+from training.policies import check_memory
 from training.teachers import DEFAULT_TEACHER, Teachers
 
 ALGORITHM = "imitation"
@@ -93,6 +94,9 @@ class Args:
     arch: str = "shared"
     """Network: mlp, shared or lattice (training/ppo.py)."""
     hidden: tuple[int, ...] = (128, 128)
+    memory: str = "none"
+    """What the network remembers between cycles: none, or last_move (the move the module played last
+    cycle, training/policies.py MEMORIES)."""
     run_dir: str | None = None
     threads: int = 1
     tensorboard: bool = True
@@ -108,6 +112,7 @@ class Args:
                 raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
         if self.arch not in ARCHS:
             raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        check_memory(self.memory)
 
 
 def round_beta(args: Args, round_index: int) -> float:
@@ -130,7 +135,7 @@ def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, c
     probability ``beta``, else the network's sample. Returns the stored samples' features
     ``(S, D)``, move masks ``(S, 13)``, teacher labels ``(S, F)``, and the episodes that ended."""
     n, a, nvec = worlds.n_envs * worlds.n_agents, worlds.n_agents, [int(v) for v in worlds.nvec]
-    features = np.zeros((n, worlds.encoder.size), dtype=np.float32)
+    features = np.zeros((n, worlds.size), dtype=np.float32)
     move_mask = np.zeros((n, N_MOVES), dtype=bool)
     kept_x, kept_m, kept_y, finished = [], [], [], []
     for _ in range(cycles):
@@ -172,7 +177,7 @@ def train(args: Args) -> Path:
     worlds = Worlds(args, env_seed=args.seed)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
     teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
-    net = ActorCritic(enc, nvec, args.arch, args.hidden)
+    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
     rng = np.random.default_rng(args.seed)
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
@@ -223,7 +228,8 @@ def train(args: Args) -> Path:
     write_checkpoint_meta(final, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
                           encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
                           extra={"label": "imitation", "control": args.control, "arch": args.arch,
-                                 "hidden": list(args.hidden), "run_dir": str(run_dir), "teacher": args.teacher,
+                                 "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
+                                 "teacher": args.teacher,
                                  "last_round": measured, "args": asdict(args)})
     log.close()
     print(f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s, held-out agreement "

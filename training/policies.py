@@ -23,7 +23,32 @@ import numpy as np
 
 from baselines.base import Policy
 from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
+
+
+MEMORIES = {"none": 0, "last_move": N_MOVES}
+"""What a network remembers between cycles, as extra inputs after the observation's features
+(name: number of extra inputs): ``none``; ``last_move``, the one-hot move the module asked for
+in the previous cycle (0, stay, at an episode's start). The hand-coded rules keep such private
+memory (their heading and whether they asked to move); the observation does not carry it."""
+
+
+def check_memory(memory) -> int:
+    """The number of extra inputs of ``memory``; a ``ConfigError`` naming the allowed memories."""
+    if memory not in MEMORIES:
+        raise ConfigError(f"memory={memory!r} is not allowed; allowed: {', '.join(map(repr, MEMORIES))}")
+    return MEMORIES[memory]
+
+
+def with_memory(features: np.ndarray, previous_moves: np.ndarray, memory: str) -> np.ndarray:
+    """``(N, D + extra)``: ``features (N, D)`` followed by the memory inputs of each row, from
+    each row's previous move ``(N,)``."""
+    if memory == "none":
+        return features
+    extra = np.zeros((len(features), N_MOVES), dtype=np.float32)
+    extra[np.arange(len(features)), previous_moves] = 1.0
+    return np.concatenate([features, extra], axis=1)
 
 
 def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, rng: np.random.Generator, *,
@@ -52,13 +77,16 @@ class LogitsPolicy(Policy):
         deterministic: take each field's arg-max instead of sampling.
         nvec: values of each field the network chooses (default: every field of ``layout``);
             at control level ``move`` only ``[13]``, and an action is then the move alone.
+        memory: what the network remembers (:data:`MEMORIES`); with ``last_move`` the policy
+            keeps each agent's previous move (by name in :meth:`act`, by row in
+            :meth:`act_arrays`), cleared by :meth:`reset`.
     """
 
     name = "learned"
 
     def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
                  encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
-                 deterministic: bool = False, nvec=None):
+                 deterministic: bool = False, nvec=None, memory: str = "none"):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
         self.levels = (self.level_of(layout, self.nvec),)
@@ -66,20 +94,34 @@ class LogitsPolicy(Policy):
         self.logits_fn = logits_fn
         self.name = label
         self.deterministic = deterministic
+        check_memory(memory)
+        self.memory = memory
+        self.previous: dict = {}
+        """Each agent's (name or row) previous move, at ``memory="last_move"``."""
+
+    def reset(self, seed=None):
+        super().reset(seed)
+        self.previous = {}
 
     def act(self, observations):
         if not observations:
             return {}
         features = self.encoder.encode_observations(observations)
         mask = np.stack([o["action_mask"] for o in observations.values()])
-        actions = sample_actions(self.logits_fn(features), self.nvec, mask, self.rng,
-                                 deterministic=self.deterministic)
-        return dict(zip(observations, actions))
+        return dict(zip(observations, self._act(list(observations), features, mask)))
 
     def act_arrays(self, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
-        """Actions of a batch given encoded features and move masks (the array API's path)."""
-        return sample_actions(self.logits_fn(features), self.nvec, move_mask, self.rng,
-                              deterministic=self.deterministic)
+        """Actions of a batch given encoded features and move masks (the array API's path; with
+        memory, row ``i`` is the same agent from call to call until :meth:`reset`)."""
+        return self._act(range(len(features)), features, move_mask)
+
+    def _act(self, keys, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
+        previous = np.array([self.previous.get(k, 0) for k in keys], dtype=np.int64)
+        actions = sample_actions(self.logits_fn(with_memory(features, previous, self.memory)), self.nvec, move_mask,
+                                 self.rng, deterministic=self.deterministic)
+        if self.memory != "none":
+            self.previous.update(zip(keys, actions[:, 0].tolist()))
+        return actions
 
     @staticmethod
     def level_of(layout, nvec) -> str:

@@ -71,6 +71,7 @@ import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES, ObservationBuffers
+from training.policies import check_memory, with_memory
 from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
                              seed_everything, write_checkpoint_meta)
 
@@ -112,6 +113,8 @@ class Args:
     """Actor network: mlp or lattice (see the module docstring)."""
     hidden: tuple[int, ...] = (64, 64)
     """Hidden sizes of the MLPs (actor at arch=mlp, critic always; lattice: embedding, head)."""
+    memory: str = "none"
+    """What the network remembers between cycles: none, or last_move (training/policies.py MEMORIES)."""
     checkpoint_every: int = 1_000_000
     run_dir: str | None = None
     resume: str | None = None
@@ -223,23 +226,30 @@ class LatticeActor(nn.Module):
 
 class ActorCritic(nn.Module):
     """The shared policy: ``logits(x) (N, sum(nvec))`` and ``value(x) (N,)`` from flat features
-    ``x (N, D)``; ``net(x)`` gives both (one pass through the trunk at ``arch="shared"``)."""
+    ``x (N, D)``; ``net(x)`` gives both (one pass through the trunk at ``arch="shared"``). With
+    ``memory`` (:data:`training.policies.MEMORIES`) ``D`` is the encoder's size plus the memory's
+    inputs (:func:`training.policies.with_memory`)."""
 
-    def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64)):
+    def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64),
+                 memory: str = "none"):
         super().__init__()
         if arch not in ARCHS:
             raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        if memory != "none" and arch == "lattice":
+            raise ConfigError(f"memory={memory!r} is not allowed with arch='lattice'; allowed: memory='none', "
+                              "or arch='mlp' or 'shared'")
         self.nvec = [int(n) for n in nvec]
         hidden = tuple(hidden)
+        in_dim = encoder.size + check_memory(memory)
         if arch == "shared":
-            self.trunk = nn.Sequential(*hidden_layers(encoder.size, hidden))
+            self.trunk = nn.Sequential(*hidden_layers(in_dim, hidden))
             self.actor = _orthogonal(nn.Linear(hidden[-1], sum(self.nvec)), 0.01)
             self.critic = _orthogonal(nn.Linear(hidden[-1], 1), 1.0)
         else:
             self.trunk = nn.Identity()
-            self.actor = (mlp(encoder.size, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
+            self.actor = (mlp(in_dim, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
                           else LatticeActor(encoder, self.nvec, hidden))
-            self.critic = mlp(encoder.size, 1, hidden, out_gain=1.0)
+            self.critic = mlp(in_dim, 1, hidden, out_gain=1.0)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h = self.trunk(x)
@@ -313,25 +323,30 @@ class Worlds:
                                           n_modes=len(first.task.modes), n_message_values=first.task.n_message_values,
                                           scent_max=first.config.physics.scent_max,
                                           message_encoding=args.message_encoding)
+        self.memory = getattr(args, "memory", "none")
+        self.size = self.encoder.size + check_memory(self.memory)
+        """Features per sample: the encoding, then the memory's inputs."""
+        self.previous_moves = np.zeros(self.n_envs * self.n_agents, dtype=np.int64)
+        """Each module's move in the last cycle (0 at an episode's start): the ``last_move`` memory."""
         self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
         self.episode_return = np.zeros(self.n_envs)
         self.final_rows = np.zeros(0, dtype=np.int64)
         """Sample rows of the worlds truncated in the last :meth:`step` (their episodes hit ``max_cycles``)."""
-        self.final_features = np.zeros((0, self.encoder.size), dtype=np.float32)
+        self.final_features = np.zeros((0, self.size), dtype=np.float32)
         """``(len(final_rows), D)`` features of those rows' last observation (the value there is bootstrapped)."""
         self.env_seconds = 0.0
         self.encode_seconds = 0.0
 
     def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
-        """Write every module's features ``(N, D)`` and legal moves ``(N, 13)`` into the given arrays
-        (one encoding call over the observation fields of all groups)."""
+        """Write every module's features ``(N, size)`` (with the memory's inputs) and legal moves
+        ``(N, 13)`` into the given arrays (one encoding call over the observation fields of all groups)."""
         started = time.perf_counter()
         if len(self.buffers) == 1:
             fields = {name: getattr(self.buffers[0], name) for name in ObservationBuffers.FIELDS}
         else:
             fields = {name: np.concatenate([getattr(b, name) for b in self.buffers])
                       for name in ObservationBuffers.FIELDS}
-        features[:] = self.encoder.encode_fields(fields)
+        features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_moves, self.memory)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
 
@@ -357,6 +372,7 @@ class Worlds:
         truncated = (cycles >= self.max_cycles) & ~terminal
         ended = terminal | truncated
         self.episode_return += reward
+        self.previous_moves = np.where(np.repeat(ended, a), 0, actions[..., 0].reshape(-1))
         for w in np.flatnonzero(ended):
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
         self.episode_return[ended] = 0.0
@@ -366,7 +382,9 @@ class Worlds:
             self.buffers[k] = group.observe_arrays()
             for j in np.flatnonzero(truncated[k * self.b:(k + 1) * self.b]):
                 rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
-                features.append(self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)))
+                moves = actions[k * self.b + j, :, 0]
+                features.append(with_memory(self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)),
+                                            moves, self.memory))
             if restart.any():
                 self.buffers[k] = group.reset_worlds(restart)
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
@@ -404,9 +422,9 @@ def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> di
         raise CheckpointError(f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
                               "training/imitate.py or training/ppo.py")
     wanted = {"task": task_id.split("-v")[0], "control": args.control, "arch": args.arch,
-              "hidden": list(args.hidden), "encoder": encoder.spec()}
+              "hidden": list(args.hidden), "memory": args.memory, "encoder": encoder.spec()}
     found = {"task": meta["task"].split("-v")[0], "control": meta.get("control"), "arch": meta.get("arch"),
-             "hidden": meta.get("hidden"), "encoder": meta.get("encoder")}
+             "hidden": meta.get("hidden"), "memory": meta.get("memory", "none"), "encoder": meta.get("encoder")}
     for key, value in wanted.items():
         if found[key] != value:
             raise CheckpointError(f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
@@ -447,7 +465,7 @@ def train(args: Args) -> Path:
     save_args(args, run_dir)
     worlds = Worlds(args, env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
-    net = ActorCritic(enc, nvec, args.arch, args.hidden)
+    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
     if args.init and resume_meta is None:
         net.load_state_dict(initial_weights(args, worlds.task_id, enc))
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
@@ -465,7 +483,7 @@ def train(args: Args) -> Path:
         torch.set_rng_state(state["torch_rng"])
 
     t_steps, n = args.n_steps, args.n_envs * a
-    features = np.zeros((t_steps, n, enc.size), dtype=np.float32)
+    features = np.zeros((t_steps, n, worlds.size), dtype=np.float32)
     move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
     obs_t, mask_t = torch.from_numpy(features), torch.from_numpy(move_mask)
     actions_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
@@ -482,7 +500,8 @@ def train(args: Args) -> Path:
         write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
                               encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
                               extra={"label": f"ppo-{args.arch}", "control": args.control, "arch": args.arch,
-                                     "hidden": list(args.hidden), "run_dir": str(run_dir), "args": asdict(args)})
+                                     "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
+                                     "args": asdict(args)})
 
     bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM,
                disable=not args.progress_bar)
@@ -509,7 +528,7 @@ def train(args: Args) -> Path:
                     teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
                     bootstrap_t[t, worlds.final_rows] = net.value(torch.from_numpy(worlds.final_features))
-            last = np.zeros((n, enc.size), dtype=np.float32)
+            last = np.zeros((n, worlds.size), dtype=np.float32)
             worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
             last_value = net.value(torch.from_numpy(last))
         collected = time.perf_counter()
@@ -521,7 +540,7 @@ def train(args: Args) -> Path:
         returns = advantages + values_t
         # ---- update
         used = t_steps * n
-        flat = (obs_t.reshape(-1, enc.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
+        flat = (obs_t.reshape(-1, worlds.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
                 logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1), labels_t.reshape(-1, len(nvec)))
         stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": [],
                  "loss/distill": []}
