@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test bench eval learning-results
+.PHONY: install install-distributed demo test bench eval learning-results learning-task
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -29,12 +29,24 @@ bench: install
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/learning.md --publish README.md
 
-# The multi-seed study of training/ppo.py at control level move (16 M agent-steps per run, about
-# 30 minutes on 2 cores),
-# then its evaluation: the table with the spread over training seeds goes into docs/eval/study,
-# docs/learning.md and README.md; the same checkpoints at twice their size into docs/eval/study_larger.
+# The multi-seed study at control level move (python -m training.study): plain PPO (16 M
+# agent-steps per run), then the clones of the rules (training/imitate.py) and PPO kickstarted
+# from them (6 M agent-steps), three training seeds each, about 80 minutes on 2 cores; then its
+# evaluation: the table with the spread over training seeds goes into docs/eval/study,
+# docs/learning.md and README.md; the same checkpoints at twice their size into
+# docs/eval/study_larger and docs/learning.md.
 learning-results: install
 	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
+	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
 		--publish docs/learning.md --publish README.md
-	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger
+	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \
+		--publish docs/learning.md
+
+# One task of the study, every recipe (make learning-task TASK=grasp, about 15 minutes): its
+# checkpoints and curves are replaced; the evaluation goes to docs/eval/study_<task> (not published).
+learning-task: install
+	@test -n "$(TASK)" || { echo "TASK is required; allowed: chain, branch, table, grasp, locomotion"; exit 2; }
+	$(BIN)/python -m training.study --tasks "[$(TASK)]" --total-steps 16000000 --minutes 0 --parallel 2
+	$(BIN)/python -m training.study --tasks "[$(TASK)]" --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
+	$(BIN)/proteo eval --config configs/eval_study.yaml --tasks $(TASK) --out docs/eval/study_$(TASK)

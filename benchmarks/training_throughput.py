@@ -17,7 +17,10 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    after two warm-up updates). Its hyper-parameters come from ``--ppo-config`` (default
    ``configs/train/ppo_<task>_move.yaml``), the environment from ``--env``; with
    ``--former-network`` also at ``move`` with the networks the configs used before (separate
-   MLP actor and critic, two epochs, messages one-hot per direction).
+   MLP actor and critic, two epochs, messages one-hot per direction); with ``--variants`` also
+   at ``move`` with the distillation term of kickstarting on (``distill_coef=1``: the rules
+   label every module every cycle; their time counts as forward passes) and with
+   ``memory=last_move`` (the previous move as 13 more inputs), in the same run.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -165,6 +168,9 @@ def main(argv=None) -> int:
     parser.add_argument("--former-network", action="store_true",
                         help="also time training/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
                         "message features (the configs' former networks; same run)")
+    parser.add_argument("--variants", action="store_true",
+                        help="also time training/ppo.py at move with the distillation term and with "
+                        "memory=last_move (same run)")
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
@@ -203,6 +209,11 @@ def main(argv=None) -> int:
         result["ppo"][former] = ppo_training(*task, args.ppo_steps, control="move", config=ppo_config,
                                              variant={"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"})
         result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
+    if args.variants:
+        for name, variant in (("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
+                              ("move, memory=last_move", {"memory": "last_move"})):
+            result["ppo"][name] = ppo_training(*task, args.ppo_steps, control="move", config=ppo_config,
+                                               variant=variant)
     result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
     result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
     result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
@@ -217,7 +228,8 @@ def main(argv=None) -> int:
         if k.endswith("per_s") or k.endswith("over_sb3"):
             print(f"{k:45s} {v:10.2f}")
     for level, r in result["ppo"].items():
-        print(f"  training/ppo.py at {level}: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items()))
+        print(f"  training/ppo.py at {level}: {r['agent_steps_per_s']:.0f} agent-steps/s; "
+              + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items()))
     for k, v in (result.get("sb3_profile") or {}).items():
         print(f"  {k:55s} {v['seconds']:8.2f} s  {100 * v['share']:5.1f} %")
     print(f"load average before/after: {result['machine']['load_average_before']} / "

@@ -41,6 +41,10 @@ weighted by ``distill_coef``, which falls linearly to zero over the first ``dist
 agent-steps (0: it stays); after that the teacher is no longer consulted and the learner is
 free to leave it behind.
 
+Curricula. ``curriculum: {stages: [...], promote_at, window}`` trains on stages of env
+overrides in turn, each promoted when the success rate of its last ``window`` episodes reaches
+``promote_at`` (:mod:`training.curriculum`); the stage is logged and saved with checkpoints.
+
 Episode ends. A world's episode ends at success or at ``max_cycles``, and the world starts
 its next episode at once (``BatchedEnv.reset_worlds``) while the others run on, so every
 sample of every cycle enters the update. At ``max_cycles`` the value of the last observation
@@ -134,6 +138,8 @@ class Args:
     """Weight of the cross-entropy to the teacher's action on the learner's states at the start (0: off)."""
     distill_steps: int = 0
     """Agent-steps over which distill_coef falls linearly to zero (0: it stays)."""
+    curriculum: dict = field(default_factory=dict)
+    """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps."""
@@ -459,22 +465,36 @@ def train(args: Args) -> Path:
         raise CheckpointError(f"resume={args.resume!r} is a {resume_meta['algorithm']!r} checkpoint; "
                               f"allowed: a checkpoint of training/ppo.py")
     agent_steps = int(resume_meta["agent_steps"]) if resume_meta else 0
+    curriculum = None
+    if args.curriculum:
+        from training.curriculum import Curriculum
+
+        curriculum = Curriculum(args.curriculum, lambda stage: proteo_env.make_batched(
+            args.task, 1, control=args.control, **{**args.env, **stage}),
+            stage=int((resume_meta or {}).get("curriculum_stage", 0)))
     run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
                            f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
                            resume=resume_meta is not None)
     save_args(args, run_dir)
-    worlds = Worlds(args, env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
+
+    def stage_args() -> Args:
+        return args if curriculum is None else dataclasses.replace(args, env=curriculum.overrides(args.env))
+
+    worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
     if args.init and resume_meta is None:
         net.load_state_dict(initial_weights(args, worlds.task_id, enc))
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
-    teachers = None
-    if args.distill_coef > 0:
+    def make_teachers():
+        if args.distill_coef <= 0:
+            return None
         from training.teachers import Teachers
 
-        teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed + agent_steps,
-                            n_fields=len(nvec))
+        return Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed + agent_steps,
+                        n_fields=len(nvec))
+
+    teachers = make_teachers()
     if resume_meta is not None:
         folder = Path(resume_meta["dir"])
         net.load_state_dict(torch.load(folder / "policy.pt", weights_only=True))
@@ -482,13 +502,18 @@ def train(args: Args) -> Path:
         optimiser.load_state_dict(state["optimiser"])
         torch.set_rng_state(state["torch_rng"])
 
-    t_steps, n = args.n_steps, args.n_envs * a
-    features = np.zeros((t_steps, n, worlds.size), dtype=np.float32)
-    move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
-    obs_t, mask_t = torch.from_numpy(features), torch.from_numpy(move_mask)
-    actions_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
-    labels_t = torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64)
-    logp_t, values_t, bootstrap_t = (torch.zeros((t_steps, n)) for _ in range(3))
+    t_steps = args.n_steps
+
+    def allocate():
+        """Rollout storage for the current worlds: ``(T, N, ...)`` with ``N`` modules of all worlds."""
+        n = args.n_envs * worlds.n_agents
+        features = np.zeros((t_steps, n, worlds.size), dtype=np.float32)
+        move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
+        return (n, features, move_mask, torch.from_numpy(features), torch.from_numpy(move_mask),
+                *(torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64) for _ in range(2)),
+                *(torch.zeros((t_steps, n)) for _ in range(3)))
+
+    n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
     rewards_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d) for d in (np.float32, bool, bool))
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
 
@@ -497,11 +522,12 @@ def train(args: Args) -> Path:
         torch.save(net.state_dict(), folder / "policy.pt")
         torch.save({"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state()}, folder / "trainer.pt")
         save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
-        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
+        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=stage_args().env,
                               encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
                               extra={"label": f"ppo-{args.arch}", "control": args.control, "arch": args.arch,
                                      "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
-                                     "args": asdict(args)})
+                                     "args": asdict(args),
+                                     **({"curriculum_stage": curriculum.stage} if curriculum else {})})
 
     bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM,
                disable=not args.progress_bar)
@@ -583,11 +609,16 @@ def train(args: Args) -> Path:
         v, r = values_t.reshape(-1), returns.reshape(-1)
         log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items() if x},
                               "loss/distill_weight": distill,
+                              **({"curriculum/stage": curriculum.stage} if curriculum else {}),
                               "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
                               "time/env_seconds": env_time, "time/encode_seconds": enc_time,
                               "time/forward_seconds": collected - started - env_time - enc_time,
                               "time/update_seconds": updated - collected,
                               "throughput/agent_steps_per_s": used / seconds})
+        if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
+            worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)
+            a, teachers = worlds.n_agents, make_teachers()
+            n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
         finished = []
         if agent_steps >= next_checkpoint:
             save(checkpoint_folder(run_dir, agent_steps))
