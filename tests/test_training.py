@@ -271,6 +271,8 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
                      "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "kickstart_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
                            "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
+    "curriculum_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
+                            "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
     "bc_": ("imitate", ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--epochs", "1",
                         "--minibatch-size", "32"]),
     "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",

@@ -14,6 +14,8 @@ recipe         script                   config
 ``imitation``  ``training/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
 ``kickstart``  ``training/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
                                         ``--init`` the kept clone of the same task and seed
+``curriculum`` ``training/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
+                                        of env overrides, no demonstrations)
 ============== ======================== ====================================================
 
 For each recipe, task and seed it trains the config with ``--seed S`` (PPO recipes for
@@ -45,7 +47,7 @@ from training.common import parse_args
 
 
 RECIPES = {"ppo": ("training.ppo", "ppo"), "imitation": ("training.imitate", "bc"),
-           "kickstart": ("training.ppo", "kickstart")}
+           "kickstart": ("training.ppo", "kickstart"), "curriculum": ("training.ppo", "curriculum")}
 """Recipe name: (script module, prefix of its configs in configs/train)."""
 
 
@@ -55,7 +57,7 @@ class Args:
 
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     recipes: tuple[str, ...] = ("ppo",)
-    """Training recipes (ppo, imitation, kickstart); see the module docstring."""
+    """Training recipes (ppo, imitation, kickstart, curriculum); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
