@@ -22,7 +22,8 @@ For each recipe, task and seed it trains the config with ``--seed S`` (PPO recip
 ``total_steps`` agent-steps or the time limit ``minutes``; ``parallel`` runs at a time, one
 thread each; a kickstart run waits for its clone), then keeps:
 
-- the final checkpoint in ``checkpoints/<task>/<recipe>_<level>/seed_<S>/`` (what
+- the final checkpoint, without its optimiser state (``--resume`` reads that from the run
+  folder), in ``checkpoints/<task>/<recipe>_<level>/seed_<S>/`` (what
   ``configs/eval_study.yaml`` names, one ``{label, runs}`` group per task and recipe);
 - its ``progress.csv`` in ``docs/learning/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
   figure of the learning curves of all seeds per task, ``docs/learning/curves_<recipe>_<task>_<level>.png``;
@@ -138,7 +139,7 @@ def main(argv=None) -> int:
             keep = kept(recipe, task, seed)
             if keep.exists():
                 shutil.rmtree(keep)
-            shutil.copytree(run_dir / "final", keep)
+            shutil.copytree(run_dir / "final", keep, ignore=shutil.ignore_patterns("trainer.pt"))  # resume: run_dir
             shutil.copy(run_dir / "progress.csv", docs / "progress" / f"{recipe}_{task}_{level}_s{seed}.csv")
             meta = json.loads((keep / "proteo.json").read_text())
             summary.append({"recipe": recipe, "task": task, "seed": seed, "level": args.level,
