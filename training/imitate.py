@@ -194,7 +194,9 @@ def train(args: Args) -> Path:
         agent_steps += args.cycles_per_round * worlds.n_envs * worlds.n_agents
         x_t, m_t, y_t = torch.from_numpy(x), torch.from_numpy(m), torch.from_numpy(y)
         held_out = agreement(net, x_t, m_t, y_t, nvec) if round_index else (float("nan"), float("nan"))
-        data_x.append(x_t), data_m.append(m_t), data_y.append(y_t)
+        data_x.append(x_t)
+        data_m.append(m_t)
+        data_y.append(y_t)
         all_x, all_m, all_y = torch.cat(data_x), torch.cat(data_m), torch.cat(data_y)
         collected = time.perf_counter()
         net.train()

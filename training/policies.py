@@ -116,9 +116,11 @@ class LogitsPolicy(Policy):
         return self._act(range(len(features)), features, move_mask)
 
     def _act(self, keys, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
-        previous = np.array([self.previous.get(k, 0) for k in keys], dtype=np.int64)
-        actions = sample_actions(self.logits_fn(with_memory(features, previous, self.memory)), self.nvec, move_mask,
-                                 self.rng, deterministic=self.deterministic)
+        if self.memory != "none":
+            previous = np.array([self.previous.get(k, 0) for k in keys], dtype=np.int64)
+            features = with_memory(features, previous, self.memory)
+        actions = sample_actions(self.logits_fn(features), self.nvec, move_mask, self.rng,
+                                 deterministic=self.deterministic)
         if self.memory != "none":
             self.previous.update(zip(keys, actions[:, 0].tolist()))
         return actions
