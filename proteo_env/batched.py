@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import EnvConfig
+from .config import EnvConfig, check_seed
 from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
 from .core.world import World
@@ -113,7 +113,9 @@ class BatchedEnv:
         return "" if self.control == "full" else f" at control level {self.control!r}"
 
     def reset(self, seed: int | None = None) -> ObservationBuffers:
-        """New start layouts for every world; world ``b`` is seeded with ``seed + b``."""
+        """New start layouts for every world; world ``b`` is seeded with ``seed + b`` (``None``
+        or an integer >= 0; anything else is a :class:`~proteo_env.config.ConfigError`)."""
+        seed = check_seed(seed)
         if seed is not None:
             self._rngs = [np.random.default_rng(seed + b) for b in range(self.n_envs)]
         layouts = [self._build_layout(b) for b in range(self.n_envs)]

@@ -17,6 +17,8 @@ import dataclasses
 import typing
 from pathlib import Path
 
+import numpy as np
+
 from .core.world import Physics
 
 
@@ -26,6 +28,16 @@ CONTROL_LEVELS = ("move", "move+mode", "full")
 
 class ConfigError(ValueError):
     """A config value or key that is not allowed (the message names field, value and allowed)."""
+
+
+def check_seed(seed, name: str = "seed"):
+    """``seed`` as a Python int (``None`` passes through); a :class:`ConfigError` naming ``name``
+    and the value unless it is ``None`` or an integer >= 0 (NumPy integers included, bools not)."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"{name}={seed!r} is not allowed; allowed: None or an integer >= 0")
+    return int(seed)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,17 +123,35 @@ def split_overrides(overrides: dict, task_params_cls, *, task_name: str):
     return env, params
 
 
-def load_run_config(path) -> tuple[str, dict]:
-    """Read a flat YAML run config; return ``(task_id, overrides)``."""
+def parse_yaml(text: str, where: str):
+    """The YAML value of ``text``; a :class:`ConfigError` that starts with ``where`` (what the text
+    is: a file, a flag) and says where the syntax breaks, instead of the parser's traceback."""
     import yaml
 
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or str(err)
+        raise ConfigError(f"{where} is not valid YAML{at} ({problem}); allowed: YAML such as "
+                          "'key: value' lines or {key: value}") from None
+
+
+def load_yaml(path, what: str = "config file", example: str = "a path to a YAML file"):
+    """The YAML document in file ``path``: the one loader of every config (run, training, eval,
+    sweep). A :class:`ConfigError` names ``what`` and the path when the file is missing or its
+    YAML is malformed (with the line and column)."""
     path = Path(path)
     if not path.is_file():
-        raise ConfigError(f"config file {str(path)!r} does not exist; allowed: a path to a YAML file")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise ConfigError(f"config file {str(path)!r} is not valid YAML: {err}") from None
+        raise ConfigError(f"{what} {str(path)!r} does not exist; allowed: {example}")
+    return parse_yaml(path.read_text(), f"{what} {str(path)!r}")
+
+
+def load_run_config(path) -> tuple[str, dict]:
+    """Read a flat YAML run config; return ``(task_id, overrides)``."""
+    data = load_yaml(path)
+    path = Path(path)
     if not isinstance(data, dict) or "task" not in data:
         raise ConfigError(f"config file {str(path)!r}: a mapping with a 'task' key is required")
     data = dict(data)

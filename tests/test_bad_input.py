@@ -346,3 +346,14 @@ def test_action_for_unknown_agent_is_rejected(running):
     actions["module_999"] = actions["module_0"]
     _raises_and_unchanged(env, obs, lambda: env.step(actions), ValueError,
                           r"actions for 1 unknown agents \(first: 'module_999'\); allowed: the agents in env.agents")
+
+
+@pytest.mark.parametrize("seed", [-1, "a", 1.5, True, [1, 2]])
+def test_a_seed_that_is_not_a_non_negative_integer_is_refused_naming_it(seed):
+    env = proteo_env.make("chain-v0", n_modules=6)
+    with pytest.raises(ConfigError, match=re.escape(f"seed={seed!r} is not allowed; allowed: None or an integer >= 0")):
+        env.reset(seed=seed)
+    batch = proteo_env.make_batched("chain-v0", 2, n_modules=6)
+    with pytest.raises(ConfigError, match=re.escape(f"seed={seed!r} is not allowed")):
+        batch.reset(seed=seed)
+    env.reset(seed=np.int64(3))  # NumPy integers are seeds

@@ -148,3 +148,30 @@ def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_pa
                   "--tensorboard", "false", "--progress-bar", "false", "--run-dir", str(tmp_path / "run")])
     with pytest.raises(ValueError, match=r"memory='recurrent' is not allowed; allowed: 'none', 'last_move'"):
         tiny_clone(tmp_path / "bad", "--memory", "recurrent")
+
+
+def test_return_scale_tracks_the_mean_and_variance_of_every_return_seen_and_is_the_identity_when_off():
+    gen = torch.Generator().manual_seed(0)
+    batches = [400 + 30 * torch.randn(500, generator=gen), 380 + 60 * torch.randn(700, generator=gen)]
+    scale = ppo.ReturnScale(True)
+    for batch in batches:
+        scale.update(batch)
+    seen = torch.cat(batches).double()
+    assert scale.mean == pytest.approx(seen.mean().item()) and scale.std == pytest.approx(seen.std(unbiased=False).item())
+    targets = scale.target(seen)
+    assert abs(targets.mean().item()) < 1e-9 and targets.std(unbiased=False).item() == pytest.approx(1.0)
+    assert torch.allclose(scale.value(targets), seen)
+    off = ppo.ReturnScale(False)
+    off.update(seen)
+    assert off.value(seen) is seen and off.target(seen) is seen
+
+
+def test_value_norm_is_saved_with_the_trainer_state_and_resumed(tmp_path):
+    common = ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--n-envs", "4", "--n-steps", "8",
+              "--minibatch-size", "128", "--hidden", "[16, 16]", "--value-norm", "true", "--tensorboard", "false",
+              "--progress-bar", "false"]
+    first = ppo.main(common + ["--total-steps", "512", "--run-dir", str(tmp_path / "run")])
+    saved = torch.load(first / "trainer.pt", weights_only=False)["return_scale"]
+    assert saved["count"] == 512 and saved["var"] > 0  # every return of both rollouts entered the statistics
+    resumed = ppo.main(["--resume", str(first), "--total-steps", "768"])
+    assert torch.load(resumed / "trainer.pt", weights_only=False)["return_scale"]["count"] == 768

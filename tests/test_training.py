@@ -379,3 +379,59 @@ def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
                 env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), control=level,
                                       **(entry.get("env") or {}))
                 assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
+
+
+@pytest.mark.parametrize("module", ["training.ppo", "training.imitate"])
+def test_a_device_that_is_not_one_or_not_here_is_refused_before_anything_is_written(module, tmp_path):
+    torch = pytest.importorskip("torch")
+    from proteo_env.config import ConfigError
+
+    main = importlib.import_module(module).main
+    run_dir = tmp_path / "run"
+    base = ["--env", TINY_FLAG, "--tensorboard", "false", "--progress-bar", "false", "--run-dir", str(run_dir)]
+    with pytest.raises(ConfigError, match=r"device='tpu' is not a device.*allowed: cpu, cuda, cuda:N or mps"):
+        main(base + ["--device", "tpu"])
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match=r"device='cuda' is not available on this machine; allowed: cpu"):
+            main(base + ["--device", "cuda"])
+    assert not run_dir.exists()
+
+
+@pytest.mark.parametrize("module", ["training.ppo", "training.imitate", "training.cma_es"])
+def test_malformed_yaml_in_a_config_file_or_a_flag_is_one_error_with_its_line_and_column(module, tmp_path, capsys):
+    from training.common import run_script
+
+    main = importlib.import_module(module).main
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("task: chain-v0\nenv: {n_modules: 6\nseed: 1\n")
+    assert run_script(main, ["--config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"config file {str(bad)!r} is not valid YAML at line 3, column" in err and "Traceback" not in err
+    assert run_script(main, ["--env", "{n_modules: 6", "--run-dir", str(tmp_path / "run")]) == 2
+    assert "--env '{n_modules: 6' is not valid YAML at line 1, column 14" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_malformed_eval_config_is_one_error_not_a_parser_traceback(tmp_path, capsys):
+    from training.cli import main
+
+    bad = tmp_path / "eval.yaml"
+    bad.write_text("tasks: [chain\n  x: 1\n")
+    assert main(["eval", "--config", str(bad), "--out", str(tmp_path / "out")]) == 2
+    assert f"proteo: error: eval config {str(bad)!r} is not valid YAML at line 2, column 4" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flag, value, allowed", [("--total-steps", "-5", "an integer >= 0"),
+                                                  ("--n-envs", "0", "an integer >= 1"),
+                                                  ("--gamma", "1.5", "a number in [0.0, 1.0]"),
+                                                  ("--learning-rate", "-0.001", "a number >= 0.0")])
+def test_ppo_refuses_a_negative_budget_or_a_bad_hyperparameter_before_writing_anything(flag, value, allowed,
+                                                                                      tmp_path, capsys):
+    from training import ppo
+    from training.common import run_script
+
+    assert run_script(ppo.main, [flag, value, "--run-dir", str(tmp_path / "run")]) == 2
+    name = flag[2:].replace("-", "_")
+    assert f"{name}={float(value) if '.' in value else int(value)!r} is not allowed; allowed: {allowed}" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

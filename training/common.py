@@ -22,6 +22,7 @@ import dataclasses
 import json
 import os
 import random
+import sys
 import time
 import typing
 from pathlib import Path
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from proteo_env.config import ConfigError, build
+from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
 
 CHECKPOINT_FORMAT = "proteo-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -55,16 +56,14 @@ def parse_args(args_cls, argv=None, *, description: str = ""):
     values: dict = {}
     if ns.config:
         path = Path(ns.config)
-        if not path.is_file():
-            raise ConfigError(f"config file {str(path)!r} does not exist; allowed: a path to a YAML file")
-        loaded = yaml.safe_load(path.read_text()) or {}
+        loaded = load_yaml(path) or {}
         if not isinstance(loaded, dict):
             raise ConfigError(f"config file {str(path)!r}: a mapping of argument names is required")
         values.update(loaded)
     for f in dataclasses.fields(args_cls):
         raw = getattr(ns, f.name)
         if raw is not None:
-            values[f.name] = raw if hints[f.name] is str else yaml.safe_load(raw)
+            values[f.name] = raw if hints[f.name] is str else parse_yaml(raw, f"--{f.name.replace('_', '-')} {raw!r}")
     for key, value in list(values.items()):  # YAML reads 1e6 as a string; accept it for ints and floats
         if isinstance(value, str) and key in hints and hints[key] in (int, float):
             try:
@@ -109,6 +108,40 @@ def limit_threads(n: int | None = 1) -> None:
     except ImportError:
         return
     torch.set_num_threads(n)
+
+
+def run_script(main, argv=None) -> int:
+    """Run a training script's ``main(argv)`` from the command line: bad input (a
+    :class:`ConfigError` or :class:`CheckpointError`, both ``ValueError``) is one line on stderr
+    naming the field, the value and what is allowed, and exit status 2, not a traceback."""
+    name = Path(sys.argv[0]).stem if argv is None else "training"
+    try:
+        main(argv)
+    except ValueError as err:
+        print(f"{name}: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def torch_device(name: str):
+    """The ``torch.device`` for a trainer's ``device`` argument (``cpu``, ``cuda``, ``cuda:N``,
+    ``mps``); a :class:`ConfigError` naming the value when it is not a device or this machine
+    lacks it. CPU is the default and the tested path; nothing needs an accelerator."""
+    import torch
+
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError) as error:
+        raise ConfigError(f"device={name!r} is not a device ({error}); allowed: cpu, cuda, cuda:N or mps") from None
+    if device.type == "cpu":
+        return device
+    if device.type == "cuda" and torch.cuda.is_available():
+        if device.index is None or device.index < torch.cuda.device_count():
+            return device
+    elif device.type == "mps" and torch.backends.mps.is_available():
+        return device
+    raise ConfigError(f"device={name!r} is not available on this machine; allowed: cpu"
+                      + "".join(f", cuda:{i}" for i in range(torch.cuda.device_count())))
 
 
 def make_run_dir(run_dir: str | None, default_name: str, *, resume: bool) -> Path:

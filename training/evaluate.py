@@ -246,16 +246,12 @@ def plot(results: list[PolicyResult], path: Path) -> None:
 
 def load_config(path) -> dict:
     """The eval config as ``{"seeds", "first_seed", "tasks": {name: {"env", "checkpoints"}}}``."""
-    import yaml
-
-    from proteo_env.config import ConfigError
+    from proteo_env.config import ConfigError, load_yaml
 
     if path is None:
         return {"seeds": 10, "first_seed": 0, "tasks": {}}
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"eval config {str(p)!r} does not exist; allowed: a YAML file such as configs/eval.yaml")
-    data = yaml.safe_load(p.read_text()) or {}
+    data = load_yaml(p, "eval config", "a YAML file such as configs/eval.yaml") or {}
     allowed = {"seeds", "first_seed", "tasks"}
     unknown = sorted(set(data) - allowed) if isinstance(data, dict) else ["<not a mapping>"]
     if unknown:

@@ -51,7 +51,8 @@ from tqdm import tqdm
 
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
-from training.common import ProgressLog, make_run_dir, parse_args, save_args, seed_everything, write_checkpoint_meta
+from training.common import (ProgressLog, make_run_dir, parse_args, save_args, seed_everything, torch_device,
+                             write_checkpoint_meta)
 from training.ppo import ARCHS, ActorCritic, Worlds, masked_log_probs, sample, teacher_cross_entropy
 from training.policies import check_memory
 from training.teachers import DEFAULT_TEACHER, Teachers
@@ -99,6 +100,8 @@ class Args:
     cycle, training/policies.py MEMORIES)."""
     run_dir: str | None = None
     threads: int = 1
+    device: str = "cpu"
+    """Where the network runs: cpu (the default), cuda, cuda:N or mps; the worlds stay on the CPU."""
     tensorboard: bool = True
     progress_bar: bool = True
 
@@ -123,8 +126,10 @@ def round_beta(args: Args, round_index: int) -> float:
 def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[float, float]:
     """``(move, whole action)``: the share of samples whose arg-max move, and whose arg-max of
     every field, equals the label ``(N, F)``."""
+    device = next(net.parameters()).device
     with torch.no_grad():
-        best = torch.stack([lp.argmax(dim=1) for lp in masked_log_probs(net.logits(features), move_mask, nvec)], 1)
+        log_probs = masked_log_probs(net.logits(features.to(device)), move_mask.to(device), nvec)
+        best = torch.stack([lp.argmax(dim=1) for lp in log_probs], 1).cpu()
     same = best == labels
     return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean())
 
@@ -148,9 +153,11 @@ def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, c
         kept_y.append(labels[keep])
         actions = labels.copy()
         if beta < 1.0:
+            device = next(net.parameters()).device
             with torch.no_grad():
-                learned, _ = sample(masked_log_probs(net.logits(torch.from_numpy(features)),
-                                                     torch.from_numpy(move_mask), nvec))
+                learned, _ = sample(masked_log_probs(net.logits(torch.from_numpy(features).to(device)),
+                                                     torch.from_numpy(move_mask).to(device), nvec))
+                learned = learned.cpu()
             play_learned = rng.random(n) >= beta
             actions[play_learned] = learned.numpy()[play_learned]
         _, terminal, truncated = worlds.step(actions.reshape(worlds.n_envs, a, -1), finished)
@@ -171,13 +178,14 @@ def main(argv=None) -> Path:
 def train(args: Args) -> Path:
     """Run round 0 and ``args.rounds`` DAgger rounds; returns the final checkpoint's folder."""
     seed_everything(args.seed, threads=args.threads)
+    device = torch_device(args.device)
     run_dir = make_run_dir(args.run_dir, f"imitate_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}"
                                          f"_s{args.seed}", resume=False)
     save_args(args, run_dir)
     worlds = Worlds(args, env_seed=args.seed)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
     teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
-    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
+    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory).to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
     rng = np.random.default_rng(args.seed)
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
@@ -205,8 +213,8 @@ def train(args: Args) -> Path:
             order = torch.randperm(len(all_x))
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start:start + args.minibatch_size]
-                loss = teacher_cross_entropy(masked_log_probs(net.logits(all_x[mb]), all_m[mb], nvec), all_y[mb],
-                                             all_m[mb])
+                x_mb, m_mb, y_mb = all_x[mb].to(device), all_m[mb].to(device), all_y[mb].to(device)
+                loss = teacher_cross_entropy(masked_log_probs(net.logits(x_mb), m_mb, nvec), y_mb, m_mb)
                 optimiser.zero_grad(set_to_none=True)
                 loss.backward()
                 optimiser.step()
@@ -225,7 +233,7 @@ def train(args: Args) -> Path:
     bar.close()
     final = run_dir / "final"
     final.mkdir(parents=True, exist_ok=True)
-    torch.save(net.state_dict(), final / "policy.pt")
+    torch.save({k: v.cpu() for k, v in net.state_dict().items()}, final / "policy.pt")
     save_args(dataclasses.replace(args, run_dir=str(run_dir)), final)
     write_checkpoint_meta(final, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
                           encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
@@ -240,4 +248,6 @@ def train(args: Args) -> Path:
 
 
 if __name__ == "__main__":
-    main()
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))

@@ -77,7 +77,7 @@ from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES, ObservationBuffers
 from training.policies import check_memory, with_memory
 from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
-                             seed_everything, write_checkpoint_meta)
+                             seed_everything, torch_device, write_checkpoint_meta)
 
 ALGORITHM = "ppo"
 ARCHS = ("mlp", "lattice", "shared")
@@ -109,6 +109,9 @@ class Args:
     clip_range: float = 0.2
     ent_coef: float = 0.01
     vf_coef: float = 0.5
+    value_norm: bool = False
+    """Train the critic on returns scaled by their running mean and standard deviation
+    (:class:`ReturnScale`); for tasks whose returns are far from 1 (table's reach hundreds)."""
     max_grad_norm: float = 0.5
     """Gradient norm limit, applied to the actor and to the critic separately (to all weights at arch=shared)."""
     message_encoding: str = "per_direction"
@@ -127,6 +130,8 @@ class Args:
     """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
     threads: int = 1
     """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
+    device: str = "cpu"
+    """Where the network runs: cpu (the default), cuda, cuda:N or mps; the worlds stay on the CPU."""
     tensorboard: bool = True
     progress_bar: bool = True
     init: str | None = None
@@ -140,6 +145,21 @@ class Args:
     """Agent-steps over which distill_coef falls linearly to zero (0: it stays)."""
     curriculum: dict = field(default_factory=dict)
     """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
+
+    def __post_init__(self):
+        for name, least in (("total_steps", 0), ("n_envs", 1), ("n_groups", 1), ("n_steps", 1),
+                            ("minibatch_size", 1), ("n_epochs", 1), ("checkpoint_every", 1), ("distill_steps", 0)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {least}")
+        for name, low, high in (("learning_rate", 0.0, None), ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0),
+                                ("clip_range", 0.0, None), ("ent_coef", 0.0, None), ("vf_coef", 0.0, None),
+                                ("max_grad_norm", 0.0, None), ("distill_coef", 0.0, None),
+                                ("time_limit_minutes", 0.0, None)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
+                allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
+                raise ConfigError(f"{name}={value!r} is not allowed; allowed: {allowed}")
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps."""
@@ -416,6 +436,45 @@ def gae(rewards, values, next_values, terminal, done, gamma: float, lam: float) 
     return advantages
 
 
+class ReturnScale:
+    """Running mean and variance of the returns (Chan et al.'s parallel update, float64). With
+    ``value_norm`` the critic predicts ``(G - mean) / std`` and :meth:`value` maps its output
+    back, so that a value loss on the scaled returns stays near 1 whatever the reward's scale:
+    on a shared trunk an unscaled value loss of returns in the hundreds swamps the policy's
+    gradient under the joint norm clip. Disabled, every method is the identity."""
+
+    def __init__(self, enabled: bool):
+        self.enabled, self.mean, self.var, self.count = enabled, 0.0, 1.0, 0
+
+    def update(self, returns: torch.Tensor) -> None:
+        if not self.enabled:
+            return
+        x = returns.double()
+        n, mean, var = x.numel(), x.mean().item(), x.var(unbiased=False).item()
+        total = self.count + n
+        delta = mean - self.mean
+        self.var = (self.var * self.count + var * n + delta * delta * self.count * n / total) / total
+        self.mean, self.count = self.mean + delta * n / total, total
+
+    @property
+    def std(self) -> float:
+        return max(self.var, 1e-8) ** 0.5
+
+    def value(self, output: torch.Tensor) -> torch.Tensor:
+        """The critic's output ``(N,)`` in return units."""
+        return output * self.std + self.mean if self.enabled else output
+
+    def target(self, returns: torch.Tensor) -> torch.Tensor:
+        """Returns ``(N,)`` on the critic's scale."""
+        return (returns - self.mean) / self.std if self.enabled else returns
+
+    def state_dict(self) -> dict:
+        return {"mean": self.mean, "var": self.var, "count": self.count}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.mean, self.var, self.count = state["mean"], state["var"], state["count"]
+
+
 def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> dict:
     """The network weights of checkpoint ``args.init``, after checking that it was trained by
     training/imitate.py or training/ppo.py on the same task, control level, observation encoding
@@ -458,6 +517,7 @@ def train(args: Args) -> Path:
     from training.common import CheckpointError, read_meta
 
     seed_everything(args.seed, threads=args.threads)
+    device = torch_device(args.device)
     if args.arch not in ARCHS:
         raise ConfigError(f"arch={args.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
     resume_meta = read_meta(args.resume) if args.resume else None
@@ -485,6 +545,7 @@ def train(args: Args) -> Path:
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
     if args.init and resume_meta is None:
         net.load_state_dict(initial_weights(args, worlds.task_id, enc))
+    net.to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
     def make_teachers():
         if args.distill_coef <= 0:
@@ -495,12 +556,15 @@ def train(args: Args) -> Path:
                         n_fields=len(nvec))
 
     teachers = make_teachers()
+    scale = ReturnScale(args.value_norm)
     if resume_meta is not None:
         folder = Path(resume_meta["dir"])
-        net.load_state_dict(torch.load(folder / "policy.pt", weights_only=True))
-        state = torch.load(folder / "trainer.pt", weights_only=False)
+        net.load_state_dict(torch.load(folder / "policy.pt", map_location=device, weights_only=True))
+        state = torch.load(folder / "trainer.pt", map_location="cpu", weights_only=False)
         optimiser.load_state_dict(state["optimiser"])
         torch.set_rng_state(state["torch_rng"])
+        if "return_scale" in state:
+            scale.load_state_dict(state["return_scale"])
 
     t_steps = args.n_steps
 
@@ -519,8 +583,9 @@ def train(args: Args) -> Path:
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
-        torch.save(net.state_dict(), folder / "policy.pt")
-        torch.save({"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state()}, folder / "trainer.pt")
+        torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
+        torch.save({"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state(),
+                    "return_scale": scale.state_dict()}, folder / "trainer.pt")
         save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
         write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=stage_args().env,
                               encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
@@ -545,18 +610,19 @@ def train(args: Args) -> Path:
                 worlds.encode(features[t], move_mask[t])
                 if distill > 0:
                     labels_t[t] = torch.from_numpy(teachers.labels(worlds.buffers))
-                logits, values = net(obs_t[t])
-                actions, logp = sample(masked_log_probs(logits, mask_t[t], nvec))
-                actions_t[t], logp_t[t], values_t[t] = actions, logp, values
-                reward, terminal, truncated = worlds.step(actions.numpy().reshape(args.n_envs, a, -1), finished)
+                logits, values = net(obs_t[t].to(device))
+                actions, logp = sample(masked_log_probs(logits, mask_t[t].to(device), nvec))
+                actions_t[t], logp_t[t], values_t[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
+                reward, terminal, truncated = worlds.step(actions_t[t].numpy().reshape(args.n_envs, a, -1), finished)
                 rewards_w[t], terminal_w[t], truncated_w[t] = reward, terminal, truncated
                 if distill > 0:
                     teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
-                    bootstrap_t[t, worlds.final_rows] = net.value(torch.from_numpy(worlds.final_features))
+                    final_values = net.value(torch.from_numpy(worlds.final_features).to(device))
+                    bootstrap_t[t, worlds.final_rows] = scale.value(final_values).cpu()
             last = np.zeros((n, worlds.size), dtype=np.float32)
             worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
-            last_value = net.value(torch.from_numpy(last))
+            last_value = scale.value(net.value(torch.from_numpy(last).to(device))).cpu()
         collected = time.perf_counter()
         terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
                                         for w in (terminal_w, truncated_w, rewards_w))
@@ -564,6 +630,7 @@ def train(args: Args) -> Path:
         advantages = gae(rewards, values_t, next_values, terminal.float(), (terminal | truncated).float(),
                          args.gamma, args.gae_lambda)
         returns = advantages + values_t
+        scale.update(returns)
         # ---- update
         used = t_steps * n
         flat = (obs_t.reshape(-1, worlds.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
@@ -574,13 +641,13 @@ def train(args: Args) -> Path:
             order = torch.randperm(used)
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start:start + args.minibatch_size]
-                x, m, act, old_logp, adv, ret, labels = (v[mb] for v in flat)
+                x, m, act, old_logp, adv, ret, labels = (v[mb].to(device) for v in flat)
                 adv = (adv - adv.mean()) / (adv.std() + 1e-8)
                 logits, values = net(x)
                 log_probs = masked_log_probs(logits, m, nvec)
                 ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
                 policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
-                value_loss = 0.5 * (values - ret).pow(2).mean()
+                value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
                 ent = entropy(log_probs).mean()
                 loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
                 if distill > 0:
@@ -631,4 +698,6 @@ def train(args: Args) -> Path:
 
 
 if __name__ == "__main__":
-    main()
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))

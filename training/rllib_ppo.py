@@ -261,4 +261,6 @@ def _finite(value) -> float | None:
 
 
 if __name__ == "__main__":
-    main()
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))

@@ -24,7 +24,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
-                             seed_everything, write_checkpoint_meta)
+                             seed_everything, torch_device, write_checkpoint_meta)
 
 ALGORITHM = "sb3-maskable-ppo"
 
@@ -60,12 +60,15 @@ class Args:
     """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
     threads: int = 1
     """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
+    device: str = "cpu"
+    """Where the networks run: cpu (the default), cuda, cuda:N or mps."""
     tensorboard: bool = True
 
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     seed_everything(args.seed, threads=args.threads)
+    device = torch_device(args.device)
 
     from sb3_contrib import MaskablePPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -80,14 +83,14 @@ def main(argv=None) -> Path:
     venv = ProteoVecEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
     tb_dir = str(run_dir / "tb") if args.tensorboard else None
     if resume_meta is not None:
-        model = MaskablePPO.load(Path(resume_meta["dir"]) / "model.zip", env=venv, device="cpu",
+        model = MaskablePPO.load(Path(resume_meta["dir"]) / "model.zip", env=venv, device=device,
                                  tensorboard_log=tb_dir)
     else:
         model = MaskablePPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=args.batch_size,
                             n_epochs=args.n_epochs, learning_rate=args.learning_rate, gamma=args.gamma,
                             gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
                             vf_coef=args.vf_coef, policy_kwargs={"net_arch": list(args.hidden)},
-                            tensorboard_log=tb_dir, seed=args.seed, device="cpu", verbose=0)
+                            tensorboard_log=tb_dir, seed=args.seed, device=device, verbose=0)
     log = ProgressLog(run_dir, tensorboard=False)  # SB3 writes TensorBoard itself
 
     def save(folder: Path) -> None:
@@ -152,4 +155,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    main()
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))

@@ -80,16 +80,11 @@ def overrides_of(point: dict) -> dict:
 def load_sweep(path) -> SweepConfig:
     """The checked :class:`SweepConfig` in ``path``; any problem is one :class:`ConfigError`
     naming the field, its value and what is allowed."""
-    import yaml
-
-    from proteo_env.config import build
+    from proteo_env.config import build, load_yaml
     from proteo_env.registry import task_class
 
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"sweep config {str(p)!r} does not exist; allowed: a YAML file such as "
-                          "configs/sweeps/chain_cycles.yaml")
-    data = yaml.safe_load(p.read_text())
+    data = load_yaml(p, "sweep config", "a YAML file such as configs/sweeps/chain_cycles.yaml")
     if not isinstance(data, dict):
         raise ConfigError(f"sweep config {str(p)!r}: a mapping of keys is required; allowed keys: "
                           "task, grid, env, policies, seeds, first_seed, search, samples, sample_seed, plot")

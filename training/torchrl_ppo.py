@@ -242,4 +242,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    main()
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))
