@@ -136,6 +136,32 @@ def test_last_move_memory_feeds_each_agent_its_own_previous_move_and_resets_with
     assert np.all(seen[2][:, encoder.size:].argmax(axis=1) == 0)
 
 
+def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_full():
+    from training.policies import LogitsPolicy
+
+    env = proteo_env.make("chain-v0", control="full", **SMALL_ENV)
+    nvec = env.action_layout.nvec
+    seen = []
+
+    def logits_fn(features):
+        seen.append(features.copy())
+        return np.zeros((len(features), int(np.sum(nvec))))
+
+    encoder = ObservationEncoder.for_env(env)
+    policy = LogitsPolicy(env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn,
+                          memory="last_action")
+    observations, _ = env.reset(seed=3)
+    policy.reset(3)
+    first = policy.act(observations)
+    assert seen[0].shape == (len(observations), encoder.size + int(np.sum(nvec)))
+    observations, *_ = env.step(first)
+    policy.act(observations)
+    starts = np.concatenate([[0], np.cumsum(nvec)[:-1]])
+    for row, agent in enumerate(observations):
+        block = seen[1][row, encoder.size:]
+        assert np.flatnonzero(block).tolist() == (starts + np.asarray(first[agent])).tolist()
+
+
 def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_path):
     clone = tiny_clone(tmp_path / "memory", "--memory", "last_move", "--rounds", "0")
     meta = read_meta(clone)
@@ -146,6 +172,11 @@ def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_pa
         ppo.main(["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--n-envs", "2", "--total-steps", "0",
                   "--arch", "shared", "--message-encoding", "compact", "--hidden", "[32, 32]", "--init", str(clone),
                   "--tensorboard", "false", "--progress-bar", "false", "--run-dir", str(tmp_path / "run")])
+    full = tiny_clone(tmp_path / "full", "--control", "full", "--memory", "last_action", "--rounds", "1",
+                      "--cycles-per-round", "20")
+    policy = load_policy(full, proteo_env.make("chain-v0", control="full", **SMALL_ENV))
+    assert policy.memory == "last_action" and len(policy.nvec) == 5
+    assert policy.sampled == "move"  # the clone's checkpoint says how it acts: moves sampled, the rest arg-max
     with pytest.raises(ValueError, match=r"memory='recurrent' is not allowed; allowed: 'none', 'last_move'"):
         tiny_clone(tmp_path / "bad", "--memory", "recurrent")
 
@@ -175,3 +206,21 @@ def test_value_norm_is_saved_with_the_trainer_state_and_resumed(tmp_path):
     assert saved["count"] == 512 and saved["var"] > 0  # every return of both rollouts entered the statistics
     resumed = ppo.main(["--resume", str(first), "--total-steps", "768"])
     assert torch.load(resumed / "trainer.pt", weights_only=False)["return_scale"]["count"] == 768
+
+
+def test_sampled_move_samples_the_move_as_before_and_takes_the_arg_max_of_every_other_field():
+    from training.policies import LogitsPolicy, sample_actions
+
+    nvec = np.array([13, 4, 3])
+    logits = np.random.default_rng(0).normal(size=(500, int(nvec.sum())))
+    mask = np.ones((500, 13), dtype=bool)
+    everything = sample_actions(logits, nvec, mask, np.random.default_rng(7))
+    moves_only = sample_actions(logits, nvec, mask, np.random.default_rng(7), sampled="move")
+    assert np.array_equal(everything[:, 0], moves_only[:, 0])  # the same draws for the moves
+    assert np.array_equal(moves_only[:, 1], logits[:, 13:17].argmax(axis=1))
+    assert np.array_equal(moves_only[:, 2], logits[:, 17:20].argmax(axis=1))
+    assert not np.array_equal(everything[:, 1], moves_only[:, 1])
+    env = proteo_env.make("chain-v0", control="full", **SMALL_ENV)
+    with pytest.raises(ConfigError, match=r"sampled='modes' is not allowed; allowed: 'all', 'move'"):
+        LogitsPolicy(env.action_layout, env.task.modes, encoder=ObservationEncoder.for_env(env),
+                     logits_fn=lambda x: x, sampled="modes")

@@ -94,7 +94,7 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
                         encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic,
-                        nvec=meta["nvec"], memory=meta.get("memory", "none"))
+                        nvec=meta["nvec"], memory=meta.get("memory", "none"), sampled=meta.get("sampled", "all"))
 
 
 def _need(file: Path) -> Path:

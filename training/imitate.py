@@ -54,7 +54,7 @@ from proteo_env.spaces import N_MOVES
 from training.common import (ProgressLog, make_run_dir, parse_args, save_args, seed_everything, torch_device,
                              write_checkpoint_meta)
 from training.ppo import ARCHS, ActorCritic, Worlds, masked_log_probs, sample, teacher_cross_entropy
-from training.policies import check_memory
+from training.policies import SAMPLED, check_memory
 from training.teachers import DEFAULT_TEACHER, Teachers
 
 ALGORITHM = "imitation"
@@ -96,8 +96,12 @@ class Args:
     """Network: mlp, shared or lattice (training/ppo.py)."""
     hidden: tuple[int, ...] = (128, 128)
     memory: str = "none"
-    """What the network remembers between cycles: none, or last_move (the move the module played last
-    cycle, training/policies.py MEMORIES)."""
+    """What the network remembers between cycles: none, last_move (the move the module played last
+    cycle) or last_action (every field it played last cycle); training/policies.py MEMORIES."""
+    sampled: str = "move"
+    """Which fields the clone samples when it acts (the others take their arg-max), in the DAgger
+    rounds and, through the checkpoint, in ``proteo eval``: move (the rules' random moves; their
+    mode, roles and messages are deterministic) or all (training/policies.py SAMPLED)."""
     run_dir: str | None = None
     threads: int = 1
     device: str = "cpu"
@@ -116,6 +120,8 @@ class Args:
         if self.arch not in ARCHS:
             raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
         check_memory(self.memory)
+        if self.sampled not in SAMPLED:
+            raise ConfigError(f"sampled={self.sampled!r} is not allowed; allowed: {', '.join(map(repr, SAMPLED))}")
 
 
 def round_beta(args: Args, round_index: int) -> float:
@@ -123,15 +129,15 @@ def round_beta(args: Args, round_index: int) -> float:
     return 1.0 if round_index == 0 else args.beta * args.beta_decay ** (round_index - 1)
 
 
-def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[float, float]:
-    """``(move, whole action)``: the share of samples whose arg-max move, and whose arg-max of
-    every field, equals the label ``(N, F)``."""
+def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[float, float, np.ndarray]:
+    """``(move, whole action, per field (F,))``: the share of samples whose arg-max move, whose
+    arg-max of every field, and whose arg-max of each field equals the label ``(N, F)``."""
     device = next(net.parameters()).device
     with torch.no_grad():
         log_probs = masked_log_probs(net.logits(features.to(device)), move_mask.to(device), nvec)
         best = torch.stack([lp.argmax(dim=1) for lp in log_probs], 1).cpu()
     same = best == labels
-    return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean())
+    return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean()), same.float().mean(0).numpy()
 
 
 def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args,
@@ -155,8 +161,12 @@ def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, c
         if beta < 1.0:
             device = next(net.parameters()).device
             with torch.no_grad():
-                learned, _ = sample(masked_log_probs(net.logits(torch.from_numpy(features).to(device)),
-                                                     torch.from_numpy(move_mask).to(device), nvec))
+                log_probs = masked_log_probs(net.logits(torch.from_numpy(features).to(device)),
+                                             torch.from_numpy(move_mask).to(device), nvec)
+                learned, _ = sample(log_probs)
+                if args.sampled == "move":
+                    for k in range(1, len(nvec)):
+                        learned[:, k] = log_probs[k].argmax(dim=1)
                 learned = learned.cpu()
             play_learned = rng.random(n) >= beta
             actions[play_learned] = learned.numpy()[play_learned]
@@ -184,6 +194,7 @@ def train(args: Args) -> Path:
     save_args(args, run_dir)
     worlds = Worlds(args, env_seed=args.seed)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
+    fields = worlds.groups[0].control_fields
     teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory).to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
@@ -201,7 +212,8 @@ def train(args: Args) -> Path:
         x, m, y, finished = collect(worlds, teachers, net, beta, args.cycles_per_round, rng, args, bar)
         agent_steps += args.cycles_per_round * worlds.n_envs * worlds.n_agents
         x_t, m_t, y_t = torch.from_numpy(x), torch.from_numpy(m), torch.from_numpy(y)
-        held_out = agreement(net, x_t, m_t, y_t, nvec) if round_index else (float("nan"), float("nan"))
+        held_out = (agreement(net, x_t, m_t, y_t, nvec) if round_index
+                    else (float("nan"), float("nan"), np.full(len(nvec), np.nan)))
         data_x.append(x_t)
         data_m.append(m_t)
         data_y.append(y_t)
@@ -223,6 +235,8 @@ def train(args: Args) -> Path:
         measured = {"round": round_index, "beta": beta, "samples/new": len(x), "samples/total": len(all_x),
                     "imitation/loss": float(np.mean(losses)), "imitation/agreement_move": held_out[0],
                     "imitation/agreement_action": held_out[1],
+                    **({f"imitation/agreement_{name}": float(share) for name, share in zip(fields, held_out[2])}
+                       if len(fields) > 1 else {}),
                     "episode/return": float(np.mean([e["r"] for e in finished])) if finished else None,
                     "episode/success": float(np.mean(successes)) if successes else None,
                     "episode/cycles": float(np.mean([e["l"] for e in finished])) if finished else None,
@@ -239,7 +253,7 @@ def train(args: Args) -> Path:
                           encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
                           extra={"label": "imitation", "control": args.control, "arch": args.arch,
                                  "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
-                                 "teacher": args.teacher,
+                                 "teacher": args.teacher, "sampled": args.sampled,
                                  "last_round": measured, "args": asdict(args)})
     log.close()
     print(f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s, held-out agreement "

@@ -27,37 +27,59 @@ from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
 
 
-MEMORIES = {"none": 0, "last_move": N_MOVES}
-"""What a network remembers between cycles, as extra inputs after the observation's features
-(name: number of extra inputs): ``none``; ``last_move``, the one-hot move the module asked for
-in the previous cycle (0, stay, at an episode's start). The hand-coded rules keep such private
-memory (their heading and whether they asked to move); the observation does not carry it."""
+MEMORIES = ("none", "last_move", "last_action")
+"""What a network remembers between cycles, as extra inputs after the observation's features:
+``none``; ``last_move``, the one-hot move the module chose in the previous cycle (13 inputs);
+``last_action``, the one-hot of every field it chose in the previous cycle (``sum(nvec)``
+inputs; the same as ``last_move`` at control level ``move``). All zero-index (stay, and the
+first value of every other field) at an episode's start. The hand-coded rules keep such private
+memory (their heading, a seed's growth direction that it broadcasts every cycle, whether they
+asked to move); the observation does not carry it."""
 
 
-def check_memory(memory) -> int:
-    """The number of extra inputs of ``memory``; a ``ConfigError`` naming the allowed memories."""
+def check_memory(memory, nvec=(N_MOVES,)) -> int:
+    """The number of extra inputs of ``memory`` for action fields ``nvec``; a ``ConfigError``
+    naming the allowed memories."""
     if memory not in MEMORIES:
         raise ConfigError(f"memory={memory!r} is not allowed; allowed: {', '.join(map(repr, MEMORIES))}")
-    return MEMORIES[memory]
+    return {"none": 0, "last_move": N_MOVES, "last_action": int(np.sum(nvec))}[memory]
 
 
-def with_memory(features: np.ndarray, previous_moves: np.ndarray, memory: str) -> np.ndarray:
+def with_memory(features: np.ndarray, previous: np.ndarray, memory: str, nvec=(N_MOVES,)) -> np.ndarray:
     """``(N, D + extra)``: ``features (N, D)`` followed by the memory inputs of each row, from
-    each row's previous move ``(N,)``."""
+    each row's previous action ``(N, F)`` (or its previous move ``(N,)``) over fields ``nvec``."""
     if memory == "none":
         return features
-    extra = np.zeros((len(features), N_MOVES), dtype=np.float32)
-    extra[np.arange(len(features)), previous_moves] = 1.0
+    previous = np.asarray(previous).reshape(len(features), -1)
+    sizes = [N_MOVES] if memory == "last_move" else [int(n) for n in nvec]
+    extra = np.zeros((len(features), sum(sizes)), dtype=np.float32)
+    rows, start = np.arange(len(features)), 0
+    for k, size in enumerate(sizes):
+        extra[rows, start + previous[:, k]] = 1.0
+        start += size
     return np.concatenate([features, extra], axis=1)
 
 
+SAMPLED = ("all", "move")
+"""Which fields a :class:`LogitsPolicy` samples (the others take their arg-max): ``all``, or
+``move`` only. A clone of the rules (:mod:`training.imitate`) at ``move+mode`` or ``full``
+samples its moves, as the rules' random moves do, and takes the arg-max of the mode, scent
+roles and messages, which the rules choose deterministically: one sampled slip in a seed's
+mode or its broadcast breaks the structure (docs/learning.md)."""
+
+
 def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, rng: np.random.Generator, *,
-                   deterministic: bool = False) -> np.ndarray:
-    """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to ``move_mask``."""
+                   deterministic: bool = False, sampled: str = "all") -> np.ndarray:
+    """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to
+    ``move_mask``. ``sampled="move"``: fields after the move take their arg-max (the generator
+    is drawn from the same either way)."""
     logits = np.array(logits, dtype=np.float64, copy=True)
     logits[:, :N_MOVES] = np.where(np.asarray(move_mask, dtype=bool), logits[:, :N_MOVES], -np.inf)
     if not deterministic:
-        logits = logits + rng.gumbel(size=logits.shape)  # Gumbel-max: a sample from each softmax
+        noise = rng.gumbel(size=logits.shape)  # Gumbel-max: a sample from each softmax
+        if sampled == "move":
+            noise[:, N_MOVES:] = 0.0
+        logits = logits + noise
     out = np.empty((logits.shape[0], len(nvec)), dtype=np.int64)
     start = 0
     for k, n in enumerate(nvec):
@@ -75,10 +97,11 @@ class LogitsPolicy(Policy):
         logits_fn: the network.
         label: the name shown in tables (``"sb3-ppo"``, ``"cma-neural"``, ...).
         deterministic: take each field's arg-max instead of sampling.
+        sampled: which fields are sampled when not ``deterministic`` (:data:`SAMPLED`).
         nvec: values of each field the network chooses (default: every field of ``layout``);
             at control level ``move`` only ``[13]``, and an action is then the move alone.
-        memory: what the network remembers (:data:`MEMORIES`); with ``last_move`` the policy
-            keeps each agent's previous move (by name in :meth:`act`, by row in
+        memory: what the network remembers (:data:`MEMORIES`); with memory the policy keeps
+            each agent's previous action (by name in :meth:`act`, by row in
             :meth:`act_arrays`), cleared by :meth:`reset`.
     """
 
@@ -86,7 +109,7 @@ class LogitsPolicy(Policy):
 
     def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
                  encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
-                 deterministic: bool = False, nvec=None, memory: str = "none"):
+                 deterministic: bool = False, nvec=None, memory: str = "none", sampled: str = "all"):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
         self.levels = (self.level_of(layout, self.nvec),)
@@ -94,10 +117,13 @@ class LogitsPolicy(Policy):
         self.logits_fn = logits_fn
         self.name = label
         self.deterministic = deterministic
+        if sampled not in SAMPLED:
+            raise ConfigError(f"sampled={sampled!r} is not allowed; allowed: {', '.join(map(repr, SAMPLED))}")
+        self.sampled = sampled
         check_memory(memory)
         self.memory = memory
         self.previous: dict = {}
-        """Each agent's (name or row) previous move, at ``memory="last_move"``."""
+        """Each agent's (name or row) previous action ``(F,)``, with memory."""
 
     def reset(self, seed=None):
         super().reset(seed)
@@ -117,12 +143,13 @@ class LogitsPolicy(Policy):
 
     def _act(self, keys, features: np.ndarray, move_mask: np.ndarray) -> np.ndarray:
         if self.memory != "none":
-            previous = np.array([self.previous.get(k, 0) for k in keys], dtype=np.int64)
-            features = with_memory(features, previous, self.memory)
+            start = np.zeros(len(self.nvec), dtype=np.int64)
+            previous = np.array([self.previous.get(k, start) for k in keys], dtype=np.int64).reshape(-1, len(start))
+            features = with_memory(features, previous, self.memory, self.nvec)
         actions = sample_actions(self.logits_fn(features), self.nvec, move_mask, self.rng,
-                                 deterministic=self.deterministic)
+                                 deterministic=self.deterministic, sampled=self.sampled)
         if self.memory != "none":
-            self.previous.update(zip(keys, actions[:, 0].tolist()))
+            self.previous.update(zip(keys, actions))
         return actions
 
     @staticmethod

@@ -121,7 +121,7 @@ class Args:
     hidden: tuple[int, ...] = (64, 64)
     """Hidden sizes of the MLPs (actor at arch=mlp, critic always; lattice: embedding, head)."""
     memory: str = "none"
-    """What the network remembers between cycles: none, or last_move (training/policies.py MEMORIES)."""
+    """What the network remembers between cycles: none, last_move or last_action (training/policies.py MEMORIES)."""
     checkpoint_every: int = 1_000_000
     run_dir: str | None = None
     resume: str | None = None
@@ -266,7 +266,7 @@ class ActorCritic(nn.Module):
                               "or arch='mlp' or 'shared'")
         self.nvec = [int(n) for n in nvec]
         hidden = tuple(hidden)
-        in_dim = encoder.size + check_memory(memory)
+        in_dim = encoder.size + check_memory(memory, self.nvec)
         if arch == "shared":
             self.trunk = nn.Sequential(*hidden_layers(in_dim, hidden))
             self.actor = _orthogonal(nn.Linear(hidden[-1], sum(self.nvec)), 0.01)
@@ -350,10 +350,10 @@ class Worlds:
                                           scent_max=first.config.physics.scent_max,
                                           message_encoding=args.message_encoding)
         self.memory = getattr(args, "memory", "none")
-        self.size = self.encoder.size + check_memory(self.memory)
+        self.size = self.encoder.size + check_memory(self.memory, self.nvec)
         """Features per sample: the encoding, then the memory's inputs."""
-        self.previous_moves = np.zeros(self.n_envs * self.n_agents, dtype=np.int64)
-        """Each module's move in the last cycle (0 at an episode's start): the ``last_move`` memory."""
+        self.previous_actions = np.zeros((self.n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
+        """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
         self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
         self.episode_return = np.zeros(self.n_envs)
         self.final_rows = np.zeros(0, dtype=np.int64)
@@ -372,7 +372,7 @@ class Worlds:
         else:
             fields = {name: np.concatenate([getattr(b, name) for b in self.buffers])
                       for name in ObservationBuffers.FIELDS}
-        features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_moves, self.memory)
+        features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
 
@@ -398,7 +398,8 @@ class Worlds:
         truncated = (cycles >= self.max_cycles) & ~terminal
         ended = terminal | truncated
         self.episode_return += reward
-        self.previous_moves = np.where(np.repeat(ended, a), 0, actions[..., 0].reshape(-1))
+        played = actions.reshape(len(self.previous_actions), -1)
+        self.previous_actions = np.where(np.repeat(ended, a)[:, None], 0, played)
         for w in np.flatnonzero(ended):
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
         self.episode_return[ended] = 0.0
@@ -408,9 +409,8 @@ class Worlds:
             self.buffers[k] = group.observe_arrays()
             for j in np.flatnonzero(truncated[k * self.b:(k + 1) * self.b]):
                 rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
-                moves = actions[k * self.b + j, :, 0]
                 features.append(with_memory(self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)),
-                                            moves, self.memory))
+                                            actions[k * self.b + j], self.memory, self.nvec))
             if restart.any():
                 self.buffers[k] = group.reset_worlds(restart)
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
