@@ -47,7 +47,8 @@ def collect(task: str, env: dict, n_envs: int, cycles: int, seed: int) -> dict[s
         memory = [p.memory_rows(range(worlds.n_agents)) for p in teachers.policies]
         labels = teachers.labels(worlds.buffers)
         keep = (mask.sum(axis=1) > 1) & mask[np.arange(n), labels[:, 0]]
-        for name, value in (("x", features), ("mask", mask), ("label", labels), ("previous", worlds.previous_actions[:, 0])):
+        previous = worlds.previous_actions[:, 0]
+        for name, value in (("x", features), ("mask", mask), ("label", labels), ("previous", previous)):
             out[name].append(value[keep].copy())
         for name in ("heading", "growth", "asked"):
             out[name].append(np.concatenate([getattr(m, name) for m in memory])[keep])
