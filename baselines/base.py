@@ -207,10 +207,6 @@ class KernelPolicy(Policy):
         n = buffers.own_mode.shape[0]
         return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))
 
-    def decide(self, agent: str, obs) -> np.ndarray:
-        """The action of one module from its observation alone."""
-        return self.act({agent: obs})[agent]
-
     def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
         """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
         given to each agent name at first sight (``"name"``)."""

@@ -189,9 +189,6 @@ class NumpyMLP:
             start += b.size
         return self
 
-    def get_flat(self) -> np.ndarray:
-        return np.concatenate([np.concatenate([w.ravel(), b]) for w, b in self.params])
-
     def init_genome(self, rng: np.random.Generator) -> np.ndarray:
         """A start genome: scaled normal weights (``1/sqrt(fan_in)``), zero biases, small output layer."""
         parts = []

@@ -53,14 +53,6 @@ OPPOSITE: np.ndarray = np.array(
 OPPOSITE.setflags(write=False)
 
 
-def direction_index(offset) -> int:
-    """Index in :data:`DIRECTIONS` of a face-neighbour offset; ``ValueError`` otherwise."""
-    hits = np.flatnonzero((DIRECTIONS == np.asarray(offset)).all(axis=1))
-    if hits.size != 1:
-        raise ValueError(f"offset {tuple(offset)} is not one of the 12 FCC face directions")
-    return int(hits[0])
-
-
 def neighbourhood_offsets(radius: int) -> np.ndarray:
     """Offsets of the sites within ``radius`` hops of a site, the site itself excluded.
 
@@ -78,11 +70,6 @@ def neighbourhood_offsets(radius: int) -> np.ndarray:
         } - set(offsets)
         offsets += sorted(ring)
     return np.array(offsets, dtype=np.int64)
-
-
-def is_site(point) -> bool:
-    """True when ``point`` is an FCC site (integer coordinates with an even sum)."""
-    return int(np.sum(point)) % 2 == 0
 
 
 class GridShape:
