@@ -130,6 +130,9 @@ def test_bad_task_parameter():
         proteo_env.make("sandbox-v0", n_modules=0)
     with pytest.raises(ConfigError, match=r"layout='foo' is not allowed; allowed: blob, ball, line"):
         proteo_env.make("sandbox-v0", layout="foo")
+    # an object 0 layers away could overlap the base at reset; it is refused when the env is made
+    with pytest.raises(ConfigError, match=r"distance=0 is not allowed; allowed: an integer in 1..100"):
+        proteo_env.make("grasp-v0", distance=0)
 
 
 # ---------------------------------------------------------------------- layouts given to the world

@@ -143,8 +143,8 @@ class GraspParams:
             bad("object_size", "a number in [0.5, 20]")
         if len(self.box_aspect) != 3 or not all(0.1 <= a <= 10 for a in self.box_aspect):
             bad("box_aspect", "three numbers in [0.1, 10]")
-        if not 0 <= self.distance <= 100:
-            bad("distance", "an integer in 0..100")
+        if not 1 <= self.distance <= 100:  # at 0 the object's rounded placement can overlap the base
+            bad("distance", "an integer in 1..100")
         if len(self.direction) != 3 or not np.isfinite(self.direction).all() or not np.any(self.direction):
             bad("direction", "three finite numbers, not all zero")
         if not 0 <= self.seed_spread <= 100:
