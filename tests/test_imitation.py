@@ -224,3 +224,22 @@ def test_sampled_move_samples_the_move_as_before_and_takes_the_arg_max_of_every_
     with pytest.raises(ConfigError, match=r"sampled='modes' is not allowed; allowed: 'all', 'move'"):
         LogitsPolicy(env.action_layout, env.task.modes, encoder=ObservationEncoder.for_env(env),
                      logits_fn=lambda x: x, sampled="modes")
+
+
+def test_a_checkpoint_teaches_its_own_actions_and_one_of_another_task_is_refused(clone, tmp_path):
+    from proteo_env.env import ProteoEnv
+
+    batch = proteo_env.make_batched("chain-v0", 3, control="move", **SMALL_ENV)
+    teachers = Teachers(batch, 3, str(clone), seed=11)
+    buffers = batch.reset(seed=40)
+    labels = teachers.labels([buffers])
+    task = batch.tasks[0]
+    same = load_policy(clone, ProteoEnv(type(task)(task.params), batch.config), seed=11)
+    features = same.encoder.encode_buffers(buffers)
+    assert np.array_equal(labels, same.act_arrays(features, buffers.action_mask.astype(bool)))
+    assert all(buffers.action_mask[np.arange(len(labels)), labels[:, 0]])  # the teacher's moves are legal
+    student = tiny_clone(tmp_path / "student", "--teacher", str(clone), "--rounds", "1")
+    log = rows(student.parent / "progress.csv")
+    assert float(log[1]["imitation/agreement_move"]) > 0.5 and read_meta(student)["teacher"] == str(clone)
+    with pytest.raises(CheckpointError, match=r"was trained on task 'chain-v0'; it cannot control 'branch-v0'"):
+        Teachers(proteo_env.make_batched("branch-v0", 1, control="move"), 1, str(clone))

@@ -70,7 +70,8 @@ class Args:
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
     teacher: str = DEFAULT_TEACHER
-    """The policy imitated: ``rules`` (the task's hand-coded policy) or the task's name."""
+    """The policy imitated: ``rules`` (the task's hand-coded policy), the task's name, or a checkpoint of
+    the task at this control level (training/teachers.py)."""
     seed: int = 0
     n_envs: int = 16
     """Worlds stepped together."""

@@ -138,7 +138,8 @@ class Args:
     """Start from this checkpoint's network (training/imitate.py or training/ppo.py; same task, level,
     encoding, arch and hidden): kickstarting from a clone."""
     teacher: str = "rules"
-    """The policy of the distillation term: rules (the task's hand-coded policy) or the task's name."""
+    """The policy of the distillation term: rules (the task's hand-coded policy), the task's name, or a
+    checkpoint of the task at this control level (training/teachers.py)."""
     distill_coef: float = 0.0
     """Weight of the cross-entropy to the teacher's action on the learner's states at the start (0: off)."""
     distill_steps: int = 0

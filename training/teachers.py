@@ -6,7 +6,9 @@ it. The teacher is a policy of :data:`baselines.POLICIES` by name: ``"rules"`` (
 is the task's own hand-coded policy with the task's rule parameters, as the ``move`` level's
 autopilot builds it (:func:`baselines.autopilot.hand_coded_rules`); naming the task
 (``"grasp"`` for ``grasp-v0``) is the same. Another behaviour's rules do not fit the task and
-are refused.
+are refused. A path to a checkpoint (any that ``proteo eval`` loads, of the same task and
+control level) makes that policy the teacher: for example PPO's locomotion moves, which beat
+the rules, taught to a new network; a checkpoint of another task or level is refused.
 
 Each world has its own teacher instance with its own private memory (the rules' heading,
 growth direction, whether they asked to move), fed every cycle with that world's
@@ -17,6 +19,8 @@ where they believe they are, the same convention as the autopilot's (:mod:`prote
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from baselines import POLICIES
@@ -24,6 +28,11 @@ from baselines.autopilot import hand_coded_rules
 from proteo_env.config import ConfigError
 
 DEFAULT_TEACHER = "rules"
+
+
+def is_checkpoint(name: str) -> bool:
+    """Whether teacher ``name`` is a path (a checkpoint) rather than a policy name."""
+    return "/" in name or Path(name).exists()
 
 
 def check_teacher(name: str, task_name: str) -> str:
@@ -36,7 +45,7 @@ def check_teacher(name: str, task_name: str) -> str:
         raise ConfigError(f"teacher={name!r}: task {task_name!r} has no hand-coded rules to teach; allowed: a task "
                           f"with rules ({', '.join(sorted(set(POLICIES) - {'random'}))})")
     raise ConfigError(f"teacher={name!r} does not fit task {task_name!r}; allowed: "
-                      f"{', '.join(map(repr, allowed))} (the task's hand-coded rules)")
+                      f"{', '.join(map(repr, allowed))} (the task's hand-coded rules) or a checkpoint of the task")
 
 
 class Teachers:
@@ -52,14 +61,28 @@ class Teachers:
     """
 
     def __init__(self, env, n_envs: int, name: str = DEFAULT_TEACHER, *, seed: int = 0, n_fields: int = 1):
-        check_teacher(name, env.task.name)
         self.n_agents, self.n_fields, self.seed = env.n_agents, n_fields, seed
-        self.policies = [hand_coded_rules(env) for _ in range(n_envs)]
         self.episodes = np.zeros(n_envs, dtype=np.int64)
+        self.checkpoint = None
+        """The learned teacher (a :class:`~training.policies.LogitsPolicy`), when ``name`` is a checkpoint."""
+        if is_checkpoint(name):
+            from proteo_env.env import ProteoEnv
+            from training.checkpoints import load_policy
+
+            task = env.tasks[0]
+            self.checkpoint = load_policy(name, ProteoEnv(type(task)(task.params), env.config), seed=seed)
+            self.policies = []
+            return
+        check_teacher(name, env.task.name)
+        self.policies = [hand_coded_rules(env) for _ in range(n_envs)]
         for b in range(n_envs):
             self._reset(b)
 
     def _reset(self, b: int) -> None:
+        if self.checkpoint is not None:  # the learned teacher's memory is kept by row
+            for row in range(b * self.n_agents, (b + 1) * self.n_agents):
+                self.checkpoint.previous.pop(row, None)
+            return
         self.policies[b].reset(seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])])
                                         .generate_state(1, np.uint64)[0] >> 1))
         self.episodes[b] += 1
@@ -70,6 +93,11 @@ class Teachers:
         per env, world-major, together ``n_envs`` worlds). Call once per cycle, in order: the
         teachers' memory advances with each call."""
         a = self.n_agents
+        if self.checkpoint is not None:  # one call over every module of every world
+            encoder = self.checkpoint.encoder
+            features = np.concatenate([encoder.encode_buffers(buffers) for buffers in groups])
+            mask = np.concatenate([buffers.action_mask for buffers in groups]).astype(bool)
+            return self.checkpoint.act_arrays(features, mask)[:, :self.n_fields]
         rows = [buffers.rows(b * a, (b + 1) * a) for buffers in groups for b in range(len(buffers.own_mode) // a)]
         return np.concatenate([p.act_arrays(r)[:, :self.n_fields] for p, r in zip(self.policies, rows, strict=True)])
 
