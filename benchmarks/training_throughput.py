@@ -20,7 +20,9 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    MLP actor and critic, two epochs, messages one-hot per direction); with ``--variants`` also
    at ``move`` with the distillation term of kickstarting on (``distill_coef=1``: the rules
    label every module every cycle; their time counts as forward passes) and with
-   ``memory=last_move`` (the previous move as 13 more inputs), in the same run.
+   ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the
+   critic on scaled returns), and at ``full`` with ``memory=last_action`` (the whole previous
+   action as inputs), in the same run.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -211,8 +213,10 @@ def main(argv=None) -> int:
         result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
     if args.variants:
         for name, variant in (("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
-                              ("move, memory=last_move", {"memory": "last_move"})):
-            result["ppo"][name] = ppo_training(*task, args.ppo_steps, control="move", config=ppo_config,
+                              ("move, memory=last_move", {"memory": "last_move"}),
+                              ("move, value_norm", {"value_norm": True}),
+                              ("full, memory=last_action", {"memory": "last_action"})):
+            result["ppo"][name] = ppo_training(*task, args.ppo_steps, control=name.split(",")[0], config=ppo_config,
                                                variant=variant)
     result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
     result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
