@@ -152,7 +152,7 @@ def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
 def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     import torch
 
-    from training.ppo import ActorCritic
+    from training.networks import ActorCritic
 
     try:
         net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]),

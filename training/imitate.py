@@ -1,7 +1,7 @@
 """Imitation of the hand-coded rules: behaviour cloning with DAgger over the batched array API.
 
 Every module of ``n_envs`` worlds is one sample, as in :mod:`training.ppo`, and the network is
-the same :class:`~training.ppo.ActorCritic` (its policy head is trained here; its value head is
+the same :class:`~training.networks.ActorCritic` (its policy head is trained here; its value head is
 left for PPO), so a checkpoint of this script is evaluated by ``proteo eval --checkpoint`` and
 starts ``training/ppo.py --init`` (kickstarting).
 
@@ -34,7 +34,7 @@ cycles of the episodes that ended during the round (the learner driving, mixed w
 teacher at the round's ``beta``).
 
 Writes ``runs/<name>/`` like every training script (:mod:`training.common`), with
-``final/policy.pt`` (the :class:`~training.ppo.ActorCritic` weights) and ``proteo.json``
+``final/policy.pt`` (the :class:`~training.networks.ActorCritic` weights) and ``proteo.json``
 (algorithm ``imitation``).
 """
 
@@ -53,7 +53,8 @@ from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
 from training.common import (ProgressLog, make_run_dir, parse_args, save_args, seed_everything, torch_device,
                              write_checkpoint_meta)
-from training.ppo import ARCHS, ActorCritic, Worlds, masked_log_probs, sample, teacher_cross_entropy
+from training.networks import ARCHS, ActorCritic
+from training.ppo import Worlds, masked_log_probs, sample, teacher_cross_entropy
 from training.policies import SAMPLED, check_memory
 from training.teachers import DEFAULT_TEACHER, Teachers
 
