@@ -110,6 +110,15 @@ def limit_threads(n: int | None = 1) -> None:
     torch.set_num_threads(n)
 
 
+def check_integers(args, least: dict[str, int]) -> None:
+    """A :class:`ConfigError` naming the first field of ``args`` in ``least`` whose value is not an
+    integer (bools are not) at least as large as its bound."""
+    for name, bound in least.items():
+        value = getattr(args, name)
+        if not isinstance(value, int) or isinstance(value, bool) or value < bound:
+            raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {bound}")
+
+
 def run_script(main, argv=None) -> int:
     """Run a training script's ``main(argv)`` from the command line: bad input (a
     :class:`ConfigError` or :class:`CheckpointError`, both ``ValueError``) is one line on stderr

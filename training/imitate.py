@@ -51,11 +51,11 @@ from tqdm import tqdm
 
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
-from training.common import (ProgressLog, make_run_dir, parse_args, save_args, seed_everything, torch_device,
-                             write_checkpoint_meta)
+from training.common import (ProgressLog, check_integers, make_run_dir, parse_args, save_args, seed_everything,
+                             torch_device, write_checkpoint_meta)
 from training.networks import ARCHS, ActorCritic
 from training.ppo import Worlds, masked_log_probs, sample, teacher_cross_entropy
-from training.policies import SAMPLED, check_memory
+from training.policies import check_memory, check_sampled
 from training.teachers import DEFAULT_TEACHER, Teachers
 
 ALGORITHM = "imitation"
@@ -112,18 +112,15 @@ class Args:
     progress_bar: bool = True
 
     def __post_init__(self):
-        for name in ("rounds", "cycles_per_round", "samples_per_round", "epochs", "minibatch_size", "n_envs"):
-            value, least = getattr(self, name), 0 if name == "rounds" else 1
-            if not isinstance(value, int) or value < least:
-                raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {least}")
+        check_integers(self, {"rounds": 0, "cycles_per_round": 1, "samples_per_round": 1, "epochs": 1,
+                              "minibatch_size": 1, "n_envs": 1})
         for name in ("beta", "beta_decay"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
         if self.arch not in ARCHS:
             raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
         check_memory(self.memory)
-        if self.sampled not in SAMPLED:
-            raise ConfigError(f"sampled={self.sampled!r} is not allowed; allowed: {', '.join(map(repr, SAMPLED))}")
+        check_sampled(self.sampled)
 
 
 def round_beta(args: Args, round_index: int) -> float:
@@ -165,11 +162,7 @@ def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, c
             with torch.no_grad():
                 log_probs = masked_log_probs(net.logits(torch.from_numpy(features).to(device)),
                                              torch.from_numpy(move_mask).to(device), nvec)
-                learned, _ = sample(log_probs)
-                if args.sampled == "move":
-                    for k in range(1, len(nvec)):
-                        learned[:, k] = log_probs[k].argmax(dim=1)
-                learned = learned.cpu()
+                learned = sample(log_probs, args.sampled)[0].cpu()
             play_learned = rng.random(n) >= beta
             actions[play_learned] = learned.numpy()[play_learned]
         _, terminal, truncated = worlds.step(actions.reshape(worlds.n_envs, a, -1), finished)

@@ -68,6 +68,13 @@ roles and messages, which the rules choose deterministically: one sampled slip i
 mode or its broadcast breaks the structure (docs/learning.md)."""
 
 
+def check_sampled(sampled) -> str:
+    """``sampled`` when it is one of :data:`SAMPLED`; otherwise a ``ConfigError`` naming them."""
+    if sampled not in SAMPLED:
+        raise ConfigError(f"sampled={sampled!r} is not allowed; allowed: {', '.join(map(repr, SAMPLED))}")
+    return sampled
+
+
 def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, rng: np.random.Generator, *,
                    deterministic: bool = False, sampled: str = "all") -> np.ndarray:
     """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to
@@ -117,9 +124,7 @@ class LogitsPolicy(Policy):
         self.logits_fn = logits_fn
         self.name = label
         self.deterministic = deterministic
-        if sampled not in SAMPLED:
-            raise ConfigError(f"sampled={sampled!r} is not allowed; allowed: {', '.join(map(repr, SAMPLED))}")
-        self.sampled = sampled
+        self.sampled = check_sampled(sampled)
         check_memory(memory)
         self.memory = memory
         self.previous: dict = {}

@@ -77,8 +77,8 @@ from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES, ObservationBuffers
 from training.networks import ARCHS, ActorCritic
 from training.policies import check_memory, with_memory
-from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
-                             seed_everything, torch_device, write_checkpoint_meta)
+from training.common import (ProgressLog, check_integers, checkpoint_folder, episode_stats, make_run_dir, parse_args,
+                             save_args, seed_everything, torch_device, write_checkpoint_meta)
 
 ALGORITHM = "ppo"
 
@@ -148,11 +148,8 @@ class Args:
     """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
 
     def __post_init__(self):
-        for name, least in (("total_steps", 0), ("n_envs", 1), ("n_groups", 1), ("n_steps", 1),
-                            ("minibatch_size", 1), ("n_epochs", 1), ("checkpoint_every", 1), ("distill_steps", 0)):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < least:
-                raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {least}")
+        check_integers(self, {"total_steps": 0, "n_envs": 1, "n_groups": 1, "n_steps": 1, "minibatch_size": 1,
+                              "n_epochs": 1, "checkpoint_every": 1, "distill_steps": 0})
         for name, low, high in (("learning_rate", 0.0, None), ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0),
                                 ("clip_range", 0.0, None), ("ent_coef", 0.0, None), ("vf_coef", 0.0, None),
                                 ("max_grad_norm", 0.0, None), ("distill_coef", 0.0, None),
@@ -182,9 +179,13 @@ def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[i
     return out
 
 
-def sample(log_probs: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Actions ``(N, F)`` (Gumbel-max, torch's generator) and their joint log-probability ``(N,)``."""
-    actions = torch.stack([(lp - torch.log(-torch.log(torch.rand_like(lp)))).argmax(dim=1) for lp in log_probs], 1)
+def sample(log_probs: list[torch.Tensor], sampled: str = "all") -> tuple[torch.Tensor, torch.Tensor]:
+    """Actions ``(N, F)`` (Gumbel-max, torch's generator) and their joint log-probability ``(N,)``.
+    ``sampled="move"`` (:data:`training.policies.SAMPLED`): the fields after the move take their
+    arg-max; the generator is drawn from the same either way."""
+    noisy = [lp - torch.log(-torch.log(torch.rand_like(lp))) for lp in log_probs]
+    actions = torch.stack([(noise if k == 0 or sampled == "all" else lp).argmax(dim=1)
+                           for k, (lp, noise) in enumerate(zip(log_probs, noisy))], 1)
     return actions, joint_log_prob(log_probs, actions)
 
 
