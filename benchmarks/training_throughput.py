@@ -21,7 +21,8 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    at ``move`` with the distillation term of kickstarting on (``distill_coef=1``: the rules
    label every module every cycle; their time counts as forward passes) and with
    ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the
-   critic on scaled returns), and at ``full`` with ``memory=last_action`` (the whole previous
+   critic on scaled returns), with ``recurrent=64`` (a GRU state per module, the update
+   back-propagating through each rollout's cycles), and at ``full`` with ``memory=last_action`` (the whole previous
    action as inputs), in the same run.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
@@ -215,6 +216,7 @@ def main(argv=None) -> int:
         for name, variant in (("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
                               ("move, memory=last_move", {"memory": "last_move"}),
                               ("move, value_norm", {"value_norm": True}),
+                              ("move, recurrent=64 (GRU)", {"recurrent": 64}),
                               ("full, memory=last_action", {"memory": "last_action"})):
             result["ppo"][name] = ppo_training(*task, args.ppo_steps, control=name.split(",")[0], config=ppo_config,
                                                variant=variant)

@@ -170,7 +170,7 @@ def test_shared_trunk_feeds_both_heads_and_its_checkpoint_loads(tmp_path):
 
     net = ppo.ActorCritic(ObservationEncoder.for_env(env), env.control_nvec, "shared", (16, 16))
     x = torch.randn(5, ObservationEncoder.for_env(env).size)
-    logits, values = net(x)
+    logits, values, _ = net(x)
     assert logits.shape == (5, 13) and values.shape == (5,)
     values.sum().backward()  # the value's gradient reaches the trunk the policy reads
     assert net.trunk[0].weight.grad.abs().sum() > 0 and net.actor.weight.grad is None

@@ -10,7 +10,7 @@ and the algorithm's files:
 ``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
 ``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
 ``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
-``ppo``              ``policy.pt``           the actor of :mod:`training.ppo` (MLP or lattice)
+``ppo``              ``policy.pt``           the network of :mod:`training.ppo` (MLP, lattice, GRU)
 ``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
 ``imitation``        ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
 ==================== ======================= ===========================================
@@ -84,17 +84,20 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         return policy
     encoder = _check_compatible(meta, env)
     label = meta.get("label", algorithm)
+    state_size = 0
     if algorithm == "sb3-maskable-ppo":
         logits_fn = _sb3_logits(folder / "model.zip", encoder)
     elif algorithm in ("torchrl-ppo", "rllib-ppo"):
         logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
     elif algorithm in ("ppo", "imitation"):
         logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)
+        state_size = int(meta.get("recurrent", 0))
     else:
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
                         encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic,
-                        nvec=meta["nvec"], memory=meta.get("memory", "none"), sampled=meta.get("sampled", "all"))
+                        nvec=meta["nvec"], memory=meta.get("memory", "none"), sampled=meta.get("sampled", "all"),
+                        state_size=state_size)
 
 
 def _need(file: Path) -> Path:
@@ -156,7 +159,7 @@ def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
 
     try:
         net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]),
-                          memory=meta.get("memory", "none"))
+                          memory=meta.get("memory", "none"), recurrent=int(meta.get("recurrent", 0)))
         net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise
@@ -164,6 +167,14 @@ def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
         raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable ppo network (arch {meta.get('arch')!r}, "
                               f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}") from None
     net.eval()
+
+    if net.recurrent:
+        def recurrent_logits_fn(features: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            with torch.no_grad():
+                logits, _, state = net(torch.as_tensor(features), torch.as_tensor(state))
+            return logits.numpy(), state.numpy()
+
+        return recurrent_logits_fn
 
     def logits_fn(features: np.ndarray) -> np.ndarray:
         with torch.no_grad():

@@ -97,20 +97,39 @@ class LatticeActor(nn.Module):
 
 
 class ActorCritic(nn.Module):
-    """The shared policy: ``logits(x) (N, sum(nvec))`` and ``value(x) (N,)`` from flat features
+    """The shared policy: logits ``(N, sum(nvec))`` and value ``(N,)`` from flat features
     ``x (N, D)``; ``net(x)`` gives both (one pass through the trunk at ``arch="shared"``). With
     ``memory`` (:data:`training.policies.MEMORIES`) ``D`` is the encoder's size plus the memory's
-    inputs (:func:`training.policies.with_memory`)."""
+    inputs (:func:`training.policies.with_memory`).
+
+    Recurrent (``recurrent = R > 0``, ``arch="shared"`` only): a GRU cell reads the trunk's
+    output and carries each module's state ``(N, R)`` from cycle to cycle (zeros at an episode's
+    start, :meth:`initial_state`); the logits and the value are the feed-forward heads' plus
+    linear heads on the new state. Those memory heads start at zero, so a recurrent network
+    whose other weights come from a feed-forward checkpoint (``training/ppo.py --init``) acts
+    exactly as that checkpoint until training teaches it to use its state.
+
+    ``net(x, state)`` returns ``(logits, value, next_state)`` (``next_state`` is ``None`` for a
+    feed-forward network); :meth:`unroll` runs a sequence, resetting the state where episodes end.
+    """
 
     def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64),
-                 memory: str = "none"):
+                 memory: str = "none", recurrent: int = 0):
         super().__init__()
         if arch not in ARCHS:
             raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
         if memory != "none" and arch == "lattice":
             raise ConfigError(f"memory={memory!r} is not allowed with arch='lattice'; allowed: memory='none', "
                               "or arch='mlp' or 'shared'")
+        if isinstance(recurrent, bool) or not isinstance(recurrent, int) or recurrent < 0:
+            raise ConfigError(f"recurrent={recurrent!r} is not allowed; allowed: 0 (feed-forward) or the GRU's "
+                              "state size, an integer >= 1")
+        if recurrent and arch != "shared":
+            raise ConfigError(f"recurrent={recurrent!r} is not allowed with arch={arch!r}; allowed: recurrent=0, "
+                              "or arch='shared'")
         self.nvec = [int(n) for n in nvec]
+        self.recurrent = recurrent
+        """The GRU's state size ``R`` (0: feed-forward)."""
         hidden = tuple(hidden)
         in_dim = encoder.size + check_memory(memory, self.nvec)
         if arch == "shared":
@@ -122,13 +141,41 @@ class ActorCritic(nn.Module):
             self.actor = (mlp(in_dim, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
                           else LatticeActor(encoder, self.nvec, hidden))
             self.critic = mlp(in_dim, 1, hidden, out_gain=1.0)
+        if recurrent:
+            self.gru = nn.GRUCell(hidden[-1], recurrent)
+            self.actor_memory = _orthogonal(nn.Linear(recurrent, sum(self.nvec)), 0.0)
+            self.critic_memory = _orthogonal(nn.Linear(recurrent, 1), 0.0)
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def initial_state(self, n: int) -> torch.Tensor | None:
+        """``(n, R)`` zeros: every module's state at an episode's start (``None`` when feed-forward)."""
+        if not self.recurrent:
+            return None
+        return torch.zeros((n, self.recurrent), device=self.critic_memory.weight.device)
+
+    def forward(self, x: torch.Tensor, state: torch.Tensor | None = None):
+        """``(logits (N, sum(nvec)), value (N,), next_state (N, R) or None)`` from features
+        ``(N, D)`` and, when recurrent, the state ``(N, R)`` before this cycle."""
         h = self.trunk(x)
-        return self.actor(h), self.critic(h)[:, 0]
+        logits, value = self.actor(h), self.critic(h)[:, 0]
+        if not self.recurrent:
+            return logits, value, None
+        state = self.gru(h, state)
+        return logits + self.actor_memory(state), value + self.critic_memory(state)[:, 0], state
 
-    def logits(self, x: torch.Tensor) -> torch.Tensor:
-        return self.actor(self.trunk(x))
+    def logits(self, x: torch.Tensor, state: torch.Tensor | None = None) -> torch.Tensor:
+        return self.forward(x, state)[0] if self.recurrent else self.actor(self.trunk(x))
 
-    def value(self, x: torch.Tensor) -> torch.Tensor:
-        return self.critic(self.trunk(x))[:, 0]
+    def value(self, x: torch.Tensor, state: torch.Tensor | None = None) -> torch.Tensor:
+        return self.forward(x, state)[1] if self.recurrent else self.critic(self.trunk(x))[:, 0]
+
+    def unroll(self, x: torch.Tensor, state: torch.Tensor, done: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits ``(T, M, sum(nvec))`` and values ``(T, M)`` of ``M`` modules over ``T`` cycles
+        (features ``(T, M, D)``) from their state ``(M, R)`` before the first; ``done (T, M)``
+        marks the cycles after which a module's episode ended, where its state restarts at zero."""
+        logits, values = [], []
+        for t in range(x.shape[0]):
+            step_logits, step_value, state = self.forward(x[t], state)
+            logits.append(step_logits)
+            values.append(step_value)
+            state = state * (1.0 - done[t].to(state.dtype))[:, None]
+        return torch.stack(logits), torch.stack(values)

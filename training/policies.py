@@ -110,13 +110,17 @@ class LogitsPolicy(Policy):
         memory: what the network remembers (:data:`MEMORIES`); with memory the policy keeps
             each agent's previous action (by name in :meth:`act`, by row in
             :meth:`act_arrays`), cleared by :meth:`reset`.
+        state_size: ``R > 0`` for a recurrent network: ``logits_fn(features (B, D), state (B, R))``
+            then returns ``(logits, next_state (B, R))``, and the policy keeps each agent's state
+            (zeros at first sight), kept and cleared as the previous action is.
     """
 
     name = "learned"
 
     def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
                  encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
-                 deterministic: bool = False, nvec=None, memory: str = "none", sampled: str = "all"):
+                 deterministic: bool = False, nvec=None, memory: str = "none", sampled: str = "all",
+                 state_size: int = 0):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
         self.levels = (self.level_of(layout, self.nvec),)
@@ -129,10 +133,20 @@ class LogitsPolicy(Policy):
         self.memory = memory
         self.previous: dict = {}
         """Each agent's (name or row) previous action ``(F,)``, with memory."""
+        self.state_size = int(state_size)
+        self.states: dict = {}
+        """Each agent's (name or row) recurrent state ``(R,)``, when ``state_size > 0``."""
 
     def reset(self, seed=None):
         super().reset(seed)
-        self.previous = {}
+        self.previous, self.states = {}, {}
+
+    def forget(self, keys) -> None:
+        """Start the agents ``keys`` (names or rows) afresh: no previous action, zero state
+        (a world's new episode when one policy acts for several worlds by row)."""
+        for key in keys:
+            self.previous.pop(key, None)
+            self.states.pop(key, None)
 
     def act(self, observations):
         if not observations:
@@ -151,7 +165,13 @@ class LogitsPolicy(Policy):
             start = np.zeros(len(self.nvec), dtype=np.int64)
             previous = np.array([self.previous.get(k, start) for k in keys], dtype=np.int64).reshape(-1, len(start))
             features = with_memory(features, previous, self.memory, self.nvec)
-        actions = sample_actions(self.logits_fn(features), self.nvec, move_mask, self.rng,
+        if self.state_size:
+            start = np.zeros(self.state_size, dtype=np.float32)
+            logits, states = self.logits_fn(features, np.stack([self.states.get(k, start) for k in keys]))
+            self.states.update(zip(keys, states))
+        else:
+            logits = self.logits_fn(features)
+        actions = sample_actions(logits, self.nvec, move_mask, self.rng,
                                  deterministic=self.deterministic, sampled=self.sampled)
         if self.memory != "none":
             self.previous.update(zip(keys, actions))

@@ -41,6 +41,16 @@ weighted by ``distill_coef``, which falls linearly to zero over the first ``dist
 agent-steps (0: it stays); after that the teacher is no longer consulted and the learner is
 free to leave it behind.
 
+Memory. ``memory`` feeds each module's previous action back as inputs
+(:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
+state ``(R,)`` each module carries from cycle to cycle and that restarts at zero with its
+world's episode (:class:`~training.networks.ActorCritic`). The rollout keeps every module's
+state; the update replays each minibatch of modules through the rollout's ``n_steps`` cycles
+from their state at its start (back-propagation through those cycles), so a minibatch is
+``minibatch_size // n_steps`` modules' whole sequences. ``--init`` from a feed-forward
+checkpoint of the same shape starts the GRU fresh and its heads at zero: the network first
+acts exactly as the checkpoint.
+
 Curricula. ``curriculum: {stages: [...], promote_at, window}`` trains on stages of env
 overrides in turn, each promoted when the success rate of its last ``window`` episodes reaches
 ``promote_at`` (:mod:`training.curriculum`); the stage is logged and saved with checkpoints.
@@ -122,6 +132,8 @@ class Args:
     """Hidden sizes of the MLPs (actor at arch=mlp, critic always; lattice: embedding, head)."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/policies.py MEMORIES)."""
+    recurrent: int = 0
+    """The state size of a GRU each module carries from cycle to cycle (arch=shared only); 0: feed-forward."""
     checkpoint_every: int = 1_000_000
     run_dir: str | None = None
     resume: str | None = None
@@ -149,7 +161,10 @@ class Args:
 
     def __post_init__(self):
         check_integers(self, {"total_steps": 0, "n_envs": 1, "n_groups": 1, "n_steps": 1, "minibatch_size": 1,
-                              "n_epochs": 1, "checkpoint_every": 1, "distill_steps": 0})
+                              "n_epochs": 1, "checkpoint_every": 1, "distill_steps": 0, "recurrent": 0})
+        if self.recurrent and self.arch != "shared":
+            raise ConfigError(f"recurrent={self.recurrent!r} is not allowed with arch={self.arch!r}; allowed: "
+                              "recurrent=0, or arch='shared'")
         for name, low, high in (("learning_rate", 0.0, None), ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0),
                                 ("clip_range", 0.0, None), ("ent_coef", 0.0, None), ("vf_coef", 0.0, None),
                                 ("max_grad_norm", 0.0, None), ("distill_coef", 0.0, None),
@@ -358,10 +373,11 @@ class ReturnScale:
         self.mean, self.var, self.count = state["mean"], state["var"], state["count"]
 
 
-def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> dict:
-    """The network weights of checkpoint ``args.init``, after checking that it was trained by
+def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder, net: ActorCritic) -> dict:
+    """The weights for ``net`` from checkpoint ``args.init``, after checking that it was trained by
     training/imitate.py or training/ppo.py on the same task, control level, observation encoding
-    and network shape; a :class:`~training.common.CheckpointError` naming what differs."""
+    and network shape; a :class:`~training.common.CheckpointError` naming what differs. A
+    feed-forward checkpoint may start a recurrent ``net`` (whose GRU keeps its own weights)."""
     from training.common import CheckpointError, read_meta
 
     meta = read_meta(args.init)
@@ -377,7 +393,32 @@ def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> di
         if found[key] != value:
             raise CheckpointError(f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
                                   f"allowed: a checkpoint with {key}={value!r}")
-    return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
+    recurrent = int(meta.get("recurrent", 0))
+    if recurrent not in (0, args.recurrent):
+        raise CheckpointError(f"{where} is recurrent (recurrent={recurrent}); this run has "
+                              f"recurrent={args.recurrent}; allowed: a feed-forward checkpoint or one with "
+                              f"recurrent={args.recurrent}")
+    weights = torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
+    if args.recurrent and not recurrent:  # the GRU keeps its fresh weights, its heads zero
+        weights = {**net.state_dict(), **weights}
+    return weights
+
+
+def minibatches(args: Args, t_steps: int, n: int):
+    """The update's minibatches over the rollout's ``t_steps * n`` samples (flat index ``t * n +
+    i``), ``n_epochs`` passes in random order: ``(indices, None)`` of ``minibatch_size`` samples
+    for a feed-forward network; for a recurrent one ``(indices, modules)``: the whole sequences
+    of ``minibatch_size // t_steps`` modules (at least one), indices ordered cycle-major."""
+    for _ in range(args.n_epochs):
+        if not args.recurrent:
+            order = torch.randperm(t_steps * n)
+            for start in range(0, len(order), args.minibatch_size):
+                yield order[start:start + args.minibatch_size], None
+            continue
+        order, width = torch.randperm(n), max(1, args.minibatch_size // t_steps)
+        for start in range(0, n, width):
+            modules = order[start:start + width]
+            yield (torch.arange(t_steps)[:, None] * n + modules[None, :]).reshape(-1), modules
 
 
 def main(argv=None) -> Path:
@@ -415,19 +456,20 @@ def train(args: Args) -> Path:
         curriculum = Curriculum(args.curriculum, lambda stage: proteo_env.make_batched(
             args.task, 1, control=args.control, **{**args.env, **stage}),
             stage=int((resume_meta or {}).get("curriculum_stage", 0)))
-    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
-                           f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
-                           resume=resume_meta is not None)
-    save_args(args, run_dir)
 
     def stage_args() -> Args:
         return args if curriculum is None else dataclasses.replace(args, env=curriculum.overrides(args.env))
 
     worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
-    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory)
+    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory, args.recurrent)
     if args.init and resume_meta is None:
-        net.load_state_dict(initial_weights(args, worlds.task_id, enc))
+        net.load_state_dict(initial_weights(args, worlds.task_id, enc, net))
+    # written only once the arguments, the worlds and the init checkpoint are known to be good
+    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
+                           f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
+                           resume=resume_meta is not None)
+    save_args(args, run_dir)
     net.to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
     def make_teachers():
@@ -461,6 +503,8 @@ def train(args: Args) -> Path:
                 *(torch.zeros((t_steps, n)) for _ in range(3)))
 
     n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
+    state = net.initial_state(n)
+    """Every module's recurrent state ``(n, R)`` before the next cycle (``None`` when feed-forward)."""
     rewards_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d) for d in (np.float32, bool, bool))
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
 
@@ -473,7 +517,8 @@ def train(args: Args) -> Path:
         write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=stage_args().env,
                               encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
                               extra={"label": f"ppo-{args.arch}", "control": args.control, "arch": args.arch,
-                                     "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
+                                     "hidden": list(args.hidden), "memory": args.memory,
+                                     "recurrent": args.recurrent, "run_dir": str(run_dir),
                                      "args": asdict(args),
                                      **({"curriculum_stage": curriculum.stage} if curriculum else {})})
 
@@ -488,12 +533,13 @@ def train(args: Args) -> Path:
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
         distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
         # ---- rollout: t_steps cycles of every world
+        first_state = state
         with torch.no_grad():
             for t in range(t_steps):
                 worlds.encode(features[t], move_mask[t])
                 if distill > 0:
                     labels_t[t] = torch.from_numpy(teachers.labels(worlds.buffers))
-                logits, values = net(obs_t[t].to(device))
+                logits, values, state = net(obs_t[t].to(device), state)
                 actions, logp = sample(masked_log_probs(logits, mask_t[t].to(device), nvec))
                 actions_t[t], logp_t[t], values_t[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
                 reward, terminal, truncated = worlds.step(actions_t[t].numpy().reshape(args.n_envs, a, -1), finished)
@@ -501,11 +547,14 @@ def train(args: Args) -> Path:
                 if distill > 0:
                     teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
-                    final_values = net.value(torch.from_numpy(worlds.final_features).to(device))
+                    final_values = net.value(torch.from_numpy(worlds.final_features).to(device),
+                                             None if state is None else state[worlds.final_rows])
                     bootstrap_t[t, worlds.final_rows] = scale.value(final_values).cpu()
+                if state is not None:  # a world's next episode starts from zero state
+                    state = state * torch.from_numpy(~np.repeat(terminal | truncated, a)).to(state)[:, None]
             last = np.zeros((n, worlds.size), dtype=np.float32)
             worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
-            last_value = scale.value(net.value(torch.from_numpy(last).to(device))).cpu()
+            last_value = scale.value(net.value(torch.from_numpy(last).to(device), state)).cpu()
         collected = time.perf_counter()
         terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
                                         for w in (terminal_w, truncated_w, rewards_w))
@@ -516,41 +565,43 @@ def train(args: Args) -> Path:
         scale.update(returns)
         # ---- update
         used = t_steps * n
-        flat = (obs_t.reshape(-1, worlds.size), mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)),
-                logp_t.reshape(-1), advantages.reshape(-1), returns.reshape(-1), labels_t.reshape(-1, len(nvec)))
+        flat = (mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)), logp_t.reshape(-1),
+                advantages.reshape(-1), returns.reshape(-1), labels_t.reshape(-1, len(nvec)))
         stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": [],
                  "loss/distill": []}
-        for _ in range(args.n_epochs):
-            order = torch.randperm(used)
-            for start in range(0, len(order), args.minibatch_size):
-                mb = order[start:start + args.minibatch_size]
-                x, m, act, old_logp, adv, ret, labels = (v[mb].to(device) for v in flat)
-                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                logits, values = net(x)
-                log_probs = masked_log_probs(logits, m, nvec)
-                ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
-                policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
-                value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
-                ent = entropy(log_probs).mean()
-                loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
-                if distill > 0:
-                    distill_loss = teacher_cross_entropy(log_probs, labels, m)
-                    loss = loss + distill * distill_loss
-                    stats["loss/distill"].append(distill_loss.item())
-                optimiser.zero_grad(set_to_none=True)
-                loss.backward()
-                if args.arch == "shared":
-                    nn.utils.clip_grad_norm_(net.parameters(), args.max_grad_norm)
-                else:
-                    nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
-                    nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
-                optimiser.step()
-                with torch.no_grad():
-                    stats["loss/policy"].append(policy_loss.item())
-                    stats["loss/value"].append(value_loss.item())
-                    stats["loss/entropy"].append(ent.item())
-                    stats["loss/approx_kl"].append(((ratio - 1) - torch.log(ratio)).mean().item())
-                    stats["loss/clip_fraction"].append(((ratio - 1).abs() > args.clip_range).float().mean().item())
+        for mb, modules in minibatches(args, t_steps, n):
+            m, act, old_logp, adv, ret, labels = (v[mb].to(device) for v in flat)
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            if modules is None:
+                logits, values, _ = net(obs_t.reshape(-1, worlds.size)[mb].to(device))
+            else:  # whole sequences of these modules, from their state at the rollout's start
+                logits, values = net.unroll(obs_t[:, modules].to(device), first_state[modules],
+                                            (terminal | truncated)[:, modules].to(device))
+                logits, values = logits.reshape(len(mb), -1), values.reshape(-1)
+            log_probs = masked_log_probs(logits, m, nvec)
+            ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
+            policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
+            value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
+            ent = entropy(log_probs).mean()
+            loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
+            if distill > 0:
+                distill_loss = teacher_cross_entropy(log_probs, labels, m)
+                loss = loss + distill * distill_loss
+                stats["loss/distill"].append(distill_loss.item())
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            if args.arch == "shared":
+                nn.utils.clip_grad_norm_(net.parameters(), args.max_grad_norm)
+            else:
+                nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
+                nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
+            optimiser.step()
+            with torch.no_grad():
+                stats["loss/policy"].append(policy_loss.item())
+                stats["loss/value"].append(value_loss.item())
+                stats["loss/entropy"].append(ent.item())
+                stats["loss/approx_kl"].append(((ratio - 1) - torch.log(ratio)).mean().item())
+                stats["loss/clip_fraction"].append(((ratio - 1).abs() > args.clip_range).float().mean().item())
         updated = time.perf_counter()
         agent_steps += used
         bar.update(used)
@@ -569,6 +620,7 @@ def train(args: Args) -> Path:
             worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)
             a, teachers = worlds.n_agents, make_teachers()
             n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
+            state = net.initial_state(n)
         finished = []
         if agent_steps >= next_checkpoint:
             save(checkpoint_folder(run_dir, agent_steps))

@@ -80,8 +80,7 @@ class Teachers:
 
     def _reset(self, b: int) -> None:
         if self.checkpoint is not None:  # the learned teacher's memory is kept by row
-            for row in range(b * self.n_agents, (b + 1) * self.n_agents):
-                self.checkpoint.previous.pop(row, None)
+            self.checkpoint.forget(range(b * self.n_agents, (b + 1) * self.n_agents))
             return
         self.policies[b].reset(seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])])
                                         .generate_state(1, np.uint64)[0] >> 1))
