@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test bench eval learning-results learning-task
+.PHONY: install install-distributed demo test lint bench eval learning-results learning-task
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -21,6 +21,11 @@ demo: install
 
 test: install-distributed
 	$(BIN)/python -m pytest
+
+# Format, lint and import order (configured in pyproject.toml); CI runs it before the tests.
+lint: install
+	$(BIN)/ruff format --check .
+	$(BIN)/ruff check .
 
 bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000

@@ -13,8 +13,9 @@ from .locomotion import LocomotionPolicy
 from .random_policy import RandomPolicy
 from .table import TablePolicy
 
-POLICIES: dict[str, type[Policy]] = {cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy,
-                                                        LocomotionPolicy)}
+POLICIES: dict[str, type[Policy]] = {
+    cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy, LocomotionPolicy)
+}
 
 
 def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:

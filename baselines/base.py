@@ -40,8 +40,7 @@ class Policy:
     def for_env(cls, env, *, seed: int | None = None, **params):
         """Build the policy from an environment's static interface (never its state)."""
         check_level(cls, env)
-        return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max,
-                   seed=seed, **params)
+        return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed, **params)
 
     def reset(self, seed: int | None = None) -> None:
         if seed is not None:
@@ -63,10 +62,12 @@ def check_level(policy_cls, env) -> None:
     """A ``ValueError`` when ``policy_cls`` gives no actions of ``env``'s control level."""
     level = getattr(env, "control", "full")
     if level not in policy_cls.levels:
-        raise ValueError(f"policy {policy_cls.name!r} gives actions at control level "
-                         f"{'/'.join(policy_cls.levels)}, not at the env's control={level!r}; allowed: an env made "
-                         f"with control={policy_cls.levels[0]!r}, or a policy of that level (random, a checkpoint "
-                         f"trained at {level!r})")
+        raise ValueError(
+            f"policy {policy_cls.name!r} gives actions at control level "
+            f"{'/'.join(policy_cls.levels)}, not at the env's control={level!r}; allowed: an env made "
+            f"with control={policy_cls.levels[0]!r}, or a policy of that level (random, a checkpoint "
+            f"trained at {level!r})"
+        )
 
 
 def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
@@ -84,9 +85,18 @@ def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
     return out
 
 
-FIELD_DTYPES = {"own_mode": np.int32, "messages": np.int32, "neighbour_kind": np.int8, "neighbour_mode": np.int32,
-                "neighbour_scent": np.int32, "own_scent": np.int32, "action_mask": np.int8, "contact": np.int8,
-                "load": np.float32, "hint": np.float32}
+FIELD_DTYPES = {
+    "own_mode": np.int32,
+    "messages": np.int32,
+    "neighbour_kind": np.int8,
+    "neighbour_mode": np.int32,
+    "neighbour_scent": np.int32,
+    "own_scent": np.int32,
+    "action_mask": np.int8,
+    "contact": np.int8,
+    "load": np.float32,
+    "hint": np.float32,
+}
 """The dtype in which the rule kernels take each observation field (those of :mod:`proteo_env.spaces`)."""
 
 
@@ -211,9 +221,11 @@ class KernelPolicy(Policy):
         """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
         given to each agent name at first sight (``"name"``)."""
         if self._keyed_by not in (None, keyed_by):
-            raise RuntimeError(f"{type(self).__name__}: act() and act_arrays() used between two resets; "
-                               "allowed: one of them per episode (memory is keyed by agent name in act() "
-                               "and by row in act_arrays())")
+            raise RuntimeError(
+                f"{type(self).__name__}: act() and act_arrays() used between two resets; "
+                "allowed: one of them per episode (memory is keyed by agent name in act() "
+                "and by row in act_arrays())"
+            )
         self._keyed_by = keyed_by
         if keyed_by == "row":
             if len(self._row_slots) != len(keys):

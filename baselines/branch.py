@@ -71,8 +71,8 @@ from __future__ import annotations
 import numpy as np
 
 from .branch_kernels import NO_COUNT, BranchRules, branch_decide
-from .chain_kernels import ChainRules
 from .chain import ChainPolicy, ModuleMemory
+from .chain_kernels import ChainRules
 
 SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
 
@@ -84,8 +84,14 @@ class BranchMemory(ModuleMemory):
     ``spot_waited``, cycles) and the directions whose module refused to become a seed
     (``refused``, a bit set)."""
 
-    FIELDS = {**ModuleMemory.FIELDS, "spawned": (np.int64, NO_COUNT), "spot_direction": (np.int64, -1),
-              "spot_announced": (np.bool_, False), "spot_waited": (np.int64, 0), "refused": (np.int64, 0)}
+    FIELDS = {
+        **ModuleMemory.FIELDS,
+        "spawned": (np.int64, NO_COUNT),
+        "spot_direction": (np.int64, -1),
+        "spot_announced": (np.bool_, False),
+        "spot_waited": (np.int64, 0),
+        "refused": (np.int64, 0),
+    }
 
 
 class BranchPolicy(ChainPolicy):
@@ -108,8 +114,21 @@ class BranchPolicy(ChainPolicy):
     name = "branch"
     rule = staticmethod(branch_decide)
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, T=12, B=6, p_node=0.0,
-                 search_relays_node=True, refuse=True, patience=30, **chain):
+    def __init__(
+        self,
+        layout,
+        modes,
+        *,
+        scent_max=65535,
+        seed=None,
+        T=12,
+        B=6,
+        p_node=0.0,
+        search_relays_node=True,
+        refuse=True,
+        patience=30,
+        **chain,
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed, **chain)
         if T < 1:
             raise ValueError(f"T={T!r} is not allowed; allowed: an integer >= 1")
@@ -129,9 +148,14 @@ class BranchPolicy(ChainPolicy):
     @property
     def branch_rules(self) -> BranchRules:
         """The branch's own parameters as the kernels of :mod:`baselines.branch_kernels` read them."""
-        return BranchRules(T=int(self.T), B=int(self.B), p_node=float(self.p_node),
-                           search_relays_node=bool(self.search_relays_node), refuse=bool(self.refuse),
-                           patience=int(self.patience))
+        return BranchRules(
+            T=int(self.T),
+            B=int(self.B),
+            p_node=float(self.p_node),
+            search_relays_node=bool(self.search_relays_node),
+            refuse=bool(self.refuse),
+            patience=int(self.patience),
+        )
 
     @classmethod
     def for_env(cls, env, *, seed=None, **params):

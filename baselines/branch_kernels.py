@@ -17,8 +17,16 @@ from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
 
 from .chain_kernels import BECOME_SEED, FINAL, SEARCH, SEED, SLEEP, search_actions, seed_blocked
-from .primitives import (ALL_BITS, HORIZONTAL_BITS, detects_scent, growth_direction, legal_bits, spot_touches,
-                         uniform_pick, write_action)
+from .primitives import (
+    ALL_BITS,
+    HORIZONTAL_BITS,
+    detects_scent,
+    growth_direction,
+    legal_bits,
+    spot_touches,
+    uniform_pick,
+    write_action,
+)
 
 NODE, INODE = 4, 5
 REFUSE = 14
@@ -51,10 +59,21 @@ def branch_seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, previou
     ``growth`` is unknown, and no second, non-horizontal try.
     """
     known = growth >= 0
-    if (not known or (refused >> growth) & 1
-            or (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, GROWN_BITS))):
-        new = growth_direction(neighbour_kind, neighbour_mode, i, rng, rules.horizontal,
-                               growth if known else previous, GROWN_BITS, rules.clean_exit)
+    if (
+        not known
+        or (refused >> growth) & 1
+        or (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, GROWN_BITS))
+    ):
+        new = growth_direction(
+            neighbour_kind,
+            neighbour_mode,
+            i,
+            rng,
+            rules.horizontal,
+            growth if known else previous,
+            GROWN_BITS,
+            rules.clean_exit,
+        )
         if new >= 0 and (refused >> new) & 1:
             new = -1
         if new >= 0 or not known or (refused >> growth) & 1:
@@ -63,8 +82,12 @@ def branch_seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, previou
         write_action(actions, i, 0, SEED, EMIT, RELAY, 0, 0)
         return -1
     kind, m = neighbour_kind[i, growth], neighbour_mode[i, growth]
-    if (not fresh and kind == KIND_MODULE and (m == SLEEP or m == SEARCH)
-            and not (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, GROWN_BITS))):
+    if (
+        not fresh
+        and kind == KIND_MODULE
+        and (m == SLEEP or m == SEARCH)
+        and not (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, GROWN_BITS))
+    ):
         write_action(actions, i, 0, FINAL, RELAY, RELAY, growth, BECOME_SEED)
         return -1
     write_action(actions, i, 0, SEED, EMIT, RELAY, MESSAGE_TO_ALL, growth + 1)
@@ -96,8 +119,21 @@ def _retire(s, spawned, spot_direction, spot_announced, spot_waited, refused):
 
 
 @kernel
-def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, spot_announced, spot_waited, refused,
-                rules, branch, rng, actions):
+def node_action(
+    neighbour_kind,
+    neighbour_mode,
+    i,
+    s,
+    spawned,
+    spot_direction,
+    spot_announced,
+    spot_waited,
+    refused,
+    rules,
+    branch,
+    rng,
+    actions,
+):
     """Write the action of the NODE at row ``i`` (memory slot ``s``) into ``actions[i]``.
 
     It keeps the number of seeds spawned (``spawned``, :data:`NO_COUNT`: none yet) and its current growth
@@ -114,8 +150,11 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
         write_action(actions, i, 0, INODE, RELAY, EMIT, 0, 0)
         return
     direction, announced, waited = spot_direction[s], spot_announced[s], spot_waited[s]
-    if (direction < 0 or not _spot_free(neighbour_kind, neighbour_mode, i, direction)
-            or (neighbour_kind[i, direction] != KIND_MODULE and waited >= branch.patience)):
+    if (
+        direction < 0
+        or not _spot_free(neighbour_kind, neighbour_mode, i, direction)
+        or (neighbour_kind[i, direction] != KIND_MODULE and waited >= branch.patience)
+    ):
         allowed = HORIZONTAL_BITS if rules.horizontal else ALL_BITS
         pool = 0
         for k in range(12):
@@ -147,9 +186,28 @@ def node_action(neighbour_kind, neighbour_mode, i, s, spawned, spot_direction, s
 
 
 @kernel
-def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
-                   slots, heading, growth, asked, spawned, spot_direction, spot_announced, spot_waited, refused,
-                   rules, branch, rng, actions):
+def branch_actions(
+    own_mode,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_scent,
+    action_mask,
+    slots,
+    heading,
+    growth,
+    asked,
+    spawned,
+    spot_direction,
+    spot_announced,
+    spot_waited,
+    refused,
+    rules,
+    branch,
+    rng,
+    actions,
+):
     """Every agent's action under the branch rule (:class:`~baselines.branch.BranchPolicy`).
 
     Shapes as in the module docstring, two scent channels (0 regular, 1 node); the branch
@@ -187,22 +245,23 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
             touches_tree = False
             for k in range(12):
                 m = neighbour_mode[i, k]
-                if (k != promoted[i] and neighbour_kind[i, k] == KIND_MODULE and m >= 0
-                        and (GROWN_BITS >> m) & 1):
+                if k != promoted[i] and neighbour_kind[i, k] == KIND_MODULE and m >= 0 and (GROWN_BITS >> m) & 1:
                     touches_tree = True
             if touches_tree:  # joining would touch another part of the tree
                 actions[i, actions.shape[1] - 2] = promoted[i]
                 actions[i, actions.shape[1] - 1] = REFUSE
                 promoted[i] = -2  # neither a seed nor moving this cycle
                 continue
-        growth[slots[i]] = branch_seed_action(neighbour_kind, neighbour_mode, i, OPPOSITE[promoted[i]], True, -1,
-                                              refused[slots[i]], rules, rng, actions)
+        growth[slots[i]] = branch_seed_action(
+            neighbour_kind, neighbour_mode, i, OPPOSITE[promoted[i]], True, -1, refused[slots[i]], rules, rng, actions
+        )
     for i in range(n_agents):  # the seed it made refused: seed again
         if refused_from[i] >= 0 and own_mode[i, 0] == FINAL:
             s = slots[i]
             refused[s] |= 1 << refused_from[i]
-            growth[s] = branch_seed_action(neighbour_kind, neighbour_mode, i, -1, True, refused_from[i], refused[s],
-                                           rules, rng, actions)
+            growth[s] = branch_seed_action(
+                neighbour_kind, neighbour_mode, i, -1, True, refused_from[i], refused[s], rules, rng, actions
+            )
     for i in range(n_agents):  # a node's seed refused: one seed fewer
         own = own_mode[i, 0]
         if refused_from[i] >= 0 and (own == NODE or own == INODE):
@@ -215,8 +274,9 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
     for i in range(n_agents):
         if own_mode[i, 0] == SEED:
             s = slots[i]
-            growth[s] = branch_seed_action(neighbour_kind, neighbour_mode, i, growth[s], False, -1, refused[s], rules,
-                                           rng, actions)
+            growth[s] = branch_seed_action(
+                neighbour_kind, neighbour_mode, i, growth[s], False, -1, refused[s], rules, rng, actions
+            )
     for i in range(n_agents):
         if own_mode[i, 0] != SLEEP or promoted[i] != -1:
             continue
@@ -225,8 +285,21 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
             if not rules.wake_when_free or legal_bits(action_mask, i):
                 actions[i, 1] = SEARCH
         elif branch.p_node > 0 and rng.random() < branch.p_node:
-            node_action(neighbour_kind, neighbour_mode, i, slots[i], spawned, spot_direction, spot_announced,
-                        spot_waited, refused, rules, branch, rng, actions)
+            node_action(
+                neighbour_kind,
+                neighbour_mode,
+                i,
+                slots[i],
+                spawned,
+                spot_direction,
+                spot_announced,
+                spot_waited,
+                refused,
+                rules,
+                branch,
+                rng,
+                actions,
+            )
     for i in range(n_agents):  # FINAL: a weak node scent (known, > T) with no node next to it: go NODE
         if own_mode[i, 0] != FINAL or refused_from[i] >= 0:
             continue
@@ -236,13 +309,39 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
             m = neighbour_mode[i, k]
             near_node |= m == NODE or m == INODE
         if node_scent > branch.T and node_scent < smax and not near_node:
-            node_action(neighbour_kind, neighbour_mode, i, slots[i], spawned, spot_direction, spot_announced,
-                        spot_waited, refused, rules, branch, rng, actions)
+            node_action(
+                neighbour_kind,
+                neighbour_mode,
+                i,
+                slots[i],
+                spawned,
+                spot_direction,
+                spot_announced,
+                spot_waited,
+                refused,
+                rules,
+                branch,
+                rng,
+                actions,
+            )
     for i in range(n_agents):
         own = own_mode[i, 0]
         if own == NODE or (own == INODE and refused_from[i] >= 0):
-            node_action(neighbour_kind, neighbour_mode, i, slots[i], spawned, spot_direction, spot_announced,
-                        spot_waited, refused, rules, branch, rng, actions)
+            node_action(
+                neighbour_kind,
+                neighbour_mode,
+                i,
+                slots[i],
+                spawned,
+                spot_direction,
+                spot_announced,
+                spot_waited,
+                refused,
+                rules,
+                branch,
+                rng,
+                actions,
+            )
         elif own == INODE:
             actions[i, 3] = EMIT
     n_search = 0
@@ -264,8 +363,9 @@ def branch_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour
                 seen[i, k] = SEED
             elif seen[i, k] == INODE:
                 seen[i, k] = FINAL
-    search_actions(search, messages, neighbour_kind, seen, neighbour_scent, action_mask, slots, heading, asked, rules,
-                   rng, actions)
+    search_actions(
+        search, messages, neighbour_kind, seen, neighbour_scent, action_mask, slots, heading, asked, rules, rng, actions
+    )
     for i in range(n_agents):
         if own_mode[i, 0] >= FINAL:
             heading[slots[i]] = -1
@@ -279,6 +379,25 @@ def branch_decide(seen, slots, memory, rules, rng, actions):
     ``(ChainRules, BranchRules)`` pair."""
     heading, growth, asked, spawned, spot_direction, spot_announced, spot_waited, refused = memory
     chain_rules, branch_rules = rules
-    branch_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
-                   seen.own_scent, seen.action_mask, slots, heading, growth, asked, spawned, spot_direction,
-                   spot_announced, spot_waited, refused, chain_rules, branch_rules, rng, actions)
+    branch_actions(
+        seen.own_mode,
+        seen.messages,
+        seen.neighbour_kind,
+        seen.neighbour_mode,
+        seen.neighbour_scent,
+        seen.own_scent,
+        seen.action_mask,
+        slots,
+        heading,
+        growth,
+        asked,
+        spawned,
+        spot_direction,
+        spot_announced,
+        spot_waited,
+        refused,
+        chain_rules,
+        branch_rules,
+        rng,
+        actions,
+    )

@@ -75,6 +75,8 @@ from .chain_kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainR
 SLEEP, SEARCH, SEED, FINAL = range(4)
 
 ON_STUCK = ("stay", "random")
+
+
 class ModuleMemory(SlotMemory):
     """The chain rule's private memory of every module, one entry per memory slot.
 
@@ -127,10 +129,28 @@ class ChainPolicy(KernelPolicy):
     name = "chain"
     rule = staticmethod(chain_decide)
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_seed=0.0, p_random=0.05,
-                 on_stuck="stay", fewer_neighbours=True, horizontal=True, clean_exit=True, turn=True,
-                 greedy_approach=True, wake_when_free=False, directed=True, momentum=1.0, queue=False,
-                 prefer_chain=True, avoid_octahedra=True):
+    def __init__(
+        self,
+        layout,
+        modes,
+        *,
+        scent_max=65535,
+        seed=None,
+        p_seed=0.0,
+        p_random=0.05,
+        on_stuck="stay",
+        fewer_neighbours=True,
+        horizontal=True,
+        clean_exit=True,
+        turn=True,
+        greedy_approach=True,
+        wake_when_free=False,
+        directed=True,
+        momentum=1.0,
+        queue=False,
+        prefer_chain=True,
+        avoid_octahedra=True,
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         if not 0.0 <= p_seed <= 1.0:
             raise ValueError(f"p_seed={p_seed!r} is not allowed; allowed: a probability in [0, 1]")
@@ -164,9 +184,19 @@ class ChainPolicy(KernelPolicy):
         """The parameters as the kernels of :mod:`baselines.chain_kernels` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
         return ChainRules(
-            scent_max=int(self.scent_max), p_seed=float(self.p_seed), p_random=float(self.p_random),
-            random_when_stuck=self.on_stuck == "random", fewer_neighbours=bool(self.fewer_neighbours),
-            horizontal=bool(self.horizontal), clean_exit=bool(self.clean_exit), turn=bool(self.turn),
-            greedy_approach=bool(self.greedy_approach), wake_when_free=bool(self.wake_when_free),
-            directed=bool(self.directed), momentum=float(self.momentum), queue=bool(self.queue),
-            prefer_chain=bool(self.prefer_chain), avoid_octahedra=octahedra)
+            scent_max=int(self.scent_max),
+            p_seed=float(self.p_seed),
+            p_random=float(self.p_random),
+            random_when_stuck=self.on_stuck == "random",
+            fewer_neighbours=bool(self.fewer_neighbours),
+            horizontal=bool(self.horizontal),
+            clean_exit=bool(self.clean_exit),
+            turn=bool(self.turn),
+            greedy_approach=bool(self.greedy_approach),
+            wake_when_free=bool(self.wake_when_free),
+            directed=bool(self.directed),
+            momentum=float(self.momentum),
+            queue=bool(self.queue),
+            prefer_chain=bool(self.prefer_chain),
+            avoid_octahedra=octahedra,
+        )

@@ -48,9 +48,22 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .primitives import (EQUATOR_BITS, FAR, SPOT_FACE, approach_rows, detects_scent, fewest_neighbours,
-                         first_bit, growth_direction, legal_bits, module_bits, random_pick, seen_scent,
-                         spot_touches, write_action)
+from .primitives import (
+    EQUATOR_BITS,
+    FAR,
+    SPOT_FACE,
+    approach_rows,
+    detects_scent,
+    fewest_neighbours,
+    first_bit,
+    growth_direction,
+    legal_bits,
+    module_bits,
+    random_pick,
+    seen_scent,
+    spot_touches,
+    write_action,
+)
 
 SLEEP, SEARCH, SEED, FINAL = range(4)
 BECOME_SEED = 13
@@ -105,19 +118,23 @@ def seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, rules, rng, ac
     """
     final_bits = 1 << FINAL
     if growth < 0 or (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, final_bits)):
-        new = growth_direction(neighbour_kind, neighbour_mode, i, rng, rules.horizontal, growth, final_bits,
-                               rules.clean_exit)
+        new = growth_direction(
+            neighbour_kind, neighbour_mode, i, rng, rules.horizontal, growth, final_bits, rules.clean_exit
+        )
         if new < 0 and rules.horizontal:  # nowhere to go in the plane: leave it
-            new = growth_direction(neighbour_kind, neighbour_mode, i, rng, False, growth, final_bits,
-                                   rules.clean_exit)
+            new = growth_direction(neighbour_kind, neighbour_mode, i, rng, False, growth, final_bits, rules.clean_exit)
         if new >= 0 or growth < 0:
             growth = new
     if growth < 0:
         write_action(actions, i, 0, SEED, EMIT, EMIT, 0, 0)
         return -1
     kind, m = neighbour_kind[i, growth], neighbour_mode[i, growth]
-    if (not fresh and kind == KIND_MODULE and (m == SLEEP or m == SEARCH)
-            and not (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, final_bits))):
+    if (
+        not fresh
+        and kind == KIND_MODULE
+        and (m == SLEEP or m == SEARCH)
+        and not (rules.turn and seed_blocked(neighbour_kind, neighbour_mode, i, growth, final_bits))
+    ):
         write_action(actions, i, 0, FINAL, RELAY, RELAY, growth, BECOME_SEED)
         return -1
     write_action(actions, i, 0, SEED, EMIT, EMIT, MESSAGE_TO_ALL, growth + 1)
@@ -126,8 +143,7 @@ def seed_action(neighbour_kind, neighbour_mode, i, growth, fresh, rules, rng, ac
 
 # ---------------------------------------------------------------- SEARCH
 @kernel
-def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_scent, heading_dir, legal,
-           rules, moves):
+def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_scent, heading_dir, legal, rules, moves):
     """Moves of the climbers ``group[:count]`` (indices into the SEARCH group; agent rows
     ``rows[group[j]]``) along the scent gradient (the rule in :class:`~baselines.chain.ChainPolicy`).
 
@@ -239,8 +255,21 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
 
 
 @kernel
-def search_moves(rows, messages, neighbour_kind, neighbour_mode, neighbour_scent, action_mask, slots,
-                 heading, asked, rules, rng, moves, send):
+def search_moves(
+    rows,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    action_mask,
+    slots,
+    heading,
+    asked,
+    rules,
+    rng,
+    moves,
+    send,
+):
     """Moves ``moves`` (Q,) and growth broadcasts ``send`` (Q,) (-1: none) of the SEARCH agents
     at rows ``rows`` (Q,), each from its own observation row and memory.
 
@@ -363,20 +392,44 @@ def search_moves(rows, messages, neighbour_kind, neighbour_mode, neighbour_scent
             group[count] = r
             count += 1
         heading_dir[r] = heading[slots[rows[r]]]
-    _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_scent, heading_dir, legal, rules,
-           moves)
+    _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_scent, heading_dir, legal, rules, moves)
 
 
 @kernel
-def search_actions(rows, messages, neighbour_kind, neighbour_mode, neighbour_scent, action_mask, slots,
-                   heading, asked, rules, rng, actions):
+def search_actions(
+    rows,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    action_mask,
+    slots,
+    heading,
+    asked,
+    rules,
+    rng,
+    actions,
+):
     """:func:`search_moves` written into ``actions`` (move, and a growth broadcast to all), and
     the SEARCH agents' memory updated (``heading`` and ``asked`` of each requested move)."""
     q = rows.shape[0]
     moves = np.empty(q, dtype=np.int64)
     send = np.empty(q, dtype=np.int64)
-    search_moves(rows, messages, neighbour_kind, neighbour_mode, neighbour_scent, action_mask, slots,
-                 heading, asked, rules, rng, moves, send)
+    search_moves(
+        rows,
+        messages,
+        neighbour_kind,
+        neighbour_mode,
+        neighbour_scent,
+        action_mask,
+        slots,
+        heading,
+        asked,
+        rules,
+        rng,
+        moves,
+        send,
+    )
     n_fields = actions.shape[1]
     for r in range(q):
         i = rows[r]
@@ -394,8 +447,22 @@ def search_actions(rows, messages, neighbour_kind, neighbour_mode, neighbour_sce
 
 # ---------------------------------------------------------------- the whole decision
 @kernel
-def chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
-                  slots, heading, growth, asked, rules, rng, actions):
+def chain_actions(
+    own_mode,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_scent,
+    action_mask,
+    slots,
+    heading,
+    growth,
+    asked,
+    rules,
+    rng,
+    actions,
+):
     """Every agent's action under the chain rule (shapes in the module docstring).
 
     In order: defaults (stay, keep the mode, relay every channel, no message); modules
@@ -418,12 +485,14 @@ def chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
                     break
     for i in range(n_agents):
         if promoted[i] >= 0:
-            growth[slots[i]] = seed_action(neighbour_kind, neighbour_mode, i, OPPOSITE[promoted[i]], True, rules,
-                                           rng, actions)
+            growth[slots[i]] = seed_action(
+                neighbour_kind, neighbour_mode, i, OPPOSITE[promoted[i]], True, rules, rng, actions
+            )
     for i in range(n_agents):
         if own_mode[i, 0] == SEED:
-            growth[slots[i]] = seed_action(neighbour_kind, neighbour_mode, i, growth[slots[i]], False, rules,
-                                           rng, actions)
+            growth[slots[i]] = seed_action(
+                neighbour_kind, neighbour_mode, i, growth[slots[i]], False, rules, rng, actions
+            )
     n_search = 0
     for i in range(n_agents):
         own = own_mode[i, 0]
@@ -446,8 +515,20 @@ def chain_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
         if own_mode[i, 0] == SEARCH and promoted[i] < 0:
             search[n_search] = i
             n_search += 1
-    search_actions(search, messages, neighbour_kind, neighbour_mode, neighbour_scent, action_mask, slots,
-                   heading, asked, rules, rng, actions)
+    search_actions(
+        search,
+        messages,
+        neighbour_kind,
+        neighbour_mode,
+        neighbour_scent,
+        action_mask,
+        slots,
+        heading,
+        asked,
+        rules,
+        rng,
+        actions,
+    )
 
 
 @kernel
@@ -455,5 +536,19 @@ def chain_decide(seen, slots, memory, rules, rng, actions):
     """:func:`chain_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
     ``memory`` is ``(heading, growth, asked)``, ``rules`` a :class:`ChainRules`."""
     heading, growth, asked = memory
-    chain_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
-                  seen.own_scent, seen.action_mask, slots, heading, growth, asked, rules, rng, actions)
+    chain_actions(
+        seen.own_mode,
+        seen.messages,
+        seen.neighbour_kind,
+        seen.neighbour_mode,
+        seen.neighbour_scent,
+        seen.own_scent,
+        seen.action_mask,
+        slots,
+        heading,
+        growth,
+        asked,
+        rules,
+        rng,
+        actions,
+    )

@@ -43,6 +43,7 @@ from proteo_env.spaces import ObservationBuffers
 
 from .base import KernelPolicy, Observed
 
+
 @dataclass(frozen=True)
 class Rollout:
     """Outcome of a compiled rollout (N modules, R recorded cycles).
@@ -87,12 +88,44 @@ def rollout_loop(rule, sense, settle):
     """
 
     @generated_kernel
-    def cycles(world, scratch, seen, slots, memory, rules, rng, task, start_cycle, max_cycles, record_every,
-               recorded_cycles, recorded_cell, recorded_mode):
-        (grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface, keep_connected,
-         exact, sweeps, scent_max, nb_delta, dir_delta, roll_delta, local_delta, roll_table) = world
-        (movers, mark, queue, stacks, search, scent_buffer, is_cut, adjacency, disc, low, stack_node,
-         stack_k) = scratch
+    def cycles(
+        world,
+        scratch,
+        seen,
+        slots,
+        memory,
+        rules,
+        rng,
+        task,
+        start_cycle,
+        max_cycles,
+        record_every,
+        recorded_cycles,
+        recorded_cell,
+        recorded_mode,
+    ):
+        (
+            grid,
+            cell,
+            n_agents,
+            anchored,
+            mode,
+            scent,
+            inbox,
+            rng_state,
+            passive_role,
+            surface,
+            keep_connected,
+            exact,
+            sweeps,
+            scent_max,
+            nb_delta,
+            dir_delta,
+            roll_delta,
+            local_delta,
+            roll_table,
+        ) = world
+        (movers, mark, queue, stacks, search, scent_buffer, is_cut, adjacency, disc, low, stack_node, stack_k) = scratch
         n_channels = scent.shape[0]
         actions = np.empty((n_agents, 4 + n_channels), dtype=np.int64)
         move = np.empty(n_agents, dtype=np.int64)
@@ -103,10 +136,35 @@ def rollout_loop(rule, sense, settle):
         moved = np.empty(n_agents, dtype=np.bool_)
         recorded = 0
         for cycle in range(1, max_cycles + 1):
-            engine.observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected, nb_delta,
-                                 dir_delta, roll_delta, roll_table, scent_max, is_cut, adjacency, disc, low,
-                                 stack_node, stack_k, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
-                                 seen.own_mode, seen.own_scent, seen.messages, seen.contact, seen.action_mask)
+            engine.observe_world(
+                grid,
+                cell,
+                n_agents,
+                mode,
+                scent,
+                inbox,
+                anchored,
+                keep_connected,
+                nb_delta,
+                dir_delta,
+                roll_delta,
+                roll_table,
+                scent_max,
+                is_cut,
+                adjacency,
+                disc,
+                low,
+                stack_node,
+                stack_k,
+                seen.neighbour_kind,
+                seen.neighbour_mode,
+                seen.neighbour_scent,
+                seen.own_mode,
+                seen.own_scent,
+                seen.messages,
+                seen.contact,
+                seen.action_mask,
+            )
             sense(task, seen.load)
             rule(seen, slots, memory, rules, rng, actions)
             for a in range(n_agents):
@@ -116,10 +174,41 @@ def rollout_loop(rule, sense, settle):
                     role[a, ch] = actions[a, 2 + ch]
                 target[a] = actions[a, 2 + n_channels]
                 value[a] = actions[a, 3 + n_channels]
-            engine.run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
-                             keep_connected, exact, sweeps, scent_max, move, new_mode, role, target, value, moved,
-                             dir_delta, DIRECTIONS, OPPOSITE, roll_delta, local_delta, LOCAL_ADJACENCY_BITS,
-                             roll_table, movers, mark, queue, stacks, search, scent_buffer)
+            engine.run_cycle(
+                grid,
+                cell,
+                n_agents,
+                anchored,
+                mode,
+                scent,
+                inbox,
+                rng_state,
+                passive_role,
+                surface,
+                keep_connected,
+                exact,
+                sweeps,
+                scent_max,
+                move,
+                new_mode,
+                role,
+                target,
+                value,
+                moved,
+                dir_delta,
+                DIRECTIONS,
+                OPPOSITE,
+                roll_delta,
+                local_delta,
+                LOCAL_ADJACENCY_BITS,
+                roll_table,
+                movers,
+                mark,
+                queue,
+                stacks,
+                search,
+                scent_buffer,
+            )
             success = settle(grid, cell, mode, anchored, dir_delta, start_cycle + cycle, task)
             if record_every > 0 and (cycle % record_every == 0 or success):
                 recorded_cycles[recorded] = cycle
@@ -133,8 +222,20 @@ def rollout_loop(rule, sense, settle):
     return cycles
 
 
-SCRATCH_FIELDS = ("movers", "mark", "queue", "stacks", "search", "scent_buffer", "is_cut", "adjacency", "disc", "low",
-                  "stack_node", "stack_k")
+SCRATCH_FIELDS = (
+    "movers",
+    "mark",
+    "queue",
+    "stacks",
+    "search",
+    "scent_buffer",
+    "is_cut",
+    "adjacency",
+    "disc",
+    "low",
+    "stack_node",
+    "stack_k",
+)
 """The engine's :class:`~proteo_env.core.world.Scratch` arrays the loop uses, in its order."""
 STATE_FIELDS = ("grid", "cell", "mode", "scent", "inbox", "rng_state")
 """The world's arrays a rollout changes (it runs on copies of them)."""
@@ -168,16 +269,20 @@ class CompiledRollout:
             raise ValueError(f"env={type(env).__name__} is not allowed; allowed: a ProteoEnv from proteo_env.make")
         task = env.task
         if not isinstance(policy, KernelPolicy) or policy.rule is None or policy.name != task.name:
-            raise ValueError(f"policy={type(policy).__name__} on task={task.task_id()!r} is not allowed; allowed: "
-                             f"the task's hand-coded policy (a KernelPolicy named {task.name!r}, from "
-                             "baselines.make_policy)")
+            raise ValueError(
+                f"policy={type(policy).__name__} on task={task.task_id()!r} is not allowed; allowed: "
+                f"the task's hand-coded policy (a KernelPolicy named {task.name!r}, from "
+                "baselines.make_policy)"
+            )
         world = env.engine
         if world is None:
             raise ValueError("env has no world yet; allowed: an env after reset(seed=...)")
         kernels = task.kernels(world)
         if kernels is None:
-            raise ValueError(f"task={task.task_id()!r} is not allowed; allowed: a task with compiled kernels "
-                             "(Task.kernels returns a TaskKernels)")
+            raise ValueError(
+                f"task={task.task_id()!r} is not allowed; allowed: a task with compiled kernels "
+                "(Task.kernels returns a TaskKernels)"
+            )
         if policy.layout != env.action_layout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
@@ -213,22 +318,57 @@ class CompiledRollout:
         ran, recorded = 0, 0
         if not self.success:
             p = w.physics
-            world = (st["grid"], st["cell"], w.n_agents, w.anchored, st["mode"], st["scent"], st["inbox"],
-                     st["rng_state"], w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent,
-                     p.scent_sweeps, int(p.scent_max), w.neighbourhood_delta, w.dir_delta, w.roll_delta,
-                     w.local_delta, w.roll_table)
+            world = (
+                st["grid"],
+                st["cell"],
+                w.n_agents,
+                w.anchored,
+                st["mode"],
+                st["scent"],
+                st["inbox"],
+                st["rng_state"],
+                w.passive_role,
+                w.surface_channels,
+                p.keep_connected,
+                p.exact_scent,
+                p.scent_sweeps,
+                int(p.scent_max),
+                w.neighbourhood_delta,
+                w.dir_delta,
+                w.roll_delta,
+                w.local_delta,
+                w.roll_table,
+            )
             scratch = tuple(getattr(self.scratch, name) for name in SCRATCH_FIELDS)
             ran, self.success, recorded = self.loop(
-                world, scratch, self.seen, np.arange(w.n_agents, dtype=np.int64), self.memory, self.rules, self.rng,
-                self.task_state, int(self.cycle), int(max_cycles), int(record_every), recorded_cycles,
-                recorded_cell, recorded_mode)
+                world,
+                scratch,
+                self.seen,
+                np.arange(w.n_agents, dtype=np.int64),
+                self.memory,
+                self.rules,
+                self.rng,
+                self.task_state,
+                int(self.cycle),
+                int(max_cycles),
+                int(record_every),
+                recorded_cycles,
+                recorded_cell,
+                recorded_mode,
+            )
         recorded_cycles[:recorded] += self.cycle
         self.cycle += int(ran)
         shape = w.shape
-        return Rollout(cycles=self.cycle, success=bool(self.success), positions=shape.point(st["cell"]),
-                       modes=st["mode"].copy(), recorded_cycles=recorded_cycles[:recorded],
-                       recorded_positions=shape.point(recorded_cell[:recorded]),
-                       recorded_modes=recorded_mode[:recorded], rng=self.rng)
+        return Rollout(
+            cycles=self.cycle,
+            success=bool(self.success),
+            positions=shape.point(st["cell"]),
+            modes=st["mode"].copy(),
+            recorded_cycles=recorded_cycles[:recorded],
+            recorded_positions=shape.point(recorded_cell[:recorded]),
+            recorded_modes=recorded_mode[:recorded],
+            rng=self.rng,
+        )
 
 
 def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:

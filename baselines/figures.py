@@ -18,8 +18,8 @@ folder, without running the episodes.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -71,14 +71,20 @@ def _chain_stills(rec) -> list[Still]:
     settled = _mode_count(rec, "FINAL") + _mode_count(rec, "SEED")
     half = np.flatnonzero(settled >= rec.positions.shape[1] / 2)
     frame = int(half[0]) if len(half) else rec.n_frames // 2
-    return [Still(frame, f"half-way: cycle {int(rec.cycles[frame])}, {int(settled[frame])} of "
-                         f"{rec.positions.shape[1]} modules in the chain",
-                  {"azimuth": side_azimuth(rec.positions[frame]), "elevation": 25.0})]
+    return [
+        Still(
+            frame,
+            f"half-way: cycle {int(rec.cycles[frame])}, {int(settled[frame])} of "
+            f"{rec.positions.shape[1]} modules in the chain",
+            {"azimuth": side_azimuth(rec.positions[frame]), "elevation": 25.0},
+        )
+    ]
 
 
 def _last_still(what: str):
     def stills(rec) -> list[Still]:
         return [Still(-1, f"{what}: cycle {int(rec.cycles[-1])}")]
+
     return stills
 
 
@@ -93,31 +99,56 @@ def _table_stills(rec) -> list[Still]:
     else:
         before, after = rec.n_frames // 2, rec.n_frames - 1
     c = rec.cycles
-    return [Still(before, f"before the weight shift: cycle {int(c[before])}"),
-            Still(after, f"after the weight shift: cycle {int(c[after])}"),
-            Still(after, f"after, from underneath: cycle {int(c[after])}", {"elevation": -25.0})]
+    return [
+        Still(before, f"before the weight shift: cycle {int(c[before])}"),
+        Still(after, f"after the weight shift: cycle {int(c[after])}"),
+        Still(after, f"after, from underneath: cycle {int(c[after])}", {"elevation": -25.0}),
+    ]
 
 
 FIGURES: tuple[PaperFigure, ...] = (
-    PaperFigure("chain", "chain", "Chain Behavior",
-                "The Proteo system half-way to a complete chain: white modules have settled (FINAL), red "
-                "ones are still looking for a place (SEARCH, darker nearer the seed's scent), the yellow "
-                "module is the current SEED.",
-                {"n_modules": 80, "max_cycles": 4000}, _chain_stills, panel=(1000, 500)),
-    PaperFigure("branch", "branch", "Branching Behavior",
-                "Recursive branching with node-scent threshold T = 12 and branch count B = 6: purple NODE "
-                "modules spawn yellow seeds; white modules have settled.",
-                {}, _last_still("branching"),
-                params={"T": (12, ("T", "threshold", "node_threshold", "node_scent_threshold")),
-                        "B": (6, ("B", "branches", "branch_count", "max_branches", "n_branches"))}),
-    PaperFigure("table", "table", "Adaptive Behavior",
-                "The table before and after the weight shift: white FIXED board, blue roots, legs grown to "
-                "the floor where the weight is; red modules are available for more legs.",
-                {}, _table_stills),
-    PaperFigure("grasp", "grasp", "Grasping Behavior",
-                "Eight fingers grown towards the object and around it: white FINAL fingers, blue TOUCH "
-                "modules on the object, yellow TOUCHSEEDs.",
-                {}, _last_still("grasp")),
+    PaperFigure(
+        "chain",
+        "chain",
+        "Chain Behavior",
+        "The Proteo system half-way to a complete chain: white modules have settled (FINAL), red "
+        "ones are still looking for a place (SEARCH, darker nearer the seed's scent), the yellow "
+        "module is the current SEED.",
+        {"n_modules": 80, "max_cycles": 4000},
+        _chain_stills,
+        panel=(1000, 500),
+    ),
+    PaperFigure(
+        "branch",
+        "branch",
+        "Branching Behavior",
+        "Recursive branching with node-scent threshold T = 12 and branch count B = 6: purple NODE "
+        "modules spawn yellow seeds; white modules have settled.",
+        {},
+        _last_still("branching"),
+        params={
+            "T": (12, ("T", "threshold", "node_threshold", "node_scent_threshold")),
+            "B": (6, ("B", "branches", "branch_count", "max_branches", "n_branches")),
+        },
+    ),
+    PaperFigure(
+        "table",
+        "table",
+        "Adaptive Behavior",
+        "The table before and after the weight shift: white FIXED board, blue roots, legs grown to "
+        "the floor where the weight is; red modules are available for more legs.",
+        {},
+        _table_stills,
+    ),
+    PaperFigure(
+        "grasp",
+        "grasp",
+        "Grasping Behavior",
+        "Eight fingers grown towards the object and around it: white FINAL fingers, blue TOUCH "
+        "modules on the object, yellow TOUCHSEEDs.",
+        {},
+        _last_still("grasp"),
+    ),
 )
 
 
@@ -130,8 +161,10 @@ def _paper_params(figure: PaperFigure, cls) -> dict:
         if name is not None:
             chosen[name] = value
         else:
-            print(f"note: {cls.task_id()} has no parameter for the paper's {symbol} (looked for "
-                  f"{', '.join(candidates)}); its default is used, not {symbol} = {value}")
+            print(
+                f"note: {cls.task_id()} has no parameter for the paper's {symbol} (looked for "
+                f"{', '.join(candidates)}); its default is used, not {symbol} = {value}"
+            )
     return chosen
 
 
@@ -140,7 +173,6 @@ def record_figure(figure: PaperFigure, seed: int):
     from tqdm import tqdm
 
     from baselines import make_policy
-
     from proteo_env.recording import Recorder
     from proteo_env.registry import make, task_class
     from proteo_env.rollout import run_episode
@@ -150,8 +182,9 @@ def record_figure(figure: PaperFigure, seed: int):
     env = make(cls.task_id(), **overrides)
     policy = make_policy(env.task.default_policy, env, seed=seed)
     recorder = Recorder(env, task_id=cls.task_id(), overrides=overrides, seed=seed, policy=policy.name)
-    with tqdm(total=env.max_cycles, desc=f"{figure.name}: {cls.task_id()} / {policy.name}", unit="cycle",
-              leave=False) as bar:
+    with tqdm(
+        total=env.max_cycles, desc=f"{figure.name}: {cls.task_id()} / {policy.name}", unit="cycle", leave=False
+    ) as bar:
         result = run_episode(env, policy, seed=seed, progress=lambda info: bar.update(1), observe=recorder)
     return recorder.recording(success=result.success)
 
@@ -165,8 +198,9 @@ def draw_figure(figure: PaperFigure, recording, out: Path) -> Path:
     panels = []
     for still in figure.stills(recording):
         frame = still.frame % recording.n_frames
-        camera = Camera.from_options({"width": figure.panel[0], "height": figure.panel[1], "follow": True,
-                                      **still.camera})
+        camera = Camera.from_options(
+            {"width": figure.panel[0], "height": figure.panel[1], "follow": True, **still.camera}
+        )
         renderer = Renderer(camera)
         panels.append(renderer.render(recording.scene(frame, caption=f"{figure.title} · {still.caption}")))
         renderer.close()
@@ -196,8 +230,10 @@ def make_figures(out: Path, *, seed: int = 0, only=None, redraw: bool = False) -
         if only and figure.name not in only:
             continue
         if figure.task not in registered:
-            print(f"skipping the {figure.title} figure: task {figure.task!r} is not registered yet "
-                  f"(registered: {', '.join(sorted(TASKS))})")
+            print(
+                f"skipping the {figure.title} figure: task {figure.task!r} is not registered yet "
+                f"(registered: {', '.join(sorted(TASKS))})"
+            )
             continue
         if redraw and (out / f"{figure.name}.npz").is_file():
             recording = load(out / f"{figure.name}.npz")
@@ -207,11 +243,14 @@ def make_figures(out: Path, *, seed: int = 0, only=None, redraw: bool = False) -
         picture = draw_figure(figure, recording, out)
         pictured = sorted({int(recording.cycles[s.frame % recording.n_frames]) for s in figure.stills(recording)})
         plots = plot_overview(recording, out / f"{figure.name}_plots.png", marks={"pictured": pictured})
-        movie = render_movie(recording, out / f"{figure.name}.gif", camera={"width": 480, "height": 300},
-                             fps=12, max_frames=80)
+        movie = render_movie(
+            recording, out / f"{figure.name}.gif", camera={"width": 480, "height": 300}, fps=12, max_frames=80
+        )
         written += [picture, plots, movie]
-        print(f"{figure.title}: {picture}, {plots}, {movie} ({recording.task_id}, {int(recording.cycles[-1])} cycles, "
-              f"{'success' if recording.success else 'no success'})")
+        print(
+            f"{figure.title}: {picture}, {plots}, {movie} ({recording.task_id}, {int(recording.cycles[-1])} cycles, "
+            f"{'success' if recording.success else 'no success'})"
+        )
     gallery = [(f, load(out / f"{f.name}.npz")) for f in FIGURES if (out / f"{f.name}.npz").is_file()]
     if gallery:
         _write_gallery(out, gallery)
@@ -220,14 +259,27 @@ def make_figures(out: Path, *, seed: int = 0, only=None, redraw: bool = False) -
 
 def _write_gallery(out: Path, gallery) -> None:
     """``README.md`` in ``out``: every figure found there, with its caption and settings."""
-    lines = ["# The paper's figures, reproduced", "",
-             "Written by `proteo figures` (each episode runs the task's default policy; "
-             "`proteo replay docs/figures/NAME.npz --out NAME.mp4` renders one again).", ""]
+    lines = [
+        "# The paper's figures, reproduced",
+        "",
+        "Written by `proteo figures` (each episode runs the task's default policy; "
+        "`proteo replay docs/figures/NAME.npz --out NAME.mp4` renders one again).",
+        "",
+    ]
     for figure, rec in gallery:
         settings = ", ".join(f"{k}={v}" for k, v in rec.overrides.items()) or "task defaults"
-        lines += [f"## {figure.title}", "", f"![{figure.title}]({figure.name}.png)", "", figure.caption, "",
-                  f"`{rec.task_id}`, policy `{rec.policy}`, seed {rec.seed}, {settings}; "
-                  f"{rec.positions.shape[1]} modules, {int(rec.cycles[-1])} cycles, "
-                  f"{'success' if rec.success else 'no success'}. Movie: [{figure.name}.gif]({figure.name}.gif).",
-                  "", f"![{figure.title}: metrics against cycles]({figure.name}_plots.png)", ""]
+        lines += [
+            f"## {figure.title}",
+            "",
+            f"![{figure.title}]({figure.name}.png)",
+            "",
+            figure.caption,
+            "",
+            f"`{rec.task_id}`, policy `{rec.policy}`, seed {rec.seed}, {settings}; "
+            f"{rec.positions.shape[1]} modules, {int(rec.cycles[-1])} cycles, "
+            f"{'success' if rec.success else 'no success'}. Movie: [{figure.name}.gif]({figure.name}.gif).",
+            "",
+            f"![{figure.title}: metrics against cycles]({figure.name}_plots.png)",
+            "",
+        ]
     (out / "README.md").write_text("\n".join(lines))

@@ -88,8 +88,20 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .grasp_kernels import (FINAL, PASS_SEED, SEARCH, SEED, SET_FINAL, SET_TOUCH, SLEEP, TOUCH, TOUCHSEED,
-                            GraspRules, grasp_decide)
+from .grasp_kernels import (
+    FINAL,
+    PASS_SEED,
+    SEARCH,
+    SEED,
+    SET_FINAL,
+    SET_TOUCH,
+    SLEEP,
+    TOUCH,
+    TOUCHSEED,
+    GraspRules,
+    grasp_decide,
+)
+
 
 class GraspMemory(SlotMemory):
     """The grasp rule's private memory of every module, one entry per memory slot.
@@ -102,8 +114,13 @@ class GraspMemory(SlotMemory):
         previous: the step that made a SEED (the direction it grew the finger; -1: none).
     """
 
-    FIELDS = {"growth": (np.int64, -1), "waited": (np.int64, 0), "stuck": (np.int64, 0), "age": (np.int64, 0),
-              "previous": (np.int64, -1)}
+    FIELDS = {
+        "growth": (np.int64, -1),
+        "waited": (np.int64, 0),
+        "stuck": (np.int64, 0),
+        "age": (np.int64, 0),
+        "previous": (np.int64, -1),
+    }
 
 
 class GraspPolicy(KernelPolicy):
@@ -140,16 +157,32 @@ class GraspPolicy(KernelPolicy):
     name = "grasp"
     rule = staticmethod(grasp_decide)
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_random=0.05, on_flat="stay",
-                 patience=30, touch_first=True, greedy_approach=True, relocate=True, touch_patience=30,
-                 retire=True, retire_after=150, straight=True, wrap_forward=True, prefer_touch=True):
+    def __init__(
+        self,
+        layout,
+        modes,
+        *,
+        scent_max=65535,
+        seed=None,
+        p_random=0.05,
+        on_flat="stay",
+        patience=30,
+        touch_first=True,
+        greedy_approach=True,
+        relocate=True,
+        touch_patience=30,
+        retire=True,
+        retire_after=150,
+        straight=True,
+        wrap_forward=True,
+        prefer_touch=True,
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         if not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         if on_flat not in ("stay", "random"):
             raise ValueError(f"on_flat={on_flat!r} is not allowed; allowed: stay, random")
-        for name, value in (("patience", patience), ("touch_patience", touch_patience),
-                            ("retire_after", retire_after)):
+        for name, value in (("patience", patience), ("touch_patience", touch_patience), ("retire_after", retire_after)):
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 1")
         self.p_random = p_random
@@ -165,22 +198,43 @@ class GraspPolicy(KernelPolicy):
         self.straight = straight
         self.wrap_forward = wrap_forward
         if layout.n_channels != 2:
-            raise ValueError(f"layout with n_channels={layout.n_channels} is not allowed; allowed: 2 (the grasp "
-                             "task's seed and touch scents)")
+            raise ValueError(
+                f"layout with n_channels={layout.n_channels} is not allowed; allowed: 2 (the grasp "
+                "task's seed and touch scents)"
+            )
         self.memory = GraspMemory()
         """Private memory of every module (see :class:`GraspMemory`)."""
 
     @property
     def rules(self) -> GraspRules:
         """The parameters as :func:`~baselines.grasp_kernels.grasp_actions` reads them."""
-        return GraspRules(scent_max=int(self.scent_max), p_random=float(self.p_random),
-                          random_on_flat=self.on_flat == "random", patience=int(self.patience),
-                          touch_first=bool(self.touch_first), greedy_approach=bool(self.greedy_approach),
-                          relocate=bool(self.relocate), touch_patience=int(self.touch_patience),
-                          retire=bool(self.retire), retire_after=int(self.retire_after),
-                          touch_channel=1 if self.prefer_touch else -1, straight=bool(self.straight),
-                          wrap_forward=bool(self.wrap_forward))
+        return GraspRules(
+            scent_max=int(self.scent_max),
+            p_random=float(self.p_random),
+            random_on_flat=self.on_flat == "random",
+            patience=int(self.patience),
+            touch_first=bool(self.touch_first),
+            greedy_approach=bool(self.greedy_approach),
+            relocate=bool(self.relocate),
+            touch_patience=int(self.touch_patience),
+            retire=bool(self.retire),
+            retire_after=int(self.retire_after),
+            touch_channel=1 if self.prefer_touch else -1,
+            straight=bool(self.straight),
+            wrap_forward=bool(self.wrap_forward),
+        )
 
 
-__all__ = ["FINAL", "PASS_SEED", "SEARCH", "SEED", "SET_FINAL", "SET_TOUCH", "SLEEP", "TOUCH", "TOUCHSEED",
-           "GraspMemory", "GraspPolicy"]
+__all__ = [
+    "FINAL",
+    "PASS_SEED",
+    "SEARCH",
+    "SEED",
+    "SET_FINAL",
+    "SET_TOUCH",
+    "SLEEP",
+    "TOUCH",
+    "TOUCHSEED",
+    "GraspMemory",
+    "GraspPolicy",
+]

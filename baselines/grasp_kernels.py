@@ -36,7 +36,16 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
 
-from .primitives import AROUND_BITS, FAR, approach_spot, legal_bits, lowest_rolls, random_pick, uniform_pick, write_action
+from .primitives import (
+    AROUND_BITS,
+    FAR,
+    approach_spot,
+    legal_bits,
+    lowest_rolls,
+    random_pick,
+    uniform_pick,
+    write_action,
+)
 
 SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
@@ -141,8 +150,9 @@ def _around(neighbour_kind, action_mask, hint, i, slot, rules, rng):
 
 
 @kernel
-def _search_near_seed(messages, neighbour_kind, neighbour_mode, action_mask, contact, hint, i, s, previous, rules,
-                      rng, actions):
+def _search_near_seed(
+    messages, neighbour_kind, neighbour_mode, action_mask, contact, hint, i, s, previous, rules, rng, actions
+):
     """A SEARCH row ``i`` next to a SEED or TOUCHSEED (module docstring of :mod:`baselines.grasp`)."""
     first, plain = -1, 0
     for k in range(12):
@@ -231,8 +241,23 @@ def _growth_direction(neighbour_kind, hint, i, previous, avoid, rules, rng):
 
 
 @kernel
-def _seed(messages, neighbour_kind, neighbour_mode, contact, hint, i, s, growth, waited, stuck, age, previous,
-          rules, rng, actions):
+def _seed(
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    contact,
+    hint,
+    i,
+    s,
+    growth,
+    waited,
+    stuck,
+    age,
+    previous,
+    rules,
+    rng,
+    actions,
+):
     """A SEED row ``i`` (slot ``s``): obey a hand-over, keep or choose its growth site, retire."""
     if _heard(messages, i, SET_TOUCH) or _heard(messages, i, SET_FINAL):
         write_action(actions, i, 0, TOUCH if _heard(messages, i, SET_TOUCH) else FINAL, RELAY, RELAY, 0, 0)
@@ -266,8 +291,9 @@ def _seed(messages, neighbour_kind, neighbour_mode, contact, hint, i, s, growth,
 
 
 @kernel
-def _touch_seed(messages, neighbour_kind, neighbour_mode, hint, i, s, growth, waited, stuck, age, previous, rules,
-                rng, actions):
+def _touch_seed(
+    messages, neighbour_kind, neighbour_mode, hint, i, s, growth, waited, stuck, age, previous, rules, rng, actions
+):
     """A TOUCHSEED row ``i`` (slot ``s``): obey a hand-over, or with ``relocate`` pass the role on."""
     if _heard(messages, i, SET_TOUCH):
         _forget(s, growth, waited, stuck, age, previous)
@@ -296,8 +322,26 @@ def _touch_seed(messages, neighbour_kind, neighbour_mode, hint, i, s, growth, wa
 
 
 @kernel
-def grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
-                  contact, hint, slots, growth, waited, stuck, age, previous, rules, rng, actions):
+def grasp_actions(
+    own_mode,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_scent,
+    action_mask,
+    contact,
+    hint,
+    slots,
+    growth,
+    waited,
+    stuck,
+    age,
+    previous,
+    rules,
+    rng,
+    actions,
+):
     """Write every row's grasp action into ``actions`` (A, 6) and update the memory of its slot.
 
     Shapes and the order of draws: module docstring. ``rules``: :class:`GraspRules`.
@@ -331,16 +375,57 @@ def grasp_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
         actions[climbers[j], 0] = random_pick(rng, pools[j]) + 1
     for i in range(n):
         if near_seed[i]:
-            _search_near_seed(messages, neighbour_kind, neighbour_mode, action_mask, contact, hint, i, slots[i],
-                              previous, rules, rng, actions)
+            _search_near_seed(
+                messages,
+                neighbour_kind,
+                neighbour_mode,
+                action_mask,
+                contact,
+                hint,
+                i,
+                slots[i],
+                previous,
+                rules,
+                rng,
+                actions,
+            )
     for i in range(n):
         if own_mode[i, 0] == SEED:
-            _seed(messages, neighbour_kind, neighbour_mode, contact, hint, i, slots[i], growth, waited, stuck, age,
-                  previous, rules, rng, actions)
+            _seed(
+                messages,
+                neighbour_kind,
+                neighbour_mode,
+                contact,
+                hint,
+                i,
+                slots[i],
+                growth,
+                waited,
+                stuck,
+                age,
+                previous,
+                rules,
+                rng,
+                actions,
+            )
     for i in range(n):
         if own_mode[i, 0] == TOUCHSEED:
-            _touch_seed(messages, neighbour_kind, neighbour_mode, hint, i, slots[i], growth, waited, stuck, age,
-                        previous, rules, rng, actions)
+            _touch_seed(
+                messages,
+                neighbour_kind,
+                neighbour_mode,
+                hint,
+                i,
+                slots[i],
+                growth,
+                waited,
+                stuck,
+                age,
+                previous,
+                rules,
+                rng,
+                actions,
+            )
     if rules.relocate:
         for i in range(n):
             if own_mode[i, 0] == TOUCH and _heard(messages, i, PASS_SEED):
@@ -353,6 +438,23 @@ def grasp_decide(seen, slots, memory, rules, rng, actions):
     """:func:`grasp_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
     ``memory`` is ``(growth, waited, stuck, age, previous)``, ``rules`` a :class:`GraspRules`."""
     growth, waited, stuck, age, previous = memory
-    grasp_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
-                  seen.own_scent, seen.action_mask, seen.contact, seen.hint, slots, growth, waited, stuck, age,
-                  previous, rules, rng, actions)
+    grasp_actions(
+        seen.own_mode,
+        seen.messages,
+        seen.neighbour_kind,
+        seen.neighbour_mode,
+        seen.neighbour_scent,
+        seen.own_scent,
+        seen.action_mask,
+        seen.contact,
+        seen.hint,
+        slots,
+        growth,
+        waited,
+        stuck,
+        age,
+        previous,
+        rules,
+        rng,
+        actions,
+    )

@@ -67,8 +67,19 @@ class LocomotionPolicy(KernelPolicy):
     name = "locomotion"
     rule = staticmethod(locomotion_decide)
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_random=0.02, patience=10, seed_on_top=True, low_first=True,
-                 contacts=2):
+    def __init__(
+        self,
+        layout,
+        modes,
+        *,
+        scent_max=65535,
+        seed=None,
+        p_random=0.02,
+        patience=10,
+        seed_on_top=True,
+        low_first=True,
+        contacts=2,
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
@@ -87,10 +98,14 @@ class LocomotionPolicy(KernelPolicy):
     @property
     def rules(self) -> LocomotionRules:
         """The parameters as :func:`~baselines.locomotion_kernels.locomotion_actions` reads them."""
-        return LocomotionRules(scent_max=int(self.scent_max), p_random=float(self.p_random),
-                               patience=int(self.patience),
-                               seed_on_top=int(bool(self.seed_on_top)), low_first=-1 if self.low_first else 0,
-                               contacts=int(self.contacts))
+        return LocomotionRules(
+            scent_max=int(self.scent_max),
+            p_random=float(self.p_random),
+            patience=int(self.patience),
+            seed_on_top=int(bool(self.seed_on_top)),
+            low_first=-1 if self.low_first else 0,
+            contacts=int(self.contacts),
+        )
 
 
 __all__ = ["LocomotionMemory", "LocomotionPolicy"]

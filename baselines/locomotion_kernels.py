@@ -25,8 +25,18 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
 
-from .primitives import (AROUND_BITS, BIT_COUNT, detects_scent, kind_bits, legal_bits, lowest_rolls, module_bits,
-                         random_pick, seen_scent, write_action)
+from .primitives import (
+    AROUND_BITS,
+    BIT_COUNT,
+    detects_scent,
+    kind_bits,
+    legal_bits,
+    lowest_rolls,
+    module_bits,
+    random_pick,
+    seen_scent,
+    write_action,
+)
 
 SEARCH, SEED = range(2)
 
@@ -60,8 +70,7 @@ def _direction_bits(hint, i):
 
 
 @kernel
-def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, hint, slots, idle, rules, rng,
-                       actions):
+def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, hint, slots, idle, rules, rng, actions):
     """Write every row's locomotion action into ``actions`` (A, 5) and update its ``idle`` count.
 
     Shapes and the order of draws: module docstring. ``rules``: :class:`LocomotionRules`.
@@ -116,5 +125,15 @@ def locomotion_decide(seen, slots, memory, rules, rng, actions):
     """:func:`locomotion_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
     ``memory`` is ``(idle,)``, ``rules`` a :class:`LocomotionRules`."""
     (idle,) = memory
-    locomotion_actions(seen.neighbour_kind, seen.neighbour_scent, seen.own_scent, seen.action_mask, seen.hint, slots,
-                       idle, rules, rng, actions)
+    locomotion_actions(
+        seen.neighbour_kind,
+        seen.neighbour_scent,
+        seen.own_scent,
+        seen.action_mask,
+        seen.hint,
+        slots,
+        idle,
+        rules,
+        rng,
+        actions,
+    )

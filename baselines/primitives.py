@@ -52,8 +52,10 @@ here, ``g == OPPOSITE[s]``)."""
 AROUND_BITS = np.array([sum(1 << int(j) for j in row) for row in DIRECTION_ADJACENCY], dtype=np.int64)
 """``AROUND_BITS[s]``: the face slots still next to ``DIRECTIONS[s]`` after any roll over them
 (the 4 slots adjacent to both here and there), as a bit set."""
-EQUATOR_BITS = np.array([sum(1 << k for k in range(12) if DIRECTIONS[k, axis] == sign)
-                         for axis in range(3) for sign in (1, -1)], dtype=np.int64)
+EQUATOR_BITS = np.array(
+    [sum(1 << k for k in range(12) if DIRECTIONS[k, axis] == sign) for axis in range(3) for sign in (1, -1)],
+    dtype=np.int64,
+)
 """``(6,)`` the face slots around each of the 6 octahedral holes that touch a site, as bit sets:
 the hole at half a step along ``+x`` is surrounded by this module, the 4 face sites with
 ``x = +1`` (its "equator", all seen) and the site two steps along ``+x`` (not seen)."""
@@ -332,8 +334,11 @@ def approach(rng, target, pivot, legal, greedy, p_random, moves):
                 moves[r] = pick
     for r in range(q):
         for k in range(12):
-            if (DIRECTIONS[k, 0] == target[r, 0] and DIRECTIONS[k, 1] == target[r, 1]
-                    and DIRECTIONS[k, 2] == target[r, 2]):
+            if (
+                DIRECTIONS[k, 0] == target[r, 0]
+                and DIRECTIONS[k, 1] == target[r, 1]
+                and DIRECTIONS[k, 2] == target[r, 2]
+            ):
                 if (legal[r] >> k) & 1:
                     moves[r] = k + 1
                 break

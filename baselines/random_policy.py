@@ -24,8 +24,14 @@ class RandomPolicy(Policy):
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
         check_level(cls, env)
-        return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
-                   n_fields=len(getattr(env, "control_fields", env.action_layout.field_names)), **params)
+        return cls(
+            env.action_layout,
+            env.task.modes,
+            scent_max=env.config.physics.scent_max,
+            seed=seed,
+            n_fields=len(getattr(env, "control_fields", env.action_layout.field_names)),
+            **params,
+        )
 
     def act(self, observations):
         actions = {}

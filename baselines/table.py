@@ -74,10 +74,25 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory, check_level
-from .table_kernels import (AROOT, DISBAND, DISBAND_NOW, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP, SPOT_TAKEN,
-                            TableRules, table_decide)
+from .table_kernels import (
+    AROOT,
+    DISBAND,
+    DISBAND_NOW,
+    FINAL,
+    FIXED,
+    IROOT,
+    ROOT,
+    SEARCH,
+    SEED,
+    SLEEP,
+    SPOT_TAKEN,
+    TableRules,
+    table_decide,
+)
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
+
+
 class TableMemory(SlotMemory):
     """The table rule's private memory of every module, one entry per memory slot.
 
@@ -106,8 +121,9 @@ class TablePolicy(KernelPolicy):
     name = "table"
     rule = staticmethod(table_decide)
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, p_max=0.05, p_min=0.05, f_max=2.0,
-                 f_min=1.0, p_random=0.05):
+    def __init__(
+        self, layout, modes, *, scent_max=65535, seed=None, p_max=0.05, p_min=0.05, f_max=2.0, f_min=1.0, p_random=0.05
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         for name, value in (("p_max", p_max), ("p_min", p_min), ("p_random", p_random)):
             if not 0.0 <= value <= 1.0:
@@ -125,15 +141,35 @@ class TablePolicy(KernelPolicy):
         check_level(cls, env)
         task_params = env.task.params
         rules = {k: getattr(task_params, k) for k in RULE_PARAMS if hasattr(task_params, k)}
-        return cls(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
-                   **{**rules, **params})
+        return cls(
+            env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed, **{**rules, **params}
+        )
 
     @property
     def rules(self) -> TableRules:
         """The parameters as :func:`~baselines.table_kernels.table_actions` reads them."""
-        return TableRules(scent_max=int(self.scent_max), p_max=self.p_max, p_min=self.p_min, f_max=self.f_max,
-                          f_min=self.f_min, p_random=self.p_random)
+        return TableRules(
+            scent_max=int(self.scent_max),
+            p_max=self.p_max,
+            p_min=self.p_min,
+            f_max=self.f_max,
+            f_min=self.f_min,
+            p_random=self.p_random,
+        )
 
 
-__all__ = ["AROOT", "DISBAND", "DISBAND_NOW", "FINAL", "FIXED", "IROOT", "ROOT", "SEARCH", "SEED", "SLEEP",
-           "SPOT_TAKEN", "TableMemory", "TablePolicy"]
+__all__ = [
+    "AROOT",
+    "DISBAND",
+    "DISBAND_NOW",
+    "FINAL",
+    "FIXED",
+    "IROOT",
+    "ROOT",
+    "SEARCH",
+    "SEED",
+    "SLEEP",
+    "SPOT_TAKEN",
+    "TableMemory",
+    "TablePolicy",
+]

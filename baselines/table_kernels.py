@@ -39,8 +39,16 @@ from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
 
-from .primitives import (FAR, approach_spot, detects_scent, legal_bits, lowest_rolls, random_pick, uniform_pick,
-                      write_action)
+from .primitives import (
+    FAR,
+    approach_spot,
+    detects_scent,
+    legal_bits,
+    lowest_rolls,
+    random_pick,
+    uniform_pick,
+    write_action,
+)
 
 FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 
@@ -112,8 +120,11 @@ def _seed(neighbour_kind, neighbour_mode, i, s, mode, spot, parent, rng, actions
         sp = _choose_spot(neighbour_kind, neighbour_mode, i, parent[s], rng)
     elif neighbour_kind[i, sp] != KIND_MODULE:
         for k in range(12):  # a module already waits at another spot below
-            if ((DOWN_BITS >> k) & 1 and neighbour_kind[i, k] == KIND_MODULE
-                    and not _blocked(neighbour_kind, neighbour_mode, i, k)):
+            if (
+                (DOWN_BITS >> k) & 1
+                and neighbour_kind[i, k] == KIND_MODULE
+                and not _blocked(neighbour_kind, neighbour_mode, i, k)
+            ):
                 sp = _choose_spot(neighbour_kind, neighbour_mode, i, parent[s], rng)
                 break
     spot[s] = sp
@@ -184,8 +195,24 @@ def _gradient_pool(neighbour_kind, neighbour_scent, action_mask, i, scent_max):
 
 
 @kernel
-def table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask,
-                  contact, load, slots, spot, parent, child, rules, rng, actions):
+def table_actions(
+    own_mode,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_scent,
+    action_mask,
+    contact,
+    load,
+    slots,
+    spot,
+    parent,
+    child,
+    rules,
+    rng,
+    actions,
+):
     """Write every row's table action into ``actions`` (A, 5) and update the memory of its slot.
 
     Shapes and draws: module docstring. ``rules``: :class:`TableRules`.
@@ -210,8 +237,7 @@ def table_actions(own_mode, messages, neighbour_kind, neighbour_mode, neighbour_
                 if neighbour_mode[i, k] == SEED or neighbour_mode[i, k] == AROOT:
                     near_seed = True
             if near_seed:
-                _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent, child, rules, rng,
-                                  actions)
+                _search_near_seed(messages, neighbour_mode, action_mask, i, s, spot, parent, child, rules, rng, actions)
             else:
                 climbers[n_climbers] = i
                 n_climbers += 1
@@ -261,6 +287,21 @@ def table_decide(seen, slots, memory, rules, rng, actions):
     """:func:`table_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
     ``memory`` is ``(spot, parent, child)``, ``rules`` a :class:`TableRules`."""
     spot, parent, child = memory
-    table_actions(seen.own_mode, seen.messages, seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent,
-                  seen.own_scent, seen.action_mask, seen.contact, seen.load, slots, spot, parent, child, rules, rng,
-                  actions)
+    table_actions(
+        seen.own_mode,
+        seen.messages,
+        seen.neighbour_kind,
+        seen.neighbour_mode,
+        seen.neighbour_scent,
+        seen.own_scent,
+        seen.action_mask,
+        seen.contact,
+        seen.load,
+        slots,
+        spot,
+        parent,
+        child,
+        rules,
+        rng,
+        actions,
+    )

@@ -45,8 +45,15 @@ def run_one(job: dict) -> dict:
     import proteo_env
     from baselines.branch import INODE, NODE, BranchPolicy
 
-    env = proteo_env.make("branch", n_modules=job["n"], T=job["T"], B=job["B"], motion_model=job["model"],
-                          max_cycles=job["max_cycles"], target_levels=99)
+    env = proteo_env.make(
+        "branch",
+        n_modules=job["n"],
+        T=job["T"],
+        B=job["B"],
+        motion_model=job["model"],
+        max_cycles=job["max_cycles"],
+        target_levels=99,
+    )
     env.reset(seed=job["seed"])
     policy = BranchPolicy.for_env(env, seed=job["seed"], **job.get("policy", {}))
     started = time.perf_counter()
@@ -63,9 +70,16 @@ def run_one(job: dict) -> dict:
     m = env.task.metrics(env.engine)
     mode = env.engine.mode
     waiting_nodes = int((mode == NODE).sum())
-    return {**job, **{k: m[k] for k in STATS}, "two_levels": two_levels, "out_at": out_at,
-            "waiting_nodes": waiting_nodes, "inodes": int((mode == INODE).sum()), "cycles": env.cycle,
-            "seconds": time.perf_counter() - started}
+    return {
+        **job,
+        **{k: m[k] for k in STATS},
+        "two_levels": two_levels,
+        "out_at": out_at,
+        "waiting_nodes": waiting_nodes,
+        "inodes": int((mode == INODE).sum()),
+        "cycles": env.cycle,
+        "seconds": time.perf_counter() - started,
+    }
 
 
 def fmt(values, digits=1) -> str:
@@ -85,17 +99,40 @@ def table(rows: list[dict], keys: tuple[str, ...]) -> list[str]:
     groups: dict = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in keys), []).append(r)
-    head = list(keys) + ["runs", "levels", ">=2 levels", "branch points", "branches/point", "point distance",
-                         "tree", "used", "tips left", "nodes waiting", "2 levels at (median)",
-                         "modules out at (median)"]
+    head = list(keys) + [
+        "runs",
+        "levels",
+        ">=2 levels",
+        "branch points",
+        "branches/point",
+        "point distance",
+        "tree",
+        "used",
+        "tips left",
+        "nodes waiting",
+        "2 levels at (median)",
+        "modules out at (median)",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for key, rs in sorted(groups.items()):
-        col = lambda k: [r[k] for r in rs]  # noqa: E731
+
+        def col(k, rs=rs):
+            return [r[k] for r in rs]
+
         cells = [str(v) for v in key] + [
-            str(len(rs)), fmt(col("levels"), 2), f"{sum(r['levels'] >= 2 for r in rs)}/{len(rs)}",
-            fmt(col("branch_points")), fmt(col("branches_per_point"), 2), fmt(col("point_distance")),
-            f"{sum(r['tree'] > 0 for r in rs)}/{len(rs)}", fmt(np.array(col("tree_size")) / np.array(col("n")), 2),
-            fmt(col("seeds")), fmt(col("waiting_nodes")), cyc(col("two_levels")), cyc(col("out_at"))]
+            str(len(rs)),
+            fmt(col("levels"), 2),
+            f"{sum(r['levels'] >= 2 for r in rs)}/{len(rs)}",
+            fmt(col("branch_points")),
+            fmt(col("branches_per_point"), 2),
+            fmt(col("point_distance")),
+            f"{sum(r['tree'] > 0 for r in rs)}/{len(rs)}",
+            fmt(np.array(col("tree_size")) / np.array(col("n")), 2),
+            fmt(col("seeds")),
+            fmt(col("waiting_nodes")),
+            cyc(col("two_levels")),
+            cyc(col("out_at")),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -107,8 +144,12 @@ def main(argv=None) -> int:
     parser.add_argument("--Ts", type=int, nargs="+", default=[4, 8, 12])
     parser.add_argument("--Bs", type=int, nargs="+", default=[1, 2, 3, 6])
     parser.add_argument("--models", nargs="+", default=["minimal"], help="motion models of the T x B table")
-    parser.add_argument("--paper-models", nargs="*", default=["minimal", "rounded", "sphere", "rhombic"],
-                        help="motion models compared at the paper's T=12, B=6, N=100")
+    parser.add_argument(
+        "--paper-models",
+        nargs="*",
+        default=["minimal", "rounded", "sphere", "rhombic"],
+        help="motion models compared at the paper's T=12, B=6, N=100",
+    )
     parser.add_argument("--max-cycles", type=int, default=6000)
     parser.add_argument("--settle", type=int, default=60, help="cycles run after the modules ran out")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
@@ -116,30 +157,39 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     base = {"max_cycles": args.max_cycles, "settle": args.settle}
-    jobs = [{**base, "n": n, "T": t, "B": b, "model": m, "seed": s}
-            for n, t, b, m, s in itertools.product(args.sizes, args.Ts, args.Bs, args.models, range(args.seeds))]
-    paper = [{**base, "n": 100, "T": 12, "B": 6, "model": m, "seed": s}
-             for m in args.paper_models for s in range(args.seeds)]
+    jobs = [
+        {**base, "n": n, "T": t, "B": b, "model": m, "seed": s}
+        for n, t, b, m, s in itertools.product(args.sizes, args.Ts, args.Bs, args.models, range(args.seeds))
+    ]
+    paper = [
+        {**base, "n": 100, "T": 12, "B": 6, "model": m, "seed": s} for m in args.paper_models for s in range(args.seeds)
+    ]
     started = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(run_one, jobs + paper, chunksize=1))
     elapsed = time.perf_counter() - started
-    main_rows, paper_rows = rows[:len(jobs)], rows[len(jobs):]
+    main_rows, paper_rows = rows[: len(jobs)], rows[len(jobs) :]
 
-    lines = ["# Branch task: evidence", "",
-             f"Generated by `benchmarks/branch_evidence.py` ({' '.join(sys.argv[1:]) or 'defaults'}) on "
-             f"{platform.machine()} with {args.workers} workers in {elapsed:.0f} s. Seeds 0..{args.seeds - 1} "
-             f"(one random blob per seed), hand-coded `BranchPolicy` with default parameters, success switched off, "
-             f"each episode run until no module is left in SLEEP or SEARCH plus {args.settle} cycles "
-             f"(limit {args.max_cycles}).", "",
-             "Cells are mean (min..max) over the seeds. *levels*: branching levels as the task measures them (real branching points, at least `min_gap` = 3 apart; see `docs/tasks/branch.md`); *>=2 levels*: runs ending with at least 2; "
-             "*branches/point*: child branches per branching point (degree, minus the parent branch except at the "
-             "root); *point distance*: mean hops along the tree from a branching point to its parent point; "
-             "*tree*: runs whose grown structure has no cycle; *used*: share of the modules in the grown tree; "
-             "*tips left*: seeds still waiting for modules when the modules ran out (unfinished branches); "
-             "*nodes waiting*: NODEs that had not spawned all their B seeds; *2 levels at*: cycle at which the "
-             "tree first had 2 levels; *modules out at*: cycle at which no module was left searching.", "",
-             f"## Tree statistics against T and B (motion model {', '.join(args.models)})", ""]
+    lines = [
+        "# Branch task: evidence",
+        "",
+        f"Generated by `benchmarks/branch_evidence.py` ({' '.join(sys.argv[1:]) or 'defaults'}) on "
+        f"{platform.machine()} with {args.workers} workers in {elapsed:.0f} s. Seeds 0..{args.seeds - 1} "
+        f"(one random blob per seed), hand-coded `BranchPolicy` with default parameters, success switched off, "
+        f"each episode run until no module is left in SLEEP or SEARCH plus {args.settle} cycles "
+        f"(limit {args.max_cycles}).",
+        "",
+        "Cells are mean (min..max) over the seeds. *levels*: branching levels as the task measures them (real branching points, at least `min_gap` = 3 apart; see `docs/tasks/branch.md`); *>=2 levels*: runs ending with at least 2; "
+        "*branches/point*: child branches per branching point (degree, minus the parent branch except at the "
+        "root); *point distance*: mean hops along the tree from a branching point to its parent point; "
+        "*tree*: runs whose grown structure has no cycle; *used*: share of the modules in the grown tree; "
+        "*tips left*: seeds still waiting for modules when the modules ran out (unfinished branches); "
+        "*nodes waiting*: NODEs that had not spawned all their B seeds; *2 levels at*: cycle at which the "
+        "tree first had 2 levels; *modules out at*: cycle at which no module was left searching.",
+        "",
+        f"## Tree statistics against T and B (motion model {', '.join(args.models)})",
+        "",
+    ]
     lines += table(main_rows, ("n", "model", "T", "B"))
     lines += ["", "## The paper's setting (T = 12, B = 6, N = 100) under each motion model", ""]
     lines += table(paper_rows, ("n", "T", "B", "model"))

@@ -70,8 +70,9 @@ DRAWS_PER_SEARCH_MODULE = 13
 def fresh(n: int, cycles: int, room: int | None = None, *, task: str = "chain", seed: int = 0):
     """The workload's env (reset with ``seed``) and the task's hand-coded policy (seeded the same).
     ``n`` is the number of modules, or for the table the board's side (``configs/table.yaml``)."""
-    import proteo_env
     import yaml
+
+    import proteo_env
     from baselines import make_policy
 
     if task in ("table", "grasp"):
@@ -112,18 +113,32 @@ def measure(n: int, cycles: int, repeats: int) -> dict:
         result = rollout.run(cycles)
         seconds.append(time.perf_counter() - started)
     python_s = python_loop(env, policy, result.cycles)
-    same = (np.array_equal(env.world.positions, result.positions) and np.array_equal(env.world.modes, result.modes)
-            and policy.rng.bit_generator.state == result.rng.bit_generator.state)
+    same = (
+        np.array_equal(env.world.positions, result.positions)
+        and np.array_equal(env.world.modes, result.modes)
+        and policy.rng.bit_generator.state == result.rng.bit_generator.state
+    )
     if not same:
         raise AssertionError(f"N={n}: the kernel and the Python loop reached different states")
     best, median = min(seconds), float(np.median(seconds))
     ran = result.cycles
-    return {"n_modules": n, "cycles": ran, "repeats": repeats, "build_s": build_s, "first_call_s": first_s,
-            "kernel_s": seconds, "kernel_ms_per_cycle": 1e3 * best / ran,
-            "kernel_median_ms_per_cycle": 1e3 * median / ran, "kernel_module_cycles_per_s": n * ran / best,
-            "python_ms_per_cycle": 1e3 * python_s / ran, "python_module_cycles_per_s": n * ran / python_s,
-            "ratio": python_s / best, "modes_at_end": np.bincount(result.modes, minlength=4).tolist(),
-            "same_state": same, "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+    return {
+        "n_modules": n,
+        "cycles": ran,
+        "repeats": repeats,
+        "build_s": build_s,
+        "first_call_s": first_s,
+        "kernel_s": seconds,
+        "kernel_ms_per_cycle": 1e3 * best / ran,
+        "kernel_median_ms_per_cycle": 1e3 * median / ran,
+        "kernel_module_cycles_per_s": n * ran / best,
+        "python_ms_per_cycle": 1e3 * python_s / ran,
+        "python_module_cycles_per_s": n * ran / python_s,
+        "ratio": python_s / best,
+        "modes_at_end": np.bincount(result.modes, minlength=4).tolist(),
+        "same_state": same,
+        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
 
 
 def profile(n: int, cycles: int) -> dict:
@@ -133,11 +148,11 @@ def profile(n: int, cycles: int) -> dict:
     """
     import numba
 
-    from proteo_env.tasks.chain_kernels import is_chain
     from baselines.chain_kernels import chain_actions
     from proteo_env.core import kernels
     from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
     from proteo_env.core.world import LOCAL_ADJACENCY_BITS
+    from proteo_env.tasks.chain_kernels import is_chain
 
     @numba.njit
     def draw(rng, count):
@@ -154,44 +169,134 @@ def profile(n: int, cycles: int) -> dict:
         actions = np.empty((n, env.action_layout.length), dtype=np.int64)
         moved = np.zeros(n, dtype=np.bool_)
         test = [np.zeros(n, dtype=np.int64) for _ in range(3)]
-        parts = dict.fromkeys(("cut modules", "observation", "decisions", "cycle", "success test", "draws",
-                               "moves", "moves without the connectivity check"), 0.0)
+        parts = dict.fromkeys(
+            (
+                "cut modules",
+                "observation",
+                "decisions",
+                "cycle",
+                "success test",
+                "draws",
+                "moves",
+                "moves without the connectivity check",
+            ),
+            0.0,
+        )
         n_search = n_requested = n_moved = 0
         for _ in range(cycles):
             t0 = time.perf_counter()
-            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low,
-                                        s.stack_node, s.stack_k)
+            kernels.articulation_points(
+                w.grid, w.cell, n, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k
+            )
             t1 = time.perf_counter()
-            kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
-                            w.neighbourhood_delta, w.roll_delta, w.roll_table, p.scent_max,
-                            obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent, obs.own_mode, obs.own_scent,
-                            obs.messages, obs.contact, obs.action_mask)
+            kernels.observe(
+                w.grid,
+                w.cell,
+                n,
+                w.mode,
+                w.scent,
+                w.inbox,
+                w.anchored,
+                s.is_cut,
+                p.keep_connected,
+                w.neighbourhood_delta,
+                w.roll_delta,
+                w.roll_table,
+                p.scent_max,
+                obs.neighbour_kind,
+                obs.neighbour_mode,
+                obs.neighbour_scent,
+                obs.own_mode,
+                obs.own_scent,
+                obs.messages,
+                obs.contact,
+                obs.action_mask,
+            )
             t2 = time.perf_counter()
             searching = int((obs.own_mode[:, 0] == 1).sum())
             spare = copy.deepcopy(policy.rng)
             t3 = time.perf_counter()
             draw(spare, DRAWS_PER_SEARCH_MODULE * searching)
             t4 = time.perf_counter()
-            chain_actions(obs.own_mode, obs.messages, obs.neighbour_kind, obs.neighbour_mode, obs.neighbour_scent,
-                          obs.own_scent, obs.action_mask, slots, memory.heading, memory.growth, memory.asked, rules,
-                          policy.rng, actions)
+            chain_actions(
+                obs.own_mode,
+                obs.messages,
+                obs.neighbour_kind,
+                obs.neighbour_mode,
+                obs.neighbour_scent,
+                obs.own_scent,
+                obs.action_mask,
+                slots,
+                memory.heading,
+                memory.growth,
+                memory.asked,
+                rules,
+                policy.rng,
+                actions,
+            )
             t5 = time.perf_counter()
             move = actions[:, 0].copy()
             for keep, part in ((True, "moves"), (False, "moves without the connectivity check")):
                 grid, cell, order = w.grid.copy(), w.cell.copy(), w.rng_state.copy()
                 started = time.perf_counter()
-                kernels.execute_moves(grid, cell, n, move, w.anchored, keep, order, w.dir_delta, DIRECTIONS,
-                                      w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
-                                      s.movers, moved, s.mark, s.stacks, s.search)
+                kernels.execute_moves(
+                    grid,
+                    cell,
+                    n,
+                    move,
+                    w.anchored,
+                    keep,
+                    order,
+                    w.dir_delta,
+                    DIRECTIONS,
+                    w.roll_delta,
+                    w.local_delta,
+                    LOCAL_ADJACENCY_BITS,
+                    w.roll_table,
+                    s.movers,
+                    moved,
+                    s.mark,
+                    s.stacks,
+                    s.search,
+                )
                 parts[part] += time.perf_counter() - started
             n_requested += int((move > 0).sum())
             t6 = time.perf_counter()
-            kernels.run_cycle(w.grid, w.cell, n, w.anchored, w.mode, w.scent, w.inbox, w.rng_state, w.passive_role,
-                              w.surface_channels, p.keep_connected, p.exact_scent, p.scent_sweeps, p.scent_max,
-                              move, actions[:, 1].astype(np.int32), actions[:, 2:-2].astype(np.int8),
-                              actions[:, -2].copy(), actions[:, -1].astype(np.int32), moved, w.dir_delta, DIRECTIONS,
-                              OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table,
-                              s.movers, s.mark, s.queue, s.stacks, s.search, s.scent_buffer)
+            kernels.run_cycle(
+                w.grid,
+                w.cell,
+                n,
+                w.anchored,
+                w.mode,
+                w.scent,
+                w.inbox,
+                w.rng_state,
+                w.passive_role,
+                w.surface_channels,
+                p.keep_connected,
+                p.exact_scent,
+                p.scent_sweeps,
+                p.scent_max,
+                move,
+                actions[:, 1].astype(np.int32),
+                actions[:, 2:-2].astype(np.int8),
+                actions[:, -2].copy(),
+                actions[:, -1].astype(np.int32),
+                moved,
+                w.dir_delta,
+                DIRECTIONS,
+                OPPOSITE,
+                w.roll_delta,
+                w.local_delta,
+                LOCAL_ADJACENCY_BITS,
+                w.roll_table,
+                s.movers,
+                s.mark,
+                s.queue,
+                s.stacks,
+                s.search,
+                s.scent_buffer,
+            )
             t7 = time.perf_counter()
             n_moved += int(moved.sum())
             is_chain(w.grid, w.cell, n, w.dir_delta, *test)
@@ -199,9 +304,14 @@ def profile(n: int, cycles: int) -> dict:
             for part, dt in zip(parts, (t1 - t0, t2 - t1, t5 - t4, t7 - t6, t8 - t7, t4 - t3)):
                 parts[part] += dt
             n_search += searching
-        return {"n_modules": n, "cycles": cycles, "search_module_cycles": n_search,
-                "requested_per_cycle": n_requested / cycles, "moved_per_cycle": n_moved / cycles,
-                "ns_per_module_cycle": {k: 1e9 * v / (n * cycles) for k, v in parts.items()}}
+        return {
+            "n_modules": n,
+            "cycles": cycles,
+            "search_module_cycles": n_search,
+            "requested_per_cycle": n_requested / cycles,
+            "moved_per_cycle": n_moved / cycles,
+            "ns_per_module_cycle": {k: 1e9 * v / (n * cycles) for k, v in parts.items()},
+        }
 
     run(20, 2)
     return run(n, cycles)
@@ -240,9 +350,18 @@ def whole_episodes(task: str, n: int, seeds: int) -> dict:
         cycles += result.cycles
         successes += result.success
     modules = env.engine.n_modules
-    return {"task": task, "n_modules": modules, "seeds": seeds, "successes": successes, "cycles": cycles,
-            "kernel_s": kernel_s, "python_s": python_s, "kernel_module_cycles_per_s": modules * cycles / kernel_s,
-            "python_module_cycles_per_s": modules * cycles / python_s, "ratio": python_s / kernel_s}
+    return {
+        "task": task,
+        "n_modules": modules,
+        "seeds": seeds,
+        "successes": successes,
+        "cycles": cycles,
+        "kernel_s": kernel_s,
+        "python_s": python_s,
+        "kernel_module_cycles_per_s": modules * cycles / kernel_s,
+        "python_module_cycles_per_s": modules * cycles / python_s,
+        "ratio": python_s / kernel_s,
+    }
 
 
 def slope(rows: list[dict], key: str) -> float:
@@ -267,7 +386,7 @@ def plot(rows: list[dict], path: Path) -> None:
     ms = np.array([r["kernel_ms_per_cycle"] for r in rows])
     b, a = np.polyfit(np.log(n), np.log(ms), 1)
     right.plot(n, ms, marker="o", label="in-kernel, ms per cycle")
-    right.plot(n, np.exp(a) * n ** b, linestyle="--", label=f"fit: slope {b:.2f}")
+    right.plot(n, np.exp(a) * n**b, linestyle="--", label=f"fit: slope {b:.2f}")
     right.set_ylabel("ms per cycle")
     for ax in (left, right):
         ax.set_xscale("log")
@@ -281,40 +400,65 @@ def plot(rows: list[dict], path: Path) -> None:
 
 
 def tables(rows: list[dict], parts: dict | None, episodes: list[dict], args) -> str:
-    lines = [f"| N | module-cycles/s (in-kernel, best) | ms per cycle (best / median of {args.repeats}) | "
-             "module-cycles/s (Python loop) | x Python loop | build s | first call s | peak RSS MiB |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"| N | module-cycles/s (in-kernel, best) | ms per cycle (best / median of {args.repeats}) | "
+        "module-cycles/s (Python loop) | x Python loop | build s | first call s | peak RSS MiB |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['n_modules']:,} | {r['kernel_module_cycles_per_s']:,.0f} | "
-                     f"{r['kernel_ms_per_cycle']:.3f} / {r['kernel_median_ms_per_cycle']:.3f} | "
-                     f"{r['python_module_cycles_per_s']:,.0f} | "
-                     f"{r['ratio']:.2f} | {r['build_s']:.2f} | {r['first_call_s']:.2f} | {r['peak_rss_mib']:.0f} |")
+        lines.append(
+            f"| {r['n_modules']:,} | {r['kernel_module_cycles_per_s']:,.0f} | "
+            f"{r['kernel_ms_per_cycle']:.3f} / {r['kernel_median_ms_per_cycle']:.3f} | "
+            f"{r['python_module_cycles_per_s']:,.0f} | "
+            f"{r['ratio']:.2f} | {r['build_s']:.2f} | {r['first_call_s']:.2f} | {r['peak_rss_mib']:.0f} |"
+        )
     big = [r for r in rows if r["n_modules"] >= 10000]
-    lines += ["", f"Log-log slope of ms per cycle against N: {slope(rows, 'kernel_ms_per_cycle'):.3f} over all sizes"
-              + (f", {slope(big, 'kernel_ms_per_cycle'):.3f} from 10,000 to 100,000" if len(big) >= 2 else "") + "."]
+    lines += [
+        "",
+        f"Log-log slope of ms per cycle against N: {slope(rows, 'kernel_ms_per_cycle'):.3f} over all sizes"
+        + (f", {slope(big, 'kernel_ms_per_cycle'):.3f} from 10,000 to 100,000" if len(big) >= 2 else "")
+        + ".",
+    ]
     if parts:
         cost = parts["ns_per_module_cycle"]
         share = parts["search_module_cycles"] / (parts["n_modules"] * parts["cycles"])
-        lines += ["", f"Parts at N = {parts['n_modules']:,} over the same {parts['cycles']} cycles (ns per "
-                  f"module-cycle; {share:.0%} of module-cycles were SEARCH):", "",
-                  "| part | ns per module-cycle |", "|---|---|"]
+        lines += [
+            "",
+            f"Parts at N = {parts['n_modules']:,} over the same {parts['cycles']} cycles (ns per "
+            f"module-cycle; {share:.0%} of module-cycles were SEARCH):",
+            "",
+            "| part | ns per module-cycle |",
+            "|---|---|",
+        ]
         whole = ("cut modules", "observation", "decisions", "cycle", "success test")
         lines += [f"| {k} | {cost[k]:.1f} |" for k in whole]
         lines.append(f"| total of the parts | {sum(cost[k] for k in whole):.1f} |")
-        lines.append(f"| of the decisions: {DRAWS_PER_SEARCH_MODULE} uniform draws per SEARCH module | "
-                     f"{cost['draws']:.1f} |")
-        lines.append(f"| of the cycle: the moves ({parts['requested_per_cycle']:,.0f} requested and "
-                     f"{parts['moved_per_cycle']:,.0f} made per cycle, on average) | {cost['moves']:.1f} |")
-        lines.append(f"| the same moves without the connectivity check | "
-                     f"{cost['moves without the connectivity check']:.1f} |")
+        lines.append(
+            f"| of the decisions: {DRAWS_PER_SEARCH_MODULE} uniform draws per SEARCH module | {cost['draws']:.1f} |"
+        )
+        lines.append(
+            f"| of the cycle: the moves ({parts['requested_per_cycle']:,.0f} requested and "
+            f"{parts['moved_per_cycle']:,.0f} made per cycle, on average) | {cost['moves']:.1f} |"
+        )
+        lines.append(
+            f"| the same moves without the connectivity check | {cost['moves without the connectivity check']:.1f} |"
+        )
     if episodes:
-        lines += ["", "Whole episodes to success (limit 20 N cycles; the table: `configs/table.yaml`, 1,300) in the "
-                  "task's default box, seeds 0 .. S - 1 (N: all modules, the table's board too):", "",
-                  "| task | N | seeds S | successes | cycles (sum) | in-kernel s | module-cycles/s | Python loop s | "
-                  "module-cycles/s | x Python loop |", "|---|---|---|---|---|---|---|---|---|---|"]
-        lines += [f"| {e['task']} | {e['n_modules']:,} | {e['seeds']} | {e['successes']} | {e['cycles']:,} | "
-                  f"{e['kernel_s']:.2f} | {e['kernel_module_cycles_per_s']:,.0f} | {e['python_s']:.2f} | "
-                  f"{e['python_module_cycles_per_s']:,.0f} | {e['ratio']:.2f} |" for e in episodes]
+        lines += [
+            "",
+            "Whole episodes to success (limit 20 N cycles; the table: `configs/table.yaml`, 1,300) in the "
+            "task's default box, seeds 0 .. S - 1 (N: all modules, the table's board too):",
+            "",
+            "| task | N | seeds S | successes | cycles (sum) | in-kernel s | module-cycles/s | Python loop s | "
+            "module-cycles/s | x Python loop |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {e['task']} | {e['n_modules']:,} | {e['seeds']} | {e['successes']} | {e['cycles']:,} | "
+            f"{e['kernel_s']:.2f} | {e['kernel_module_cycles_per_s']:,.0f} | {e['python_s']:.2f} | "
+            f"{e['python_module_cycles_per_s']:,.0f} | {e['ratio']:.2f} |"
+            for e in episodes
+        ]
     return "\n".join(lines)
 
 
@@ -324,34 +468,76 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=200, help="cycles from the reset, timed")
     parser.add_argument("--repeats", type=int, default=3, help="kernel runs of those cycles per size")
     parser.add_argument("--profile-n", type=int, default=10000, help="N of the per-part profile (0: none)")
-    parser.add_argument("--chain-episodes", type=int, nargs=2, default=[500, 1], metavar=("N", "SEEDS"),
-                        help="whole chain episodes to success: N and the number of seeds (0 0: none)")
-    parser.add_argument("--branch-episodes", type=int, nargs=2, default=[100, 10], metavar=("N", "SEEDS"),
-                        help="whole branch episodes to success: N and the number of seeds (0 0: none)")
-    parser.add_argument("--table-episodes", type=int, nargs=2, default=[30, 10], metavar=("BOARD", "SEEDS"),
-                        help="whole table episodes to success: board side and the number of seeds (0 0: none)")
-    parser.add_argument("--grasp-episodes", type=int, nargs=2, default=[160, 10], metavar=("N", "SEEDS"),
-                        help="whole grasp episodes to success: N and the number of seeds (0 0: none)")
+    parser.add_argument(
+        "--chain-episodes",
+        type=int,
+        nargs=2,
+        default=[500, 1],
+        metavar=("N", "SEEDS"),
+        help="whole chain episodes to success: N and the number of seeds (0 0: none)",
+    )
+    parser.add_argument(
+        "--branch-episodes",
+        type=int,
+        nargs=2,
+        default=[100, 10],
+        metavar=("N", "SEEDS"),
+        help="whole branch episodes to success: N and the number of seeds (0 0: none)",
+    )
+    parser.add_argument(
+        "--table-episodes",
+        type=int,
+        nargs=2,
+        default=[30, 10],
+        metavar=("BOARD", "SEEDS"),
+        help="whole table episodes to success: board side and the number of seeds (0 0: none)",
+    )
+    parser.add_argument(
+        "--grasp-episodes",
+        type=int,
+        nargs=2,
+        default=[160, 10],
+        metavar=("N", "SEEDS"),
+        help="whole grasp episodes to success: N and the number of seeds (0 0: none)",
+    )
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("WHAT", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
         what, n = args.one[0], int(args.one[1])
-        row = {"row": lambda: measure(n, args.cycles, args.repeats), "profile": lambda: profile(n, args.cycles),
-               "chain-episodes": lambda: whole_episodes("chain", n, args.chain_episodes[1]),
-               "branch-episodes": lambda: whole_episodes("branch", n, args.branch_episodes[1]),
-               "table-episodes": lambda: whole_episodes("table", n, args.table_episodes[1]),
-               "grasp-episodes": lambda: whole_episodes("grasp", n, args.grasp_episodes[1]),
-               "compile": lambda: compile_time(n)}[what]()
+        row = {
+            "row": lambda: measure(n, args.cycles, args.repeats),
+            "profile": lambda: profile(n, args.cycles),
+            "chain-episodes": lambda: whole_episodes("chain", n, args.chain_episodes[1]),
+            "branch-episodes": lambda: whole_episodes("branch", n, args.branch_episodes[1]),
+            "table-episodes": lambda: whole_episodes("table", n, args.table_episodes[1]),
+            "grasp-episodes": lambda: whole_episodes("grasp", n, args.grasp_episodes[1]),
+            "compile": lambda: compile_time(n),
+        }[what]()
         print(json.dumps(row))
         return
 
     def child(what: str, n: int, **env) -> dict:
-        cmd = [sys.executable, __file__, "--one", what, str(n), "--cycles", str(args.cycles),
-               "--repeats", str(args.repeats), "--chain-episodes", *map(str, args.chain_episodes),
-               "--branch-episodes", *map(str, args.branch_episodes), "--table-episodes", *map(str, args.table_episodes),
-               "--grasp-episodes", *map(str, args.grasp_episodes)]
+        cmd = [
+            sys.executable,
+            __file__,
+            "--one",
+            what,
+            str(n),
+            "--cycles",
+            str(args.cycles),
+            "--repeats",
+            str(args.repeats),
+            "--chain-episodes",
+            *map(str, args.chain_episodes),
+            "--branch-episodes",
+            *map(str, args.branch_episodes),
+            "--table-episodes",
+            *map(str, args.table_episodes),
+            "--grasp-episodes",
+            *map(str, args.grasp_episodes),
+        ]
         env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads), **env}
         out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
@@ -363,25 +549,46 @@ def main() -> None:
     for n in args.sizes:
         rows.append(child("row", n))
         r = rows[-1]
-        print(f"N={n:>7,}: in-kernel {r['kernel_module_cycles_per_s']:>12,.0f} module-cycles/s "
-              f"({r['kernel_ms_per_cycle']:.3f} ms per cycle), Python loop {r['python_module_cycles_per_s']:>10,.0f} "
-              f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB",
-              flush=True)
+        print(
+            f"N={n:>7,}: in-kernel {r['kernel_module_cycles_per_s']:>12,.0f} module-cycles/s "
+            f"({r['kernel_ms_per_cycle']:.3f} ms per cycle), Python loop {r['python_module_cycles_per_s']:>10,.0f} "
+            f"(x{r['ratio']:.2f}), first call {r['first_call_s']:.2f} s, peak {r['peak_rss_mib']:.0f} MiB",
+            flush=True,
+        )
     parts = child("profile", args.profile_n) if args.profile_n else None
-    episodes = [child(f"{task}-episodes", n) for task, (n, seeds) in
-                (("chain", args.chain_episodes), ("branch", args.branch_episodes), ("table", args.table_episodes),
-                 ("grasp", args.grasp_episodes)) if n and seeds]
+    episodes = [
+        child(f"{task}-episodes", n)
+        for task, (n, seeds) in (
+            ("chain", args.chain_episodes),
+            ("branch", args.branch_episodes),
+            ("table", args.table_episodes),
+            ("grasp", args.grasp_episodes),
+        )
+        if n and seeds
+    ]
     info = describe("numpy", "numba", numba_threads=args.threads)
     text = tables(rows, parts, episodes, args)
-    text = (f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "
-            "the *first call* column loads the compiled code from the on-disk cache.\n\n" + text)
+    text = (
+        f"JIT compile of the rollout (first call with an empty cache, N = 100): {compiled['first_call_s']:.1f} s; "
+        "the *first call* column loads the compiled code from the on-disk cache.\n\n" + text
+    )
     print(f"\nmachine: {info}\n\n{text}")
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "compile": compiled,
-                                                        "results": rows, "profile": parts, "whole_episodes": episodes},
-                                                       indent=2))
+        out.with_suffix(".json").write_text(
+            json.dumps(
+                {
+                    "machine": info,
+                    "args": vars(args),
+                    "compile": compiled,
+                    "results": rows,
+                    "profile": parts,
+                    "whole_episodes": episodes,
+                },
+                indent=2,
+            )
+        )
         out.with_suffix(".md").write_text(f"machine: `{info}`\n\n{text}\n")
         plot(rows, out.with_suffix(".png"))
 

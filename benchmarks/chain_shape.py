@@ -41,8 +41,10 @@ def main(argv=None) -> int:
     env = proteo_env.make("chain-v0", n_modules=args.modules, max_cycles=args.max_cycles, motion_model="sphere")
     policies = [make_policy(env.task.default_policy, env, seed=0), make_policy("random", env, seed=0)]
     policies += [load_policy(path, env, seed=0) for path in args.checkpoint]
-    print(f"| policy | successes | end-to-end span of successful chains (straight = {args.modules - 1}) | "
-          "mean bounding box |")
+    print(
+        f"| policy | successes | end-to-end span of successful chains (straight = {args.modules - 1}) | "
+        "mean bounding box |"
+    )
     print("|---|---|---|---|")
     for policy in policies:
         spans, boxes, wins = [], [], 0

@@ -60,14 +60,18 @@ class FixedModePolicy(Policy):
 
 def strategies(name: str, env) -> dict:
     """``{label: factory(seed) -> policy}`` of the strategies measured on task ``name``."""
+
     def fixed(**kw):
         return lambda seed: FixedModePolicy.for_env(env, seed=seed, **kw)
 
     def checkpoint(path):
         return lambda seed: load_policy(path, env, seed=seed)
 
-    out = {"hand-coded": lambda seed: make_policy(name, env, seed=seed), "idle": fixed(),
-           "random": lambda seed: make_policy("random", env, seed=seed)}
+    out = {
+        "hand-coded": lambda seed: make_policy(name, env, seed=seed),
+        "idle": fixed(),
+        "random": lambda seed: make_policy("random", env, seed=seed),
+    }
     if name == "chain":
         out["winding chain (MaskablePPO, checkpoints/chain/sb3_ppo)"] = checkpoint("checkpoints/chain/sb3_ppo")
     if name == "branch":
@@ -76,8 +80,9 @@ def strategies(name: str, env) -> dict:
         out["every module NODE, random moves"] = fixed(mode=node, moving=True)
     if name == "table":
         out["never settle (MaskablePPO, checkpoints/table/sb3_ppo)"] = checkpoint("checkpoints/table/sb3_ppo")
-        out["rules that never grow a leg (p_max = p_min = 0)"] = (
-            lambda seed: make_policy("table", env, seed=seed, p_max=0.0, p_min=0.0))
+        out["rules that never grow a leg (p_max = p_min = 0)"] = lambda seed: make_policy(
+            "table", env, seed=seed, p_max=0.0, p_min=0.0
+        )
     if name == "grasp":
         out["approach, never wrap (MaskablePPO, checkpoints/grasp/sb3_ppo)"] = checkpoint("checkpoints/grasp/sb3_ppo")
     return out
@@ -92,32 +97,49 @@ def measure(task_id: str, overrides: dict, seeds: list[int]) -> list[dict]:
         returns = [e.total_reward for e in episodes]
         mean, half = mean_ci(returns)
         won = [e.cycles for e in episodes if e.success]
-        rows.append({"task": task_id, "strategy": label, "return": mean, "return_ci": half,
-                     "per_cycle": float(np.mean([e.total_reward / e.cycles for e in episodes])),
-                     "successes": len(won), "episodes": len(episodes),
-                     "cycles_to_success": float(np.mean(won)) if won else None})
+        rows.append(
+            {
+                "task": task_id,
+                "strategy": label,
+                "return": mean,
+                "return_ci": half,
+                "per_cycle": float(np.mean([e.total_reward / e.cycles for e in episodes])),
+                "successes": len(won),
+                "episodes": len(episodes),
+                "cycles_to_success": float(np.mean(won)) if won else None,
+            }
+        )
     return rows
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| strategy | return (95 % CI) | return per cycle | success | cycles to success |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| strategy | return (95 % CI) | return per cycle | success | cycles to success |",
+        "|---|---|---|---|---|",
+    ]
     best = max(r["return"] for r in rows if r["strategy"] != "hand-coded")
     for r in rows:
         mark = " **(beats the rules)**" if r["strategy"] != "hand-coded" and r["return"] > rows[0]["return"] else ""
         cycles = "–" if r["cycles_to_success"] is None else f"{r['cycles_to_success']:.0f}"
-        lines.append(f"| {r['strategy']}{mark} | {r['return']:.3f} ± {r['return_ci']:.3f} | {r['per_cycle']:.4f} | "
-                     f"{r['successes']}/{r['episodes']} | {cycles} |")
-    verdict = ("the hand-coded policy earns the most" if rows[0]["return"] > best
-               else "a degenerate strategy earns more than the hand-coded policy")
+        lines.append(
+            f"| {r['strategy']}{mark} | {r['return']:.3f} ± {r['return_ci']:.3f} | {r['per_cycle']:.4f} | "
+            f"{r['successes']}/{r['episodes']} | {cycles} |"
+        )
+    verdict = (
+        "the hand-coded policy earns the most"
+        if rows[0]["return"] > best
+        else "a degenerate strategy earns more than the hand-coded policy"
+    )
     return "\n".join(lines) + f"\n\n{rows[0]['task']}: {verdict}."
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", default=",".join(sorted({cls.name for cls in proteo_env.TASKS.values()}
-                                                          & set(POLICIES))),
-                        help="comma-separated task names (default: every task with a hand-coded policy)")
+    parser.add_argument(
+        "--tasks",
+        default=",".join(sorted({cls.name for cls in proteo_env.TASKS.values()} & set(POLICIES))),
+        help="comma-separated task names (default: every task with a hand-coded policy)",
+    )
     parser.add_argument("--seeds", type=int, default=10, help="episodes per strategy (seeds 1000..)")
     parser.add_argument("--config", default="configs/eval.yaml", help="per-task settings (the eval config)")
     parser.add_argument("--out", default=None, help="also write the rows as JSON here")

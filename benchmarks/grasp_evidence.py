@@ -48,10 +48,9 @@ SIZES = (1.5, 2.5, 3.5)
 
 def run_one(job: dict) -> dict:
     """One episode: ``job`` has ``policy``, ``seed`` and the ``make`` overrides."""
+    from baselines import make_policy
     from proteo_env import make
     from proteo_env.tasks.grasp import GraspParams
-
-    from baselines import make_policy
 
     overrides = dict(job["overrides"])
     env = make("grasp-v0", **overrides)
@@ -69,13 +68,25 @@ def run_one(job: dict) -> dict:
             contact_at = env.cycle
         if success_at is None and next(iter(terms.values())):
             success_at = env.cycle
-        if grasp_at is None and info["metric/coverage"] >= default.coverage_threshold \
-                and info["metric/surround"] >= default.surround_threshold:
+        if (
+            grasp_at is None
+            and info["metric/coverage"] >= default.coverage_threshold
+            and info["metric/surround"] >= default.surround_threshold
+        ):
             grasp_at = env.cycle
-    return {**job, "cycles": env.cycle, "success": success_at is not None, "contact_at": contact_at,
-            "success_at": success_at, "grasp_at": grasp_at, "coverage": info["metric/coverage"],
-            "surround": info["metric/surround"], "contact": info["metric/contact"],
-            "seconds": time.perf_counter() - started, "surface_sites": int(len(env.task.surface_sites))}
+    return {
+        **job,
+        "cycles": env.cycle,
+        "success": success_at is not None,
+        "contact_at": contact_at,
+        "success_at": success_at,
+        "grasp_at": grasp_at,
+        "coverage": info["metric/coverage"],
+        "surround": info["metric/surround"],
+        "contact": info["metric/contact"],
+        "seconds": time.perf_counter() - started,
+        "surface_sites": int(len(env.task.surface_sites)),
+    }
 
 
 def _mean_ci(values) -> str:
@@ -105,8 +116,10 @@ def table(rows: list[dict]) -> str:
         o = r["overrides"]
         key = (r["policy"], o.get("motion_model", "default"), o["shape"], o["object_size"])
         groups.setdefault(key, []).append(r)
-    head = ("| policy | motion | shape | size | surface sites | success (95% CI) | coverage | surround | "
-            "contact modules | cycles to contact | cycles to success |")
+    head = (
+        "| policy | motion | shape | size | surface sites | success (95% CI) | coverage | surround | "
+        "contact modules | cycles to contact | cycles to success |"
+    )
     # cycles to success: the first cycle meeting the default thresholds (coverage >= 0.3 and
     # surround >= 0.75); where the episode stops at success that is the cycle it stopped
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
@@ -119,7 +132,8 @@ def table(rows: list[dict]) -> str:
             f"{_wilson(k, len(g))} | {_mean_ci([r['coverage'] for r in g])} | "
             f"{_mean_ci([r['surround'] for r in g])} | {_mean_ci([r['contact'] for r in g])} | "
             f"{_mean_ci(contact)} ({sum(c is not None for c in contact)}/{len(g)}) | "
-            f"{_mean_ci([r['grasp_at'] for r in g])} ({sum(r['grasp_at'] is not None for r in g)}/{len(g)}) |")
+            f"{_mean_ci([r['grasp_at'] for r in g])} ({sum(r['grasp_at'] is not None for r in g)}/{len(g)}) |"
+        )
     return "\n".join(lines)
 
 
@@ -128,9 +142,11 @@ def machine() -> str:
 
     import proteo_env
 
-    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python "
-            f"{platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
-            f"proteo {proteo_env.__version__}")
+    return (
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
+        f"proteo {proteo_env.__version__}"
+    )
 
 
 PAPER_ONLY = {"relocate": False, "retire": False, "straight": False, "wrap_forward": False, "prefer_touch": False}
@@ -141,21 +157,56 @@ def suites(seeds: int, random_seeds: int, quick: bool) -> list[dict]:
     """The experiments of the report: each a titled grid of episodes."""
     sizes = [2.5] if quick else list(SIZES)
     return [
-        {"title": "Hand-coded grasp policy (default parameters)", "policy": "grasp", "params": {},
-         "motion_models": ["sphere", "minimal"], "shapes": list(SHAPES), "sizes": sizes, "seeds": seeds},
-        {"title": "Random policy (uniform over legal moves and all other action fields)", "policy": "random",
-         "params": {}, "motion_models": ["sphere", "minimal"], "shapes": list(SHAPES), "sizes": sizes,
-         "seeds": random_seeds},
-        {"title": "The paper's rules alone (our additions off: " + ", ".join(f"`{k}=False`" for k in PAPER_ONLY)
-         + ")", "policy": "grasp", "params": PAPER_ONLY, "motion_models": ["sphere", "minimal"],
-         "shapes": list(SHAPES), "sizes": [2.5], "seeds": seeds},
-        {"title": "The stricter motion models", "policy": "grasp", "params": {},
-         "motion_models": ["rounded", "rhombic"], "shapes": list(SHAPES), "sizes": [2.5], "seeds": seeds},
-        {"title": "No early stop: the hand-coded grasp left running for 1500 cycles (success thresholds set to 1, "
-         "so coverage and surround are the values reached at cycle 1500; 'cycles to success' is the first cycle "
-         "that met the default thresholds)", "policy": "grasp", "params": {},
-         "motion_models": ["sphere", "minimal"], "shapes": list(SHAPES), "sizes": sizes, "seeds": seeds,
-         "overrides": {"coverage_threshold": 1.0, "surround_threshold": 1.0, "max_cycles": 1500}},
+        {
+            "title": "Hand-coded grasp policy (default parameters)",
+            "policy": "grasp",
+            "params": {},
+            "motion_models": ["sphere", "minimal"],
+            "shapes": list(SHAPES),
+            "sizes": sizes,
+            "seeds": seeds,
+        },
+        {
+            "title": "Random policy (uniform over legal moves and all other action fields)",
+            "policy": "random",
+            "params": {},
+            "motion_models": ["sphere", "minimal"],
+            "shapes": list(SHAPES),
+            "sizes": sizes,
+            "seeds": random_seeds,
+        },
+        {
+            "title": "The paper's rules alone (our additions off: "
+            + ", ".join(f"`{k}=False`" for k in PAPER_ONLY)
+            + ")",
+            "policy": "grasp",
+            "params": PAPER_ONLY,
+            "motion_models": ["sphere", "minimal"],
+            "shapes": list(SHAPES),
+            "sizes": [2.5],
+            "seeds": seeds,
+        },
+        {
+            "title": "The stricter motion models",
+            "policy": "grasp",
+            "params": {},
+            "motion_models": ["rounded", "rhombic"],
+            "shapes": list(SHAPES),
+            "sizes": [2.5],
+            "seeds": seeds,
+        },
+        {
+            "title": "No early stop: the hand-coded grasp left running for 1500 cycles (success thresholds set to 1, "
+            "so coverage and surround are the values reached at cycle 1500; 'cycles to success' is the first cycle "
+            "that met the default thresholds)",
+            "policy": "grasp",
+            "params": {},
+            "motion_models": ["sphere", "minimal"],
+            "shapes": list(SHAPES),
+            "sizes": sizes,
+            "seeds": seeds,
+            "overrides": {"coverage_threshold": 1.0, "surround_threshold": 1.0, "max_cycles": 1500},
+        },
     ]
 
 
@@ -163,8 +214,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=10, help="episodes per setting (hand-coded policy)")
     ap.add_argument("--random-seeds", type=int, default=3, help="episodes per setting for the random policy")
-    ap.add_argument("--first-seed", type=int, default=100,
-                    help="first episode seed (100: seeds not used while the policy was developed)")
+    ap.add_argument(
+        "--first-seed",
+        type=int,
+        default=100,
+        help="first episode seed (100: seeds not used while the policy was developed)",
+    )
     ap.add_argument("--max-cycles", type=int, default=3000)
     ap.add_argument("--quick", action="store_true", help="object size 2.5 only (a smoke run)")
     ap.add_argument("--only", type=int, nargs="+", default=None, help="run only these suites (0-based)")
@@ -180,25 +235,46 @@ def main(argv=None) -> int:
     for k, suite in enumerate(chosen):
         for motion, shape, size in itertools.product(suite["motion_models"], suite["shapes"], suite["sizes"]):
             for seed in range(args.first_seed, args.first_seed + suite["seeds"]):
-                jobs.append({"suite": k, "policy": suite["policy"], "seed": seed, "policy_params": suite["params"],
-                             "overrides": {"shape": shape, "object_size": size, "motion_model": motion,
-                                           "max_cycles": args.max_cycles, **suite.get("overrides", {})}})
+                jobs.append(
+                    {
+                        "suite": k,
+                        "policy": suite["policy"],
+                        "seed": seed,
+                        "policy_params": suite["params"],
+                        "overrides": {
+                            "shape": shape,
+                            "object_size": size,
+                            "motion_model": motion,
+                            "max_cycles": args.max_cycles,
+                            **suite.get("overrides", {}),
+                        },
+                    }
+                )
     started = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         for i, row in enumerate(pool.map(run_one, jobs, chunksize=1), start=1):
             rows.append(row)
-            print(f"[{i}/{len(jobs)}] suite {row['suite']} {row['policy']} {row['overrides']['motion_model']} "
-                  f"{row['overrides']['shape']} {row['overrides']['object_size']} seed {row['seed']}: "
-                  f"success={row['success']} coverage={row['coverage']:.2f} surround={row['surround']:.2f} "
-                  f"cycles={row['cycles']} ({row['seconds']:.0f} s)", file=sys.stderr, flush=True)
+            print(
+                f"[{i}/{len(jobs)}] suite {row['suite']} {row['policy']} {row['overrides']['motion_model']} "
+                f"{row['overrides']['shape']} {row['overrides']['object_size']} seed {row['seed']}: "
+                f"success={row['success']} coverage={row['coverage']:.2f} surround={row['surround']:.2f} "
+                f"cycles={row['cycles']} ({row['seconds']:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
     wall = time.perf_counter() - started
     cmd = "python benchmarks/grasp_evidence.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    lines = [f"Command: `{cmd.strip()}`", "",
-             f"Machine: {machine()}; {len(jobs)} episodes in {wall / 60:.1f} min wall-clock "
-             f"({args.workers} worker processes).", "",
-             f"Every episode: task defaults (`grasp-v0`) except the shape, size and motion model in the row, "
-             f"`max_cycles={args.max_cycles}`, seeds {args.first_seed} and up.", ""]
+    lines = [
+        f"Command: `{cmd.strip()}`",
+        "",
+        f"Machine: {machine()}; {len(jobs)} episodes in {wall / 60:.1f} min wall-clock "
+        f"({args.workers} worker processes).",
+        "",
+        f"Every episode: task defaults (`grasp-v0`) except the shape, size and motion model in the row, "
+        f"`max_cycles={args.max_cycles}`, seeds {args.first_seed} and up.",
+        "",
+    ]
     for k, suite in enumerate(chosen):
         lines += [f"### {suite['title']}", "", table([r for r in rows if r["suite"] == k]), ""]
     report = "\n".join(lines)

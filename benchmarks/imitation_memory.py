@@ -36,8 +36,10 @@ from training.teachers import Teachers
 
 def collect(task: str, env: dict, n_envs: int, cycles: int, seed: int) -> dict[str, np.ndarray]:
     """Samples of rules-driven worlds: features, masks, labels, previous moves and the rules' memory."""
-    worlds = Worlds(SimpleNamespace(task=task, control="move", env=env, n_envs=n_envs, n_groups=1,
-                                    message_encoding="compact"), env_seed=seed)
+    worlds = Worlds(
+        SimpleNamespace(task=task, control="move", env=env, n_envs=n_envs, n_groups=1, message_encoding="compact"),
+        env_seed=seed,
+    )
     teachers = Teachers(worlds.groups[0], worlds.n_envs, seed=seed)
     n = worlds.n_envs * worlds.n_agents
     features, mask = np.zeros((n, worlds.size), np.float32), np.zeros((n, 13), bool)
@@ -70,7 +72,7 @@ def held_out(train: dict, test: dict, inputs, epochs: int) -> tuple[float, float
     for _ in range(epochs):
         order = torch.randperm(len(x))
         for start in range(0, len(order), 4096):
-            mb = order[start:start + 4096]
+            mb = order[start : start + 4096]
             loss = teacher_cross_entropy(masked_log_probs(net.logits(x[mb]), mask[mb], [13]), labels[mb], mask[mb])
             optimiser.zero_grad()
             loss.backward()
@@ -78,8 +80,10 @@ def held_out(train: dict, test: dict, inputs, epochs: int) -> tuple[float, float
     with torch.no_grad():
         log_probs = masked_log_probs(net.logits(x_test), torch.from_numpy(test["mask"]), [13])[0]
     truth = torch.from_numpy(test["label"][:, :1])
-    return (float((log_probs.argmax(dim=1, keepdim=True) == truth).float().mean()),
-            float(-log_probs.gather(1, truth).mean()))
+    return (
+        float((log_probs.argmax(dim=1, keepdim=True) == truth).float().mean()),
+        float(-log_probs.gather(1, truth).mean()),
+    )
 
 
 def main(argv=None) -> int:
@@ -97,7 +101,8 @@ def main(argv=None) -> int:
         "observation (memory: none)": lambda d: d["x"],
         "+ previous move (memory: last_move)": lambda d: with_memory(d["x"], d["previous"], "last_move"),
         "+ the rules' heading, growth, asked": lambda d: np.hstack(
-            [d["x"], one_hot(d["heading"] + 1), one_hot(d["growth"] + 1), d["asked"][:, None].astype(np.float32)]),
+            [d["x"], one_hot(d["heading"] + 1), one_hot(d["growth"] + 1), d["asked"][:, None].astype(np.float32)]
+        ),
     }
     print(f"{args.task} {env}: {len(train['x'])} training samples, {len(test['x'])} held-out")
     for name, inputs in variants.items():

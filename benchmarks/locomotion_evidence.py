@@ -26,8 +26,9 @@ if str(ROOT) not in sys.path:
 HEIGHTS = (0, 1, 2, 3)
 SIZES = (20, 40)
 MODELS = ("minimal", "sphere")
-COURSES = [("flat" if h == 0 else f"step h={h}", {"step_height": h}) for h in HEIGHTS] + \
-          [("tunnel, 2 free layers", {"step_height": 0, "tunnel_height": 2})]
+COURSES = [("flat" if h == 0 else f"step h={h}", {"step_height": h}) for h in HEIGHTS] + [
+    ("tunnel, 2 free layers", {"step_height": 0, "tunnel_height": 2})
+]
 
 
 def run_one(n_modules: int, overrides: dict, model: str, seed: int, max_cycles: int) -> dict:
@@ -41,17 +42,24 @@ def run_one(n_modules: int, overrides: dict, model: str, seed: int, max_cycles: 
     start = env.world.positions[:, 0].mean()
     result = compiled_rollout(env, make_policy("locomotion", env, seed=seed))
     distance = float(result.positions[:, 0].mean() - start)
-    return {"success": result.success, "cycles": result.cycles, "distance": distance,
-            "speed": distance / max(result.cycles, 1), "beyond": float((result.positions[:, 0] >= env.task.finish).mean())}
+    return {
+        "success": result.success,
+        "cycles": result.cycles,
+        "distance": distance,
+        "speed": distance / max(result.cycles, 1),
+        "beyond": float((result.positions[:, 0] >= env.task.finish).mean()),
+    }
 
 
 def summary(rows: list[dict]) -> dict:
     wins = [r for r in rows if r["success"]]
-    return {"success": f"{len(wins)}/{len(rows)}",
-            "rate": len(wins) / len(rows),
-            "cycles": f"{np.median([r['cycles'] for r in wins]):.0f}" if wins else "-",
-            "speed": float(np.mean([r["speed"] for r in rows])),
-            "beyond": float(np.mean([r["beyond"] for r in rows]))}
+    return {
+        "success": f"{len(wins)}/{len(rows)}",
+        "rate": len(wins) / len(rows),
+        "cycles": f"{np.median([r['cycles'] for r in wins]):.0f}" if wins else "-",
+        "speed": float(np.mean([r["speed"] for r in rows])),
+        "beyond": float(np.mean([r["beyond"] for r in rows])),
+    }
 
 
 def main(argv=None) -> int:
@@ -69,21 +77,29 @@ def main(argv=None) -> int:
                 rows = [run_one(n, overrides, model, s, args.max_cycles) for s in range(args.seeds)]
                 table[model, n, label] = summary(rows)
                 print(model, n, label, table[model, n, label], flush=True)
-    lines = ["| motion model | modules | course | successes | median cycles to success | mean speed (sites/cycle) "
-             "| mean share beyond the line |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| motion model | modules | course | successes | median cycles to success | mean speed (sites/cycle) "
+        "| mean share beyond the line |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for (model, n, label), s in table.items():
-        lines.append(f"| {model} | {n} | {label} | {s['success']} | {s['cycles']} | {s['speed']:.3f} | "
-                     f"{s['beyond']:.2f} |")
+        lines.append(
+            f"| {model} | {n} | {label} | {s['success']} | {s['cycles']} | {s['speed']:.3f} | {s['beyond']:.2f} |"
+        )
     import numba
 
-    machine = (f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy "
-               f"{np.__version__}, numba {numba.__version__}, {time.perf_counter() - started:.0f} s")
+    machine = (
+        f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy "
+        f"{np.__version__}, numba {numba.__version__}, {time.perf_counter() - started:.0f} s"
+    )
     text = args.out.read_text() if args.out.exists() else "<!-- tables -->\n<!-- /tables -->\n"
     head, rest = text.split("<!-- tables -->", 1)
     tail = rest.split("<!-- /tables -->", 1)[1]
-    block = (f"<!-- tables -->\n{args.seeds} seeds per row (seeds 0..{args.seeds - 1}), at most {args.max_cycles} "
-             f"cycles, `distance` 3, defaults otherwise; `python benchmarks/locomotion_evidence.py --seeds "
-             f"{args.seeds}` ({machine}).\n\n" + "\n".join(lines) + "\n<!-- /tables -->")
+    block = (
+        f"<!-- tables -->\n{args.seeds} seeds per row (seeds 0..{args.seeds - 1}), at most {args.max_cycles} "
+        f"cycles, `distance` 3, defaults otherwise; `python benchmarks/locomotion_evidence.py --seeds "
+        f"{args.seeds}` ({machine}).\n\n" + "\n".join(lines) + "\n<!-- /tables -->"
+    )
     args.out.write_text(head + block + tail)
     plot(table, args.figure)
     return 0
@@ -101,11 +117,15 @@ def plot(table: dict, path: Path) -> None:
     for model in MODELS:
         for n in SIZES:
             style = "-" if model == "minimal" else "--"
-            left.plot(HEIGHTS, [table[model, n, label]["rate"] for label in labels], style, marker="o",
-                      label=f"{model}, {n} modules")
+            left.plot(
+                HEIGHTS,
+                [table[model, n, label]["rate"] for label in labels],
+                style,
+                marker="o",
+                label=f"{model}, {n} modules",
+            )
             right.plot(HEIGHTS, [table[model, n, label]["speed"] for label in labels], style, marker="o")
-    left.set(xlabel="step height (sites)", ylabel="share of seeds beyond the step", ylim=(-0.05, 1.05),
-             xticks=HEIGHTS)
+    left.set(xlabel="step height (sites)", ylabel="share of seeds beyond the step", ylim=(-0.05, 1.05), xticks=HEIGHTS)
     right.set(xlabel="step height (sites)", ylabel="mean speed (sites per cycle)", xticks=HEIGHTS)
     left.legend(fontsize=8)
     fig.suptitle("locomotion-v0, hand-coded policy")

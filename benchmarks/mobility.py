@@ -35,8 +35,9 @@ def main() -> None:
     args = parser.parse_args()
     shapes = {
         "300-module ball": [ball_sites(300)],
-        f"300-module random blob (mean of {args.blob_seeds})":
-            [blob_sites(300, np.random.default_rng(s)) for s in range(args.blob_seeds)],
+        f"300-module random blob (mean of {args.blob_seeds})": [
+            blob_sites(300, np.random.default_rng(s)) for s in range(args.blob_seeds)
+        ],
         "20-module straight chain": [line_sites(20)],
     }
     print("| motion model | " + " | ".join(shapes) + " |")

@@ -70,27 +70,62 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
 
     def moves(keep_connected):
         return lambda: kernels.execute_moves(
-            w.grid, w.cell, n, move, w.anchored, keep_connected, w.rng_state, w.dir_delta, DIRECTIONS,
-            w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS, w.roll_table, s.movers, moved,
-            s.mark, s.stacks, s.search)
+            w.grid,
+            w.cell,
+            n,
+            move,
+            w.anchored,
+            keep_connected,
+            w.rng_state,
+            w.dir_delta,
+            DIRECTIONS,
+            w.roll_delta,
+            w.local_delta,
+            LOCAL_ADJACENCY_BITS,
+            w.roll_table,
+            s.movers,
+            moved,
+            s.mark,
+            s.stacks,
+            s.search,
+        )
 
     def observation():
-        kernels.observe(w.grid, w.cell, n, w.mode, w.scent, w.inbox, w.anchored, s.is_cut, p.keep_connected,
-                        w.neighbourhood_delta, w.roll_delta, w.roll_table, p.scent_max,
-                        buffers.neighbour_kind, buffers.neighbour_mode, buffers.neighbour_scent,
-                        buffers.own_mode, buffers.own_scent, buffers.messages, buffers.contact,
-                        buffers.action_mask)
+        kernels.observe(
+            w.grid,
+            w.cell,
+            n,
+            w.mode,
+            w.scent,
+            w.inbox,
+            w.anchored,
+            s.is_cut,
+            p.keep_connected,
+            w.neighbourhood_delta,
+            w.roll_delta,
+            w.roll_table,
+            p.scent_max,
+            buffers.neighbour_kind,
+            buffers.neighbour_mode,
+            buffers.neighbour_scent,
+            buffers.own_mode,
+            buffers.own_scent,
+            buffers.messages,
+            buffers.contact,
+            buffers.action_mask,
+        )
 
     parts = {
         "checks": lambda: env.batch.check_actions(actions[None]),
-        "messages": lambda: kernels.deliver_messages(w.grid, w.cell, n, target, value, w.dir_delta, OPPOSITE,
-                                                     w.inbox),
+        "messages": lambda: kernels.deliver_messages(w.grid, w.cell, n, target, value, w.dir_delta, OPPOSITE, w.inbox),
         "moves": moves(True),
         "moves without connectivity": moves(False),
-        "scent": lambda: kernels.relax_scent(w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer,
-                                             p.scent_sweeps, p.scent_max, w.dir_delta),
-        "cut modules": lambda: kernels.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s.is_cut,
-                                                           s.adjacency, s.disc, s.low, s.stack_node, s.stack_k),
+        "scent": lambda: kernels.relax_scent(
+            w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer, p.scent_sweeps, p.scent_max, w.dir_delta
+        ),
+        "cut modules": lambda: kernels.articulation_points(
+            w.grid, w.cell, w.n_modules, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k
+        ),
         "observation": observation,
         "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
     }
@@ -112,8 +147,10 @@ def main() -> None:
     print("| part | " + " | ".join(f"cycle {at}" for at in args.at) + " |")
     print("|---|" + "---|" * len(args.at))
     for name in next(iter(columns.values())):
-        cells = [f"{columns[at][name]:.2f}" if isinstance(columns[at][name], float) else f"{columns[at][name]:,}"
-                 for at in args.at]
+        cells = [
+            f"{columns[at][name]:.2f}" if isinstance(columns[at][name], float) else f"{columns[at][name]:,}"
+            for at in args.at
+        ]
         print(f"| {name} | " + " | ".join(cells) + " |")
 
 

@@ -30,8 +30,18 @@ def main() -> None:
     from training.distributed import run_jobs
     from training.evaluate import EpisodeJob, run_episode_job
 
-    jobs = [EpisodeJob(task_id="chain-v1", overrides='{"max_cycles": 1500, "motion_model": "rhombic", "n_modules": 40}',
-                       level="full", policy="chain", checkpoint=False, seed=s, policy_seed=0) for s in range(16)]
+    jobs = [
+        EpisodeJob(
+            task_id="chain-v1",
+            overrides='{"max_cycles": 1500, "motion_model": "rhombic", "n_modules": 40}',
+            level="full",
+            policy="chain",
+            checkpoint=False,
+            seed=s,
+            policy_seed=0,
+        )
+        for s in range(16)
+    ]
     keys = [j.key for j in jobs]
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     options = {"address": None, "workers": 2}
@@ -45,34 +55,60 @@ def main() -> None:
         fn()
         rows.append((label, time.perf_counter() - started, load))
 
-    timed("eval: 16 chain episodes (N=40, rhombic), serial", lambda: run_jobs(run_episode_job, jobs, keys, progress=False))
-    timed("eval: 16 chain episodes (N=40, rhombic), Ray, 2 workers",
-          lambda: run_jobs(run_episode_job, jobs, keys, ray=options, progress=False))
+    timed(
+        "eval: 16 chain episodes (N=40, rhombic), serial", lambda: run_jobs(run_episode_job, jobs, keys, progress=False)
+    )
+    timed(
+        "eval: 16 chain episodes (N=40, rhombic), Ray, 2 workers",
+        lambda: run_jobs(run_episode_job, jobs, keys, ray=options, progress=False),
+    )
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
         list(pool.map(run_episode_job, jobs[:4]))  # warm both processes
-        timed("eval: the same 16 episodes, 2 plain processes (no Ray: what two cores allow)",
-              lambda: list(pool.map(run_episode_job, jobs)))
-    cma = ["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2", "--popsize", "8",
-           "--episodes-per-candidate", "2", "--env", "{n_modules: 30, max_cycles: 1500, motion_model: rhombic}",
-           "--tensorboard", "false"]
+        timed(
+            "eval: the same 16 episodes, 2 plain processes (no Ray: what two cores allow)",
+            lambda: list(pool.map(run_episode_job, jobs)),
+        )
+    cma = [
+        "--config",
+        "configs/train/cma_rules_chain.yaml",
+        "--generations",
+        "2",
+        "--popsize",
+        "8",
+        "--episodes-per-candidate",
+        "2",
+        "--env",
+        "{n_modules: 30, max_cycles: 1500, motion_model: rhombic}",
+        "--tensorboard",
+        "false",
+    ]
     for label, extra in (("serial", []), ("Ray, 2 workers", ["--ray", "true"])):
         with tempfile.TemporaryDirectory() as tmp:
             load = os.getloadavg()[0]
             cma_es.main([*cma, "--run-dir", f"{tmp}/run", *extra])
             lines = open(f"{tmp}/run/progress.csv").read().splitlines()
             seconds = [float(line.split(",")[1]) for line in lines[1:]]
-            rows.append((f"CMA-ES: one generation (8 candidates x 2 episodes, N=30, rhombic; the 2nd), {label}",
-                         seconds[1] - seconds[0], load))
+            rows.append(
+                (
+                    f"CMA-ES: one generation (8 candidates x 2 episodes, N=30, rhombic; the 2nd), {label}",
+                    seconds[1] - seconds[0],
+                    load,
+                )
+            )
     n = 400
-    timed(f"Ray overhead: {n} empty tasks, 2 workers",
-          lambda: run_jobs(noop, list(range(n)), [str(i) for i in range(n)], ray=options, progress=False))
+    timed(
+        f"Ray overhead: {n} empty tasks, 2 workers",
+        lambda: run_jobs(noop, list(range(n)), [str(i) for i in range(n)], ray=options, progress=False),
+    )
     print(describe("ray", "numba", "numpy"))
     print("| measurement | seconds | load average (1 min) before |\n|---|---|---|")
     for label, seconds, load in rows:
         print(f"| {label} | {seconds:.2f} | {load:.2f} |")
-    print(f"\neval speed-up: {rows[0][1] / rows[1][1]:.2f}x on Ray, {rows[0][1] / rows[2][1]:.2f}x on plain processes;"
-          f" CMA-ES generation speed-up: {rows[3][1] / rows[4][1]:.2f}x;"
-          f" overhead per task: {1000 * rows[5][1] / n:.1f} ms wall ({2000 * rows[5][1] / n:.1f} ms of a worker)")
+    print(
+        f"\neval speed-up: {rows[0][1] / rows[1][1]:.2f}x on Ray, {rows[0][1] / rows[2][1]:.2f}x on plain processes;"
+        f" CMA-ES generation speed-up: {rows[3][1] / rows[4][1]:.2f}x;"
+        f" overhead per task: {1000 * rows[5][1] / n:.1f} ms wall ({2000 * rows[5][1] / n:.1f} ms of a worker)"
+    )
     ray.shutdown()
 
 

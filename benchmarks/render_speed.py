@@ -23,7 +23,6 @@ import json
 import time
 
 import numpy as np
-
 from machine_info import describe
 
 
@@ -33,8 +32,15 @@ def scene_of_size(n: int, seed: int):
 
     rng = np.random.default_rng(seed)
     sites, size = place_in_box(blob_sites(n, rng, flat=True), margin=2, floor=True)
-    return Scene(positions=sites, modes=rng.integers(0, 4, n), mode_names=("SLEEP", "SEARCH", "SEED", "FINAL"),
-                 scent=rng.integers(0, 20, n), box=size, floor=True, caption=f"{n} modules")
+    return Scene(
+        positions=sites,
+        modes=rng.integers(0, 4, n),
+        mode_names=("SLEEP", "SEARCH", "SEED", "FINAL"),
+        scent=rng.integers(0, 20, n),
+        box=size,
+        floor=True,
+        caption=f"{n} modules",
+    )
 
 
 def bench_size(n: int, frames: int, width: int, height: int, seed: int) -> dict:
@@ -54,17 +60,28 @@ def bench_size(n: int, frames: int, width: int, height: int, seed: int) -> dict:
         faces.append(renderer.n_faces)
     seconds, cpu_seconds = time.perf_counter() - started, time.process_time() - cpu_started
     renderer.close()
-    return {"modules": n, "frames": frames, "first_frame_s": first, "seconds": seconds, "fps": frames / seconds,
-            "fps_cpu_time": frames / cpu_seconds,
-            "faces_per_frame": float(np.mean(faces)), "image": f"{width}x{height}"}
+    return {
+        "modules": n,
+        "frames": frames,
+        "first_frame_s": first,
+        "seconds": seconds,
+        "fps": frames / seconds,
+        "fps_cpu_time": frames / cpu_seconds,
+        "faces_per_frame": float(np.mean(faces)),
+        "image": f"{width}x{height}",
+    }
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| modules | faces drawn per frame | frames per second | per CPU second | first frame (s) | image |",
-             "|---:|---:|---:|---:|---:|---|"]
+    lines = [
+        "| modules | faces drawn per frame | frames per second | per CPU second | first frame (s) | image |",
+        "|---:|---:|---:|---:|---:|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['modules']:,} | {r['faces_per_frame']:,.0f} | {r['fps']:.2f} | {r['fps_cpu_time']:.2f} | "
-                     f"{r['first_frame_s']:.2f} | {r['image']} |")
+        lines.append(
+            f"| {r['modules']:,} | {r['faces_per_frame']:,.0f} | {r['fps']:.2f} | {r['fps_cpu_time']:.2f} | "
+            f"{r['first_frame_s']:.2f} | {r['image']} |"
+        )
     return "\n".join(lines)
 
 
@@ -90,15 +107,17 @@ def main(argv=None) -> int:
             json.dump({"machine": info, "results": rows}, f, indent=2)
     if args.markdown:
         with open(args.markdown, "w") as f:
-            f.write("# Rendering speed\n\n"
-                    "From `python benchmarks/render_speed.py --sizes "
-                    f"{' '.join(map(str, args.sizes))} --frames {args.frames}`: random connected blobs "
-                    "on the floor, modules in random chain modes, the camera turning 7 degrees a frame; "
-                    "each frame selects the visible faces, projects, sorts, shades and rasterises them "
-                    "(matplotlib Agg) into an RGB array. The first frame (figure set-up) is timed apart. "
-                    "Frames per second is wall-clock; per CPU second divides by the process's CPU time, "
-                    "what one idle core would give (the machine may be shared: its load is recorded).\n\n"
-                    f"{text}\n\nMachine: {described}.\n")
+            f.write(
+                "# Rendering speed\n\n"
+                "From `python benchmarks/render_speed.py --sizes "
+                f"{' '.join(map(str, args.sizes))} --frames {args.frames}`: random connected blobs "
+                "on the floor, modules in random chain modes, the camera turning 7 degrees a frame; "
+                "each frame selects the visible faces, projects, sorts, shades and rasterises them "
+                "(matplotlib Agg) into an RGB array. The first frame (figure set-up) is timed apart. "
+                "Frames per second is wall-clock; per CPU second divides by the process's CPU time, "
+                "what one idle core would give (the machine may be shared: its load is recorded).\n\n"
+                f"{text}\n\nMachine: {described}.\n"
+            )
     return 0
 
 

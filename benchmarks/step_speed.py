@@ -28,7 +28,6 @@ import json
 import time
 
 import numpy as np
-
 from machine_info import describe
 
 
@@ -46,8 +45,7 @@ def draw_moves(workload: str, mask: np.ndarray, rng: np.random.Generator) -> np.
 def bench_size(n: int, cycles: int, motion_model: str, seed: int, workload: str) -> dict:
     import proteo_env
 
-    env = proteo_env.make("sandbox-v0", n_modules=n, margin=4, motion_model=motion_model,
-                          max_cycles=10 * cycles + 10)
+    env = proteo_env.make("sandbox-v0", n_modules=n, margin=4, motion_model=motion_model, max_cycles=10 * cycles + 10)
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     layout = env.action_layout
@@ -81,13 +79,18 @@ def bench_size(n: int, cycles: int, motion_model: str, seed: int, workload: str)
         started = time.perf_counter()
         observations, *_ = env.step(action_dict)
         pz_seconds += time.perf_counter() - started
-    return {"n_modules": n, "motion_model": motion_model, "workload": workload, "cycles": cycles,
-            "first_cycle_s": first_cycle,
-            "engine_module_cycles_per_s": n * cycles / engine_seconds,
-            "engine_cycle_ms": 1e3 * engine_seconds / cycles,
-            "moves_per_cycle": moved / cycles,
-            "pettingzoo_agent_steps_per_s": n * pz_cycles / pz_seconds,
-            "pettingzoo_cycle_ms": 1e3 * pz_seconds / pz_cycles}
+    return {
+        "n_modules": n,
+        "motion_model": motion_model,
+        "workload": workload,
+        "cycles": cycles,
+        "first_cycle_s": first_cycle,
+        "engine_module_cycles_per_s": n * cycles / engine_seconds,
+        "engine_cycle_ms": 1e3 * engine_seconds / cycles,
+        "moves_per_cycle": moved / cycles,
+        "pettingzoo_agent_steps_per_s": n * pz_cycles / pz_seconds,
+        "pettingzoo_cycle_ms": 1e3 * pz_seconds / pz_cycles,
+    }
 
 
 def main() -> None:
@@ -104,14 +107,18 @@ def main() -> None:
     info = describe("numpy", "numba", "gymnasium", "pettingzoo", numba_threads=numba.config.NUMBA_NUM_THREADS)
     rows = [bench_size(n, args.cycles, args.motion_model, args.seed, w) for w in args.workloads for n in args.sizes]
     print(f"machine: {info}")
-    print("| actions | N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "
-          "PettingZoo agent-steps/s | PettingZoo ms/cycle | moves/cycle |")
+    print(
+        "| actions | N | first cycle (compile or cache load) s | engine module-cycles/s | engine ms/cycle | "
+        "PettingZoo agent-steps/s | PettingZoo ms/cycle | moves/cycle |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['workload']} | {r['n_modules']:,} | {r['first_cycle_s']:.2f} | "
-              f"{r['engine_module_cycles_per_s']:,.0f} | "
-              f"{r['engine_cycle_ms']:.2f} | {r['pettingzoo_agent_steps_per_s']:,.0f} | "
-              f"{r['pettingzoo_cycle_ms']:.2f} | {r['moves_per_cycle']:.0f} |")
+        print(
+            f"| {r['workload']} | {r['n_modules']:,} | {r['first_cycle_s']:.2f} | "
+            f"{r['engine_module_cycles_per_s']:,.0f} | "
+            f"{r['engine_cycle_ms']:.2f} | {r['pettingzoo_agent_steps_per_s']:,.0f} | "
+            f"{r['pettingzoo_cycle_ms']:.2f} | {r['moves_per_cycle']:.0f} |"
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"machine": info, "args": vars(args), "results": rows}, f, indent=2)

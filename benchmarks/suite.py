@@ -54,7 +54,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from machine_info import describe
 
 MODES = ("pettingzoo", "engine", "batched", "chain-kernel", "reference")
@@ -80,6 +79,7 @@ def _stepper(mode: str, n: int, batch_modules: int):
             env.step_arrays(actions)
             env.observe_arrays()
             return time.perf_counter() - t
+
         return (lambda: env.reset(seed=0)), step, n_envs * n, n_envs
 
     if mode == "chain-kernel":
@@ -97,17 +97,20 @@ def _stepper(mode: str, n: int, batch_modules: int):
             t = time.perf_counter()
             rollout["run"](1)
             return time.perf_counter() - t
+
         return reset, step, n, 1
 
     env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
     nvec = env.action_layout.nvec
     if mode == "engine":
+
         def step(rng):
             actions = rng.integers(0, nvec, size=(n, len(nvec)))
             t = time.perf_counter()
             env.step_arrays(actions)
             env.observe_arrays()
             return time.perf_counter() - t
+
         return (lambda: env.reset(seed=0)), step, n, 1
     if mode == "pettingzoo":
         agents = env.possible_agents
@@ -117,6 +120,7 @@ def _stepper(mode: str, n: int, batch_modules: int):
             t = time.perf_counter()
             env.step(actions)
             return time.perf_counter() - t
+
         return (lambda: env.reset(seed=0)), step, n, 1
     if mode == "reference":
         from proteo_env.core.reference import ReferenceWorld
@@ -127,18 +131,29 @@ def _stepper(mode: str, n: int, batch_modules: int):
         def reset():
             env.reset(seed=0)
             w = env.engine
-            ref = ReferenceWorld(size=w.shape.size, positions=w.positions, n_agents=w.n_agents,
-                                 physics=w.physics, n_channels=w.n_channels)
+            ref = ReferenceWorld(
+                size=w.shape.size,
+                positions=w.positions,
+                n_agents=w.n_agents,
+                physics=w.physics,
+                n_channels=w.n_channels,
+            )
             ref.rng_state = int(w.rng_state[0])
             world["ref"] = ref
 
         def step(rng):
             a = rng.integers(0, nvec, size=(n, len(nvec)))
             t = time.perf_counter()
-            world["ref"].step(move=a[:, lay.move], mode=a[:, lay.mode], scent_role=a[:, lay.roles],
-                              message_target=a[:, lay.message_target], message_value=a[:, lay.message_value])
+            world["ref"].step(
+                move=a[:, lay.move],
+                mode=a[:, lay.mode],
+                scent_role=a[:, lay.roles],
+                message_target=a[:, lay.message_target],
+                message_value=a[:, lay.message_value],
+            )
             world["ref"].observe()
             return time.perf_counter() - t
+
         return reset, step, n, 1
     raise ValueError(f"mode={mode!r} is not known; allowed: {', '.join(MODES)}")
 
@@ -162,10 +177,18 @@ def measure(mode: str, n: int, batch_modules: int, budget_s: float, cycles: int)
         repeats += 1
     per_cycle /= repeats
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return {"mode": mode, "n_modules": n, "n_envs": n_envs, "cycles": cycles, "repeats": repeats,
-            "first_cycle_s": first, "module_cycles_per_s": rows / per_cycle.mean(),
-            "ms_per_cycle": 1e3 * per_cycle.mean(), "per_cycle_ms": (1e3 * per_cycle).tolist(),
-            "peak_rss_mib": peak_mib}
+    return {
+        "mode": mode,
+        "n_modules": n,
+        "n_envs": n_envs,
+        "cycles": cycles,
+        "repeats": repeats,
+        "first_cycle_s": first,
+        "module_cycles_per_s": rows / per_cycle.mean(),
+        "ms_per_cycle": 1e3 * per_cycle.mean(),
+        "per_cycle_ms": (1e3 * per_cycle).tolist(),
+        "peak_rss_mib": peak_mib,
+    }
 
 
 def plot(rows: list[dict], path: Path) -> None:
@@ -195,12 +218,15 @@ def main() -> None:
     parser.add_argument("--modes", nargs="+", default=list(MODES), choices=MODES)
     parser.add_argument("--reference-max", type=int, default=1000, help="largest N for the reference")
     parser.add_argument("--batch-modules", type=int, default=20000, help="B * N of the batched runs")
-    parser.add_argument("--budget", type=float, default=2.0, help="seconds of timed cycles per row (at least one episode)")
+    parser.add_argument(
+        "--budget", type=float, default=2.0, help="seconds of timed cycles per row (at least one episode)"
+    )
     parser.add_argument("--cycles", type=int, default=50, help="cycles per episode, timed from a fresh reset")
     parser.add_argument("--reference-cycles", type=int, default=3, help="cycles per episode of the reference")
     parser.add_argument("--threads", type=int, default=1, help="NUMBA_NUM_THREADS of the measurements")
-    parser.add_argument("--compile-n", type=int, default=100,
-                        help="N of the JIT compile measurement with an empty cache (0: none)")
+    parser.add_argument(
+        "--compile-n", type=int, default=100, help="N of the JIT compile measurement with an empty cache (0: none)"
+    )
     parser.add_argument("--out", default=None, help="write <out>.json, <out>.md (the table) and <out>.png")
     parser.add_argument("--one", nargs=2, metavar=("MODE", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -213,8 +239,21 @@ def main() -> None:
     env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads)}
 
     def child(mode: str, n: int, *, budget: float, cycles: int, **extra_env) -> dict:
-        cmd = [sys.executable, __file__, "--one", mode, str(n), "--batch-modules", str(args.batch_modules),
-               "--budget", str(budget), "--cycles", str(cycles), "--reference-cycles", str(args.reference_cycles)]
+        cmd = [
+            sys.executable,
+            __file__,
+            "--one",
+            mode,
+            str(n),
+            "--batch-modules",
+            str(args.batch_modules),
+            "--budget",
+            str(budget),
+            "--cycles",
+            str(cycles),
+            "--reference-cycles",
+            str(args.reference_cycles),
+        ]
         out = subprocess.run(cmd, env={**env, **extra_env}, capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -222,9 +261,13 @@ def main() -> None:
     if args.compile_n:
         for mode in (m for m in args.modes if m != "reference"):
             with tempfile.TemporaryDirectory() as cache:
-                compiled[mode] = child(mode, args.compile_n, budget=0.0, cycles=1, NUMBA_CACHE_DIR=cache)["first_cycle_s"]
-            print(f"{mode:>12}: JIT compile (first cycle, empty cache, N={args.compile_n}) {compiled[mode]:.1f} s",
-                  flush=True)
+                compiled[mode] = child(mode, args.compile_n, budget=0.0, cycles=1, NUMBA_CACHE_DIR=cache)[
+                    "first_cycle_s"
+                ]
+            print(
+                f"{mode:>12}: JIT compile (first cycle, empty cache, N={args.compile_n}) {compiled[mode]:.1f} s",
+                flush=True,
+            )
     rows = []
     for mode in args.modes:
         for n in args.sizes:
@@ -232,35 +275,46 @@ def main() -> None:
                 continue
             rows.append(child(mode, n, budget=args.budget, cycles=args.cycles))
             r = rows[-1]
-            print(f"{mode:>11} N={n:>7,} B={r['n_envs']:>4}: {r['module_cycles_per_s']:>14,.0f} module-cycles/s, "
-                  f"{r['ms_per_cycle']:.3f} ms/cycle, first {r['first_cycle_s']:.2f} s, "
-                  f"peak {r['peak_rss_mib']:.0f} MiB", flush=True)
+            print(
+                f"{mode:>11} N={n:>7,} B={r['n_envs']:>4}: {r['module_cycles_per_s']:>14,.0f} module-cycles/s, "
+                f"{r['ms_per_cycle']:.3f} ms/cycle, first {r['first_cycle_s']:.2f} s, "
+                f"peak {r['peak_rss_mib']:.0f} MiB",
+                flush=True,
+            )
+
     def early_rate(r):  # module-cycles/s over the cycles the reference ran
         rows_per_cycle = r["n_envs"] * r["n_modules"]
-        return 1e3 * rows_per_cycle / np.mean(r["per_cycle_ms"][:args.reference_cycles])
+        return 1e3 * rows_per_cycle / np.mean(r["per_cycle_ms"][: args.reference_cycles])
 
     ref = {r["n_modules"]: early_rate(r) for r in rows if r["mode"] == "reference"}
-    lines = [f"| mode | N | worlds B | module-cycles/s | ms per cycle | x reference (first {args.reference_cycles} "
-             "cycles) | first cycle s | peak RSS MiB |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"| mode | N | worlds B | module-cycles/s | ms per cycle | x reference (first {args.reference_cycles} "
+        "cycles) | first cycle s | peak RSS MiB |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         same_workload = r["mode"] != "chain-kernel"  # the reference runs the sandbox workload
         ratio = f"{early_rate(r) / ref[r['n_modules']]:,.0f}" if r["n_modules"] in ref and same_workload else "-"
-        lines.append(f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
-                     f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |")
+        lines.append(
+            f"| {r['mode']} | {r['n_modules']:,} | {r['n_envs']} | {r['module_cycles_per_s']:,.0f} | "
+            f"{r['ms_per_cycle']:.3f} | {ratio} | {r['first_cycle_s']:.2f} | {r['peak_rss_mib']:.0f} |"
+        )
     if compiled:
-        lines += ["", f"JIT compile, once per machine (first cycle with an empty cache, N = {args.compile_n}): "
-                  + ", ".join(f"{mode} {seconds:.1f} s" for mode, seconds in compiled.items())
-                  + "; the *first cycle* column loads the compiled kernels from the on-disk cache."]
+        lines += [
+            "",
+            f"JIT compile, once per machine (first cycle with an empty cache, N = {args.compile_n}): "
+            + ", ".join(f"{mode} {seconds:.1f} s" for mode, seconds in compiled.items())
+            + "; the *first cycle* column loads the compiled kernels from the on-disk cache.",
+        ]
     table = "\n".join(lines)
     info = describe("numpy", "numba", "gymnasium", "pettingzoo", numba_threads=args.threads)
     print(f"\nmachine: {info}\n\n{table}")
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.with_suffix(".json").write_text(json.dumps({"machine": info, "args": vars(args), "compile_s": compiled,
-                                                        "results": rows},
-                                                       indent=2))
+        out.with_suffix(".json").write_text(
+            json.dumps({"machine": info, "args": vars(args), "compile_s": compiled, "results": rows}, indent=2)
+        )
         out.with_suffix(".md").write_text(f"machine: `{info}`\n\n{table}\n")
         plot(rows, out.with_suffix(".png"))
 

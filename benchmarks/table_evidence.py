@@ -39,8 +39,18 @@ from proteo_env.rollout import run_episode  # noqa: E402
 from proteo_env.tasks.table import board_sites  # noqa: E402
 
 PAPER_CYCLES = 200
-SERIES = ("legs_left", "legs_right", "grounded_legs", "active_left", "active_right", "support",
-          "leg_creations", "leg_disbands", "weight_left", "weight_right")
+SERIES = (
+    "legs_left",
+    "legs_right",
+    "grounded_legs",
+    "active_left",
+    "active_right",
+    "support",
+    "leg_creations",
+    "leg_disbands",
+    "weight_left",
+    "weight_right",
+)
 
 
 def run(task_id: str, overrides: dict, seed: int, policy: str = "table") -> dict:
@@ -52,8 +62,14 @@ def run(task_id: str, overrides: dict, seed: int, policy: str = "table") -> dict
     result = run_episode(env, pol, seed=seed, observe=lambda env, info: rows.append(info))
     seconds = time.perf_counter() - started
     series = {name: np.array([row[f"metric/{name}"] for row in rows]) for name in SERIES}
-    return {"series": series, "metrics": result.metrics, "cycles": result.cycles, "success": result.success,
-            "reward": result.total_reward, "seconds": seconds}
+    return {
+        "series": series,
+        "metrics": result.metrics,
+        "cycles": result.cycles,
+        "success": result.success,
+        "reward": result.total_reward,
+        "seconds": seconds,
+    }
 
 
 def shift_windows(schedule, cycles: int) -> list[tuple[int, int]]:
@@ -74,17 +90,22 @@ def per_shift(ep: dict, schedule) -> list[dict]:
         steps = steps[steps != 0]
         reversals = int((steps[1:] != steps[:-1]).sum()) if steps.size > 1 else 0
         after = slice(a + 1, b) if b > a + 1 else slice(a, b)
-        out.append({
-            "restabilise": float(ep["metrics"].get(f"restabilise_{k}", -1)),
-            "creations": int(s["leg_creations"][last] - s["leg_creations"][a]),
-            "disbands": int(s["leg_disbands"][last] - s["leg_disbands"][a]),
-            "reversals": reversals,
-            "min_legs_left": int(s["legs_left"][after].min()), "min_legs_right": int(s["legs_right"][after].min()),
-            "legs_left": int(s["legs_left"][last]), "legs_right": int(s["legs_right"][last]),
-            "active_left": int(s["active_left"][last]), "active_right": int(s["active_right"][last]),
-            "unsupported": int((s["support"][after] < 1.0).sum()),
-            "weights": (float(s["weight_left"][min(a + 1, last)]), float(s["weight_right"][min(a + 1, last)])),
-        })
+        out.append(
+            {
+                "restabilise": float(ep["metrics"].get(f"restabilise_{k}", -1)),
+                "creations": int(s["leg_creations"][last] - s["leg_creations"][a]),
+                "disbands": int(s["leg_disbands"][last] - s["leg_disbands"][a]),
+                "reversals": reversals,
+                "min_legs_left": int(s["legs_left"][after].min()),
+                "min_legs_right": int(s["legs_right"][after].min()),
+                "legs_left": int(s["legs_left"][last]),
+                "legs_right": int(s["legs_right"][last]),
+                "active_left": int(s["active_left"][last]),
+                "active_right": int(s["active_right"][last]),
+                "unsupported": int((s["support"][after] < 1.0).sum()),
+                "weights": (float(s["weight_left"][min(a + 1, last)]), float(s["weight_right"][min(a + 1, last)])),
+            }
+        )
     return out
 
 
@@ -131,9 +152,14 @@ def reach_floor_spot(model: str) -> bool:
         frontier = list(starts)
         while frontier:
             p = frontier.pop()
-            w = World(size=(12, 12, h + 1), positions=np.array([p] + board + leg), n_agents=1,
-                      physics=Physics(motion_model=model, keep_connected=False),
-                      anchored=np.array([False] + [True] * (len(board) + len(leg))), floor=True)
+            w = World(
+                size=(12, 12, h + 1),
+                positions=np.array([p] + board + leg),
+                n_agents=1,
+                physics=Physics(motion_model=model, keep_connected=False),
+                anchored=np.array([False] + [True] * (len(board) + len(leg))),
+                floor=True,
+            )
             for k in range(12):
                 if w.roll_is_legal(0, k):
                     q = tuple(int(v) for v in np.array(p) + DIRECTIONS[k])
@@ -163,8 +189,10 @@ def machine() -> str:
         pass
     import os
 
-    return (f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {np.__version__}, "
-            f"numba {numba.__version__}, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}")
+    return (
+        f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {np.__version__}, "
+        f"numba {numba.__version__}, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}"
+    )
 
 
 def main(argv=None) -> int:
@@ -185,17 +213,25 @@ def main(argv=None) -> int:
     schedule = params.schedule
     n_roots, n_fixed = (len(sites) for sites in board_sites(params))
     began = time.perf_counter()
-    lines = ["# Table task: evidence (paper section 4.3)", "",
-             "Written by `benchmarks/table_evidence.py`; regenerate with", "",
-             "```", f"NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/table_evidence.py --seeds {args.seeds} "
-             f"--out docs/table_evidence.md", "```", "",
-             f"Experiment: `{_shown(args.config)}` "
-             f"({task_id}, hand-coded `table` policy): board {params.board_size} x {params.board_size} "
-             f"({n_roots + n_fixed} board modules: {n_roots} roots, {n_fixed} FIXED), roots every "
-             f"{params.root_spacing} sites, depth {params.depth}, {params.n_spares} spare modules, "
-             f"F_max = {params.f_max}, F_min = {params.f_min}, stable window {params.stable_window} cycles, "
-             f"motion model `{base.get('motion_model', 'default')}`, schedule (cycle, W1, W2) = {list(schedule)}.",
-             "Seeds 0..{} for each setting. Machine: {}.".format(args.seeds - 1, machine()), ""]
+    lines = [
+        "# Table task: evidence (paper section 4.3)",
+        "",
+        "Written by `benchmarks/table_evidence.py`; regenerate with",
+        "",
+        "```",
+        f"NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/table_evidence.py --seeds {args.seeds} "
+        f"--out docs/table_evidence.md",
+        "```",
+        "",
+        f"Experiment: `{_shown(args.config)}` "
+        f"({task_id}, hand-coded `table` policy): board {params.board_size} x {params.board_size} "
+        f"({n_roots + n_fixed} board modules: {n_roots} roots, {n_fixed} FIXED), roots every "
+        f"{params.root_spacing} sites, depth {params.depth}, {params.n_spares} spare modules, "
+        f"F_max = {params.f_max}, F_min = {params.f_min}, stable window {params.stable_window} cycles, "
+        f"motion model `{base.get('motion_model', 'default')}`, schedule (cycle, W1, W2) = {list(schedule)}.",
+        f"Seeds 0..{args.seeds - 1} for each setting. Machine: {machine()}.",
+        "",
+    ]
 
     results: dict[float, list[dict]] = {}
     for p in args.p_values:
@@ -205,34 +241,51 @@ def main(argv=None) -> int:
             ep = run(task_id, overrides, seed)
             ep["shifts"] = per_shift(ep, schedule)
             episodes.append(ep)
-            print(f"p={p} seed={seed}: {ep['cycles']} cycles, success={ep['success']}, "
-                  f"restabilise={[s['restabilise'] for s in ep['shifts']]}, {ep['seconds']:.1f}s", flush=True)
+            print(
+                f"p={p} seed={seed}: {ep['cycles']} cycles, success={ep['success']}, "
+                f"restabilise={[s['restabilise'] for s in ep['shifts']]}, {ep['seconds']:.1f}s",
+                flush=True,
+            )
         results[p] = episodes
 
     # 1. re-stabilisation
-    lines += ["## Cycles to a new stable configuration after each weight shift", "",
-              "A configuration is stable when every active root (ROOT/AROOT) stands on a grounded leg, no "
-              f"other root does, and this stays unchanged for {params.stable_window} cycles; the time is "
-              "counted from the shift to the start of that period (`restabilise_k`, docs/tasks/table.md). "
-              f"Paper: \"on the order of {PAPER_CYCLES} cycles\". Median (IQR, range) over seeds.", "",
-              "| p_max = p_min | " + " | ".join(
-                  f"entry {k}: cycle {c}, W = {w1:g}/{w2:g}" for k, (c, w1, w2) in enumerate(schedule)) + " | success |",
-              "|---" * (len(schedule) + 2) + "|"]
+    lines += [
+        "## Cycles to a new stable configuration after each weight shift",
+        "",
+        "A configuration is stable when every active root (ROOT/AROOT) stands on a grounded leg, no "
+        f"other root does, and this stays unchanged for {params.stable_window} cycles; the time is "
+        "counted from the shift to the start of that period (`restabilise_k`, docs/tasks/table.md). "
+        f'Paper: "on the order of {PAPER_CYCLES} cycles". Median (IQR, range) over seeds.',
+        "",
+        "| p_max = p_min | "
+        + " | ".join(f"entry {k}: cycle {c}, W = {w1:g}/{w2:g}" for k, (c, w1, w2) in enumerate(schedule))
+        + " | success |",
+        "|---" * (len(schedule) + 2) + "|",
+    ]
     for p, episodes in results.items():
-        cells = [spread([ep["shifts"][k]["restabilise"] if k < len(ep["shifts"]) else -1 for ep in episodes])
-                 for k in range(len(schedule))]
-        lines.append(f"| {p:g} | " + " | ".join(cells) + f" | {sum(ep['success'] for ep in episodes)}/{len(episodes)} |")
+        cells = [
+            spread([ep["shifts"][k]["restabilise"] if k < len(ep["shifts"]) else -1 for ep in episodes])
+            for k in range(len(schedule))
+        ]
+        lines.append(
+            f"| {p:g} | " + " | ".join(cells) + f" | {sum(ep['success'] for ep in episodes)}/{len(episodes)} |"
+        )
     lines += ["", "Entry 0 is the first growth from the start (no legs yet).", ""]
 
     # 3. the paper's argument
-    lines += ["## Probabilistic versus deterministic roots", "",
-              "Per schedule window (from a shift to the next, or to the end of the episode): roots turning "
-              "active (leg creations) and inactive (disbandings), reversals of the total active-root count "
-              "(up then down or down then up), the fewest grounded legs per region after the shift, the cycles "
-              "with weight not carried (support < 1), and the legs at the end of the window. Median (range) over "
-              "seeds.", "",
-              "| p | window | W1/W2 | creations | disbandings | reversals | fewest legs L/R | cycles unsupported "
-              "| legs at end L/R |", "|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "## Probabilistic versus deterministic roots",
+        "",
+        "Per schedule window (from a shift to the next, or to the end of the episode): roots turning "
+        "active (leg creations) and inactive (disbandings), reversals of the total active-root count "
+        "(up then down or down then up), the fewest grounded legs per region after the shift, the cycles "
+        "with weight not carried (support < 1), and the legs at the end of the window. Median (range) over "
+        "seeds.",
+        "",
+        "| p | window | W1/W2 | creations | disbandings | reversals | fewest legs L/R | cycles unsupported "
+        "| legs at end L/R |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for p, episodes in results.items():
         for k in range(len(schedule)):
             rows = [ep["shifts"][k] for ep in episodes if k < len(ep["shifts"])]
@@ -244,55 +297,83 @@ def main(argv=None) -> int:
                 f"{med_range([r['disbands'] for r in rows])} | {med_range([r['reversals'] for r in rows])} | "
                 f"{np.median([r['min_legs_left'] for r in rows]):.0f}/{np.median([r['min_legs_right'] for r in rows]):.0f} | "
                 f"{med_range([r['unsupported'] for r in rows])} | "
-                f"{np.median([r['legs_left'] for r in rows]):.0f}/{np.median([r['legs_right'] for r in rows]):.0f} |")
+                f"{np.median([r['legs_left'] for r in rows]):.0f}/{np.median([r['legs_right'] for r in rows]):.0f} |"
+            )
     lines.append("")
 
     # 2. legs over time
     until = max(ep["cycles"] for eps in results.values() for ep in eps)
     for p in (args.p_values[0], args.p_values[-1]) if len(args.p_values) > 1 else args.p_values:
-        lines += [f"## Grounded legs per region over time, p = {p:g}", "",
-                  f"Median over seeds every {args.every} cycles (an episode that ended, stable after the last "
-                  "shift, keeps its last values). Shifts at cycles "
-                  f"{', '.join(str(c) for c in params.shift_cycles[1:])}.", "",
-                  "| cycle | W1/W2 | legs left | legs right | active left | active right |", "|---|---|---|---|---|---|"]
+        lines += [
+            f"## Grounded legs per region over time, p = {p:g}",
+            "",
+            f"Median over seeds every {args.every} cycles (an episode that ended, stable after the last "
+            "shift, keeps its last values). Shifts at cycles "
+            f"{', '.join(str(c) for c in params.shift_cycles[1:])}.",
+            "",
+            "| cycle | W1/W2 | legs left | legs right | active left | active right |",
+            "|---|---|---|---|---|---|",
+        ]
         for c, ll, lr, al, ar in legs_over_time(results[p], args.every, until):
             k = max(i for i, entry in enumerate(schedule) if entry[0] <= c)
             lines.append(f"| {c} | {schedule[k][1]:g}/{schedule[k][2]:g} | {ll:g} | {lr:g} | {al:g} | {ar:g} |")
         lines.append("")
 
     # 4. motion models and the random policy
-    lines += ["## Motion models", "",
-              "The same experiment under the other motion models (seeds 0.."
-              f"{args.model_seeds - 1}, at most {args.model_cycles} cycles), and whether a lone module rolling "
-              "over a static leg can reach any site below the leg's SEED when that SEED is one layer above "
-              "the floor (breadth-first search over single rolls, three leg shapes).", "",
-              "| motion model | most grounded legs | success | reaches the floor spot |", "|---|---|---|---|"]
+    lines += [
+        "## Motion models",
+        "",
+        "The same experiment under the other motion models (seeds 0.."
+        f"{args.model_seeds - 1}, at most {args.model_cycles} cycles), and whether a lone module rolling "
+        "over a static leg can reach any site below the leg's SEED when that SEED is one layer above "
+        "the floor (breadth-first search over single rolls, three leg shapes).",
+        "",
+        "| motion model | most grounded legs | success | reaches the floor spot |",
+        "|---|---|---|---|",
+    ]
     minimal_best = max(int(ep["series"]["grounded_legs"].max()) for ep in results[args.p_values[0]])
     minimal_ok = sum(ep["success"] for ep in results[args.p_values[0]])
-    lines.append(f"| minimal (above, p = {args.p_values[0]:g}) | {minimal_best} | {minimal_ok}/{args.seeds} | "
-                 f"{'yes' if reach_floor_spot('minimal') else 'no'} |")
+    lines.append(
+        f"| minimal (above, p = {args.p_values[0]:g}) | {minimal_best} | {minimal_ok}/{args.seeds} | "
+        f"{'yes' if reach_floor_spot('minimal') else 'no'} |"
+    )
     for model in ("sphere", "rounded", "rhombic"):
         overrides = {**base, "motion_model": model, "max_cycles": args.model_cycles}
         eps = [run(task_id, overrides, seed) for seed in range(args.model_seeds)]
         best = max(int(ep["series"]["grounded_legs"].max()) for ep in eps)
         print(f"{model}: most grounded legs {best}", flush=True)
-        lines.append(f"| {model} | {best} | {sum(ep['success'] for ep in eps)}/{len(eps)} | "
-                     f"{'yes' if reach_floor_spot(model) else 'no'} |")
+        lines.append(
+            f"| {model} | {best} | {sum(ep['success'] for ep in eps)}/{len(eps)} | "
+            f"{'yes' if reach_floor_spot(model) else 'no'} |"
+        )
     lines.append("")
 
-    lines += ["## Random policy", "",
-              f"The `random` policy on the same experiment (seeds 0..{args.random_seeds - 1}) next to the "
-              "hand-coded one: team reward summed over the episode, most grounded legs, success.", "",
-              "| policy | reward per cycle | most grounded legs | success | cycles |", "|---|---|---|---|---|"]
-    for name, eps in (("table (p = %g)" % args.p_values[0], results[args.p_values[0]]),
-                      ("random", [run(task_id, base, seed, policy="random") for seed in range(args.random_seeds)])):
+    lines += [
+        "## Random policy",
+        "",
+        f"The `random` policy on the same experiment (seeds 0..{args.random_seeds - 1}) next to the "
+        "hand-coded one: team reward summed over the episode, most grounded legs, success.",
+        "",
+        "| policy | reward per cycle | most grounded legs | success | cycles |",
+        "|---|---|---|---|---|",
+    ]
+    for name, eps in (
+        (f"table (p = {args.p_values[0]:g})", results[args.p_values[0]]),
+        ("random", [run(task_id, base, seed, policy="random") for seed in range(args.random_seeds)]),
+    ):
         per_cycle = [ep["reward"] / max(ep["cycles"], 1) for ep in eps]
-        lines.append(f"| {name} | {np.median(per_cycle):.3f} | "
-                     f"{max(int(ep['series']['grounded_legs'].max()) for ep in eps)} | "
-                     f"{sum(ep['success'] for ep in eps)}/{len(eps)} | {med_range([ep['cycles'] for ep in eps])} |")
+        lines.append(
+            f"| {name} | {np.median(per_cycle):.3f} | "
+            f"{max(int(ep['series']['grounded_legs'].max()) for ep in eps)} | "
+            f"{sum(ep['success'] for ep in eps)}/{len(eps)} | {med_range([ep['cycles'] for ep in eps])} |"
+        )
     seconds = [ep["seconds"] for eps in results.values() for ep in eps]
-    lines += ["", f"Episode wall time (hand-coded, all p): median {np.median(seconds):.1f} s; whole run "
-              f"{(time.perf_counter() - began) / 60:.1f} min.", ""]
+    lines += [
+        "",
+        f"Episode wall time (hand-coded, all p): median {np.median(seconds):.1f} s; whole run "
+        f"{(time.perf_counter() - began) / 60:.1f} min.",
+        "",
+    ]
 
     text = "\n".join(lines)
     if args.out:

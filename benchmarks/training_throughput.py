@@ -111,14 +111,17 @@ def sb3_training(task: str, overrides: dict, steps: int, n_copies: int, *, profi
     for (file, _, func), (_, _, _, ct, _) in stats.items():
         key = f"{Path(file).name}:{func}"
         cum[key] = max(cum.get(key, 0.0), ct)
-    parts = {"engine cycle (env.step_arrays)": cum.get("env.py:step_arrays", 0.0),
-             "observation kernel (env.observe_arrays)": cum.get("env.py:observe_arrays", 0.0),
-             "observation encoding (flatten)": cum.get("flatten.py:encode_fields", 0.0),
-             "adapter step total (ProteoVecEnv.step_wait)": cum.get("sb3.py:step_wait", 0.0),
-             "rollout collection total": cum.get("ppo_mask.py:collect_rollouts", 0.0),
-             "PPO update (train)": cum.get("ppo_mask.py:train", 0.0)}
-    parts["policy forward + buffer (collection minus adapter)"] = (parts["rollout collection total"]
-                                                                    - parts["adapter step total (ProteoVecEnv.step_wait)"])
+    parts = {
+        "engine cycle (env.step_arrays)": cum.get("env.py:step_arrays", 0.0),
+        "observation kernel (env.observe_arrays)": cum.get("env.py:observe_arrays", 0.0),
+        "observation encoding (flatten)": cum.get("flatten.py:encode_fields", 0.0),
+        "adapter step total (ProteoVecEnv.step_wait)": cum.get("sb3.py:step_wait", 0.0),
+        "rollout collection total": cum.get("ppo_mask.py:collect_rollouts", 0.0),
+        "PPO update (train)": cum.get("ppo_mask.py:train", 0.0),
+    }
+    parts["policy forward + buffer (collection minus adapter)"] = (
+        parts["rollout collection total"] - parts["adapter step total (ProteoVecEnv.step_wait)"]
+    )
     total = seconds
     return steps / seconds, {k: {"seconds": round(v, 2), "share": round(v / total, 3)} for k, v in parts.items()}
 
@@ -135,9 +138,19 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
 
     base = parse_args(ppo.Args, ["--config", config]) if Path(config).is_file() else ppo.Args()
     with tempfile.TemporaryDirectory() as tmp:
-        args = dataclasses.replace(base, task=task, control=control, env=overrides, run_dir=f"{tmp}/run",
-                                   total_steps=steps, checkpoint_every=10**12, time_limit_minutes=0.0,
-                                   tensorboard=False, progress_bar=False, **(variant or {}))
+        args = dataclasses.replace(
+            base,
+            task=task,
+            control=control,
+            env=overrides,
+            run_dir=f"{tmp}/run",
+            total_steps=steps,
+            checkpoint_every=10**12,
+            time_limit_minutes=0.0,
+            tensorboard=False,
+            progress_bar=False,
+            **(variant or {}),
+        )
         ppo.train(args)
         with open(f"{tmp}/run/progress.csv") as fh:
             rows = list(csv.DictReader(fh))
@@ -145,14 +158,25 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
         raise ValueError(f"steps={steps} gave {len(rows)} updates; allowed: enough steps for at least 4")
     first, timed = rows[1], rows[2:]
     seconds = float(timed[-1]["seconds"]) - float(first["seconds"])
-    parts = {name: sum(float(r[f"time/{name}_seconds"]) for r in timed) for name in ("env", "encode", "forward", "update")}
-    return {"control": control, "config": config, "arch": args.arch, "hidden": list(args.hidden),
-            "n_envs": args.n_envs, "n_groups": args.n_groups, "n_steps": args.n_steps,
-            "minibatch_size": args.minibatch_size, "n_epochs": args.n_epochs,
-            "message_encoding": args.message_encoding,
-            "agent_steps": int(float(timed[-1]["agent_steps"]) - float(first["agent_steps"])), "seconds": round(seconds, 2),
-            "agent_steps_per_s": (float(timed[-1]["agent_steps"]) - float(first["agent_steps"])) / seconds,
-            "share": {k: round(v / seconds, 3) for k, v in parts.items()}}
+    parts = {
+        name: sum(float(r[f"time/{name}_seconds"]) for r in timed) for name in ("env", "encode", "forward", "update")
+    }
+    return {
+        "control": control,
+        "config": config,
+        "arch": args.arch,
+        "hidden": list(args.hidden),
+        "n_envs": args.n_envs,
+        "n_groups": args.n_groups,
+        "n_steps": args.n_steps,
+        "minibatch_size": args.minibatch_size,
+        "n_epochs": args.n_epochs,
+        "message_encoding": args.message_encoding,
+        "agent_steps": int(float(timed[-1]["agent_steps"]) - float(first["agent_steps"])),
+        "seconds": round(seconds, 2),
+        "agent_steps_per_s": (float(timed[-1]["agent_steps"]) - float(first["agent_steps"])) / seconds,
+        "share": {k: round(v / seconds, 3) for k, v in parts.items()},
+    }
 
 
 def main(argv=None) -> int:
@@ -164,16 +188,28 @@ def main(argv=None) -> int:
     parser.add_argument("--cycles", type=int, default=2000, help="cycles for the environment-only measurements")
     parser.add_argument("--steps", type=int, default=60000, help="agent-steps of MaskablePPO training")
     parser.add_argument("--ppo-steps", type=int, default=1_500_000, help="agent-steps of training/ppo.py per level")
-    parser.add_argument("--ppo-config", default=None, help="hyper-parameters of training/ppo.py "
-                        "(default configs/train/ppo_<task>_move.yaml)")
-    parser.add_argument("--only", choices=("all", "training"), default="all",
-                        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates")
-    parser.add_argument("--former-network", action="store_true",
-                        help="also time training/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
-                        "message features (the configs' former networks; same run)")
-    parser.add_argument("--variants", action="store_true",
-                        help="also time training/ppo.py at move with the distillation term and with "
-                        "memory=last_move (same run)")
+    parser.add_argument(
+        "--ppo-config",
+        default=None,
+        help="hyper-parameters of training/ppo.py (default configs/train/ppo_<task>_move.yaml)",
+    )
+    parser.add_argument(
+        "--only",
+        choices=("all", "training"),
+        default="all",
+        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates",
+    )
+    parser.add_argument(
+        "--former-network",
+        action="store_true",
+        help="also time training/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
+        "message features (the configs' former networks; same run)",
+    )
+    parser.add_argument(
+        "--variants",
+        action="store_true",
+        help="also time training/ppo.py at move with the distillation term and with memory=last_move (same run)",
+    )
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
@@ -185,7 +221,7 @@ def main(argv=None) -> int:
 
     overrides = yaml.safe_load(args.env) or {}
     if not isinstance(overrides, dict):
-        parser.error(f"--env {args.env!r} is not allowed; allowed: a YAML mapping such as \"{{n_modules: 40}}\"")
+        parser.error(f'--env {args.env!r} is not allowed; allowed: a YAML mapping such as "{{n_modules: 40}}"')
     overrides.setdefault("max_cycles", 300)
     if args.modules is not None or args.task.startswith("chain"):
         overrides.setdefault("n_modules", args.modules or 12)
@@ -193,39 +229,59 @@ def main(argv=None) -> int:
 
     limit_threads(1)
     torch.manual_seed(0)
-    result = {"machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(),
-                          "python": platform.python_version(), "torch": torch.__version__,
-                          "sb3_contrib": sb3_contrib.__version__, "numpy": np.__version__,
-                          "numba_num_threads": os.environ.get("NUMBA_NUM_THREADS"),
-                          "load_average_before": os.getloadavg()},
-              "task": args.task, "env": overrides, "modules": overrides.get("n_modules"), "copies": args.copies}
+    result = {
+        "machine": {
+            "cpu_count": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+            "sb3_contrib": sb3_contrib.__version__,
+            "numpy": np.__version__,
+            "numba_num_threads": os.environ.get("NUMBA_NUM_THREADS"),
+            "load_average_before": os.getloadavg(),
+        },
+        "task": args.task,
+        "env": overrides,
+        "modules": overrides.get("n_modules"),
+        "copies": args.copies,
+    }
     task = (args.task, overrides)
     if args.only == "all":
         result["raw_env_agent_steps_per_s"] = raw_env(*task, args.cycles)
         result["sb3_adapter_agent_steps_per_s"] = sb3_adapter(*task, args.cycles // args.copies, args.copies)
         result["torchrl_env_agent_steps_per_s"] = torchrl_env(*task, args.cycles // args.copies, args.copies)
     result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
-    result["ppo"] = {level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config)
-                     for level in ("full", "move")}
+    result["ppo"] = {
+        level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config) for level in ("full", "move")
+    }
     if args.former_network:
         former = "move, arch=mlp, n_epochs=2, per-direction messages"
-        result["ppo"][former] = ppo_training(*task, args.ppo_steps, control="move", config=ppo_config,
-                                             variant={"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"})
+        result["ppo"][former] = ppo_training(
+            *task,
+            args.ppo_steps,
+            control="move",
+            config=ppo_config,
+            variant={"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"},
+        )
         result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
     if args.variants:
-        for name, variant in (("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
-                              ("move, memory=last_move", {"memory": "last_move"}),
-                              ("move, value_norm", {"value_norm": True}),
-                              ("move, recurrent=64 (GRU)", {"recurrent": 64}),
-                              ("full, memory=last_action", {"memory": "last_action"})):
-            result["ppo"][name] = ppo_training(*task, args.ppo_steps, control=name.split(",")[0], config=ppo_config,
-                                               variant=variant)
+        for name, variant in (
+            ("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
+            ("move, memory=last_move", {"memory": "last_move"}),
+            ("move, value_norm", {"value_norm": True}),
+            ("move, recurrent=64 (GRU)", {"recurrent": 64}),
+            ("full, memory=last_action", {"memory": "last_action"}),
+        ):
+            result["ppo"][name] = ppo_training(
+                *task, args.ppo_steps, control=name.split(",")[0], config=ppo_config, variant=variant
+            )
     result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
     result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
     result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
     if args.only == "all":
         result["sb3_training_profiled_agent_steps_per_s"], result["sb3_profile"] = sb3_training(
-            *task, args.steps, args.copies, profile=True)
+            *task, args.steps, args.copies, profile=True
+        )
         result["raw_env_agent_steps_per_s_after"] = raw_env(*task, args.cycles)
     result["machine"]["load_average_after"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -234,12 +290,16 @@ def main(argv=None) -> int:
         if k.endswith("per_s") or k.endswith("over_sb3"):
             print(f"{k:45s} {v:10.2f}")
     for level, r in result["ppo"].items():
-        print(f"  training/ppo.py at {level}: {r['agent_steps_per_s']:.0f} agent-steps/s; "
-              + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items()))
+        print(
+            f"  training/ppo.py at {level}: {r['agent_steps_per_s']:.0f} agent-steps/s; "
+            + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items())
+        )
     for k, v in (result.get("sb3_profile") or {}).items():
         print(f"  {k:55s} {v['seconds']:8.2f} s  {100 * v['share']:5.1f} %")
-    print(f"load average before/after: {result['machine']['load_average_before']} / "
-          f"{result['machine']['load_average_after']}")
+    print(
+        f"load average before/after: {result['machine']['load_average_before']} / "
+        f"{result['machine']['load_average_after']}"
+    )
     return 0
 
 

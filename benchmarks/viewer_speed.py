@@ -29,7 +29,6 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-
 from machine_info import describe
 
 PLAYBACK = """
@@ -75,12 +74,27 @@ def episode_of_size(n: int, frames: int, seed: int):
     modes = (rng.integers(0, 4, (1, n)) + np.cumsum(changes * rng.integers(1, 4, (t, n)), axis=0)) % 4
     scents = np.clip(rng.integers(0, 20, (1, 1, n)) + np.cumsum(rng.integers(-1, 2, (t, 1, n)), axis=0), 0, 40)
     return Recording(
-        task_id="sandbox-v0", overrides={}, config={}, seed=seed, policy="synthetic", success=False,
-        package_version="benchmark", mode_names=("SLEEP", "SEARCH", "SEED", "FINAL"), n_agents=n, box=tuple(box),
-        floor=True, scent_max=65535, cycles=np.arange(t, dtype=np.int64), positions=positions,
-        modes=modes.astype(np.int32), scents=scents.astype(np.int32), anchored=np.zeros(n, dtype=bool),
-        solid_sites=np.zeros((0, 3), dtype=np.int64), object_sites=np.zeros((0, 3), dtype=np.int64),
-        series={"moved": movers.sum(axis=1).astype(float), "components": np.ones(t)})
+        task_id="sandbox-v0",
+        overrides={},
+        config={},
+        seed=seed,
+        policy="synthetic",
+        success=False,
+        package_version="benchmark",
+        mode_names=("SLEEP", "SEARCH", "SEED", "FINAL"),
+        n_agents=n,
+        box=tuple(box),
+        floor=True,
+        scent_max=65535,
+        cycles=np.arange(t, dtype=np.int64),
+        positions=positions,
+        modes=modes.astype(np.int32),
+        scents=scents.astype(np.int32),
+        anchored=np.zeros(n, dtype=bool),
+        solid_sites=np.zeros((0, 3), dtype=np.int64),
+        object_sites=np.zeros((0, 3), dtype=np.int64),
+        series={"moved": movers.sum(axis=1).astype(float), "components": np.ones(t)},
+    )
 
 
 def bench_size(browser, n: int, frames: int, seconds: float, seed: int, folder: Path) -> dict:
@@ -89,22 +103,36 @@ def bench_size(browser, n: int, frames: int, seconds: float, seed: int, folder: 
     page = write_html(episode_of_size(n, frames, seed), folder / f"episode_{n}.html")
     browser.open(page, timeout=300)
     if browser.evaluate("document.body.dataset.errors") != "0" or browser.errors():
-        raise RuntimeError(f"the page reported errors: {browser.errors()} {browser.evaluate('document.body.dataset.error')}")
+        raise RuntimeError(
+            f"the page reported errors: {browser.errors()} {browser.evaluate('document.body.dataset.error')}"
+        )
     load_ms = float(browser.evaluate("document.body.dataset.loadMs"))
     result = browser.evaluate(PLAYBACK.replace("SECONDS", repr(float(seconds))), await_promise=True)
     intervals, scripts = np.array(result["intervals"]), np.array(result["scripts"])
-    return {"modules": n, "cycles": frames, "page_mb": page.stat().st_size / 1e6, "load_s": load_ms / 1000,
-            "frames": result["frames"], "fps": result["frames"] / result["seconds"],
-            "frame_ms": float(intervals.mean()), "frame_ms_p95": float(np.percentile(intervals, 95)),
-            "script_ms": float(scripts.mean())}
+    return {
+        "modules": n,
+        "cycles": frames,
+        "page_mb": page.stat().st_size / 1e6,
+        "load_s": load_ms / 1000,
+        "frames": result["frames"],
+        "fps": result["frames"] / result["seconds"],
+        "frame_ms": float(intervals.mean()),
+        "frame_ms_p95": float(np.percentile(intervals, 95)),
+        "script_ms": float(scripts.mean()),
+    }
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| modules | cycles | page (MB) | load (s) | frames per second | frame time (ms, mean / p95) | "
-             "script per frame (ms) |", "|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        "| modules | cycles | page (MB) | load (s) | frames per second | frame time (ms, mean / p95) | "
+        "script per frame (ms) |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
-        lines.append(f"| {r['modules']:,} | {r['cycles']:,} | {r['page_mb']:.2f} | {r['load_s']:.2f} | {r['fps']:.1f} | "
-                     f"{r['frame_ms']:.1f} / {r['frame_ms_p95']:.1f} | {r['script_ms']:.1f} |")
+        lines.append(
+            f"| {r['modules']:,} | {r['cycles']:,} | {r['page_mb']:.2f} | {r['load_s']:.2f} | {r['fps']:.1f} | "
+            f"{r['frame_ms']:.1f} / {r['frame_ms_p95']:.1f} | {r['script_ms']:.1f} |"
+        )
     return "\n".join(lines)
 
 
@@ -138,18 +166,20 @@ def main(argv=None) -> int:
             json.dump({"machine": info, "results": rows}, f, indent=2)
     if args.markdown:
         with open(args.markdown, "w") as f:
-            f.write("# Viewer playback speed\n\n"
-                    "From `python benchmarks/viewer_speed.py --sizes "
-                    f"{' '.join(map(str, args.sizes))} --frames {args.frames} --seconds {args.seconds:g}`: the page "
-                    "`proteo view` writes, opened in headless Chromium with WebGL on SwiftShader (software "
-                    "rendering on the CPU, no GPU), playing a synthetic episode one cycle per animation frame "
-                    "(5% of the modules step and 1% change mode each cycle, every scent changes). Load is "
-                    "from navigation start to the first picture (data inflated). Frames per second counts "
-                    "pictures drawn per wall-clock second; script is the JavaScript part of a frame (seek, "
-                    "instance update, draw calls); the rest is rasterising and compositing. The machine may "
-                    "be shared: its load is recorded. See `docs/viewer.md` for the viewer and "
-                    "`docs/render_speed.md` for the matplotlib pictures.\n\n"
-                    f"{text}\n\nMachine: {described}.\n")
+            f.write(
+                "# Viewer playback speed\n\n"
+                "From `python benchmarks/viewer_speed.py --sizes "
+                f"{' '.join(map(str, args.sizes))} --frames {args.frames} --seconds {args.seconds:g}`: the page "
+                "`proteo view` writes, opened in headless Chromium with WebGL on SwiftShader (software "
+                "rendering on the CPU, no GPU), playing a synthetic episode one cycle per animation frame "
+                "(5% of the modules step and 1% change mode each cycle, every scent changes). Load is "
+                "from navigation start to the first picture (data inflated). Frames per second counts "
+                "pictures drawn per wall-clock second; script is the JavaScript part of a frame (seek, "
+                "instance update, draw calls); the rest is rasterising and compositing. The machine may "
+                "be shared: its load is recorded. See `docs/viewer.md` for the viewer and "
+                "`docs/render_speed.md` for the matplotlib pictures.\n\n"
+                f"{text}\n\nMachine: {described}.\n"
+            )
     return 0
 
 

@@ -7,14 +7,26 @@ Quick start::
     observations, infos = env.reset(seed=0)
 """
 
+from .batched import BatchedEnv
 from .config import ConfigError, EnvConfig
 from .core.lattice import DIRECTIONS
 from .core.motion import MOTION_MODELS
 from .core.world import LayoutError, Physics
 from .env import ProteoEnv, WorldView
-from .batched import BatchedEnv
 from .registry import TASKS, make, make_batched
 
-__all__ = ["BatchedEnv", "ConfigError", "DIRECTIONS", "EnvConfig", "LayoutError", "MOTION_MODELS", "Physics",
-           "ProteoEnv", "TASKS", "WorldView", "make", "make_batched"]
+__all__ = [
+    "BatchedEnv",
+    "ConfigError",
+    "DIRECTIONS",
+    "EnvConfig",
+    "LayoutError",
+    "MOTION_MODELS",
+    "Physics",
+    "ProteoEnv",
+    "TASKS",
+    "WorldView",
+    "make",
+    "make_batched",
+]
 __version__ = "0.1.0"

@@ -80,11 +80,22 @@ class BatchedEnv:
 
     def build_world(self, task: Task, layout: Layout, extent=None) -> World:
         """The world of ``layout`` under this env's physics and the task's scent set-up."""
-        return World(size=layout.size, positions=layout.positions, n_agents=layout.n_agents,
-                     anchored=layout.anchored, solid=layout.solid, object_sites=layout.object_sites,
-                     floor=layout.floor, n_channels=task.n_channels, surface_channels=task.surface_channels,
-                     passive_role=task.passive_role, modes=task.initial_modes(layout),
-                     physics=self.config.physics, obs_radius=self.config.obs_radius, extent=extent)
+        return World(
+            size=layout.size,
+            positions=layout.positions,
+            n_agents=layout.n_agents,
+            anchored=layout.anchored,
+            solid=layout.solid,
+            object_sites=layout.object_sites,
+            floor=layout.floor,
+            n_channels=task.n_channels,
+            surface_channels=task.surface_channels,
+            passive_role=task.passive_role,
+            modes=task.initial_modes(layout),
+            physics=self.config.physics,
+            obs_radius=self.config.obs_radius,
+            extent=extent,
+        )
 
     @property
     def worlds(self) -> list[World]:
@@ -145,8 +156,10 @@ class BatchedEnv:
         which = np.asarray(which)
         rows = np.flatnonzero(which) if which.dtype == np.bool_ else which.astype(np.int64).reshape(-1)
         if rows.size and (rows.min() < 0 or rows.max() >= self.n_envs):
-            raise ValueError(f"world {int(rows.max() if rows.max() >= self.n_envs else rows.min())} is not "
-                             f"allowed; allowed: 0..{self.n_envs - 1}")
+            raise ValueError(
+                f"world {int(rows.max() if rows.max() >= self.n_envs else rows.min())} is not "
+                f"allowed; allowed: 0..{self.n_envs - 1}"
+            )
         layouts = {int(b): self._build_layout(int(b)) for b in rows}
         extent = self.worlds[0].shape.extent
         needed = tuple(np.max([extent] + [layout.size for layout in layouts.values()], axis=0))
@@ -176,9 +189,11 @@ class BatchedEnv:
         """World ``b``'s next start layout, from its generator; its module and agent counts checked."""
         layout = self.tasks[b].build_layout(self._rngs[b])
         if layout.n_agents != self.n_agents or len(layout.positions) != self.n_modules:
-            raise ValueError(f"task {self.tasks[0].task_id()} built {layout.n_agents} agents and "
-                             f"{len(layout.positions)} modules after {self.n_agents} and "
-                             f"{self.n_modules} at construction; the counts must stay fixed")
+            raise ValueError(
+                f"task {self.tasks[0].task_id()} built {layout.n_agents} agents and "
+                f"{len(layout.positions)} modules after {self.n_agents} and "
+                f"{self.n_modules} at construction; the counts must stay fixed"
+            )
         return layout
 
     def _start_episode(self, b: int) -> None:
@@ -196,14 +211,17 @@ class BatchedEnv:
             raise ValueError(f"actions dtype {actions.dtype} is not allowed; allowed: integers")
         expected = (self.n_envs, self.n_agents, len(fields))
         if actions.shape != expected:
-            raise ValueError(f"actions shape {actions.shape} is not allowed{self.at_level}; allowed: {expected} "
-                             f"(worlds, agents, {list(fields)})")
+            raise ValueError(
+                f"actions shape {actions.shape} is not allowed{self.at_level}; allowed: {expected} "
+                f"(worlds, agents, {list(fields)})"
+            )
         bad = (actions < 0) | (actions >= nvec)
         if bad.any():
             b, a, f = np.argwhere(bad)[0]
             where = f"world {b}, " if self.n_envs > 1 else ""
-            raise ValueError(f"action of {where}module_{a}: {fields[f]}={actions[b, a, f]} is not "
-                             f"allowed; allowed: 0..{nvec[f] - 1}")
+            raise ValueError(
+                f"action of {where}module_{a}: {fields[f]}={actions[b, a, f]} is not allowed; allowed: 0..{nvec[f] - 1}"
+            )
         return actions.astype(np.int64, copy=False)
 
     def full_actions(self, actions: np.ndarray) -> np.ndarray:
@@ -244,8 +262,12 @@ class BatchedEnv:
         actions = self.full_actions(self.check_actions(actions))
         lay = self.action_layout
         self.last_moved = self.engine.step(
-            move=actions[..., lay.move], mode=actions[..., lay.mode], scent_role=actions[..., lay.roles],
-            message_target=actions[..., lay.message_target], message_value=actions[..., lay.message_value])
+            move=actions[..., lay.move],
+            mode=actions[..., lay.mode],
+            scent_role=actions[..., lay.roles],
+            message_target=actions[..., lay.message_target],
+            message_value=actions[..., lay.message_value],
+        )
         self.cycles += 1
         self._observed = None
         terms = []

@@ -21,7 +21,6 @@ import numpy as np
 
 from .core.world import Physics
 
-
 CONTROL_LEVELS = ("move", "move+mode", "full")
 """The control levels (:mod:`proteo_env.control`), from the easiest to learn to the hardest."""
 
@@ -63,8 +62,9 @@ class EnvConfig:
         if self.obs_radius not in (1, 2):
             raise ConfigError(f"obs_radius={self.obs_radius!r} is not allowed; allowed: 1 or 2")
         if self.control not in CONTROL_LEVELS:
-            raise ConfigError(f"control={self.control!r} is not allowed; allowed: "
-                              f"{', '.join(map(repr, CONTROL_LEVELS))}")
+            raise ConfigError(
+                f"control={self.control!r} is not allowed; allowed: {', '.join(map(repr, CONTROL_LEVELS))}"
+            )
 
 
 ENV_KEYS = tuple(f.name for f in dataclasses.fields(EnvConfig) if f.name != "physics")
@@ -96,8 +96,10 @@ def build(cls, values: dict, *, where: str = ""):
         if key not in fields:
             raise ConfigError(f"{where}unknown key {key!r}; allowed: {', '.join(sorted(fields))}")
         if not _type_ok(value, hints[key]):
-            raise ConfigError(f"{where}{key}={value!r} is not allowed; allowed: a value of type "
-                              f"{getattr(hints[key], '__name__', hints[key])}")
+            raise ConfigError(
+                f"{where}{key}={value!r} is not allowed; allowed: a value of type "
+                f"{getattr(hints[key], '__name__', hints[key])}"
+            )
         if typing.get_origin(hints[key]) is tuple and isinstance(value, list):
             values = {**values, key: tuple(value)}
     try:
@@ -118,8 +120,9 @@ def split_overrides(overrides: dict, task_params_cls, *, task_name: str):
     physics = build(Physics, {k: v for k, v in overrides.items() if k in PHYSICS_KEYS})
     env = build(EnvConfig, {k: v for k, v in overrides.items() if k in ENV_KEYS})
     env = dataclasses.replace(env, physics=physics)
-    params = build(task_params_cls, {k: v for k, v in overrides.items() if k in task_keys},
-                   where=f"task {task_name!r}: ")
+    params = build(
+        task_params_cls, {k: v for k, v in overrides.items() if k in task_keys}, where=f"task {task_name!r}: "
+    )
     return env, params
 
 
@@ -134,8 +137,9 @@ def parse_yaml(text: str, where: str):
         mark = getattr(err, "problem_mark", None)
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(err, "problem", None) or str(err)
-        raise ConfigError(f"{where} is not valid YAML{at} ({problem}); allowed: YAML such as "
-                          "'key: value' lines or {key: value}") from None
+        raise ConfigError(
+            f"{where} is not valid YAML{at} ({problem}); allowed: YAML such as 'key: value' lines or {{key: value}}"
+        ) from None
 
 
 def load_yaml(path, what: str = "config file", example: str = "a path to a YAML file"):

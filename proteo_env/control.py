@@ -42,9 +42,9 @@ move-dependent memory is their heading and whether they asked to move).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Callable
 
 import numpy as np
 
@@ -111,8 +111,10 @@ def autopilot_factory(task_name: str) -> Callable:
                 break
     if task_name not in _autopilots:
         known = sorted(set(_autopilots) | {p.name for p in metadata.entry_points(group=AUTOPILOT_GROUP)})
-        raise ConfigError(f"control='move' needs the hand-coded rules of task {task_name!r}, and none is "
-                          f"registered; allowed: tasks with rules ({', '.join(known) or 'none found'}); "
-                          "install the project (pip install -e .) or call "
-                          "proteo_env.control.register_autopilot")
+        raise ConfigError(
+            f"control='move' needs the hand-coded rules of task {task_name!r}, and none is "
+            f"registered; allowed: tasks with rules ({', '.join(known) or 'none found'}); "
+            "install the project (pip install -e .) or call "
+            "proteo_env.control.register_autopilot"
+        )
     return _autopilots[task_name]

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from .batched import BatchedEnv
 from .config import EnvConfig
 from .core.world import World
 from .spaces import ModuleActionSpace, ObservationBuffers, observation_space
-from .batched import BatchedEnv
 from .tasks.base import Task
 
 
@@ -89,14 +90,19 @@ class ProteoEnv(ParallelEnv):
     :meth:`step_arrays` / :meth:`observe_arrays`.
     """
 
-    metadata = {"name": "proteo_v0", "render_modes": ["ansi", "rgb_array", "human"], "render_fps": 10,
-                "is_parallelizable": True}
+    metadata = {
+        "name": "proteo_v0",
+        "render_modes": ["ansi", "rgb_array", "human"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
 
-    def __init__(self, task: Task, config: EnvConfig | None = None, render_mode: str | None = None,
-                 camera=None):
+    def __init__(self, task: Task, config: EnvConfig | None = None, render_mode: str | None = None, camera=None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r} is not allowed; allowed: None or "
-                             f"{', '.join(self.metadata['render_modes'])}")
+            raise ValueError(
+                f"render_mode={render_mode!r} is not allowed; allowed: None or "
+                f"{', '.join(self.metadata['render_modes'])}"
+            )
         self.task = task
         self.config = config or EnvConfig()
         self.render_mode = render_mode
@@ -113,8 +119,12 @@ class ProteoEnv(ParallelEnv):
         self.agents: list[str] = []
         self._action_space = self._level_space()
         self._observation_space = observation_space(
-            n_sites=self.batch.n_sites, n_channels=task.n_channels, n_modes=len(task.modes),
-            n_message_values=task.n_message_values, scent_max=self.config.physics.scent_max)
+            n_sites=self.batch.n_sites,
+            n_channels=task.n_channels,
+            n_modes=len(task.modes),
+            n_message_values=task.n_message_values,
+            scent_max=self.config.physics.scent_max,
+        )
         n_state = self.batch.n_modules * (4 + task.n_channels)
         self.state_space = spaces.Box(low=-1, high=np.iinfo(np.int32).max, shape=(n_state,), dtype=np.int32)
 
@@ -165,8 +175,12 @@ class ProteoEnv(ParallelEnv):
         # the same keys as every step's info (TorchRL builds its info spec from the reset's)
         world = self.batch.worlds[0]
         terms = self.task.reward_terms(world, np.zeros(world.n_agents, dtype=np.bool_))
-        info = {"cycle": 0, "moved": 0, **{f"reward/{k}": 0.0 for k in terms},
-                **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()}}
+        info = {
+            "cycle": 0,
+            "moved": 0,
+            **{f"reward/{k}": 0.0 for k in terms},
+            **{f"metric/{k}": v for k, v in self.batch.metrics()[0].items()},
+        }
         return buffers.per_agent(self.agents), {a: info for a in self.agents}
 
     def step(self, actions):
@@ -178,9 +192,12 @@ class ProteoEnv(ParallelEnv):
         metrics = self.batch.metrics()[0]
         success = bool(self.batch.success()[0])
         reward = float(sum(rewards_terms.values()))
-        info = {"cycle": self.cycle, "moved": int(self.last_moved.sum()),
-                **{f"reward/{k}": v for k, v in rewards_terms.items()},
-                **{f"metric/{k}": v for k, v in metrics.items()}}
+        info = {
+            "cycle": self.cycle,
+            "moved": int(self.last_moved.sum()),
+            **{f"reward/{k}": v for k, v in rewards_terms.items()},
+            **{f"metric/{k}": v for k, v in metrics.items()},
+        }
         truncated = self.cycle >= self.max_cycles and not success
         agents = self.agents
         observations = buffers.per_agent(self.agents)
@@ -201,11 +218,14 @@ class ProteoEnv(ParallelEnv):
         if len(actions) != len(self.agents) or not all(a in actions for a in self.agents):
             missing = [a for a in self.agents if a not in actions]
             if missing:
-                raise ValueError(f"actions missing for {len(missing)} agents (first: {missing[0]}); "
-                                 "allowed: one action for every agent in env.agents")
+                raise ValueError(
+                    f"actions missing for {len(missing)} agents (first: {missing[0]}); "
+                    "allowed: one action for every agent in env.agents"
+                )
             unknown = [a for a in actions if a not in set(self.agents)]
-            raise ValueError(f"actions for {len(unknown)} unknown agents (first: {unknown[0]!r}); "
-                             "allowed: the agents in env.agents")
+            raise ValueError(
+                f"actions for {len(unknown)} unknown agents (first: {unknown[0]!r}); allowed: the agents in env.agents"
+            )
         shapes = [(), (1,)] if scalar else [(len(fields),)]
         try:
             batch = np.asarray([actions[a] for a in self.agents])
@@ -216,8 +236,9 @@ class ProteoEnv(ParallelEnv):
             for a in self.agents:
                 value = np.asarray(actions[a])
                 if value.shape not in shapes:
-                    raise ValueError(f"action of {a}: shape {value.shape} is not allowed{self.batch.at_level}; "
-                                     f"allowed: {allowed}")
+                    raise ValueError(
+                        f"action of {a}: shape {value.shape} is not allowed{self.batch.at_level}; allowed: {allowed}"
+                    )
                 if value.dtype.kind not in "iu":
                     raise ValueError(f"action of {a}: dtype {value.dtype} is not allowed; allowed: integers")
         return batch.reshape(len(self.agents), len(fields)).astype(np.int64, copy=False)
@@ -233,8 +254,10 @@ class ProteoEnv(ParallelEnv):
         actions = np.asarray(actions)
         expected = (self.batch.n_agents, len(self.control_fields))
         if actions.shape != expected:
-            raise ValueError(f"actions shape {actions.shape} is not allowed{self.batch.at_level}; "
-                             f"allowed: {expected}, one row per agent of {list(self.control_fields)}")
+            raise ValueError(
+                f"actions shape {actions.shape} is not allowed{self.batch.at_level}; "
+                f"allowed: {expected}, one row per agent of {list(self.control_fields)}"
+            )
         return self.batch.step_arrays(actions[None])[0]
 
     def observe_arrays(self) -> ObservationBuffers:
@@ -249,12 +272,22 @@ class ProteoEnv(ParallelEnv):
         if w is None:
             raise RuntimeError("no world yet; call reset() first")
         p = w.physics
-        return WorldView(positions=_read_only(w.positions), modes=_read_only(w.mode),
-                         scents=_read_only(w.scent), anchored=_read_only(w.anchored), n_agents=w.n_agents,
-                         solid_sites=_read_only(w.solid_sites), object_sites=_read_only(w.object_sites),
-                         box=w.shape.size, floor=w.floor, motion_model=p.motion_model,
-                         keep_connected=p.keep_connected, scent_max=p.scent_max,
-                         mode_names=tuple(self.task.modes), cycle=self.cycle)
+        return WorldView(
+            positions=_read_only(w.positions),
+            modes=_read_only(w.mode),
+            scents=_read_only(w.scent),
+            anchored=_read_only(w.anchored),
+            n_agents=w.n_agents,
+            solid_sites=_read_only(w.solid_sites),
+            object_sites=_read_only(w.object_sites),
+            box=w.shape.size,
+            floor=w.floor,
+            motion_model=p.motion_model,
+            keep_connected=p.keep_connected,
+            scent_max=p.scent_max,
+            mode_names=tuple(self.task.modes),
+            cycle=self.cycle,
+        )
 
     def state(self) -> np.ndarray:
         """Global state: per module ``x, y, z, mode, scent_0 .. scent_{C-1}``, flattened (int32)."""
@@ -272,19 +305,27 @@ class ProteoEnv(ParallelEnv):
             if self._viewer is None:
                 from .render.viewer import Viewer
 
-                self._viewer = Viewer(self.render_mode, self.camera, fps=self.metadata["render_fps"],
-                                      caption=self.task.task_id())
+                self._viewer = Viewer(
+                    self.render_mode, self.camera, fps=self.metadata["render_fps"], caption=self.task.task_id()
+                )
             return self._viewer.render(self.world)
         from .layouts import Layout, format_layout
 
         w = self.engine
         pos = w.positions
-        text = format_layout(Layout(size=w.shape.size, modules=pos[~w.anchored], fixed=pos[w.anchored],
-                                    solid=w.solid_sites, object_sites=w.object_sites, floor=w.floor))
+        text = format_layout(
+            Layout(
+                size=w.shape.size,
+                modules=pos[~w.anchored],
+                fixed=pos[w.anchored],
+                solid=w.solid_sites,
+                object_sites=w.object_sites,
+                floor=w.floor,
+            )
+        )
         return f"cycle {self.cycle}\n{text}"
 
     def close(self):
         if self._viewer is not None:
             self._viewer.close()
             self._viewer = None
-

@@ -105,33 +105,51 @@ def parse_layout(text: str) -> Layout:
             elif words == ["floor"]:
                 floor = True
             else:
-                raise LayoutError(f"line {lineno}: {line!r} is not a header; allowed: 'size X Y Z', 'floor', "
-                                  "or a layer starting with 'z = K'")
+                raise LayoutError(
+                    f"line {lineno}: {line!r} is not a header; allowed: 'size X Y Z', 'floor', "
+                    "or a layer starting with 'z = K'"
+                )
             continue
         for x, ch in enumerate(line):
             if ch not in LEGEND:
-                raise LayoutError(f"line {lineno}, column {x + 1}: character {ch!r} is not in the legend; "
-                                  f"allowed: {', '.join(repr(c) for c in LEGEND)}")
+                raise LayoutError(
+                    f"line {lineno}, column {x + 1}: character {ch!r} is not in the legend; "
+                    f"allowed: {', '.join(repr(c) for c in LEGEND)}"
+                )
             if ch == ".":
                 continue
             if (x + y + z) % 2:
-                raise LayoutError(f"line {lineno}, column {x + 1}: {ch!r} at ({x}, {y}, {z}) is not an FCC "
-                                  "site; allowed: '.' where x + y + z is odd")
+                raise LayoutError(
+                    f"line {lineno}, column {x + 1}: {ch!r} at ({x}, {y}, {z}) is not an FCC "
+                    "site; allowed: '.' where x + y + z is odd"
+                )
             sites[ch].append((x, y, z))
         extent[0] = max(extent[0], len(line))
         extent[1] = max(extent[1], y + 1)
         y += 1
     arr = {c: np.array(v, dtype=np.int64).reshape(-1, 3) for c, v in sites.items()}
-    return Layout(size=size or tuple(extent), modules=arr["m"], roots=arr["R"], fixed=arr["F"],
-                  solid=arr["#"], object_sites=arr["o"], floor=floor)
+    return Layout(
+        size=size or tuple(extent),
+        modules=arr["m"],
+        roots=arr["R"],
+        fixed=arr["F"],
+        solid=arr["#"],
+        object_sites=arr["o"],
+        floor=floor,
+    )
 
 
 def format_layout(layout: Layout) -> str:
     """Write a layout as text that :func:`parse_layout` reads back to the same layout."""
     X, Y, Z = layout.size
     chars = np.full((Z, Y, X), ".")
-    for ch, pts in (("m", layout.modules), ("R", layout.roots), ("F", layout.fixed),
-                    ("#", layout.solid), ("o", layout.object_sites)):
+    for ch, pts in (
+        ("m", layout.modules),
+        ("R", layout.roots),
+        ("F", layout.fixed),
+        ("#", layout.solid),
+        ("o", layout.object_sites),
+    ):
         for x, y, z in pts:
             chars[z, y, x] = ch
     lines = [f"size {X} {Y} {Z}"] + (["floor"] if layout.floor else [])
@@ -177,9 +195,9 @@ def blob_sites(n: int, rng: np.random.Generator, *, flat: bool = False) -> np.nd
 def ball_sites(n: int) -> np.ndarray:
     """``(n, 3)`` the ``n`` sites nearest the origin (ties broken by coordinates): a compact ball."""
     r = int(np.ceil((3 * n) ** (1 / 3))) + 2
-    g = np.mgrid[-r:r + 1, -r:r + 1, -r:r + 1].reshape(3, -1).T
+    g = np.mgrid[-r : r + 1, -r : r + 1, -r : r + 1].reshape(3, -1).T
     g = g[g.sum(axis=1) % 2 == 0]
-    order = np.lexsort((g[:, 2], g[:, 1], g[:, 0], (g ** 2).sum(axis=1)))
+    order = np.lexsort((g[:, 2], g[:, 1], g[:, 0], (g**2).sum(axis=1)))
     return g[order[:n]].astype(np.int64)
 
 

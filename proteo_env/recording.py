@@ -113,10 +113,18 @@ class Recording:
 
         if caption is None:
             caption = f"{self.task_id} · {self.policy} · cycle {int(self.cycles[frame])}"
-        return Scene(positions=self.positions[frame], modes=self.modes[frame], mode_names=self.mode_names,
-                     scent=self.scents[frame, 0] if self.scents.shape[1] else None, scent_max=self.scent_max,
-                     solid_sites=self.solid_sites, object_sites=self.object_sites, box=self.box,
-                     floor=self.floor, caption=caption)
+        return Scene(
+            positions=self.positions[frame],
+            modes=self.modes[frame],
+            mode_names=self.mode_names,
+            scent=self.scents[frame, 0] if self.scents.shape[1] else None,
+            scent_max=self.scent_max,
+            solid_sites=self.solid_sites,
+            object_sites=self.object_sites,
+            box=self.box,
+            floor=self.floor,
+            caption=caption,
+        )
 
     def sites_visited(self, max_frames: int = 64) -> np.ndarray:
         """``(K, 3)`` distinct module sites of up to ``max_frames`` evenly spread frames, and the object's."""
@@ -132,13 +140,14 @@ class Recording:
         s = s[s < self.scent_max]
         return max(int(s.max()), 1) if s.size else 1
 
-    def equals(self, other: "Recording") -> bool:
+    def equals(self, other: Recording) -> bool:
         """True when every field and array is identical."""
         for f in dataclasses.fields(self):
             a, b = getattr(self, f.name), getattr(other, f.name)
             if isinstance(a, np.ndarray):
-                if not (isinstance(b, np.ndarray) and a.shape == b.shape and a.dtype == b.dtype
-                        and np.array_equal(a, b)):
+                if not (
+                    isinstance(b, np.ndarray) and a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b)
+                ):
                     return False
             elif f.name == "series":
                 if list(a) != list(b) or not all(np.array_equal(a[k], b[k], equal_nan=True) for k in a):
@@ -160,16 +169,29 @@ class Recording:
             "solid_sites": self.solid_sites.astype(np.int64).reshape(-1, 3),
             "object_sites": self.object_sites.astype(np.int64).reshape(-1, 3),
             "series": np.stack([np.asarray(v, dtype=np.float64) for v in self.series.values()], axis=1)
-            if self.series else np.zeros((self.n_frames, 0)),
+            if self.series
+            else np.zeros((self.n_frames, 0)),
         }
         header = {
-            "format": FORMAT, "format_version": FORMAT_VERSION, "package_version": self.package_version,
-            "task_id": self.task_id, "overrides": self.overrides, "config": self.config, "seed": self.seed,
-            "policy": self.policy, "success": bool(self.success), "mode_names": list(self.mode_names),
-            "n_agents": int(self.n_agents), "box": [int(v) for v in self.box], "floor": bool(self.floor),
-            "scent_max": int(self.scent_max), "series_names": list(self.series),
-            "arrays": {k: {"shape": list(a.shape), "dtype": a.dtype.str, "crc32": zlib.crc32(a.tobytes())}
-                       for k, a in arrays.items()},
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "package_version": self.package_version,
+            "task_id": self.task_id,
+            "overrides": self.overrides,
+            "config": self.config,
+            "seed": self.seed,
+            "policy": self.policy,
+            "success": bool(self.success),
+            "mode_names": list(self.mode_names),
+            "n_agents": int(self.n_agents),
+            "box": [int(v) for v in self.box],
+            "floor": bool(self.floor),
+            "scent_max": int(self.scent_max),
+            "series_names": list(self.series),
+            "arrays": {
+                k: {"shape": list(a.shape), "dtype": a.dtype.str, "crc32": zlib.crc32(a.tobytes())}
+                for k, a in arrays.items()
+            },
         }
         stored = {k: _delta(a) if k in DELTA_ARRAYS else a for k, a in arrays.items()}
         stored["header"] = np.frombuffer(json.dumps(header, default=_json_default).encode(), dtype=np.uint8)
@@ -225,15 +247,17 @@ def load(path) -> Recording:
     try:
         archive = np.load(path, allow_pickle=False)
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, zlib.error) as err:
-        raise RecordingError(f"{where} is truncated or corrupted: not a readable .npz archive ({err}); "
-                             f"{ALLOWED}") from None
+        raise RecordingError(
+            f"{where} is truncated or corrupted: not a readable .npz archive ({err}); {ALLOWED}"
+        ) from None
     if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise RecordingError(f"{where} is not a proteo recording (a bare .npy array, not an .npz archive); "
-                             f"{ALLOWED}")
+        raise RecordingError(f"{where} is not a proteo recording (a bare .npy array, not an .npz archive); {ALLOWED}")
     with archive:
         if "header" not in archive.files:
-            raise RecordingError(f"{where} is not a proteo recording (no 'header' member; found: "
-                                 f"{', '.join(archive.files) or 'nothing'}); {ALLOWED}")
+            raise RecordingError(
+                f"{where} is not a proteo recording (no 'header' member; found: "
+                f"{', '.join(archive.files) or 'nothing'}); {ALLOWED}"
+            )
         header = _read_header(archive, where)
         arrays = {name: _read_array(archive, name, header, where) for name in ARRAYS}
     return _assemble(header, arrays, where)
@@ -243,11 +267,14 @@ def _member(archive, name: str, where: str) -> np.ndarray:
     try:
         return archive[name]
     except KeyError:
-        raise RecordingError(f"{where} is not a complete recording: member {name!r} is missing "
-                             f"(found: {', '.join(archive.files)}); {ALLOWED}") from None
+        raise RecordingError(
+            f"{where} is not a complete recording: member {name!r} is missing "
+            f"(found: {', '.join(archive.files)}); {ALLOWED}"
+        ) from None
     except (zipfile.BadZipFile, EOFError, OSError, ValueError, zlib.error) as err:
-        raise RecordingError(f"{where} is truncated or corrupted: member {name!r} cannot be read ({err}); "
-                             f"{ALLOWED}") from None
+        raise RecordingError(
+            f"{where} is truncated or corrupted: member {name!r} cannot be read ({err}); {ALLOWED}"
+        ) from None
 
 
 def _read_header(archive, where: str) -> dict:
@@ -261,19 +288,37 @@ def _read_header(archive, where: str) -> dict:
         raise RecordingError(f"{where} is not a proteo recording (format {found!r}); allowed: format {FORMAT!r}")
     version = header.get("format_version")
     if version != FORMAT_VERSION:
-        raise RecordingError(f"{where}: format_version {version!r} (written by proteo "
-                             f"{header.get('package_version', '?')}) is not supported; allowed: format_version "
-                             f"{FORMAT_VERSION} (this is proteo {_package_version()})")
-    required = ("package_version", "task_id", "overrides", "config", "seed", "policy", "success", "mode_names",
-                "n_agents", "box", "floor", "scent_max", "series_names", "arrays")
+        raise RecordingError(
+            f"{where}: format_version {version!r} (written by proteo "
+            f"{header.get('package_version', '?')}) is not supported; allowed: format_version "
+            f"{FORMAT_VERSION} (this is proteo {_package_version()})"
+        )
+    required = (
+        "package_version",
+        "task_id",
+        "overrides",
+        "config",
+        "seed",
+        "policy",
+        "success",
+        "mode_names",
+        "n_agents",
+        "box",
+        "floor",
+        "scent_max",
+        "series_names",
+        "arrays",
+    )
     missing = [k for k in required if k not in header]
     if missing:
-        raise RecordingError(f"{where}: header field {missing[0]!r} is missing; allowed: a header with "
-                             f"{', '.join(required)}")
+        raise RecordingError(
+            f"{where}: header field {missing[0]!r} is missing; allowed: a header with {', '.join(required)}"
+        )
     missing = [k for k in ARRAYS if k not in header["arrays"]]
     if missing:
-        raise RecordingError(f"{where}: header describes no array {missing[0]!r}; allowed: a header describing "
-                             f"{', '.join(ARRAYS)}")
+        raise RecordingError(
+            f"{where}: header describes no array {missing[0]!r}; allowed: a header describing {', '.join(ARRAYS)}"
+        )
     return header
 
 
@@ -281,13 +326,14 @@ def _read_array(archive, name: str, header: dict, where: str) -> np.ndarray:
     spec = header["arrays"][name]
     stored = _member(archive, name, where)
     if list(stored.shape) != list(spec["shape"]) or stored.dtype.str != spec["dtype"]:
-        raise RecordingError(f"{where}: array {name!r} has shape {tuple(stored.shape)} and dtype {stored.dtype.str}, "
-                             f"but the header says shape {tuple(spec['shape'])} and dtype {spec['dtype']}; "
-                             "allowed: arrays that match the header (the file was altered or mixed with another)")
+        raise RecordingError(
+            f"{where}: array {name!r} has shape {tuple(stored.shape)} and dtype {stored.dtype.str}, "
+            f"but the header says shape {tuple(spec['shape'])} and dtype {spec['dtype']}; "
+            "allowed: arrays that match the header (the file was altered or mixed with another)"
+        )
     a = np.cumsum(stored, axis=0, dtype=stored.dtype) if name in DELTA_ARRAYS and len(stored) else stored
     if zlib.crc32(a.tobytes()) != spec["crc32"]:
-        raise RecordingError(f"{where}: array {name!r} does not match its checksum (corrupted or altered); "
-                             f"{ALLOWED}")
+        raise RecordingError(f"{where}: array {name!r} does not match its checksum (corrupted or altered); {ALLOWED}")
     return a
 
 
@@ -298,23 +344,39 @@ def _assemble(header: dict, a: dict, where: str) -> Recording:
     expected = {"positions": (t, n, 3), "modes": (t, n), "series": (t, len(names))}
     for name, shape in expected.items():
         if a[name].shape != shape:
-            raise RecordingError(f"{where}: array {name!r} has shape {a[name].shape}; allowed: {shape} "
-                                 f"({t} frames, {n} modules, {len(names)} series)")
+            raise RecordingError(
+                f"{where}: array {name!r} has shape {a[name].shape}; allowed: {shape} "
+                f"({t} frames, {n} modules, {len(names)} series)"
+            )
     if a["scents"].ndim != 3 or a["scents"].shape[0] != t or a["scents"].shape[2] != n:
         raise RecordingError(f"{where}: array 'scents' has shape {a['scents'].shape}; allowed: ({t}, C, {n})")
     mode_names = tuple(header["mode_names"])
     if a["modes"].size and not (0 <= a["modes"].min() and a["modes"].max() < len(mode_names)):
-        raise RecordingError(f"{where}: modes outside 0..{len(mode_names) - 1}; allowed: indices of mode_names "
-                             f"{list(mode_names)}")
+        raise RecordingError(
+            f"{where}: modes outside 0..{len(mode_names) - 1}; allowed: indices of mode_names {list(mode_names)}"
+        )
     return Recording(
-        task_id=str(header["task_id"]), overrides=dict(header["overrides"]), config=dict(header["config"]),
-        seed=header["seed"], policy=str(header["policy"]), success=bool(header["success"]),
-        package_version=str(header["package_version"]), mode_names=mode_names, n_agents=int(header["n_agents"]),
-        box=tuple(header["box"]), floor=bool(header["floor"]), scent_max=int(header["scent_max"]),
-        cycles=a["cycles"], positions=a["positions"].astype(np.int32), modes=a["modes"].astype(np.int32),
+        task_id=str(header["task_id"]),
+        overrides=dict(header["overrides"]),
+        config=dict(header["config"]),
+        seed=header["seed"],
+        policy=str(header["policy"]),
+        success=bool(header["success"]),
+        package_version=str(header["package_version"]),
+        mode_names=mode_names,
+        n_agents=int(header["n_agents"]),
+        box=tuple(header["box"]),
+        floor=bool(header["floor"]),
+        scent_max=int(header["scent_max"]),
+        cycles=a["cycles"],
+        positions=a["positions"].astype(np.int32),
+        modes=a["modes"].astype(np.int32),
         scents=a["scents"].astype(np.int32),
-        anchored=a["anchored"], solid_sites=a["solid_sites"], object_sites=a["object_sites"],
-        series={k: a["series"][:, i] for i, k in enumerate(names)})
+        anchored=a["anchored"],
+        solid_sites=a["solid_sites"],
+        object_sites=a["object_sites"],
+        series={k: a["series"][:, i] for i, k in enumerate(names)},
+    )
 
 
 # ---------------------------------------------------------------------- recording
@@ -341,8 +403,9 @@ class Recorder:
             self._frames.clear()
             self._series.clear()
         e = env.engine
-        self._frames.append((env.cycle, e.positions.astype(np.int32), e.mode.astype(np.int32),
-                             e.scent.astype(np.int32)))
+        self._frames.append(
+            (env.cycle, e.positions.astype(np.int32), e.mode.astype(np.int32), e.scent.astype(np.int32))
+        )
         row = {k.removeprefix("metric/"): float(v) for k, v in info.items() if k.startswith("metric/")}
         rewards = [v for k, v in info.items() if k.startswith("reward/")]
         row["reward"] = float(sum(rewards)) if env.cycle > 0 else float("nan")
@@ -359,15 +422,27 @@ class Recorder:
         names += list(BUILTIN_SERIES)
         series = {k: np.array([row.get(k, np.nan) for row in self._series], dtype=np.float64) for k in names}
         return Recording(
-            task_id=self.task_id, overrides=self.overrides, config=_resolved_config(env),
-            seed=self.seed, policy=self.policy, success=bool(success), package_version=_package_version(),
-            mode_names=tuple(env.task.modes), n_agents=e.n_agents, box=tuple(int(v) for v in e.shape.size),
-            floor=bool(e.floor), scent_max=int(e.physics.scent_max),
+            task_id=self.task_id,
+            overrides=self.overrides,
+            config=_resolved_config(env),
+            seed=self.seed,
+            policy=self.policy,
+            success=bool(success),
+            package_version=_package_version(),
+            mode_names=tuple(env.task.modes),
+            n_agents=e.n_agents,
+            box=tuple(int(v) for v in e.shape.size),
+            floor=bool(e.floor),
+            scent_max=int(e.physics.scent_max),
             cycles=np.array([f[0] for f in self._frames], dtype=np.int64),
-            positions=np.stack([f[1] for f in self._frames]), modes=np.stack([f[2] for f in self._frames]),
-            scents=np.stack([f[3] for f in self._frames]), anchored=e.anchored.copy(),
+            positions=np.stack([f[1] for f in self._frames]),
+            modes=np.stack([f[2] for f in self._frames]),
+            scents=np.stack([f[3] for f in self._frames]),
+            anchored=e.anchored.copy(),
             solid_sites=np.asarray(e.solid_sites, dtype=np.int64).reshape(-1, 3),
-            object_sites=np.asarray(e.object_sites, dtype=np.int64).reshape(-1, 3), series=series)
+            object_sites=np.asarray(e.object_sites, dtype=np.int64).reshape(-1, 3),
+            series=series,
+        )
 
 
 def _resolved_config(env) -> dict:

@@ -11,7 +11,9 @@ from .tasks.locomotion import Locomotion
 from .tasks.sandbox import Sandbox
 from .tasks.table import Table, TableV1
 
-TASKS: dict[str, type[Task]] = {cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, Locomotion)}
+TASKS: dict[str, type[Task]] = {
+    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, Locomotion)
+}
 """Registered task classes by id ``<name>-v<version>``."""
 
 
@@ -69,4 +71,3 @@ def make_batched(task_id: str, n_envs: int, **overrides):
     cls = task_class(task_id)
     config, params = split_overrides(overrides, cls.Params, task_name=cls.task_id())
     return BatchedEnv([cls(params) for _ in range(n_envs)], config)
-

@@ -46,12 +46,12 @@ def run_episode(env, policy, *, seed: int, progress=None, observe=None) -> Episo
         info = next(iter(infos.values()))
         success = next(iter(terminations.values()))
         total += reward
-        history.append({"cycle": info["cycle"], "reward": reward,
-                        **{k: v for k, v in info.items() if k.startswith("metric/")}})
+        history.append(
+            {"cycle": info["cycle"], "reward": reward, **{k: v for k, v in info.items() if k.startswith("metric/")}}
+        )
         if observe is not None:
             observe(env, info)
         if progress is not None:
             progress(info)
     metrics = {k.removeprefix("metric/"): v for k, v in info.items() if k.startswith("metric/")}
-    return EpisodeResult(cycles=env.cycle, success=bool(success), total_reward=total, metrics=metrics,
-                         history=history)
+    return EpisodeResult(cycles=env.cycle, success=bool(success), total_reward=total, metrics=metrics, history=history)

@@ -40,9 +40,21 @@ from gymnasium import spaces
 from .core.kernels import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, KIND_SOLID, RELAY, SILENT
 from .core.world import MESSAGE_TO_ALL
 
-__all__ = ["EMIT", "KIND_EMPTY", "KIND_MODULE", "KIND_OBJECT", "KIND_SOLID", "RELAY", "SILENT",
-           "MESSAGE_TO_ALL", "N_MOVES", "ActionLayout", "ModuleActionSpace", "ObservationBuffers",
-           "observation_space"]
+__all__ = [
+    "EMIT",
+    "KIND_EMPTY",
+    "KIND_MODULE",
+    "KIND_OBJECT",
+    "KIND_SOLID",
+    "RELAY",
+    "SILENT",
+    "MESSAGE_TO_ALL",
+    "N_MOVES",
+    "ActionLayout",
+    "ModuleActionSpace",
+    "ObservationBuffers",
+    "observation_space",
+]
 
 N_MOVES = 13
 
@@ -74,8 +86,10 @@ class ActionLayout:
 
     @property
     def nvec(self) -> np.ndarray:
-        return np.array([N_MOVES, self.n_modes] + [3] * self.n_channels
-                        + [MESSAGE_TO_ALL + 1, self.n_message_values + 1], dtype=np.int64)
+        return np.array(
+            [N_MOVES, self.n_modes] + [3] * self.n_channels + [MESSAGE_TO_ALL + 1, self.n_message_values + 1],
+            dtype=np.int64,
+        )
 
     @property
     def move(self) -> int:
@@ -117,20 +131,33 @@ class ActionLayout:
     def check(self, actions: np.ndarray, agents) -> None:
         """Raise ``ValueError`` naming the agent, field, value and range for a bad ``(A, L)`` batch."""
         if actions.ndim != 2 or actions.shape[1] != self.length:
-            raise ValueError(f"action shape {actions.shape[1:]} is not allowed; allowed: ({self.length},) "
-                             f"= {self.field_names}")
+            raise ValueError(
+                f"action shape {actions.shape[1:]} is not allowed; allowed: ({self.length},) = {self.field_names}"
+            )
         bad = (actions < 0) | (actions >= self.nvec)
         if bad.any():
             a, f = np.argwhere(bad)[0]
-            raise ValueError(f"action of {agents[a]}: {self.field_names[f]}={actions[a, f]} is not allowed; "
-                             f"allowed: 0..{self.nvec[f] - 1}")
+            raise ValueError(
+                f"action of {agents[a]}: {self.field_names[f]}={actions[a, f]} is not allowed; "
+                f"allowed: 0..{self.nvec[f] - 1}"
+            )
 
 
 class ObservationBuffers:
     """Per-agent observation arrays for ``A`` agents; field ``f`` of agent ``i`` is ``getattr(self, f)[i]``."""
 
-    FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent",
-              "messages", "contact", "load", "hint", "action_mask")
+    FIELDS = (
+        "neighbour_kind",
+        "neighbour_mode",
+        "neighbour_scent",
+        "own_mode",
+        "own_scent",
+        "messages",
+        "contact",
+        "load",
+        "hint",
+        "action_mask",
+    )
 
     def __init__(self, n_agents: int, n_sites: int, n_channels: int):
         a = n_agents
@@ -145,14 +172,14 @@ class ObservationBuffers:
         self.hint = np.zeros((a, 3), dtype=np.float32)
         self.action_mask = np.zeros((a, N_MOVES), dtype=np.int8)
 
-    def rows(self, start: int, stop: int) -> "ObservationBuffers":
+    def rows(self, start: int, stop: int) -> ObservationBuffers:
         """The agents ``start .. stop - 1`` as buffers of their own (views, not copies)."""
         view = object.__new__(ObservationBuffers)
         for f in self.FIELDS:
             setattr(view, f, getattr(self, f)[start:stop])
         return view
 
-    def copy(self) -> "ObservationBuffers":
+    def copy(self) -> ObservationBuffers:
         """Buffers of their own with the same values."""
         twin = object.__new__(ObservationBuffers)
         for f in self.FIELDS:
@@ -173,21 +200,25 @@ class ObservationBuffers:
         return {name: dict(zip(self.FIELDS, row)) for name, row in zip(names, zip(*columns))}
 
 
-def observation_space(*, n_sites: int, n_channels: int, n_modes: int, n_message_values: int,
-                      scent_max: int) -> spaces.Dict:
+def observation_space(
+    *, n_sites: int, n_channels: int, n_modes: int, n_message_values: int, scent_max: int
+) -> spaces.Dict:
     """The ``Dict`` space of one agent's observation (see the module docstring)."""
+
     def box(low, high, shape, dtype):
         return spaces.Box(low=low, high=high, shape=shape, dtype=dtype)
 
-    return spaces.Dict({
-        "neighbour_kind": box(0, 3, (n_sites,), np.int8),
-        "neighbour_mode": box(-1, n_modes - 1, (n_sites,), np.int32),
-        "neighbour_scent": box(0, scent_max, (n_sites, n_channels), np.int32),
-        "own_mode": box(0, n_modes - 1, (1,), np.int32),
-        "own_scent": box(0, scent_max, (n_channels,), np.int32),
-        "messages": box(0, n_message_values, (12,), np.int32),
-        "contact": box(0, 1, (2,), np.int8),
-        "load": box(0.0, np.inf, (1,), np.float32),
-        "hint": box(-1.0, 1.0, (3,), np.float32),
-        "action_mask": box(0, 1, (N_MOVES,), np.int8),
-    })
+    return spaces.Dict(
+        {
+            "neighbour_kind": box(0, 3, (n_sites,), np.int8),
+            "neighbour_mode": box(-1, n_modes - 1, (n_sites,), np.int32),
+            "neighbour_scent": box(0, scent_max, (n_sites, n_channels), np.int32),
+            "own_mode": box(0, n_modes - 1, (1,), np.int32),
+            "own_scent": box(0, scent_max, (n_channels,), np.int32),
+            "messages": box(0, n_message_values, (12,), np.int32),
+            "contact": box(0, 1, (2,), np.int8),
+            "load": box(0.0, np.inf, (1,), np.float32),
+            "hint": box(-1.0, 1.0, (3,), np.float32),
+            "action_mask": box(0, 1, (N_MOVES,), np.int8),
+        }
+    )

@@ -73,5 +73,6 @@ def run_without_jit(module: str, function: str) -> subprocess.CompletedProcess:
     here = Path(__file__).resolve().parent
     code = f"import sys; sys.path.insert(0, {str(here)!r}); import {module} as t; t.{function}()"
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300,
-                          cwd=here.parent)
+    return subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300, cwd=here.parent
+    )

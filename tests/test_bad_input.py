@@ -74,16 +74,22 @@ def test_unknown_config_key_lists_allowed_keys(task_id):
 
 
 @pytest.mark.parametrize("task_id", TASK_IDS)
-@pytest.mark.parametrize("key, value, expected", [
-    ("max_cycles", "10", "int"),
-    ("max_cycles", 2.5, "int"),
-    ("keep_connected", "yes", "bool"),
-    ("scent_sweeps", True, "int"),
-    ("motion_model", 3, "str"),
-])
+@pytest.mark.parametrize(
+    "key, value, expected",
+    [
+        ("max_cycles", "10", "int"),
+        ("max_cycles", 2.5, "int"),
+        ("keep_connected", "yes", "bool"),
+        ("scent_sweeps", True, "int"),
+        ("motion_model", 3, "str"),
+    ],
+)
 def test_wrong_type_of_config_value(task_id, key, value, expected):
-    with pytest.raises(ConfigError, match=rf"{key}={re.escape(repr(value))} is not allowed; "
-                                          rf"allowed: a value of type {expected}"):
+    with pytest.raises(
+        ConfigError,
+        match=rf"{key}={re.escape(repr(value))} is not allowed; "
+        rf"allowed: a value of type {expected}",
+    ):
         proteo_env.make(task_id, **{key: value})
 
 
@@ -109,11 +115,14 @@ def test_scent_sweeps_zero(task_id):
 
 
 @pytest.mark.parametrize("task_id", TASK_IDS)
-@pytest.mark.parametrize("key, value, match", [
-    ("max_cycles", 0, r"max_cycles=0 is not allowed; allowed: an integer >= 1"),
-    ("obs_radius", 3, r"obs_radius=3 is not allowed; allowed: 1 or 2"),
-    ("scent_max", 0, r"scent_max=0 is not allowed; allowed: an integer in \[1, 2\*\*31 - 2\]"),
-])
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("max_cycles", 0, r"max_cycles=0 is not allowed; allowed: an integer >= 1"),
+        ("obs_radius", 3, r"obs_radius=3 is not allowed; allowed: 1 or 2"),
+        ("scent_max", 0, r"scent_max=0 is not allowed; allowed: an integer in \[1, 2\*\*31 - 2\]"),
+    ],
+)
 def test_config_value_out_of_range(task_id, key, value, match):
     with pytest.raises(ConfigError, match=match):
         proteo_env.make(task_id, **{key: value})
@@ -156,8 +165,10 @@ def test_module_in_a_solid_site():
 
 @pytest.mark.parametrize("site", [(6, 0, 0), (-1, 1, 0), (0, 0, 6), (1, 7, 0)])
 def test_module_outside_the_box(site):
-    match = rf"module site \({site[0]}, {site[1]}, {site[2]}\) is outside the box \(6, 6, 6\); " \
-            r"allowed: 0 <= site < size"
+    match = (
+        rf"module site \({site[0]}, {site[1]}, {site[2]}\) is outside the box \(6, 6, 6\); "
+        r"allowed: 0 <= site < size"
+    )
     with pytest.raises(LayoutError, match=match):
         _world([site], physics=Physics(keep_connected=False))
 
@@ -168,8 +179,11 @@ def test_solid_site_outside_the_box():
 
 
 def test_non_fcc_site():
-    with pytest.raises(LayoutError, match=r"module site \(1, 0, 0\) is not an FCC site; "
-                                          r"allowed: integer sites with x \+ y \+ z even"):
+    with pytest.raises(
+        LayoutError,
+        match=r"module site \(1, 0, 0\) is not an FCC site; "
+        r"allowed: integer sites with x \+ y \+ z even",
+    ):
         _world([[0, 0, 0], [1, 0, 0]])
 
 
@@ -180,8 +194,11 @@ def test_too_many_agents():
 
 def test_disconnected_start():
     sites = [[0, 0, 0], [1, 1, 0], [4, 0, 0]]
-    with pytest.raises(LayoutError, match=r"positions form 2 connected pieces; allowed: one connected whole "
-                                          r"when keep_connected=True"):
+    with pytest.raises(
+        LayoutError,
+        match=r"positions form 2 connected pieces; allowed: one connected whole "
+        r"when keep_connected=True",
+    ):
         _world(sites)
     world = _world(sites, physics=Physics(keep_connected=False))
     assert world.n_components() == 2
@@ -199,16 +216,21 @@ def test_disconnected_layout_file_through_the_env(tmp_path):
 
 
 # ---------------------------------------------------------------------- layout texts and files
-@pytest.mark.parametrize("text, match", [
-    ("floor\nz = 0\nm.x.m\n", r"line 3, column 3: character 'x' is not in the legend; allowed: '\.', 'm', 'F'"),
-    ("z = 0\nm.m\n.m.\nm.?\n", r"line 4, column 3: character '\?' is not in the legend"),
-    ("z = 0\nmm\n", r"line 2, column 2: 'm' at \(1, 0, 0\) is not an FCC site; allowed: '\.' where x \+ y \+ z is odd"),
-    ("size 4 4 2\nz = 0\nm.m.\nz = 1\nm...\n",
-     r"line 5, column 1: 'm' at \(0, 0, 1\) is not an FCC site"),
-    ("z = 0\n.#\n", r"line 2, column 2: '#' at \(1, 0, 0\) is not an FCC site"),
-    ("sise 3 3 3\nz = 0\nm\n", r"line 1: 'sise 3 3 3' is not a header; allowed: 'size X Y Z', 'floor'"),
-    ("z = a\nm\n", r"line 1: 'z = a' is not a layer header; allowed: 'z = K'"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("floor\nz = 0\nm.x.m\n", r"line 3, column 3: character 'x' is not in the legend; allowed: '\.', 'm', 'F'"),
+        ("z = 0\nm.m\n.m.\nm.?\n", r"line 4, column 3: character '\?' is not in the legend"),
+        (
+            "z = 0\nmm\n",
+            r"line 2, column 2: 'm' at \(1, 0, 0\) is not an FCC site; allowed: '\.' where x \+ y \+ z is odd",
+        ),
+        ("size 4 4 2\nz = 0\nm.m.\nz = 1\nm...\n", r"line 5, column 1: 'm' at \(0, 0, 1\) is not an FCC site"),
+        ("z = 0\n.#\n", r"line 2, column 2: '#' at \(1, 0, 0\) is not an FCC site"),
+        ("sise 3 3 3\nz = 0\nm\n", r"line 1: 'sise 3 3 3' is not a header; allowed: 'size X Y Z', 'floor'"),
+        ("z = a\nm\n", r"line 1: 'z = a' is not a layer header; allowed: 'z = K'"),
+    ],
+)
 def test_malformed_layout_text(text, match):
     with pytest.raises(LayoutError, match=match):
         parse_layout(text)
@@ -223,8 +245,11 @@ def test_malformed_layout_file_through_make(tmp_path):
 
 def test_missing_layout_file(tmp_path):
     path = str(tmp_path / "missing.txt")
-    with pytest.raises(ValueError, match=rf"layout={re.escape(repr(path))}: no such file; "
-                                         r"allowed: a path to a layout text file"):
+    with pytest.raises(
+        ValueError,
+        match=rf"layout={re.escape(repr(path))}: no such file; "
+        r"allowed: a path to a layout text file",
+    ):
         proteo_env.make("sandbox-v0", layout=path)
 
 
@@ -256,12 +281,15 @@ def test_valid_yaml_run_config(tmp_path):
     assert env.world.motion_model == "minimal" and env.max_cycles == 7 and len(env.agents) == 12
 
 
-@pytest.mark.parametrize("text, match", [
-    ("task: [sandbox-v0\nn_modules: 3\n", r"is not valid YAML"),
-    ("task: sandbox-v0\n  n_modules: : 3\n", r"is not valid YAML"),
-    ("- task\n- sandbox-v0\n", r"a mapping with a 'task' key is required"),
-    ("n_modules: 3\n", r"a mapping with a 'task' key is required"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("task: [sandbox-v0\nn_modules: 3\n", r"is not valid YAML"),
+        ("task: sandbox-v0\n  n_modules: : 3\n", r"is not valid YAML"),
+        ("- task\n- sandbox-v0\n", r"a mapping with a 'task' key is required"),
+        ("n_modules: 3\n", r"a mapping with a 'task' key is required"),
+    ],
+)
 def test_malformed_yaml_run_config(tmp_path, text, match):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
@@ -299,18 +327,30 @@ def test_wrong_batch_shape_in_the_array_api(running):
     lay = env.action_layout
     n_agents = len(env.possible_agents)
     for batch, match in (
-        (np.zeros((n_agents - 1, lay.length), dtype=np.int64),
-         rf"actions shape \({n_agents - 1}, {lay.length}\) is not allowed; allowed: \({n_agents}, {lay.length}\)"),
-        (np.zeros((n_agents, lay.length + 2), dtype=np.int64),
-         rf"actions shape \({n_agents}, {lay.length + 2}\) is not allowed; allowed: \({n_agents}, {lay.length}\)"),
+        (
+            np.zeros((n_agents - 1, lay.length), dtype=np.int64),
+            rf"actions shape \({n_agents - 1}, {lay.length}\) is not allowed; allowed: \({n_agents}, {lay.length}\)",
+        ),
+        (
+            np.zeros((n_agents, lay.length + 2), dtype=np.int64),
+            rf"actions shape \({n_agents}, {lay.length + 2}\) is not allowed; allowed: \({n_agents}, {lay.length}\)",
+        ),
     ):
         _raises_and_unchanged(env, obs, lambda b=batch: env.step_arrays(b), ValueError, match)
 
 
-@pytest.mark.parametrize("field, value", [
-    ("move", 13), ("move", -1), ("mode", "n_modes"), ("role_0", 3),
-    ("message_target", 13), ("message_value", -1), ("message_value", "too_big"),
-])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("move", 13),
+        ("move", -1),
+        ("mode", "n_modes"),
+        ("role_0", 3),
+        ("message_target", 13),
+        ("message_value", -1),
+        ("message_value", "too_big"),
+    ],
+)
 def test_action_value_out_of_range(running, field, value):
     env, obs = running
     lay = env.action_layout
@@ -331,24 +371,35 @@ def test_missing_agent_in_actions(running):
     del actions["module_1"]
     match = r"actions missing for 1 agents \(first: module_1\); allowed: one action for every agent in env.agents"
     _raises_and_unchanged(env, obs, lambda: env.step(actions), ValueError, match)
-    _raises_and_unchanged(env, obs, lambda: env.step({}), ValueError,
-                          rf"actions missing for {len(env.agents)} agents \(first: module_0\)")
+    _raises_and_unchanged(
+        env, obs, lambda: env.step({}), ValueError, rf"actions missing for {len(env.agents)} agents \(first: module_0\)"
+    )
 
 
 def test_float_action_is_rejected_not_truncated(running):
     env, obs = running
     actions = _stay(env, obs)
     actions["module_1"] = actions["module_1"].astype(float) + 0.7
-    _raises_and_unchanged(env, obs, lambda: env.step(actions), ValueError,
-                          r"action of module_1: dtype float64 is not allowed; allowed: integers")
+    _raises_and_unchanged(
+        env,
+        obs,
+        lambda: env.step(actions),
+        ValueError,
+        r"action of module_1: dtype float64 is not allowed; allowed: integers",
+    )
 
 
 def test_action_for_unknown_agent_is_rejected(running):
     env, obs = running
     actions = _stay(env, obs)
     actions["module_999"] = actions["module_0"]
-    _raises_and_unchanged(env, obs, lambda: env.step(actions), ValueError,
-                          r"actions for 1 unknown agents \(first: 'module_999'\); allowed: the agents in env.agents")
+    _raises_and_unchanged(
+        env,
+        obs,
+        lambda: env.step(actions),
+        ValueError,
+        r"actions for 1 unknown agents \(first: 'module_999'\); allowed: the agents in env.agents",
+    )
 
 
 @pytest.mark.parametrize("seed", [-1, "a", 1.5, True, [1, 2]])

@@ -6,11 +6,10 @@ import pickle
 
 import numpy as np
 import pytest
+from conftest import SMALL_OVERRIDES
 
 import proteo_env
 from proteo_env.spaces import ObservationBuffers
-
-from conftest import SMALL_OVERRIDES
 
 N_ENVS = 3
 
@@ -42,8 +41,9 @@ def test_batch_matches_single_envs(task_id, motion_model):
             assert env.step_arrays(actions[b]) == terms[b]
             single_obs = env.observe_arrays()
             for field in ObservationBuffers.FIELDS:
-                np.testing.assert_array_equal(getattr(obs, field)[b * a:(b + 1) * a], getattr(single_obs, field),
-                                              err_msg=field)
+                np.testing.assert_array_equal(
+                    getattr(obs, field)[b * a : (b + 1) * a], getattr(single_obs, field), err_msg=field
+                )
             np.testing.assert_array_equal(batched.last_moved[b], env.last_moved)
             for key, value in env.engine.snapshot().items():
                 np.testing.assert_array_equal(batched.worlds[b].snapshot()[key], value, err_msg=key)
@@ -54,8 +54,15 @@ RESET_EVERY = (5, 8, 13)
 """World ``b`` of the per-world reset test starts a new episode every ``RESET_EVERY[b]`` cycles."""
 
 
-@pytest.mark.parametrize("task_id,control", [(t, c) for t in sorted(proteo_env.TASKS) for c in ("full", "move")
-                                               if c == "full" or proteo_env.TASKS[t].name != "sandbox"])
+@pytest.mark.parametrize(
+    "task_id,control",
+    [
+        (t, c)
+        for t in sorted(proteo_env.TASKS)
+        for c in ("full", "move")
+        if c == "full" or proteo_env.TASKS[t].name != "sandbox"
+    ],
+)
 def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
     """reset_worlds restarts some worlds while the others run on; world b's episodes are those
     of a single env reset with seed 7 + b and then reset() without a seed, also across a move
@@ -71,7 +78,7 @@ def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
     extent = batched.worlds[0].shape.extent
     a, lay, rng = batched.n_agents, batched.action_layout, np.random.default_rng(0)
     for cycle in range(1, 61):
-        actions = _random_actions(lay, obs.action_mask, rng)[:, :len(batched.control_nvec)]
+        actions = _random_actions(lay, obs.action_mask, rng)[:, : len(batched.control_nvec)]
         actions = actions.reshape(N_ENVS, a, -1)
         terms = batched.step_arrays(actions)
         restart = np.array([cycle % every == 0 for every in RESET_EVERY])
@@ -88,8 +95,9 @@ def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
                 env.reset()
             single_obs = env.observe_arrays()
             for field in ObservationBuffers.FIELDS:
-                np.testing.assert_array_equal(getattr(obs, field)[b * a:(b + 1) * a], getattr(single_obs, field),
-                                              err_msg=field)
+                np.testing.assert_array_equal(
+                    getattr(obs, field)[b * a : (b + 1) * a], getattr(single_obs, field), err_msg=field
+                )
             for key, value in env.engine.snapshot().items():
                 np.testing.assert_array_equal(batched.worlds[b].snapshot()[key], value, err_msg=key)
             assert batched.cycles[b] == env.cycle

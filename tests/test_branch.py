@@ -28,8 +28,18 @@ from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SL
 N, T, B = 40, 4, 3
 LIMIT = 400
 SEEDS = range(6)
-OBSERVATION_FIELDS = {"neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent", "messages",
-                      "contact", "load", "hint", "action_mask"}
+OBSERVATION_FIELDS = {
+    "neighbour_kind",
+    "neighbour_mode",
+    "neighbour_scent",
+    "own_mode",
+    "own_scent",
+    "messages",
+    "contact",
+    "load",
+    "hint",
+    "action_mask",
+}
 GROWN = (SEED, FINAL, NODE, INODE)
 
 
@@ -87,16 +97,22 @@ def tree_stats(positions: np.ndarray, modes: np.ndarray, root: int, min_gap: int
     levels = max((level(i) for i in real), default=0)
     dists = [chain_up(i)[0] for i in points if chain_up(i)]
     children = [degree[i] - (0 if parent[i] is None else 1) for i in points]
-    return {"size": len(order), "tree": edges == len(order) - 1, "points": len(points), "levels": levels,
-            "branches_per_point": float(np.mean(children)) if children else 0.0,
-            "point_distance": float(np.mean(dists)) if dists else 0.0}
+    return {
+        "size": len(order),
+        "tree": edges == len(order) - 1,
+        "points": len(points),
+        "levels": levels,
+        "branches_per_point": float(np.mean(children)) if children else 0.0,
+        "point_distance": float(np.mean(dists)) if dists else 0.0,
+    }
 
 
 def measure(sites, modes, root=0):
     """The task's metrics for hand-made ``sites`` (planar offsets) and ``modes``."""
     sites = np.asarray(sites, dtype=np.int64) + np.array([12, 12, 2])
-    world = World(size=(30, 30, 6), positions=sites, n_agents=len(sites), physics=Physics(),
-                  n_channels=2, modes=np.asarray(modes))
+    world = World(
+        size=(30, 30, 6), positions=sites, n_agents=len(sites), physics=Physics(), n_channels=2, modes=np.asarray(modes)
+    )
     task = Branch(BranchParams(n_modules=len(sites)))
     task._root = root
     task.reset(world, np.random.default_rng(0))
@@ -136,8 +152,7 @@ def test_metrics_two_levels():
     assert m["branches_per_point"] == 3.5  # root: 4 arms; node: 3 beyond its parent branch
     assert m["point_distance"] == 4 and m["leaves"] == 6
     assert m["success"] == 1 and m["nodes"] == 2
-    assert ref == {"size": 24, "tree": True, "points": 2, "levels": 2, "branches_per_point": 3.5,
-                   "point_distance": 4.0}
+    assert ref == {"size": 24, "tree": True, "points": 2, "levels": 2, "branches_per_point": 3.5, "point_distance": 4.0}
     # structure, not modes: a module shown as NODE on a plain stretch of branch is no branching point
     modes2 = list(modes)
     modes2[sites.index((-2, -2, 0))] = NODE
@@ -194,8 +209,13 @@ def test_hand_coded_policy_grows_two_levels(seed):
     assert terminated and not truncated, f"seed {seed}: no 2-level tree within {LIMIT} cycles"
     ref = tree_stats(env.world.positions, env.world.modes, env.task._root)
     assert ref["tree"] and ref["levels"] >= 2
-    for key, name in (("size", "tree_size"), ("points", "branch_points"), ("levels", "levels"),
-                      ("branches_per_point", "branches_per_point"), ("point_distance", "point_distance")):
+    for key, name in (
+        ("size", "tree_size"),
+        ("points", "branch_points"),
+        ("levels", "levels"),
+        ("branches_per_point", "branches_per_point"),
+        ("point_distance", "point_distance"),
+    ):
         assert info[f"metric/{name}"] == pytest.approx(ref[key]), key
 
 

@@ -25,8 +25,18 @@ N = 30
 LIMIT = 600
 SEEDS = range(5)
 WORKING_MODELS = ("minimal", "rounded", "sphere")
-OBSERVATION_FIELDS = {"neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent", "messages",
-                      "contact", "load", "hint", "action_mask"}
+OBSERVATION_FIELDS = {
+    "neighbour_kind",
+    "neighbour_mode",
+    "neighbour_scent",
+    "own_mode",
+    "own_scent",
+    "messages",
+    "contact",
+    "load",
+    "hint",
+    "action_mask",
+}
 
 
 def is_chain(positions: np.ndarray) -> bool:
@@ -172,8 +182,13 @@ def test_seed_turns_instead_of_thickening():
 
 def test_bad_policy_parameters_are_refused():
     env = proteo_env.make("chain", n_modules=8)
-    for bad in ({"p_random": 1.5}, {"p_seed": -0.1}, {"on_stuck": "dance"}, {"momentum": -1.0},
-                {"avoid_octahedra": "some"}):
+    for bad in (
+        {"p_random": 1.5},
+        {"p_seed": -0.1},
+        {"on_stuck": "dance"},
+        {"momentum": -1.0},
+        {"avoid_octahedra": "some"},
+    ):
         name = next(iter(bad))
         with pytest.raises(ValueError, match=name):
             ChainPolicy.for_env(env, seed=0, **bad)

@@ -10,6 +10,7 @@ import hashlib
 
 import numpy as np
 import pytest
+from conftest import run_without_jit
 
 import proteo_env
 from baselines.branch import BranchPolicy
@@ -17,12 +18,18 @@ from baselines.chain import ChainPolicy
 from baselines.compiled import CompiledRollout, compiled_rollout
 from baselines.grasp import GraspPolicy
 from baselines.table import TablePolicy
-from conftest import run_without_jit
 from proteo_env.tasks.table import FINAL as LEG_FINAL
 
 LIMIT = 400
-SMALL_TABLE = dict(board_size=12, depth=3, n_spares=40, schedule=[[0, 8.0, 2.0], [150, 2.0, 8.0]], stable_window=30,
-                   motion_model="minimal", max_cycles=800)
+SMALL_TABLE = dict(
+    board_size=12,
+    depth=3,
+    n_spares=40,
+    schedule=[[0, 8.0, 2.0], [150, 2.0, 8.0]],
+    stable_window=30,
+    motion_model="minimal",
+    max_cycles=800,
+)
 """A table that grows legs, moves them after one weight shift and settles in about 240 cycles."""
 
 
@@ -66,10 +73,19 @@ def test_compiled_rollout_is_the_observation_based_policy(model, n):
         assert_same_trajectory(result, positions, modes, success, policy.rng)
 
 
-@pytest.mark.parametrize("params", [
-    {"queue": True, "p_seed": 0.01, "on_stuck": "random"},
-    {"directed": False, "momentum": 0.0, "avoid_octahedra": "all", "greedy_approach": False, "wake_when_free": True},
-])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"queue": True, "p_seed": 0.01, "on_stuck": "random"},
+        {
+            "directed": False,
+            "momentum": 0.0,
+            "avoid_octahedra": "all",
+            "greedy_approach": False,
+            "wake_when_free": True,
+        },
+    ],
+)
 def test_same_trajectory_with_other_rule_parameters(params):
     env = proteo_env.make("chain-v0", n_modules=20, motion_model="rounded", max_cycles=150)
     env.reset(seed=4)
@@ -91,10 +107,13 @@ def test_compiled_branch_is_the_observation_based_policy(model):
         assert success or model == "sphere", f"{model} seed={seed}: no tree of 2 levels within {LIMIT} cycles"
 
 
-@pytest.mark.parametrize("task, params", [
-    ({"initial_node": False, "target_levels": 9}, {"p_node": 0.02, "refuse": False}),
-    ({"T": 3, "B": 2, "target_levels": 9}, {"patience": 3, "search_relays_node": False, "queue": True}),
-])
+@pytest.mark.parametrize(
+    "task, params",
+    [
+        ({"initial_node": False, "target_levels": 9}, {"p_node": 0.02, "refuse": False}),
+        ({"T": 3, "B": 2, "target_levels": 9}, {"patience": 3, "search_relays_node": False, "queue": True}),
+    ],
+)
 def test_same_branch_trajectory_with_other_parameters(task, params):
     env = proteo_env.make("branch-v0", n_modules=40, motion_model="minimal", max_cycles=150, **task)
     env.reset(seed=5)
@@ -150,8 +169,20 @@ SMALL_GRASP = dict(n_modules=160, motion_model="sphere", max_cycles=400)
 (seeds 0, 1, 2)."""
 
 
-@pytest.mark.parametrize("params", [{}, {"on_flat": "random", "straight": False, "wrap_forward": False,
-                                         "relocate": False, "prefer_touch": False, "greedy_approach": False}])
+@pytest.mark.parametrize(
+    "params",
+    [
+        {},
+        {
+            "on_flat": "random",
+            "straight": False,
+            "wrap_forward": False,
+            "relocate": False,
+            "prefer_touch": False,
+            "greedy_approach": False,
+        },
+    ],
+)
 def test_compiled_grasp_is_the_observation_based_policy(params):
     successes = 0
     for seed in range(3):
@@ -256,10 +287,11 @@ def fingerprint() -> str:
     digest = hashlib.sha256()
     small = {"n_modules": 12, "motion_model": "sphere", "max_cycles": 25}
     for task, policy_cls, extra, params in (
-            ("chain-v0", ChainPolicy, small, {"queue": True}),
-            ("branch-v0", BranchPolicy, {**small, "T": 3, "B": 2}, {"queue": True}),
-            ("table-v0", TablePolicy, {**SMALL_TABLE, "max_cycles": 40}, {"p_max": 0.5}),
-            ("grasp-v0", GraspPolicy, {**SMALL_GRASP, "n_modules": 30, "max_cycles": 40}, {"straight": False})):
+        ("chain-v0", ChainPolicy, small, {"queue": True}),
+        ("branch-v0", BranchPolicy, {**small, "T": 3, "B": 2}, {"queue": True}),
+        ("table-v0", TablePolicy, {**SMALL_TABLE, "max_cycles": 40}, {"p_max": 0.5}),
+        ("grasp-v0", GraspPolicy, {**SMALL_GRASP, "n_modules": 30, "max_cycles": 40}, {"straight": False}),
+    ):
         env = proteo_env.make(task, **extra)
         env.reset(seed=3)
         result = compiled_rollout(env, policy_cls.for_env(env, seed=3, **params), record_every=1)
@@ -274,6 +306,7 @@ def nojit_child() -> None:
 
     assert numba.config.DISABLE_JIT, "NUMBA_DISABLE_JIT was not picked up"
     from baselines import chain_kernels
+
     assert not hasattr(chain_kernels.chain_actions, "signatures"), "kernels are still compiled"
     print("FINGERPRINT", fingerprint())
 

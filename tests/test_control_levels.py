@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import small_overrides
 from gymnasium import spaces
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 from pettingzoo.utils import parallel_to_aec
@@ -18,8 +19,6 @@ from proteo_env import control
 from proteo_env.config import ConfigError
 from proteo_env.core.kernels import EMIT, RELAY
 
-from conftest import small_overrides
-
 RULE_TASKS = sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox")
 LEVELS = ("move", "move+mode")  # "full" is every other test file's level
 
@@ -29,8 +28,11 @@ def _make(task_id, level, **extra):
 
 
 def _check_warnings(record):
-    expected = ("Observation is not a NumPy array", "Observation numpy array is all zeros",
-                "space for each agent probably should be gymnasium.spaces.box or gymnasium.spaces.discrete")
+    expected = (
+        "Observation is not a NumPy array",
+        "Observation numpy array is all zeros",
+        "space for each agent probably should be gymnasium.spaces.box or gymnasium.spaces.discrete",
+    )
     unexpected = [str(w.message) for w in record if not any(text in str(w.message) for text in expected)]
     assert not unexpected, f"unexpected warnings: {unexpected}"
 
@@ -227,8 +229,9 @@ def test_unknown_level_is_one_clear_error():
 
 
 def test_move_level_without_rules_names_the_tasks_that_have_them():
-    with pytest.raises(ConfigError,
-                       match=r"task 'sandbox'.*allowed: tasks with rules \(branch, chain, grasp, locomotion, table\)"):
+    with pytest.raises(
+        ConfigError, match=r"task 'sandbox'.*allowed: tasks with rules \(branch, chain, grasp, locomotion, table\)"
+    ):
         proteo_env.make("sandbox-v0", control="move")
 
 
@@ -237,8 +240,11 @@ def test_actions_that_do_not_fit_the_level_change_nothing():
     obs, _ = env.reset(seed=0)
     policy = make_policy("chain", _make("chain-v0", "full"), seed=0)  # full actions: not this level's
     before = env.world.positions.copy()
-    with pytest.raises(ValueError, match=r"module_0: shape \(5,\) is not allowed at control level 'move'; "
-                                         r"allowed: an int, the move"):
+    with pytest.raises(
+        ValueError,
+        match=r"module_0: shape \(5,\) is not allowed at control level 'move'; "
+        r"allowed: an int, the move",
+    ):
         env.step(policy.act(obs))
     with pytest.raises(ValueError, match=r"not allowed at control level 'move'; allowed: \(12, 1\)"):
         env.step_arrays(np.zeros((12, 5), dtype=np.int64))
@@ -254,8 +260,11 @@ def test_actions_that_do_not_fit_the_level_change_nothing():
 
 def test_policies_refuse_a_level_they_do_not_act_at():
     env = _make("chain-v0", "move")
-    with pytest.raises(ValueError, match=r"policy 'chain' gives actions at control level full, not at the env's "
-                                         r"control='move'"):
+    with pytest.raises(
+        ValueError,
+        match=r"policy 'chain' gives actions at control level full, not at the env's "
+        r"control='move'",
+    ):
         make_policy("chain", env)
     random = make_policy("random", env, seed=0)  # random moves under the rules
     obs, _ = env.reset(seed=0)

@@ -104,8 +104,7 @@ def test_different_seed_different_trajectory(make_small, actions_from):
     for seed in (0, 1):
         env_a = make_small("sandbox-v0", layout="blob", max_cycles=50)
         env_b = make_small("sandbox-v0", layout="blob", max_cycles=50)
-        trajectories.append(_run_pair(env_a, env_b, seed=seed, action_seed=3, n_cycles=50,
-                                      actions_from=actions_from))
+        trajectories.append(_run_pair(env_a, env_b, seed=seed, action_seed=3, n_cycles=50, actions_from=actions_from))
     assert not np.array_equal(trajectories[0][0], trajectories[1][0]), "start blobs differ"
     assert any(not np.array_equal(a, b) for a, b in zip(*trajectories))
 

@@ -15,12 +15,29 @@ from proteo_env.config import ConfigError
 
 ray = pytest.importorskip("ray")
 
-EVAL_CONFIG = {"seeds": 3, "first_seed": 5, "tasks": {
-    "chain": {"env": {"n_modules": 8, "max_cycles": 60}},
-    "table": {"env": {"board_size": 6, "depth": 2, "n_spares": 8, "motion_model": "minimal", "max_cycles": 40}}}}
+EVAL_CONFIG = {
+    "seeds": 3,
+    "first_seed": 5,
+    "tasks": {
+        "chain": {"env": {"n_modules": 8, "max_cycles": 60}},
+        "table": {"env": {"board_size": 6, "depth": 2, "n_spares": 8, "motion_model": "minimal", "max_cycles": 40}},
+    },
+}
 TASKS = ["chain", "table"]
-CMA = ["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2", "--popsize", "4",
-       "--episodes-per-candidate", "2", "--env", "{n_modules: 8, max_cycles: 60}", "--tensorboard", "false"]
+CMA = [
+    "--config",
+    "configs/train/cma_rules_chain.yaml",
+    "--generations",
+    "2",
+    "--popsize",
+    "4",
+    "--episodes-per-candidate",
+    "2",
+    "--env",
+    "{n_modules: 8, max_cycles: 60}",
+    "--tensorboard",
+    "false",
+]
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +74,7 @@ def _interrupting(fn, after: int, calls: list):
             raise Interrupt
         calls.append(job)
         return fn(job)
+
     return wrapped
 
 
@@ -129,15 +147,21 @@ def test_cma_es_on_ray_equals_serial(tmp_path, local_ray):
 SWEEP = "task: chain-v1\nenv: {max_cycles: 40}\ngrid:\n  n_modules: [6, 8]\nseeds: 2\nplot: {x: n_modules}\n"
 
 
-@pytest.mark.parametrize("text, message", [
-    (SWEEP + "colour: red\n", "unknown key 'colour'; allowed: env, first_seed, grid"),
-    (SWEEP.replace("[6, 8]", "[]"), r"grid.n_modules=\[\] is not allowed; allowed: a non-empty list"),
-    ("task: chain-v1\ngrid: {}\n", "grid={} is empty"),
-    (SWEEP.replace("n_modules", "n_modlues"), "grid point .*unknown key 'n_modlues'"),
-    (SWEEP + "search: random\nsamples: 5\n", r"samples=5 is not allowed with search: random; allowed: 1..2"),
-    (SWEEP.replace("seeds: 2", "seeds: 2\npolicies: [chian]"), "policies: 'chian' is not allowed; allowed: default, branch, chain"),
-    (SWEEP.replace("{x: n_modules}", "{x: size}"), "plot.x='size' is not allowed; allowed: n_modules, policy"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (SWEEP + "colour: red\n", "unknown key 'colour'; allowed: env, first_seed, grid"),
+        (SWEEP.replace("[6, 8]", "[]"), r"grid.n_modules=\[\] is not allowed; allowed: a non-empty list"),
+        ("task: chain-v1\ngrid: {}\n", "grid={} is empty"),
+        (SWEEP.replace("n_modules", "n_modlues"), "grid point .*unknown key 'n_modlues'"),
+        (SWEEP + "search: random\nsamples: 5\n", r"samples=5 is not allowed with search: random; allowed: 1..2"),
+        (
+            SWEEP.replace("seeds: 2", "seeds: 2\npolicies: [chian]"),
+            "policies: 'chian' is not allowed; allowed: default, branch, chain",
+        ),
+        (SWEEP.replace("{x: n_modules}", "{x: size}"), "plot.x='size' is not allowed; allowed: n_modules, policy"),
+    ],
+)
 def test_bad_sweep_config_is_one_clear_error(tmp_path, text, message):
     from training.sweep import sweep
 
@@ -152,9 +176,11 @@ def test_sweep_tables_tie_settings_and_sample_points(tmp_path):
     from training.sweep import sweep
 
     path = tmp_path / "sweep.yaml"
-    path.write_text("task: table-v1\nenv: {board_size: 6, depth: 2, n_spares: 8, motion_model: minimal, "
-                    "max_cycles: 30}\ngrid:\n  p_max=p_min: [0.1, 0.5, 0.9]\n  f_max: [2.0, 3.0]\nseeds: 2\n"
-                    "search: random\nsamples: 3\nplot: {x: p_max=p_min, y: support, hue: f_max}\n")
+    path.write_text(
+        "task: table-v1\nenv: {board_size: 6, depth: 2, n_spares: 8, motion_model: minimal, "
+        "max_cycles: 30}\ngrid:\n  p_max=p_min: [0.1, 0.5, 0.9]\n  f_max: [2.0, 3.0]\nseeds: 2\n"
+        "search: random\nsamples: 3\nplot: {x: p_max=p_min, y: support, hue: f_max}\n"
+    )
     summary = sweep(path, out=tmp_path / "out", progress=False)
     assert len(summary) == 3 and all(r["episodes"] == 2 and r["y"] == "support" for r in summary)
     with (tmp_path / "out" / "episodes.csv").open() as fh:
@@ -168,15 +194,39 @@ def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
     from training import rllib_ppo
     from training.evaluate import evaluate
 
-    final = rllib_ppo.main(["--iterations", "1", "--env-runners", "2", "--train-batch-size", "128",
-                            "--minibatch-size", "64", "--epochs", "1", "--env", "{n_modules: 6, max_cycles: 16}",
-                            "--run-dir", str(tmp_path / "run"), "--tensorboard", "false"])
+    final = rllib_ppo.main(
+        [
+            "--iterations",
+            "1",
+            "--env-runners",
+            "2",
+            "--train-batch-size",
+            "128",
+            "--minibatch-size",
+            "64",
+            "--epochs",
+            "1",
+            "--env",
+            "{n_modules: 6, max_cycles: 16}",
+            "--run-dir",
+            str(tmp_path / "run"),
+            "--tensorboard",
+            "false",
+        ]
+    )
     meta = json.loads((final / "proteo.json").read_text())
     assert meta["algorithm"] == "rllib-ppo" and meta["control"] == "move" and meta["agent_steps"] >= 128 * 6
     assert (final / "rllib").is_dir()
     config = tmp_path / "eval.yaml"
     config.write_text(json.dumps({"tasks": {"chain": {"env": {"n_modules": 6, "max_cycles": 16}}}}))
-    rows = evaluate(config=config, tasks=["chain"], seeds=2, checkpoints=[str(final)], out=tmp_path / "eval",
-                    progress=False, plots=False)
+    rows = evaluate(
+        config=config,
+        tasks=["chain"],
+        seeds=2,
+        checkpoints=[str(final)],
+        out=tmp_path / "eval",
+        progress=False,
+        plots=False,
+    )
     learned = [r for r in rows if r.kind == "learned"]
     assert len(learned) == 1 and learned[0].level == "move" and learned[0].n == 2

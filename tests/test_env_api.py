@@ -39,8 +39,7 @@ EXPECTED_WARNINGS = (
 
 
 def _check_warnings(record):
-    unexpected = [str(w.message) for w in record
-                  if not any(text in str(w.message) for text in EXPECTED_WARNINGS)]
+    unexpected = [str(w.message) for w in record if not any(text in str(w.message) for text in EXPECTED_WARNINGS)]
     assert not unexpected, f"unexpected warnings: {unexpected}"
 
 
@@ -320,13 +319,13 @@ def test_masked_move_semantics(task_id, motion_model, keep_connected, make_small
                 if mask[move]:
                     n_legal += 1
                     target = start[i] + proteo_env.DIRECTIONS[move - 1]
-                    assert tuple(end[i]) == tuple(target), \
+                    assert tuple(end[i]) == tuple(target), (
                         f"{agent}: legal move {move} did not reach {tuple(target)} ({motion_model})"
+                    )
                     assert trial.last_moved[i]
                 else:
                     n_illegal += 1
-                    assert tuple(end[i]) == tuple(start[i]), \
-                        f"{agent}: masked move {move} happened ({motion_model})"
+                    assert tuple(end[i]) == tuple(start[i]), f"{agent}: masked move {move} happened ({motion_model})"
                     assert not trial.last_moved.any()
     assert n_illegal > 0
     if motion_model == "minimal":

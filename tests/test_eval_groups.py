@@ -15,14 +15,31 @@ RUNS = ["checkpoints/chain/cma_rules", "checkpoints/chain/cma_neural", "checkpoi
 
 def _config(tmp_path, checkpoints):
     path = tmp_path / "eval.yaml"
-    path.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 1000, "tasks": {"chain": {
-        "env": {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}, "checkpoints": checkpoints}}}))
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "seeds": 2,
+                "first_seed": 1000,
+                "tasks": {
+                    "chain": {
+                        "env": {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"},
+                        "checkpoints": checkpoints,
+                    }
+                },
+            }
+        )
+    )
     return path
 
 
 def test_a_group_of_training_seeds_is_one_row_with_the_spread_across_them(tmp_path):
-    rows = evaluate(config=_config(tmp_path, [{"label": "three-runs", "runs": RUNS}]), tasks=["chain"],
-                    out=tmp_path / "out", progress=False, plots=False)
+    rows = evaluate(
+        config=_config(tmp_path, [{"label": "three-runs", "runs": RUNS}]),
+        tasks=["chain"],
+        out=tmp_path / "out",
+        progress=False,
+        plots=False,
+    )
     (group,) = [r for r in rows if isinstance(r, GroupResult)]
     assert [r.source for r in group.runs] == RUNS
     summary = group.summary()
@@ -38,20 +55,29 @@ def test_a_group_of_training_seeds_is_one_row_with_the_spread_across_them(tmp_pa
 
 
 def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
-    with pytest.raises(ConfigError, match=r"tasks.chain.checkpoints\[0\] = \{'label': 'x'\} is not allowed; "
-                                          r"allowed: a checkpoint path, or \{label: NAME, runs: \[PATH, ...\]\}"):
-        evaluate(config=_config(tmp_path, [{"label": "x"}]), tasks=["chain"], out=tmp_path / "out",
-                 progress=False, plots=False)
+    with pytest.raises(
+        ConfigError,
+        match=r"tasks.chain.checkpoints\[0\] = \{'label': 'x'\} is not allowed; "
+        r"allowed: a checkpoint path, or \{label: NAME, runs: \[PATH, ...\]\}",
+    ):
+        evaluate(
+            config=_config(tmp_path, [{"label": "x"}]),
+            tasks=["chain"],
+            out=tmp_path / "out",
+            progress=False,
+            plots=False,
+        )
 
 
 def test_publish_puts_the_table_between_the_markers_and_refuses_a_page_without_them(tmp_path):
     from training.evaluate import PUBLISH_END, publish
 
     page = tmp_path / "page.md"
-    page.write_text("intro\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n")
+    page.write_text(
+        "intro\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n"
+    )
     publish("| new |", "docs/eval/x", [page])
-    assert page.read_text() == ("intro\n<!-- proteo eval --out docs/eval/x -->\n| new |\n"
-                                f"{PUBLISH_END}\nrest\n")
+    assert page.read_text() == (f"intro\n<!-- proteo eval --out docs/eval/x -->\n| new |\n{PUBLISH_END}\nrest\n")
     other = tmp_path / "other.md"
     other.write_text("no markers\n")
     with pytest.raises(ValueError, match="no '<!-- proteo eval --out docs/eval/x -->'"):

@@ -101,8 +101,14 @@ def test_same_seed_same_layout_and_sizes_grow():
 # ---------------------------------------------------------------------- metrics
 def _world_with_modules_on(task, layout, positions):
     physics = Physics(motion_model="minimal", keep_connected=False)
-    world = World(size=layout.size, positions=positions, n_agents=len(positions), physics=physics,
-                  object_sites=layout.object_sites, n_channels=task.n_channels)
+    world = World(
+        size=layout.size,
+        positions=positions,
+        n_agents=len(positions),
+        physics=physics,
+        object_sites=layout.object_sites,
+        n_channels=task.n_channels,
+    )
     task.reset(world, np.random.default_rng(0))
     return world
 
@@ -263,9 +269,20 @@ def test_config_files_build_and_run(path):
     assert env.engine.n_components() == 1
 
 
-@pytest.mark.parametrize("key, value", [("shape", "cone"), ("n_seeds", 0), ("n_seeds", 1000), ("object_size", 0.1),
-                                        ("direction", (0.0, 0.0, 0.0)), ("hint_noise_deg", 120.0),
-                                        ("surround_threshold", 1.5), ("base", "plate"), ("margin", 1)])
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("shape", "cone"),
+        ("n_seeds", 0),
+        ("n_seeds", 1000),
+        ("object_size", 0.1),
+        ("direction", (0.0, 0.0, 0.0)),
+        ("hint_noise_deg", 120.0),
+        ("surround_threshold", 1.5),
+        ("base", "plate"),
+        ("margin", 1),
+    ],
+)
 def test_bad_parameters_name_the_field(key, value):
     with pytest.raises(ConfigError, match=key):
         proteo_env.make("grasp-v0", **{key: value})

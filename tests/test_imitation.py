@@ -22,10 +22,33 @@ SMALL_ENV = {"n_modules": 8, "max_cycles": 100}
 
 
 def tiny_clone(run_dir, *extra: str):
-    argv = ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--seed", "5", "--n-envs", "16",
-            "--rounds", "2", "--cycles-per-round", "150", "--epochs", "8", "--minibatch-size", "512",
-            "--hidden", "[32, 32]", "--run-dir", str(run_dir), "--tensorboard", "false", "--progress-bar", "false",
-            *extra]
+    argv = [
+        "--task",
+        "chain-v0",
+        "--env",
+        json.dumps(SMALL_ENV),
+        "--seed",
+        "5",
+        "--n-envs",
+        "16",
+        "--rounds",
+        "2",
+        "--cycles-per-round",
+        "150",
+        "--epochs",
+        "8",
+        "--minibatch-size",
+        "512",
+        "--hidden",
+        "[32, 32]",
+        "--run-dir",
+        str(run_dir),
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+        *extra,
+    ]
     return imitate.main(argv)
 
 
@@ -79,14 +102,48 @@ def test_imitation_is_deterministic_for_a_seed(clone, tmp_path):
 
 def test_kickstarting_starts_from_the_clone_and_anneals_the_distillation_term(clone, tmp_path):
     hidden = json.dumps(read_meta(clone)["hidden"])
-    common = ["--task", "chain-v0", "--control", "move", "--env", json.dumps(SMALL_ENV), "--n-envs", "8",
-              "--n-steps", "16", "--minibatch-size", "256", "--arch", "shared", "--message-encoding", "compact",
-              "--hidden", hidden, "--tensorboard", "false", "--progress-bar", "false", "--init", str(clone)]
+    common = [
+        "--task",
+        "chain-v0",
+        "--control",
+        "move",
+        "--env",
+        json.dumps(SMALL_ENV),
+        "--n-envs",
+        "8",
+        "--n-steps",
+        "16",
+        "--minibatch-size",
+        "256",
+        "--arch",
+        "shared",
+        "--message-encoding",
+        "compact",
+        "--hidden",
+        hidden,
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+        "--init",
+        str(clone),
+    ]
     start = ppo.main(common + ["--total-steps", "0", "--run-dir", str(tmp_path / "zero")])
     kept, loaded = (torch.load(p / "policy.pt", weights_only=True) for p in (clone, start))
     assert all(torch.equal(kept[k], loaded[k]) for k in kept)
-    run = ppo.main(common + ["--total-steps", "6000", "--distill-coef", "1.0", "--distill-steps", "3000",
-                             "--run-dir", str(tmp_path / "kick")])
+    run = ppo.main(
+        common
+        + [
+            "--total-steps",
+            "6000",
+            "--distill-coef",
+            "1.0",
+            "--distill-steps",
+            "3000",
+            "--run-dir",
+            str(tmp_path / "kick"),
+        ]
+    )
     log = rows(run.parent / "progress.csv")
     weights = [float(r["loss/distill_weight"]) for r in log]
     assert weights[0] == 1.0 and weights == sorted(weights, reverse=True) and weights[-1] == 0.0
@@ -101,8 +158,24 @@ def test_bad_teacher_and_init_are_refused_naming_the_field(clone, tmp_path):
         tiny_clone(tmp_path / "b", "--rounds", "-1")
     with pytest.raises(ConfigError, match=r"beta=1.5 is not allowed"):
         tiny_clone(tmp_path / "c", "--beta", "1.5")
-    base = ["--control", "move", "--n-envs", "2", "--total-steps", "0", "--tensorboard", "false",
-            "--progress-bar", "false", "--arch", "shared", "--message-encoding", "compact", "--init", str(clone)]
+    base = [
+        "--control",
+        "move",
+        "--n-envs",
+        "2",
+        "--total-steps",
+        "0",
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+        "--arch",
+        "shared",
+        "--message-encoding",
+        "compact",
+        "--init",
+        str(clone),
+    ]
     with pytest.raises(CheckpointError, match=r"task='chain'; this run has task='branch'"):
         ppo.main(base + ["--task", "branch-v0", "--hidden", "[32, 32]", "--run-dir", str(tmp_path / "d")])
     with pytest.raises(CheckpointError, match=r"hidden=\[32, 32\]; this run has hidden=\[64, 64\]"):
@@ -120,20 +193,21 @@ def test_last_move_memory_feeds_each_agent_its_own_previous_move_and_resets_with
         return np.zeros((len(features), 13))
 
     encoder = ObservationEncoder.for_env(env)
-    policy = LogitsPolicy(env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn,
-                          nvec=[13], memory="last_move")
+    policy = LogitsPolicy(
+        env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn, nvec=[13], memory="last_move"
+    )
     observations, _ = env.reset(seed=3)
     policy.reset(3)
     first = policy.act(observations)
     assert seen[0].shape == (len(observations), encoder.size + 13)
-    assert np.all(seen[0][:, encoder.size:] == np.eye(13)[[0] * len(observations)])  # nothing remembered yet
+    assert np.all(seen[0][:, encoder.size :] == np.eye(13)[[0] * len(observations)])  # nothing remembered yet
     observations, *_ = env.step(first)
     policy.act(observations)
-    remembered = seen[1][:, encoder.size:].argmax(axis=1)
+    remembered = seen[1][:, encoder.size :].argmax(axis=1)
     assert list(remembered) == [int(first[a][0]) for a in observations]  # by agent name, in row order
     policy.reset(4)
     policy.act(observations)
-    assert np.all(seen[2][:, encoder.size:].argmax(axis=1) == 0)
+    assert np.all(seen[2][:, encoder.size :].argmax(axis=1) == 0)
 
 
 def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_full():
@@ -148,8 +222,9 @@ def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_
         return np.zeros((len(features), int(np.sum(nvec))))
 
     encoder = ObservationEncoder.for_env(env)
-    policy = LogitsPolicy(env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn,
-                          memory="last_action")
+    policy = LogitsPolicy(
+        env.action_layout, env.task.modes, seed=1, encoder=encoder, logits_fn=logits_fn, memory="last_action"
+    )
     observations, _ = env.reset(seed=3)
     policy.reset(3)
     first = policy.act(observations)
@@ -158,7 +233,7 @@ def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_
     policy.act(observations)
     starts = np.concatenate([[0], np.cumsum(nvec)[:-1]])
     for row, agent in enumerate(observations):
-        block = seen[1][row, encoder.size:]
+        block = seen[1][row, encoder.size :]
         assert np.flatnonzero(block).tolist() == (starts + np.asarray(first[agent])).tolist()
 
 
@@ -169,11 +244,35 @@ def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_pa
     policy = load_policy(clone, proteo_env.make("chain-v0", control="move", **SMALL_ENV))
     assert policy.memory == "last_move"
     with pytest.raises(CheckpointError, match=r"memory='last_move'; this run has memory='none'"):
-        ppo.main(["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--n-envs", "2", "--total-steps", "0",
-                  "--arch", "shared", "--message-encoding", "compact", "--hidden", "[32, 32]", "--init", str(clone),
-                  "--tensorboard", "false", "--progress-bar", "false", "--run-dir", str(tmp_path / "run")])
-    full = tiny_clone(tmp_path / "full", "--control", "full", "--memory", "last_action", "--rounds", "1",
-                      "--cycles-per-round", "20")
+        ppo.main(
+            [
+                "--task",
+                "chain-v0",
+                "--env",
+                json.dumps(SMALL_ENV),
+                "--n-envs",
+                "2",
+                "--total-steps",
+                "0",
+                "--arch",
+                "shared",
+                "--message-encoding",
+                "compact",
+                "--hidden",
+                "[32, 32]",
+                "--init",
+                str(clone),
+                "--tensorboard",
+                "false",
+                "--progress-bar",
+                "false",
+                "--run-dir",
+                str(tmp_path / "run"),
+            ]
+        )
+    full = tiny_clone(
+        tmp_path / "full", "--control", "full", "--memory", "last_action", "--rounds", "1", "--cycles-per-round", "20"
+    )
     policy = load_policy(full, proteo_env.make("chain-v0", control="full", **SMALL_ENV))
     assert policy.memory == "last_action" and len(policy.nvec) == 5
     assert policy.sampled == "move"  # the clone's checkpoint says how it acts: moves sampled, the rest arg-max
@@ -188,7 +287,9 @@ def test_return_scale_tracks_the_mean_and_variance_of_every_return_seen_and_is_t
     for batch in batches:
         scale.update(batch)
     seen = torch.cat(batches).double()
-    assert scale.mean == pytest.approx(seen.mean().item()) and scale.std == pytest.approx(seen.std(unbiased=False).item())
+    assert scale.mean == pytest.approx(seen.mean().item()) and scale.std == pytest.approx(
+        seen.std(unbiased=False).item()
+    )
     targets = scale.target(seen)
     assert abs(targets.mean().item()) < 1e-9 and targets.std(unbiased=False).item() == pytest.approx(1.0)
     assert torch.allclose(scale.value(targets), seen)
@@ -198,9 +299,26 @@ def test_return_scale_tracks_the_mean_and_variance_of_every_return_seen_and_is_t
 
 
 def test_value_norm_is_saved_with_the_trainer_state_and_resumed(tmp_path):
-    common = ["--task", "chain-v0", "--env", json.dumps(SMALL_ENV), "--n-envs", "4", "--n-steps", "8",
-              "--minibatch-size", "128", "--hidden", "[16, 16]", "--value-norm", "true", "--tensorboard", "false",
-              "--progress-bar", "false"]
+    common = [
+        "--task",
+        "chain-v0",
+        "--env",
+        json.dumps(SMALL_ENV),
+        "--n-envs",
+        "4",
+        "--n-steps",
+        "8",
+        "--minibatch-size",
+        "128",
+        "--hidden",
+        "[16, 16]",
+        "--value-norm",
+        "true",
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+    ]
     first = ppo.main(common + ["--total-steps", "512", "--run-dir", str(tmp_path / "run")])
     saved = torch.load(first / "trainer.pt", weights_only=False)["return_scale"]
     assert saved["count"] == 512 and saved["var"] > 0  # every return of both rollouts entered the statistics
@@ -222,8 +340,13 @@ def test_sampled_move_samples_the_move_as_before_and_takes_the_arg_max_of_every_
     assert not np.array_equal(everything[:, 1], moves_only[:, 1])
     env = proteo_env.make("chain-v0", control="full", **SMALL_ENV)
     with pytest.raises(ConfigError, match=r"sampled='modes' is not allowed; allowed: 'all', 'move'"):
-        LogitsPolicy(env.action_layout, env.task.modes, encoder=ObservationEncoder.for_env(env),
-                     logits_fn=lambda x: x, sampled="modes")
+        LogitsPolicy(
+            env.action_layout,
+            env.task.modes,
+            encoder=ObservationEncoder.for_env(env),
+            logits_fn=lambda x: x,
+            sampled="modes",
+        )
 
 
 def test_a_checkpoint_teaches_its_own_actions_and_one_of_another_task_is_refused(clone, tmp_path):

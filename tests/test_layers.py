@@ -54,7 +54,11 @@ def imports(path: Path) -> list[tuple[int, str]]:
     """``(line, absolute module)`` of every import in ``path`` (relative imports resolved)."""
     found = []
     for node, base in import_statements(path):
-        found += [(node.lineno, alias.name) for alias in node.names] if isinstance(node, ast.Import) else [(node.lineno, base)]
+        found += (
+            [(node.lineno, alias.name) for alias in node.names]
+            if isinstance(node, ast.Import)
+            else [(node.lineno, base)]
+        )
     return found
 
 
@@ -144,8 +148,11 @@ def test_layer_of_a_module_and_relative_imports(tmp_path):
 @pytest.mark.parametrize("path", list(project_files()), ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_module_imports_a_layer_above_its_own(path):
     own = layer(module_name(path))
-    above = [f"{path.relative_to(ROOT)}:{line} imports {name}" for line, name in imports(path)
-             if layer(name) is not None and layer(name) > own]
+    above = [
+        f"{path.relative_to(ROOT)}:{line} imports {name}"
+        for line, name in imports(path)
+        if layer(name) is not None and layer(name) > own
+    ]
     assert not above, "dependencies must run core <- proteo_env <- baselines <- training: " + "; ".join(above)
 
 

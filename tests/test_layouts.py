@@ -61,18 +61,7 @@ def test_legend():
 
 
 def test_parse_every_legend_character():
-    text = (
-        "; every character of the legend\n"
-        "size 4 4 2\n"
-        "floor\n"
-        "z = 0\n"
-        "m.F.\n"
-        ".R.#\n"
-        "o...\n"
-        "\n"
-        "z = 1\n"
-        ".m..\n"
-    )
+    text = "; every character of the legend\nsize 4 4 2\nfloor\nz = 0\nm.F.\n.R.#\no...\n\nz = 1\n.m..\n"
     layout = parse_layout(text)
     assert layout.size == (4, 4, 2)
     assert layout.floor is True
@@ -112,13 +101,19 @@ def _layout_from_blob(n, seed, floor, margin, kinds_seed):
     sites, size = place_in_box(blob_sites(n, rng, flat=floor), margin=margin, floor=floor)
     kinds = np.random.default_rng(kinds_seed).integers(0, 5, size=n)
     parts = [sites[kinds == k] for k in range(5)]
-    return Layout(size=size, modules=parts[0], roots=parts[1], fixed=parts[2], solid=parts[3],
-                  object_sites=parts[4], floor=floor)
+    return Layout(
+        size=size, modules=parts[0], roots=parts[1], fixed=parts[2], solid=parts[3], object_sites=parts[4], floor=floor
+    )
 
 
 @HYPOTHESIS
-@given(n=st.integers(1, 40), seed=st.integers(0, 2**32 - 1), floor=st.booleans(),
-       margin=st.integers(1, 3), kinds_seed=st.integers(0, 2**32 - 1))
+@given(
+    n=st.integers(1, 40),
+    seed=st.integers(0, 2**32 - 1),
+    floor=st.booleans(),
+    margin=st.integers(1, 3),
+    kinds_seed=st.integers(0, 2**32 - 1),
+)
 def test_format_parse_round_trip(n, seed, floor, margin, kinds_seed):
     layout = _layout_from_blob(n, seed, floor, margin, kinds_seed)
     text = format_layout(layout)
@@ -134,8 +129,15 @@ def test_format_parse_round_trip(n, seed, floor, margin, kinds_seed):
 def test_formatted_layout_runs_in_an_env(tmp_path):
     layout = parse_layout(format_layout(_layout_from_blob(15, 3, True, 2, 0)))
     path = tmp_path / "blob.txt"
-    path.write_text(format_layout(Layout(size=layout.size, modules=np.concatenate(
-        [layout.modules, layout.roots, layout.fixed, layout.solid, layout.object_sites]), floor=True)))
+    path.write_text(
+        format_layout(
+            Layout(
+                size=layout.size,
+                modules=np.concatenate([layout.modules, layout.roots, layout.fixed, layout.solid, layout.object_sites]),
+                floor=True,
+            )
+        )
+    )
     env = proteo_env.make("sandbox-v0", layout=str(path))
     env.reset(seed=0)
     assert len(env.agents) == 15
@@ -176,10 +178,10 @@ def test_ball_sites(n):
     assert _connected(sites)
     # compact: the n sites nearest the origin
     r = int(np.ceil((3 * n) ** (1 / 3))) + 3
-    g = np.mgrid[-r:r + 1, -r:r + 1, -r:r + 1].reshape(3, -1).T
+    g = np.mgrid[-r : r + 1, -r : r + 1, -r : r + 1].reshape(3, -1).T
     g = g[g.sum(axis=1) % 2 == 0]
     outside = _as_set(g) - _as_set(sites)
-    far = max(int((p ** 2).sum()) for p in sites)
+    far = max(int((p**2).sum()) for p in sites)
     near_outside = min(sum(c * c for c in p) for p in outside)
     assert far <= near_outside
 
@@ -200,8 +202,12 @@ def test_line_sites_default_direction():
 
 
 @HYPOTHESIS
-@given(n=st.integers(1, 40), seed=st.integers(0, 2**32 - 1), floor=st.booleans(),
-       margin=st.one_of(st.integers(1, 4), st.tuples(st.integers(1, 4), st.integers(1, 4), st.integers(1, 4))))
+@given(
+    n=st.integers(1, 40),
+    seed=st.integers(0, 2**32 - 1),
+    floor=st.booleans(),
+    margin=st.one_of(st.integers(1, 4), st.tuples(st.integers(1, 4), st.integers(1, 4), st.integers(1, 4))),
+)
 def test_place_in_box(n, seed, floor, margin):
     sites = blob_sites(n, np.random.default_rng(seed), flat=floor) + np.array([-7, 3, 0])
     placed, size = place_in_box(sites, margin=margin, floor=floor)
@@ -248,8 +254,13 @@ def test_floor_flag(floor):
 
 
 def test_floor_in_the_world():
-    world = World(size=(4, 4, 3), positions=[[1, 1, 0], [2, 2, 0], [1, 1, 2]], n_agents=3,
-                  physics=Physics(keep_connected=False), floor=True)
+    world = World(
+        size=(4, 4, 3),
+        positions=[[1, 1, 0], [2, 2, 0], [1, 1, 2]],
+        n_agents=3,
+        physics=Physics(keep_connected=False),
+        floor=True,
+    )
     assert world.floor
     with pytest.raises(LayoutError, match="outside the box"):
         World(size=(4, 4, 3), positions=[[1, 1, -2]], n_agents=1, physics=Physics(), floor=True)

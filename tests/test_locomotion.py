@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_compiled_rollout import assert_same_trajectory, drive
 
 import proteo_env
 from baselines import make_policy
 from baselines.compiled import compiled_rollout
 from baselines.locomotion import LocomotionPolicy
 from proteo_env.config import ConfigError
-from test_compiled_rollout import assert_same_trajectory, drive
 
 SMALL = dict(n_modules=16, step_height=0, distance=2, max_cycles=600)
 
@@ -92,11 +92,17 @@ def test_success_means_the_whole_robot_is_beyond_the_line(overrides):
         pytest.fail(f"no success in 6 seeds with {overrides}")
 
 
-@pytest.mark.parametrize("field, value, allowed", [
-    ("step_height", -1, "an integer >= 0"), ("distance", 0, "an integer >= 1"),
-    ("tunnel_height", 1, "0 (no tunnel) or an integer >= 2"), ("n_modules", 1, "an integer >= 2"),
-    ("room", 0, "None or an integer >= 1"), ("time_penalty", -0.5, "a number >= 0"),
-])
+@pytest.mark.parametrize(
+    "field, value, allowed",
+    [
+        ("step_height", -1, "an integer >= 0"),
+        ("distance", 0, "an integer >= 1"),
+        ("tunnel_height", 1, "0 (no tunnel) or an integer >= 2"),
+        ("n_modules", 1, "an integer >= 2"),
+        ("room", 0, "None or an integer >= 1"),
+        ("time_penalty", -0.5, "a number >= 0"),
+    ],
+)
 def test_bad_parameters_get_one_clear_error(field, value, allowed):
     with pytest.raises(ConfigError) as error:
         proteo_env.make("locomotion-v0", **{field: value})

@@ -38,7 +38,7 @@ the candidate sites (every FCC site with max-abs coordinate <= 3 apart from M, T
 from __future__ import annotations
 
 import itertools
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -58,9 +58,7 @@ Case = tuple[tuple[int, int, int], tuple[int, int, int]]
 # --------------------------------------------------------------------------- lattice and cell
 
 
-FACE_DIRECTIONS = np.array(
-    [v for v in itertools.product((-1, 0, 1), repeat=3) if sorted(map(abs, v)) == [0, 1, 1]]
-)
+FACE_DIRECTIONS = np.array([v for v in itertools.product((-1, 0, 1), repeat=3) if sorted(map(abs, v)) == [0, 1, 1]])
 CELL_VERTICES = np.array(
     [v for v in itertools.product((-1, 0, 1), repeat=3) if sum(map(abs, v)) == 1]
     + list(itertools.product((-0.5, 0.5), repeat=3)),
@@ -214,7 +212,7 @@ SWEEPERS = {
 }
 
 
-@lru_cache(maxsize=None)
+@cache
 def derived_table(model: str) -> dict[Case, frozenset]:
     return {case: SWEEPERS[model](*case) for case in roll_cases()}
 

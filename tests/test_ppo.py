@@ -22,10 +22,35 @@ SMALL_ENV = {"n_modules": 6, "max_cycles": 40}
 
 def tiny_run(run_dir, *extra: str, steps: int = 3000):
     """A short chain run at control level move (a few updates of 6-module worlds)."""
-    argv = ["--task", "chain-v0", "--control", "move", "--env", json.dumps(SMALL_ENV), "--seed", "3",
-            "--n-envs", "8", "--n-groups", "8", "--n-steps", "16", "--minibatch-size", "256",
-            "--total-steps", str(steps), "--checkpoint-every", "1500", "--run-dir", str(run_dir),
-            "--tensorboard", "false", "--progress-bar", "false", *extra]
+    argv = [
+        "--task",
+        "chain-v0",
+        "--control",
+        "move",
+        "--env",
+        json.dumps(SMALL_ENV),
+        "--seed",
+        "3",
+        "--n-envs",
+        "8",
+        "--n-groups",
+        "8",
+        "--n-steps",
+        "16",
+        "--minibatch-size",
+        "256",
+        "--total-steps",
+        str(steps),
+        "--checkpoint-every",
+        "1500",
+        "--run-dir",
+        str(run_dir),
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+        *extra,
+    ]
     return ppo.main(argv)
 
 
@@ -46,8 +71,9 @@ def test_checkpoint_loads_and_proteo_eval_runs_it_at_its_level(trained, tmp_path
     assert all(np.asarray(a).shape == (1,) and observations[k]["action_mask"][int(a[0])] for k, a in actions.items())
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 500, "tasks": {"chain": {"env": SMALL_ENV}}}))
-    rows = evaluate(config=config, tasks=["chain"], checkpoints=[str(trained)], out=tmp_path / "eval",
-                    progress=False, plots=False)
+    rows = evaluate(
+        config=config, tasks=["chain"], checkpoints=[str(trained)], out=tmp_path / "eval", progress=False, plots=False
+    )
     learned = [r.summary() for r in rows if r.kind == "learned"]
     assert len(learned) == 1 and learned[0]["level"] == "move" and learned[0]["episodes"] == 2
     assert "ppo-mlp" in (tmp_path / "eval" / "results.md").read_text()
@@ -66,8 +92,9 @@ def test_resume_continues_from_the_step_count(trained):
     done = read_meta(step)["agent_steps"]
     with (run_dir / "progress.csv").open() as fh:
         rows_before = len(list(csv.DictReader(fh)))
-    final = ppo.main(["--resume", str(step), "--total-steps", "6000", "--tensorboard", "false",
-                      "--progress-bar", "false"])
+    final = ppo.main(
+        ["--resume", str(step), "--total-steps", "6000", "--tensorboard", "false", "--progress-bar", "false"]
+    )
     assert final == run_dir / "final"
     with (run_dir / "progress.csv").open() as fh:
         rows = list(csv.DictReader(fh))[rows_before:]
@@ -111,13 +138,31 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
     """Move-level chain of 12 modules (the training size): after ~20 s of training the learned moves
     earn more than random moves under the rules, by more than 3 standard errors, and finish sooner."""
     env = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
-    final = ppo.main(["--config", "configs/train/ppo_chain_move.yaml", "--task", "chain-v0", "--env", json.dumps(env),
-                      "--total-steps", "600000", "--time-limit-minutes", "0", "--run-dir", str(tmp_path / "run"),
-                      "--tensorboard", "false", "--progress-bar", "false"])
+    final = ppo.main(
+        [
+            "--config",
+            "configs/train/ppo_chain_move.yaml",
+            "--task",
+            "chain-v0",
+            "--env",
+            json.dumps(env),
+            "--total-steps",
+            "600000",
+            "--time-limit-minutes",
+            "0",
+            "--run-dir",
+            str(tmp_path / "run"),
+            "--tensorboard",
+            "false",
+            "--progress-bar",
+            "false",
+        ]
+    )
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 20, "first_seed": 2000, "tasks": {"chain": {"env": env}}}))
-    rows = evaluate(config=config, tasks=["chain"], checkpoints=[str(final)], out=tmp_path / "eval",
-                    progress=False, plots=False)
+    rows = evaluate(
+        config=config, tasks=["chain"], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
+    )
     by_kind = {(r.kind, r.level): r for r in rows}
     learned, random_moves = by_kind[("learned", "move")], by_kind[("random", "move")]
 
@@ -125,8 +170,10 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
         return np.std(values, ddof=1) / math.sqrt(len(values))
 
     gap = np.mean(learned.returns) - np.mean(random_moves.returns)
-    assert gap > 3 * math.hypot(standard_error(learned.returns), standard_error(random_moves.returns)), \
-        (learned.returns, random_moves.returns)
+    assert gap > 3 * math.hypot(standard_error(learned.returns), standard_error(random_moves.returns)), (
+        learned.returns,
+        random_moves.returns,
+    )
     assert np.mean(learned.cycles) < np.mean(random_moves.cycles)
 
 
@@ -142,7 +189,7 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
         single.reset(seed=11 + w)
     a, enc, rng = worlds.n_agents, worlds.encoder, np.random.default_rng(0)
     n_truncated = 0
-    for cycle in range(1, 8):
+    for _ in range(1, 8):
         mask = np.concatenate([b.action_mask for b in worlds.buffers]).astype(bool)
         moves = np.argmax(mask * rng.random(mask.shape), axis=1).reshape(3, a, 1)
         finished = []
@@ -156,8 +203,10 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
                 np.testing.assert_array_equal(worlds.final_features[rows], enc.encode_buffers(single.observe_arrays()))
             if ended:
                 single.reset()
-            np.testing.assert_array_equal(enc.encode_buffers(worlds.buffers[0].rows(w * a, (w + 1) * a)),
-                                          enc.encode_buffers(single.observe_arrays()))
+            np.testing.assert_array_equal(
+                enc.encode_buffers(worlds.buffers[0].rows(w * a, (w + 1) * a)),
+                enc.encode_buffers(single.observe_arrays()),
+            )
         assert len(finished) == int((terminal | truncated).sum())
         n_truncated += int(truncated.sum())
     assert n_truncated > 0

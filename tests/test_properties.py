@@ -41,17 +41,16 @@ def worlds(draw, *, min_modules=2, max_modules=40):
     kw = dict(size=size, positions=sites, n_agents=n, floor=floor)
     if obstacles:
         taken = {tuple(p) for p in sites.tolist()}
-        g = np.mgrid[0:size[0], 0:size[1], 0:size[2]].reshape(3, -1).T
+        g = np.mgrid[0 : size[0], 0 : size[1], 0 : size[2]].reshape(3, -1).T
         free = np.array([p for p in g if p.sum() % 2 == 0 and tuple(p.tolist()) not in taken])
         pick = rng.permutation(len(free))
         kw["solid"] = free[pick[: len(free) // 5]]
-        kw["object_sites"] = free[pick[len(free) // 5: len(free) // 5 + 8]]
+        kw["object_sites"] = free[pick[len(free) // 5 : len(free) // 5 + 8]]
     n_anchored = draw(st.integers(0, min(3, n - 1)))
     anchored = np.zeros(n, dtype=bool)
     anchored[rng.choice(n, n_anchored, replace=False)] = True
     kw["anchored"] = anchored
-    kw["physics"] = Physics(motion_model=draw(st.sampled_from(MOTION_MODELS)),
-                            keep_connected=draw(st.booleans()))
+    kw["physics"] = Physics(motion_model=draw(st.sampled_from(MOTION_MODELS)), keep_connected=draw(st.booleans()))
     return kw
 
 
@@ -60,10 +59,13 @@ def random_actions(rng, n_agents, mask):
     for a in np.flatnonzero(rng.random(n_agents) < 0.5):
         legal = np.flatnonzero(mask[a])
         move[a] = rng.choice(legal)
-    return dict(move=move, mode=np.zeros(n_agents, dtype=np.int64),
-                scent_role=np.ones((n_agents, 1), dtype=np.int64),
-                message_target=np.zeros(n_agents, dtype=np.int64),
-                message_value=np.zeros(n_agents, dtype=np.int64))
+    return dict(
+        move=move,
+        mode=np.zeros(n_agents, dtype=np.int64),
+        scent_role=np.ones((n_agents, 1), dtype=np.int64),
+        message_target=np.zeros(n_agents, dtype=np.int64),
+        message_value=np.zeros(n_agents, dtype=np.int64),
+    )
 
 
 def check_occupancy(world: World, kw: dict) -> None:
@@ -103,8 +105,9 @@ def test_random_play_keeps_invariants_and_moves_only_legally(kw, cycles, action_
         for a in order:
             k = int(move[a]) - 1
             legal = ref.move_is_legal(a, k)
-            assert bool(moved[a]) == legal, (f"cycle {t}: module {a} towards {k}: engine moved={bool(moved[a])}, "
-                                             f"reference legal={legal}")
+            assert bool(moved[a]) == legal, (
+                f"cycle {t}: module {a} towards {k}: engine moved={bool(moved[a])}, reference legal={legal}"
+            )
             if not anyone_moved:
                 assert bool(moved[a]) == bool(mask[a, k + 1]), f"cycle {t}: module {a} ignored its action mask"
             if legal:
@@ -142,8 +145,13 @@ def test_detach_test_and_cut_modules_match_a_full_search(kw, cycles, action_seed
 def _relax_only(world, roles):
     """A cycle in which nobody moves or sends: only the scents change (agents keep their modes)."""
     a = world.n_agents
-    world.step(move=np.zeros(a, np.int64), mode=world.mode[:a].copy(), scent_role=roles,
-               message_target=np.zeros(a, np.int64), message_value=np.zeros(a, np.int32))
+    world.step(
+        move=np.zeros(a, np.int64),
+        mode=world.mode[:a].copy(),
+        scent_role=roles,
+        message_target=np.zeros(a, np.int64),
+        message_value=np.zeros(a, np.int32),
+    )
 
 
 @settings(max_examples=150, **SETTINGS)
@@ -154,11 +162,28 @@ def test_enough_sweeps_reach_the_exact_scent(kw, scent_max, surface, role_seed):
     rng = np.random.default_rng(role_seed)
     common = dict(kw, n_channels=1, surface_channels=np.array([surface]))
     base = kw["physics"]
-    exact = World(**{**common, "physics": Physics(motion_model=base.motion_model, keep_connected=base.keep_connected,
-                                                  exact_scent=True, scent_max=scent_max)})
-    sweeping = World(**{**common, "physics": Physics(motion_model=base.motion_model,
-                                                     keep_connected=base.keep_connected,
-                                                     scent_sweeps=scent_max + n, scent_max=scent_max)})
+    exact = World(
+        **{
+            **common,
+            "physics": Physics(
+                motion_model=base.motion_model,
+                keep_connected=base.keep_connected,
+                exact_scent=True,
+                scent_max=scent_max,
+            ),
+        }
+    )
+    sweeping = World(
+        **{
+            **common,
+            "physics": Physics(
+                motion_model=base.motion_model,
+                keep_connected=base.keep_connected,
+                scent_sweeps=scent_max + n,
+                scent_max=scent_max,
+            ),
+        }
+    )
     # a stale field first: values left over from other roles
     sweeping.scent[:] = rng.integers(0, scent_max + 1, (1, n))
     roles = rng.choice(3, size=(n, 1), p=[0.2, 0.7, 0.1])
@@ -206,7 +231,7 @@ def test_bad_layouts_get_one_clear_error(kw, corruption, pick):
         pos[m] = pos[(m + 1) % n]
     elif corruption in ("on_solid", "on_object"):
         key = "solid" if corruption == "on_solid" else "object_sites"
-        kw[key] = np.concatenate([np.asarray(kw.get(key, np.zeros((0, 3))), dtype=np.int64), pos[m:m + 1]])
+        kw[key] = np.concatenate([np.asarray(kw.get(key, np.zeros((0, 3))), dtype=np.int64), pos[m : m + 1]])
     elif corruption == "too_many_agents":
         kw["n_agents"] = n + 1 + pick % 3
     elif corruption == "split":  # one module far away in a wider box, connectivity enforced

@@ -14,8 +14,10 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-SWEEP = ("task: chain-v1\nenv: {max_cycles: 400}\ngrid:\n  n_modules: [12, 16]\n  motion_model: [minimal, sphere]\n"
-         "seeds: 2\nplot: {x: n_modules, hue: motion_model}\n")
+SWEEP = (
+    "task: chain-v1\nenv: {max_cycles: 400}\ngrid:\n  n_modules: [12, 16]\n  motion_model: [minimal, sphere]\n"
+    "seeds: 2\nplot: {x: n_modules, hue: motion_model}\n"
+)
 LONG_SWEEP = "task: chain-v1\nenv: {max_cycles: 1500, motion_model: rhombic}\ngrid:\n  n_modules: [30, 40]\nseeds: 2\n"
 """Episodes of a second or more, so that one can be killed while it runs."""
 
@@ -114,6 +116,9 @@ def test_node_lacking_the_project_is_named(two_nodes):
     from training.distributed import PROJECT_MODULES, ClusterError, check_cluster
 
     assert len(check_cluster()) == 2
-    with pytest.raises(ClusterError, match=r"node .*: cannot import proteo_extension_not_installed .*allowed: every "
-                                           r"node with this checkout installed"):
+    with pytest.raises(
+        ClusterError,
+        match=r"node .*: cannot import proteo_extension_not_installed .*allowed: every "
+        r"node with this checkout installed",
+    ):
         check_cluster((*PROJECT_MODULES, "proteo_extension_not_installed"))

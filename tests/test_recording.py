@@ -85,8 +85,8 @@ def _flip_in_member(src, dst, member: str):
     data = bytearray(src.read_bytes())
     with zipfile.ZipFile(src) as z:
         info = z.getinfo(member + ".npy")
-    name_len = int.from_bytes(data[info.header_offset + 26:info.header_offset + 28], "little")
-    extra_len = int.from_bytes(data[info.header_offset + 28:info.header_offset + 30], "little")
+    name_len = int.from_bytes(data[info.header_offset + 26 : info.header_offset + 28], "little")
+    extra_len = int.from_bytes(data[info.header_offset + 28 : info.header_offset + 30], "little")
     start = info.header_offset + 30 + name_len + extra_len
     data[start + info.compress_size // 2] ^= 0xFF
     dst.write_bytes(bytes(data))
@@ -107,7 +107,7 @@ def _assert_clear(path, *words):
 def test_truncated_file(saved, tmp_path, keep):
     data = saved.read_bytes()
     path = tmp_path / "cut.npz"
-    path.write_bytes(data[:int(len(data) * keep)])
+    path.write_bytes(data[: int(len(data) * keep)])
     _assert_clear(path, "truncated or corrupted")
 
 
@@ -117,8 +117,7 @@ def test_corrupted_file(saved, tmp_path, member):
 
 
 def test_wrong_format_version(saved, tmp_path):
-    message = _assert_clear(_rewrite(saved, tmp_path / "v.npz", header={"format_version": 99}),
-                            "format_version 99")
+    message = _assert_clear(_rewrite(saved, tmp_path / "v.npz", header={"format_version": 99}), "format_version 99")
     assert f"allowed: format_version {FORMAT_VERSION}" in message
 
 
@@ -171,8 +170,10 @@ def test_plot_groups_and_weight_shifts(recording, monkeypatch, tmp_path):
     weight = np.where(np.arange(t) < t // 2, 7.0, 3.0)
     series = {"legs_region_0": np.arange(t, dtype=float), "legs_region_1": np.ones(t), "weight_left": weight}
     table_like = Recording(**{**recording.__dict__, "task_id": "unregistered-v0", "series": series})
-    assert plot_groups(table_like) == {"legs per region": ["legs_region_0", "legs_region_1"],
-                                       "weight left": ["weight_left"]}
+    assert plot_groups(table_like) == {
+        "legs per region": ["legs_region_0", "legs_region_1"],
+        "weight left": ["weight_left"],
+    }
     assert weight_shifts(table_like) == [int(recording.cycles[t // 2])]
     paths = plot_recording(table_like, tmp_path / "plots")
     assert [p.name for p in paths] == ["overview.png", "legs_per_region.png", "weight_left.png"]
@@ -184,9 +185,31 @@ def test_run_record_render_and_replay(tmp_path, capsys):
     from training.cli import main
 
     ep, movie, plots = tmp_path / "ep.npz", tmp_path / "movie.gif", tmp_path / "plots"
-    assert main(["run", "chain-v0", "--set", "n_modules=8", "--set", "max_cycles=12", "--policy", "chain",
-                 "--record", str(ep), "--render", str(movie), "--plots", str(plots), "--size", "160x120",
-                 "--max-frames", "4"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "chain-v0",
+                "--set",
+                "n_modules=8",
+                "--set",
+                "max_cycles=12",
+                "--policy",
+                "chain",
+                "--record",
+                str(ep),
+                "--render",
+                str(movie),
+                "--plots",
+                str(plots),
+                "--size",
+                "160x120",
+                "--max-frames",
+                "4",
+            ]
+        )
+        == 0
+    )
     rec = load(ep)
     assert rec.overrides == {"n_modules": 8, "max_cycles": 12} and rec.positions.shape[1] == 8
     assert movie.is_file() and (plots / "overview.png").is_file()

@@ -23,11 +23,39 @@ SMALL_ENV = {"n_modules": 6, "max_cycles": 30}
 
 
 def tiny_run(run_dir, *extra: str, steps: int = 2000):
-    argv = ["--task", "chain-v0", "--control", "move", "--env", json.dumps(SMALL_ENV), "--seed", "2",
-            "--n-envs", "4", "--n-steps", "16", "--minibatch-size", "128", "--arch", "shared",
-            "--message-encoding", "compact", "--hidden", "[16, 16]", "--total-steps", str(steps),
-            "--checkpoint-every", "100000", "--run-dir", str(run_dir), "--tensorboard", "false",
-            "--progress-bar", "false", *extra]
+    argv = [
+        "--task",
+        "chain-v0",
+        "--control",
+        "move",
+        "--env",
+        json.dumps(SMALL_ENV),
+        "--seed",
+        "2",
+        "--n-envs",
+        "4",
+        "--n-steps",
+        "16",
+        "--minibatch-size",
+        "128",
+        "--arch",
+        "shared",
+        "--message-encoding",
+        "compact",
+        "--hidden",
+        "[16, 16]",
+        "--total-steps",
+        str(steps),
+        "--checkpoint-every",
+        "100000",
+        "--run-dir",
+        str(run_dir),
+        "--tensorboard",
+        "false",
+        "--progress-bar",
+        "false",
+        *extra,
+    ]
     return ppo.main(argv)
 
 
@@ -39,8 +67,9 @@ def recurrent_run(tmp_path_factory):
 def small_net(recurrent: int = 8) -> ActorCritic:
     env = proteo_env.make("chain-v0", control="move", **SMALL_ENV)
     torch.manual_seed(0)
-    net = ActorCritic(ObservationEncoder.for_env(env, message_encoding="compact"), [13], "shared", (16, 16),
-                      recurrent=recurrent)
+    net = ActorCritic(
+        ObservationEncoder.for_env(env, message_encoding="compact"), [13], "shared", (16, 16), recurrent=recurrent
+    )
     for head in (net.actor_memory, net.critic_memory):  # as after training: the state matters
         torch.nn.init.normal_(head.weight)
     return net
@@ -68,12 +97,12 @@ def test_the_state_carries_information_between_cycles():
     x = torch.randn(2, 1, net.trunk[0].in_features)
     other_first = torch.cat([torch.randn(1, 1, x.shape[2]), x[1:]])
     none = torch.zeros(2, 1, dtype=torch.bool)
-    assert not torch.allclose(net.unroll(x, net.initial_state(1), none)[0][1],
-                              net.unroll(other_first, net.initial_state(1), none)[0][1])
+    assert not torch.allclose(
+        net.unroll(x, net.initial_state(1), none)[0][1], net.unroll(other_first, net.initial_state(1), none)[0][1]
+    )
 
 
-def test_a_recurrent_run_saves_a_checkpoint_that_loads_as_a_policy_whose_state_restarts_with_its_episode(
-        recurrent_run):
+def test_a_recurrent_run_saves_a_checkpoint_that_loads_as_a_policy_whose_state_restarts_with_its_episode(recurrent_run):
     meta = read_meta(recurrent_run)
     assert meta["recurrent"] == 8 and meta["agent_steps"] >= 2000
     env = proteo_env.make("chain-v0", control="move", **SMALL_ENV)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from conftest import run_without_jit
 
 from proteo_env.core.kernels import LAST_EPOCH
 from proteo_env.core.motion import MOTION_MODELS
@@ -19,10 +20,17 @@ from proteo_env.core.reference import ReferenceWorld
 from proteo_env.core.world import Physics, World
 from proteo_env.layouts import ball_sites, blob_sites, line_sites, place_in_box
 from proteo_env.spaces import ObservationBuffers
-from conftest import run_without_jit
 
-OBS_FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent",
-              "messages", "contact", "action_mask")
+OBS_FIELDS = (
+    "neighbour_kind",
+    "neighbour_mode",
+    "neighbour_scent",
+    "own_mode",
+    "own_scent",
+    "messages",
+    "contact",
+    "action_mask",
+)
 
 
 @dataclass(frozen=True)
@@ -56,14 +64,14 @@ def make_layout(name: str, seed: int) -> dict:
         free = _free_sites(size, sites)
         pick = rng.permutation(len(free))
         kw["solid"] = free[pick[: len(free) // 6]]
-        kw["object_sites"] = free[pick[len(free) // 6: len(free) // 6 + 12]]
+        kw["object_sites"] = free[pick[len(free) // 6 : len(free) // 6 + 12]]
         kw["floor"] = True
     elif name == "anchored":
         sites, size = place_in_box(blob_sites(30, rng), margin=2)
         n_passive = 8
         anchored = np.zeros(len(sites), dtype=bool)
         anchored[:3] = True  # three anchored agents (roots)
-        anchored[len(sites) - n_passive:] = True  # passive board modules
+        anchored[len(sites) - n_passive :] = True  # passive board modules
         kw["anchored"] = anchored
         kw["n_agents"] = len(sites) - n_passive
         kw["modes"] = rng.integers(0, 4, len(sites))
@@ -75,20 +83,28 @@ def make_layout(name: str, seed: int) -> dict:
 
 def _free_sites(size, sites) -> np.ndarray:
     taken = {tuple(p) for p in sites}
-    g = np.mgrid[0:size[0], 0:size[1], 0:size[2]].reshape(3, -1).T
+    g = np.mgrid[0 : size[0], 0 : size[1], 0 : size[2]].reshape(3, -1).T
     g = g[g.sum(axis=1) % 2 == 0]
     return np.array([p for p in g if tuple(p) not in taken], dtype=np.int64)
 
 
 def build(case: Case, obs_radius: int = 1):
     kw = make_layout(case.layout, case.seed)
-    physics = Physics(motion_model=case.model, keep_connected=case.keep_connected,
-                      scent_sweeps=3 if case.scent == "sweep3" else 1, exact_scent=case.scent == "exact",
-                      scent_max=(40, 65535, 2**31 - 2)[case.seed % 3])
+    physics = Physics(
+        motion_model=case.model,
+        keep_connected=case.keep_connected,
+        scent_sweeps=3 if case.scent == "sweep3" else 1,
+        exact_scent=case.scent == "exact",
+        scent_max=(40, 65535, 2**31 - 2)[case.seed % 3],
+    )
     c = case.n_channels
-    kw.update(physics=physics, n_channels=c,
-              surface_channels=np.array([case.surface and ch == c - 1 for ch in range(c)]),
-              passive_role=np.array([1, 2][:c]) if c == 2 else np.array([1]), obs_radius=obs_radius)
+    kw.update(
+        physics=physics,
+        n_channels=c,
+        surface_channels=np.array([case.surface and ch == c - 1 for ch in range(c)]),
+        passive_role=np.array([1, 2][:c]) if c == 2 else np.array([1]),
+        obs_radius=obs_radius,
+    )
     return World(**kw), ReferenceWorld(**kw)
 
 
@@ -151,8 +167,14 @@ def run_parity(case: Case, obs_radius: int = 1, first_epoch: int = 0) -> int:
 
 
 LAYOUTS = ("blob10", "blob25", "blob40", "ball", "line", "floor", "obstacles", "anchored")
-SCENTS = (("sweep1", 1, False), ("sweep3", 2, True), ("exact", 2, True), ("sweep1", 2, True),
-          ("exact", 1, False), ("sweep3", 1, True))
+SCENTS = (
+    ("sweep1", 1, False),
+    ("sweep3", 2, True),
+    ("exact", 2, True),
+    ("sweep1", 2, True),
+    ("exact", 1, False),
+    ("sweep3", 1, True),
+)
 
 
 def _cases() -> list[Case]:
@@ -171,8 +193,14 @@ def _cases() -> list[Case]:
 CASES = _cases()
 
 
-@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c.layout}-{c.model}-{'keep' if c.keep_connected else 'free'}"
-                         f"-{c.scent}-c{c.n_channels}{'-surf' if c.surface else ''}")
+@pytest.mark.parametrize(
+    "case",
+    CASES,
+    ids=lambda c: (
+        f"{c.layout}-{c.model}-{'keep' if c.keep_connected else 'free'}"
+        f"-{c.scent}-c{c.n_channels}{'-surf' if c.surface else ''}"
+    ),
+)
 def test_parity(case):
     n_moves = run_parity(case)
     assert n_moves > 0 or case.layout == "ball" or case.model == "rhombic"
@@ -209,8 +237,7 @@ def test_roll_table_decides_like_the_reference_rule(model, fill):
     solid = sites[(kind >= fill) & (kind < fill + 0.08)]
     objects = sites[(kind >= fill + 0.08) & (kind < fill + 0.12)]
     physics = Physics(motion_model=model, keep_connected=False)
-    kw = dict(size=size, positions=modules, n_agents=len(modules), physics=physics, solid=solid,
-              object_sites=objects)
+    kw = dict(size=size, positions=modules, n_agents=len(modules), physics=physics, solid=solid, object_sites=objects)
     world, ref = World(**kw), ReferenceWorld(**kw)
     verdicts = np.array([[world.roll_is_legal(m, k) for k in range(12)] for m in range(len(modules))])
     expected = np.array([[ref.roll_is_legal(m, k) for k in range(12)] for m in range(len(modules))])
@@ -235,9 +262,11 @@ def test_cases_cover_every_setting():
 
 
 # ------------------------------------------------------------------ kernels as plain Python
-NOJIT_CASES = [Case("blob12", "sphere", True, "sweep3", 2, True, 25, seed=3),
-               Case("anchored", "minimal", True, "exact", 2, True, 15, seed=4),
-               Case("obstacles", "rhombic", False, "sweep1", 1, False, 15, seed=5)]
+NOJIT_CASES = [
+    Case("blob12", "sphere", True, "sweep3", 2, True, 25, seed=3),
+    Case("anchored", "minimal", True, "exact", 2, True, 15, seed=4),
+    Case("obstacles", "rhombic", False, "sweep1", 1, False, 15, seed=5),
+]
 
 
 def nojit_child() -> None:
@@ -246,6 +275,7 @@ def nojit_child() -> None:
 
     assert numba.config.DISABLE_JIT, "NUMBA_DISABLE_JIT was not picked up"
     from proteo_env.core import kernels
+
     assert not hasattr(kernels.execute_moves, "signatures"), "kernels are still compiled"
     for case in NOJIT_CASES:
         run_parity(case)

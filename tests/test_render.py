@@ -12,14 +12,13 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import small_overrides  # noqa: E402
 
 import proteo_env  # noqa: E402
 from proteo_env.core.lattice import DIRECTIONS  # noqa: E402
 from proteo_env.render import Camera, MovieWriter, Renderer, Scene  # noqa: E402
 from proteo_env.render.colours import BACKGROUND, MODE_COLOURS, SEARCH_FAR, rgb  # noqa: E402
 from proteo_env.render.geometry import FACE_QUADS, occupancy_grid, visible_faces  # noqa: E402
-
-from conftest import small_overrides  # noqa: E402
 
 PAPER_MODES = ("SLEEP", "SEARCH", "SEED", "FINAL", "NODE", "ROOT", "TOUCH", "TOUCHSEED")
 
@@ -62,8 +61,9 @@ def _spread_scene(mode_names=PAPER_MODES, caption="test") -> Scene:
     modes = np.array(list(range(n)) + [mode_names.index("SEARCH")])
     scent = np.zeros(n + 1, dtype=np.int64)
     scent[-1] = 10
-    return Scene(positions=positions, modes=modes, mode_names=mode_names, scent=scent, box=(2 * n + 1, 1, 1),
-                 caption=caption)
+    return Scene(
+        positions=positions, modes=modes, mode_names=mode_names, scent=scent, box=(2 * n + 1, 1, 1), caption=caption
+    )
 
 
 def _has_colour(image: np.ndarray, colour, *, min_pixels: int = 20, tol: float = 3 / 255) -> bool:
@@ -103,8 +103,15 @@ def test_faces_are_lit_from_a_fixed_direction():
 
 
 def test_object_solid_and_floor_are_drawn():
-    scene = Scene(positions=np.array([[0, 0, 0]]), modes=np.array([0]), mode_names=("SLEEP",),
-                  solid_sites=np.array([[4, 0, 0]]), object_sites=np.array([[0, 4, 0]]), box=(6, 6, 2), floor=True)
+    scene = Scene(
+        positions=np.array([[0, 0, 0]]),
+        modes=np.array([0]),
+        mode_names=("SLEEP",),
+        solid_sites=np.array([[4, 0, 0]]),
+        object_sites=np.array([[0, 4, 0]]),
+        box=(6, 6, 2),
+        floor=True,
+    )
     image = Renderer({"width": 300, "height": 240}, legend=False, edges=False).render(scene)
     from proteo_env.render.colours import FLOOR_COLOUR, OBJECT_COLOUR, SOLID_COLOUR
 
@@ -133,9 +140,16 @@ def test_camera_settings_change_the_picture():
     assert coverage[1] > 5 * coverage[0]
 
 
-@pytest.mark.parametrize("options, field", [({"zoom": 0}, "zoom"), ({"elevation": 120}, "elevation"),
-                                            ({"width": 3}, "width"), ({"follow": "yes"}, "follow"),
-                                            ({"azimut": 3}, "azimut")])
+@pytest.mark.parametrize(
+    "options, field",
+    [
+        ({"zoom": 0}, "zoom"),
+        ({"elevation": 120}, "elevation"),
+        ({"width": 3}, "width"),
+        ({"follow": "yes"}, "follow"),
+        ({"azimut": 3}, "azimut"),
+    ],
+)
 def test_bad_camera_settings_are_refused(options, field):
     with pytest.raises(ValueError, match=field) as err:
         Camera.from_options(options)
@@ -147,8 +161,9 @@ def test_bad_camera_settings_are_refused(options, field):
 # ---------------------------------------------------------------------- environment
 @pytest.mark.parametrize("task_id", sorted(proteo_env.TASKS))
 def test_every_task_renders_rgb_array(task_id):
-    env = proteo_env.make(task_id, render_mode="rgb_array", camera={"width": 200, "height": 150},
-                          **small_overrides(task_id))
+    env = proteo_env.make(
+        task_id, render_mode="rgb_array", camera={"width": 200, "height": 150}, **small_overrides(task_id)
+    )
     env.reset(seed=0)
     env.step({a: np.zeros(env.action_layout.length, dtype=np.int64) for a in env.agents})
     image = env.render()
@@ -170,10 +185,12 @@ def test_human_and_ansi_modes():
 
 
 def test_rendering_is_imported_only_when_used():
-    code = ("import sys, proteo_env\n"
-            "env = proteo_env.make('sandbox-v0', n_modules=5)\n"
-            "env.reset(seed=0)\n"
-            "assert not any(m.startswith(('matplotlib', 'proteo_env.render')) for m in sys.modules), 'imported'\n")
+    code = (
+        "import sys, proteo_env\n"
+        "env = proteo_env.make('sandbox-v0', n_modules=5)\n"
+        "env.reset(seed=0)\n"
+        "assert not any(m.startswith(('matplotlib', 'proteo_env.render')) for m in sys.modules), 'imported'\n"
+    )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
 

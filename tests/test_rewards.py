@@ -15,8 +15,15 @@ from proteo_env.tasks.chain import fcc_hops
 from training.checkpoints import load_policy
 
 CHAIN = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
-TABLE = {"board_size": 9, "depth": 2, "n_spares": 16, "schedule": ((0, 8, 2), (150, 2, 8)), "stable_window": 30,
-         "motion_model": "minimal", "max_cycles": 500}
+TABLE = {
+    "board_size": 9,
+    "depth": 2,
+    "n_spares": 16,
+    "schedule": ((0, 8, 2), (150, 2, 8)),
+    "stable_window": 30,
+    "motion_model": "minimal",
+    "max_cycles": 500,
+}
 
 
 def test_versions_are_registered_and_bare_names_mean_the_newest():

@@ -11,8 +11,24 @@ from training.checkpoints import read_meta
 
 def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path):
     keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
-    study.main(["--tasks", "[chain]", "--seeds", "[0, 1]", "--minutes", "0.02", "--parallel", "2",
-                "--runs-dir", str(tmp_path / "runs"), "--keep-dir", str(keep), "--docs-dir", str(docs)])
+    study.main(
+        [
+            "--tasks",
+            "[chain]",
+            "--seeds",
+            "[0, 1]",
+            "--minutes",
+            "0.02",
+            "--parallel",
+            "2",
+            "--runs-dir",
+            str(tmp_path / "runs"),
+            "--keep-dir",
+            str(keep),
+            "--docs-dir",
+            str(docs),
+        ]
+    )
     summary = json.loads((docs / "study_move.json").read_text())
     assert [(r["task"], r["seed"]) for r in summary] == [("chain", 0), ("chain", 1)]
     for seed in (0, 1):
@@ -25,10 +41,28 @@ def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path)
 def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
     keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
     tiny = ["--n-envs", "4", "--env", "{n_modules: 6, max_cycles: 40}"]
-    study.main(["--tasks", "[chain]", "--seeds", "[0]", "--recipes", "[imitation, kickstart]", "--minutes", "0.02",
-                "--parallel", "2", "--runs-dir", str(tmp_path / "runs"), "--keep-dir", str(keep), "--docs-dir",
-                str(docs), "--flags", json.dumps({"imitation": ["--rounds", "1", "--cycles-per-round", "20", *tiny],
-                                                  "kickstart": tiny})])
+    study.main(
+        [
+            "--tasks",
+            "[chain]",
+            "--seeds",
+            "[0]",
+            "--recipes",
+            "[imitation, kickstart]",
+            "--minutes",
+            "0.02",
+            "--parallel",
+            "2",
+            "--runs-dir",
+            str(tmp_path / "runs"),
+            "--keep-dir",
+            str(keep),
+            "--docs-dir",
+            str(docs),
+            "--flags",
+            json.dumps({"imitation": ["--rounds", "1", "--cycles-per-round", "20", *tiny], "kickstart": tiny}),
+        ]
+    )
     summary = json.loads((docs / "study_move.json").read_text())
     assert [(r["recipe"], r["task"]) for r in summary] == [("imitation", "chain"), ("kickstart", "chain")]
     clone = read_meta(keep / "chain" / "imitation_move" / "seed_0")

@@ -24,8 +24,14 @@ from proteo_env.tasks.table import AROOT, FINAL, IROOT, ROOT, SLEEP, TableParams
 
 CONFIGS = sorted(Path(__file__).resolve().parents[1].glob("configs/table*.yaml"))
 SHIFT = 250
-SMALL = {"board_size": 12, "depth": 3, "n_spares": 30, "schedule": ((0, 6.0, 1.0), (SHIFT, 1.0, 6.0)),
-         "motion_model": "minimal", "max_cycles": 700}
+SMALL = {
+    "board_size": 12,
+    "depth": 3,
+    "n_spares": 30,
+    "schedule": ((0, 6.0, 1.0), (SHIFT, 1.0, 6.0)),
+    "motion_model": "minimal",
+    "max_cycles": 700,
+}
 SEEDS = (0, 1, 2)
 
 
@@ -54,7 +60,7 @@ def test_paper_board_is_30_by_30_with_roots_every_3_sites():
     for r in roots:
         d = np.abs(roots - r)
         d = d[d.any(axis=1)]
-        nearest = d[np.argmin((d ** 2).sum(axis=1))]
+        nearest = d[np.argmin((d**2).sum(axis=1))]
         assert tuple(nearest) == (3, 3, 0)
     spares = spare_sites(p)
     assert len(spares) == p.n_spares and np.all(spares[:, 2] < p.depth) and np.all(spares[:, 2] >= 0)
@@ -69,8 +75,8 @@ def test_start_state_is_one_piece_with_fixed_board_and_sleeping_spares():
     modes = np.array(w.modes)
     assert env.engine.n_components() == 1
     assert w.n_agents == n_spares + 8  # 8 roots on a 12 x 12 board
-    assert np.all(modes[:n_spares] == SLEEP) and np.all(modes[n_spares:w.n_agents] == IROOT)
-    assert np.all(np.array(w.mode_names)[modes[w.n_agents:]] == "FIXED")
+    assert np.all(modes[:n_spares] == SLEEP) and np.all(modes[n_spares : w.n_agents] == IROOT)
+    assert np.all(np.array(w.mode_names)[modes[w.n_agents :]] == "FIXED")
     assert np.all(w.anchored[n_spares:]) and not w.anchored[:n_spares].any()
 
 
@@ -135,8 +141,9 @@ def test_legs_grow_where_the_weight_is_and_move_after_the_shift(episodes, seed):
 def test_restabilise_metric_marks_an_unchanged_complete_period(episodes, seed):
     env, result = episodes[seed]
     window = env.task.params.stable_window
-    series = {name: _history(result, name) for name in ("legs_left", "legs_right", "active_left",
-                                                          "active_right", "stable")}
+    series = {
+        name: _history(result, name) for name in ("legs_left", "legs_right", "active_left", "active_right", "stable")
+    }
     for k, shift in enumerate((0, SHIFT)):
         start = shift + int(result.metrics[f"restabilise_{k}"])
         rows = slice(max(start - 1, 0), start + window)  # cycles start .. start + window
@@ -226,14 +233,22 @@ def test_legs_reach_the_floor_under_minimal_only():
     spots = {tuple(np.array(leg[-1]) + d) for d in DIRECTIONS if d[2] == -1}
 
     def reachable(model):
-        start = [tuple(np.array(leg[-1]) + d) for d in DIRECTIONS
-                 if tuple(np.array(leg[-1]) + d) not in leg and 1 <= leg[-1][2] + d[2] < h]
+        start = [
+            tuple(np.array(leg[-1]) + d)
+            for d in DIRECTIONS
+            if tuple(np.array(leg[-1]) + d) not in leg and 1 <= leg[-1][2] + d[2] < h
+        ]
         seen, frontier = set(start), list(start)
         while frontier:
             p = frontier.pop()
-            w = World(size=(10, 10, h + 1), positions=np.array([p] + board + leg), n_agents=1,
-                      physics=Physics(motion_model=model, keep_connected=False),
-                      anchored=np.array([False] + [True] * (len(board) + len(leg))), floor=True)
+            w = World(
+                size=(10, 10, h + 1),
+                positions=np.array([p] + board + leg),
+                n_agents=1,
+                physics=Physics(motion_model=model, keep_connected=False),
+                anchored=np.array([False] + [True] * (len(board) + len(leg))),
+                floor=True,
+            )
             for k in range(12):
                 q = tuple(int(v) for v in np.array(p) + DIRECTIONS[k])
                 if q not in seen and w.roll_is_legal(0, k):
@@ -263,17 +278,20 @@ def test_configs_carry_the_paper_parameters(path):
     assert env.max_cycles > p.schedule[-1][0]
 
 
-@pytest.mark.parametrize("key, value, match", [
-    ("schedule", ((5, 8.0, 2.0),), r"schedule=.* is not allowed; allowed: .*cycles increasing from 0"),
-    ("schedule", ((0, 8.0, 2.0), (0, 2.0, 8.0)), r"schedule=.* is not allowed"),
-    ("schedule", ((0, -1.0, 2.0),), r"schedule=.* is not allowed; allowed: .*weights >= 0"),
-    ("schedule", ((0, 8.0),), r"schedule=.* is not allowed"),
-    ("f_min", 3.0, r"f_min=3.0 is not allowed; allowed: a number in \[0, f_max = 2.0\]"),
-    ("p_max", 1.5, r"p_max=1.5 is not allowed; allowed: a probability in \[0, 1\]"),
-    ("n_spares", 0, r"n_spares=0 is not allowed"),
-    ("root_spacing", 1, r"root_spacing=1 is not allowed; allowed: an integer >= 2"),
-    ("weights", 3, r"unknown key 'weights'"),
-])
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("schedule", ((5, 8.0, 2.0),), r"schedule=.* is not allowed; allowed: .*cycles increasing from 0"),
+        ("schedule", ((0, 8.0, 2.0), (0, 2.0, 8.0)), r"schedule=.* is not allowed"),
+        ("schedule", ((0, -1.0, 2.0),), r"schedule=.* is not allowed; allowed: .*weights >= 0"),
+        ("schedule", ((0, 8.0),), r"schedule=.* is not allowed"),
+        ("f_min", 3.0, r"f_min=3.0 is not allowed; allowed: a number in \[0, f_max = 2.0\]"),
+        ("p_max", 1.5, r"p_max=1.5 is not allowed; allowed: a probability in \[0, 1\]"),
+        ("n_spares", 0, r"n_spares=0 is not allowed"),
+        ("root_spacing", 1, r"root_spacing=1 is not allowed; allowed: an integer >= 2"),
+        ("weights", 3, r"unknown key 'weights'"),
+    ],
+)
 def test_bad_table_settings_are_rejected(key, value, match):
     with pytest.raises(ConfigError, match=match):
         proteo_env.make("table-v0", **{key: value})
@@ -281,8 +299,7 @@ def test_bad_table_settings_are_rejected(key, value, match):
 
 def test_yaml_lists_become_a_schedule_of_tuples(tmp_path):
     path = tmp_path / "t.yaml"
-    path.write_text("task: table-v0\nboard_size: 12\ndepth: 3\nn_spares: 30\n"
-                    "schedule: [[0, 6, 1], [100, 1, 6]]\n")
+    path.write_text("task: table-v0\nboard_size: 12\ndepth: 3\nn_spares: 30\nschedule: [[0, 6, 1], [100, 1, 6]]\n")
     task_id, overrides = load_run_config(path)
     env = proteo_env.make(task_id, **overrides)
     assert env.task.params.schedule == ((0, 6.0, 1.0), (100, 1.0, 6.0))

@@ -65,8 +65,11 @@ def test_compact_message_encoding_says_who_sent_and_what():
     for name in sl:
         if name in full.slices:
             np.testing.assert_array_equal(x[:, sl[name]], y[:, full.slices[name]], err_msg=name)
-    with pytest.raises(ValueError, match=r"message_encoding='sparse' is not allowed; allowed: 'per_direction', "
-                                         r"'compact'"):
+    with pytest.raises(
+        ValueError,
+        match=r"message_encoding='sparse' is not allowed; allowed: 'per_direction', "
+        r"'compact'",
+    ):
         ObservationEncoder.for_env(env, message_encoding="sparse")
 
 
@@ -130,20 +133,94 @@ def checkpoints(tmp_path_factory):
     root = tmp_path_factory.mktemp("runs")
     common = ["--env", TINY_FLAG, "--tensorboard", "false"]
     return {
-        "sb3": sb3_ppo.main(["--config", "configs/train/sb3_ppo_chain.yaml", "--total-steps", "192", "--n-steps", "8",
-                             "--n-copies", "2", "--batch-size", "48", "--n-epochs", "1", "--checkpoint-every", "96",
-                             "--time-limit-minutes", "0", "--run-dir", str(root / "sb3"), *common]),
-        "torchrl": torchrl_ppo.main(["--config", "configs/train/torchrl_ippo_chain.yaml", "--variant", "mappo",
-                                     "--total-steps", "192", "--n-steps", "8", "--n-copies", "2",
-                                     "--minibatch-size", "48", "--n-epochs", "1", "--checkpoint-every", "96",
-                                     "--time-limit-minutes", "0", "--run-dir", str(root / "torchrl"), *common]),
-        "cma_rules": cma_es.main(["--config", "configs/train/cma_rules_chain.yaml", "--generations", "2",
-                                  "--popsize", "3", "--episodes-per-candidate", "1", "--checkpoint-every", "1",
-                                  "--time-limit-minutes", "0", "--run-dir", str(root / "cma_rules"), *common]),
-        "cma_neural": cma_es.main(["--config", "configs/train/cma_neural_chain.yaml", "--generations", "2",
-                                   "--popsize", "3", "--episodes-per-candidate", "1", "--hidden", "[4]",
-                                   "--checkpoint-every", "1", "--time-limit-minutes", "0",
-                                   "--run-dir", str(root / "cma_neural"), *common]),
+        "sb3": sb3_ppo.main(
+            [
+                "--config",
+                "configs/train/sb3_ppo_chain.yaml",
+                "--total-steps",
+                "192",
+                "--n-steps",
+                "8",
+                "--n-copies",
+                "2",
+                "--batch-size",
+                "48",
+                "--n-epochs",
+                "1",
+                "--checkpoint-every",
+                "96",
+                "--time-limit-minutes",
+                "0",
+                "--run-dir",
+                str(root / "sb3"),
+                *common,
+            ]
+        ),
+        "torchrl": torchrl_ppo.main(
+            [
+                "--config",
+                "configs/train/torchrl_ippo_chain.yaml",
+                "--variant",
+                "mappo",
+                "--total-steps",
+                "192",
+                "--n-steps",
+                "8",
+                "--n-copies",
+                "2",
+                "--minibatch-size",
+                "48",
+                "--n-epochs",
+                "1",
+                "--checkpoint-every",
+                "96",
+                "--time-limit-minutes",
+                "0",
+                "--run-dir",
+                str(root / "torchrl"),
+                *common,
+            ]
+        ),
+        "cma_rules": cma_es.main(
+            [
+                "--config",
+                "configs/train/cma_rules_chain.yaml",
+                "--generations",
+                "2",
+                "--popsize",
+                "3",
+                "--episodes-per-candidate",
+                "1",
+                "--checkpoint-every",
+                "1",
+                "--time-limit-minutes",
+                "0",
+                "--run-dir",
+                str(root / "cma_rules"),
+                *common,
+            ]
+        ),
+        "cma_neural": cma_es.main(
+            [
+                "--config",
+                "configs/train/cma_neural_chain.yaml",
+                "--generations",
+                "2",
+                "--popsize",
+                "3",
+                "--episodes-per-candidate",
+                "1",
+                "--hidden",
+                "[4]",
+                "--checkpoint-every",
+                "1",
+                "--time-limit-minutes",
+                "0",
+                "--run-dir",
+                str(root / "cma_neural"),
+                *common,
+            ]
+        ),
     }
 
 
@@ -155,8 +232,15 @@ def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_pat
         assert meta["task"] == "chain-v0" and meta["agent_steps"] > 0, name
         assert (final.parent / "progress.csv").is_file(), name
         assert any((final.parent / "checkpoints").iterdir()), name
-    results = evaluate(tasks=["chain"], seeds=2, checkpoints=[str(p) for p in checkpoints.values()],
-                       out=tmp_path / "eval", progress=False, plots=True, config=None)
+    results = evaluate(
+        tasks=["chain"],
+        seeds=2,
+        checkpoints=[str(p) for p in checkpoints.values()],
+        out=tmp_path / "eval",
+        progress=False,
+        plots=True,
+        config=None,
+    )
     kinds = [r.kind for r in results]
     assert kinds == ["hand-coded", "random", "learned", "learned", "evolved", "evolved"]
     assert all(r.n == 2 for r in results)
@@ -171,8 +255,15 @@ def test_two_checkpoints_of_one_algorithm_get_their_folder_names(checkpoints, tm
 
     other = tmp_path / "cma_neural_other"
     shutil.copytree(checkpoints["cma_neural"], other)
-    results = evaluate(tasks=["chain"], seeds=1, checkpoints=[str(checkpoints["cma_neural"]), str(other)],
-                       out=tmp_path / "eval", progress=False, plots=False, config=None)
+    results = evaluate(
+        tasks=["chain"],
+        seeds=1,
+        checkpoints=[str(checkpoints["cma_neural"]), str(other)],
+        out=tmp_path / "eval",
+        progress=False,
+        plots=False,
+        config=None,
+    )
     names = [r.policy for r in results]
     assert names[:2] == ["chain", "random"]
     assert names[2:] == [f"cma-neural ({checkpoints['cma_neural'].name})", "cma-neural (cma_neural_other)"]
@@ -183,13 +274,46 @@ def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
     from training import cma_es, sb3_ppo
 
     first = sorted((checkpoints["sb3"].parent / "checkpoints").iterdir())[0]
-    final = sb3_ppo.main(["--resume", str(first), "--total-steps", "288", "--n-steps", "8", "--n-copies", "2",
-                          "--env", TINY_FLAG, "--tensorboard", "false", "--run-dir", str(tmp_path / "sb3")])
+    final = sb3_ppo.main(
+        [
+            "--resume",
+            str(first),
+            "--total-steps",
+            "288",
+            "--n-steps",
+            "8",
+            "--n-copies",
+            "2",
+            "--env",
+            TINY_FLAG,
+            "--tensorboard",
+            "false",
+            "--run-dir",
+            str(tmp_path / "sb3"),
+        ]
+    )
     assert json.loads((final / "proteo.json").read_text())["agent_steps"] >= 288
     first = sorted((checkpoints["cma_rules"].parent / "checkpoints").iterdir())[0]
-    final = cma_es.main(["--config", "configs/train/cma_rules_chain.yaml", "--resume", str(first), "--generations", "3",
-                         "--popsize", "3", "--episodes-per-candidate", "1", "--env", TINY_FLAG,
-                         "--tensorboard", "false", "--run-dir", str(tmp_path / "cma")])
+    final = cma_es.main(
+        [
+            "--config",
+            "configs/train/cma_rules_chain.yaml",
+            "--resume",
+            str(first),
+            "--generations",
+            "3",
+            "--popsize",
+            "3",
+            "--episodes-per-candidate",
+            "1",
+            "--env",
+            TINY_FLAG,
+            "--tensorboard",
+            "false",
+            "--run-dir",
+            str(tmp_path / "cma"),
+        ]
+    )
     assert json.loads((final / "proteo.json").read_text())["generation"] == 3
 
 
@@ -211,11 +335,17 @@ def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
 
     config = tmp_path / "eval.yaml"
     config.write_text("seeds: 3\nfirst_seed: 7\ntasks:\n  chain:\n    env: {n_modules: 6, max_cycles: 40}\n")
-    runs = [evaluate(config=config, tasks=["chain"], out=tmp_path / f"e{i}", progress=False, plots=False)
-            for i in range(2)]
+    runs = [
+        evaluate(config=config, tasks=["chain"], out=tmp_path / f"e{i}", progress=False, plots=False) for i in range(2)
+    ]
     for a, b in zip(*runs):
-        assert (a.policy, a.returns, a.successes, a.cycles, a.seeds) == (b.policy, b.returns, b.successes,
-                                                                         b.cycles, b.seeds)
+        assert (a.policy, a.returns, a.successes, a.cycles, a.seeds) == (
+            b.policy,
+            b.returns,
+            b.successes,
+            b.cycles,
+            b.seeds,
+        )
     assert [r.kind for r in runs[0]] == ["hand-coded", "random"]
     assert runs[0][0].seeds == [7, 8, 9]
 
@@ -228,8 +358,8 @@ def test_eval_covers_every_task_with_a_reward():
 
 
 def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
-    from training.cli import main
     from training.checkpoints import CheckpointError, load_policy
+    from training.cli import main
 
     env = proteo_env.make("chain-v0", **TINY)
     with pytest.raises(CheckpointError, match="does not exist"):
@@ -255,30 +385,144 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
     radius2 = proteo_env.make("chain-v0", obs_radius=2, **TINY)
     with pytest.raises(CheckpointError, match="observation encoding does not match"):
         load_policy(checkpoints["torchrl"], radius2)
-    assert main(["eval", "--tasks", "chain", "--seeds", "1", "--checkpoint", str(tmp_path / "empty"),
-                 "--out", str(tmp_path / "out")]) == 2
+    assert (
+        main(
+            [
+                "eval",
+                "--tasks",
+                "chain",
+                "--seeds",
+                "1",
+                "--checkpoint",
+                str(tmp_path / "empty"),
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
+        == 2
+    )
     assert "not a proteo checkpoint" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------- every training config, every task
 TRAIN_CONFIGS = sorted(p.name for p in Path("configs/train").glob("*.yaml"))
 TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
-    "sb3_ppo": ("sb3_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1", "--batch-size", "32",
-                            "--n-epochs", "1", "--checkpoint-every", "32"]),
-    "torchrl": ("torchrl_ppo", ["--total-steps", "64", "--n-steps", "4", "--n-copies", "1",
-                                "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
-    "ppo_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
-                     "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
-    "kickstart_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
-                           "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
-    "curriculum_": ("ppo", ["--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2",
-                            "--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"]),
-    "bc_": ("imitate", ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--epochs", "1",
-                        "--minibatch-size", "32"]),
-    "cma": ("cma_es", ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1",
-                       "--checkpoint-every", "1"]),
-    "rllib": ("rllib_ppo", ["--iterations", "1", "--env-runners", "1", "--train-batch-size", "32",
-                            "--minibatch-size", "16", "--epochs", "1", "--checkpoint-every", "1"]),
+    "sb3_ppo": (
+        "sb3_ppo",
+        [
+            "--total-steps",
+            "64",
+            "--n-steps",
+            "4",
+            "--n-copies",
+            "1",
+            "--batch-size",
+            "32",
+            "--n-epochs",
+            "1",
+            "--checkpoint-every",
+            "32",
+        ],
+    ),
+    "torchrl": (
+        "torchrl_ppo",
+        [
+            "--total-steps",
+            "64",
+            "--n-steps",
+            "4",
+            "--n-copies",
+            "1",
+            "--minibatch-size",
+            "32",
+            "--n-epochs",
+            "1",
+            "--checkpoint-every",
+            "32",
+        ],
+    ),
+    "ppo_": (
+        "ppo",
+        [
+            "--total-steps",
+            "64",
+            "--n-steps",
+            "4",
+            "--n-envs",
+            "2",
+            "--n-groups",
+            "2",
+            "--minibatch-size",
+            "32",
+            "--n-epochs",
+            "1",
+            "--checkpoint-every",
+            "32",
+        ],
+    ),
+    "kickstart_": (
+        "ppo",
+        [
+            "--total-steps",
+            "64",
+            "--n-steps",
+            "4",
+            "--n-envs",
+            "2",
+            "--n-groups",
+            "2",
+            "--minibatch-size",
+            "32",
+            "--n-epochs",
+            "1",
+            "--checkpoint-every",
+            "32",
+        ],
+    ),
+    "curriculum_": (
+        "ppo",
+        [
+            "--total-steps",
+            "64",
+            "--n-steps",
+            "4",
+            "--n-envs",
+            "2",
+            "--n-groups",
+            "2",
+            "--minibatch-size",
+            "32",
+            "--n-epochs",
+            "1",
+            "--checkpoint-every",
+            "32",
+        ],
+    ),
+    "bc_": (
+        "imitate",
+        ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--epochs", "1", "--minibatch-size", "32"],
+    ),
+    "cma": (
+        "cma_es",
+        ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1", "--checkpoint-every", "1"],
+    ),
+    "rllib": (
+        "rllib_ppo",
+        [
+            "--iterations",
+            "1",
+            "--env-runners",
+            "1",
+            "--train-batch-size",
+            "32",
+            "--minibatch-size",
+            "16",
+            "--epochs",
+            "1",
+            "--checkpoint-every",
+            "1",
+        ],
+    ),
 }
 
 
@@ -288,8 +532,8 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     pytest.importorskip("sb3_contrib")
     pytest.importorskip("cma")
     import yaml
-
     from conftest import SMALL_OVERRIDES
+
     from training.evaluate import evaluate
 
     settings = yaml.safe_load((Path("configs/train") / config).read_text())
@@ -297,20 +541,38 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     module, flags = next(v for k, v in TINY_BUDGET.items() if config.startswith(k))
     if "hidden" in settings and module == "cma_es":
         flags = [*flags, "--hidden", "[4]"]
-    env = json.dumps({**SMALL_OVERRIDES.get(task, {}), "max_cycles": 6,
-                      **({"motion_model": settings["env"]["motion_model"]} if "motion_model" in settings["env"] else {})})
+    env = json.dumps(
+        {
+            **SMALL_OVERRIDES.get(task, {}),
+            "max_cycles": 6,
+            **({"motion_model": settings["env"]["motion_model"]} if "motion_model" in settings["env"] else {}),
+        }
+    )
     final = importlib.import_module(f"training.{module}").main(
-        ["--config", f"configs/train/{config}", *flags, "--env", env, "--tensorboard", "false",
-         "--run-dir", str(tmp_path / "run"), *(["--time-limit-minutes", "0"] if module != "imitate" else [])])
+        [
+            "--config",
+            f"configs/train/{config}",
+            *flags,
+            "--env",
+            env,
+            "--tensorboard",
+            "false",
+            "--run-dir",
+            str(tmp_path / "run"),
+            *(["--time-limit-minutes", "0"] if module != "imitate" else []),
+        ]
+    )
     meta = json.loads((final / "proteo.json").read_text())
     assert meta["task"] == settings["task"] and meta["agent_steps"] > 0
     eval_config = tmp_path / "eval.yaml"
     eval_config.write_text(yaml.safe_dump({"seeds": 1, "first_seed": 0, "tasks": {task: {"env": json.loads(env)}}}))
-    results = evaluate(config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval",
-                       progress=False, plots=False)
+    results = evaluate(
+        config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
+    )
     random_levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
-    assert [(r.kind, r.level) for r in results] == [("hand-coded", "full")] + [("random", lv) for lv in random_levels] \
-        + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
+    assert [(r.kind, r.level) for r in results] == [("hand-coded", "full")] + [
+        ("random", lv) for lv in random_levels
+    ] + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
         from training.checkpoints import load_policy
 
@@ -340,15 +602,36 @@ def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_pa
     pytest.importorskip("cma")
     from training import cma_es
 
-    common = ["--config", "configs/train/cma_rules_table.yaml", "--generations", "1", "--popsize", "4",
-              "--episodes-per-candidate", "1", "--env", json.dumps(TABLE_TINY), "--tensorboard", "false",
-              "--time-limit-minutes", "0"]
-    final = cma_es.main([*common, "--bounds", "{f_max: [0.5, 1.5], f_min: [0.5, 1.5]}", "--sigma0", "0.5",
-                         "--run-dir", str(tmp_path / "some")])
+    common = [
+        "--config",
+        "configs/train/cma_rules_table.yaml",
+        "--generations",
+        "1",
+        "--popsize",
+        "4",
+        "--episodes-per-candidate",
+        "1",
+        "--env",
+        json.dumps(TABLE_TINY),
+        "--tensorboard",
+        "false",
+        "--time-limit-minutes",
+        "0",
+    ]
+    final = cma_es.main(
+        [
+            *common,
+            "--bounds",
+            "{f_max: [0.5, 1.5], f_min: [0.5, 1.5]}",
+            "--sigma0",
+            "0.5",
+            "--run-dir",
+            str(tmp_path / "some"),
+        ]
+    )
     assert "cma/rejected" in (final.parent / "progress.csv").read_text().splitlines()[0]
     with pytest.raises(ValueError, match="rejected every candidate"):  # f_min > f_max always
         cma_es.main([*common, "--bounds", "{f_max: [0.5, 0.6], f_min: [1.0, 2.0]}", "--run-dir", str(tmp_path / "all")])
-
 
 
 def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped():
@@ -376,8 +659,9 @@ def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
         for item in entry.get("checkpoints") or []:
             for path in [item] if isinstance(item, str) else item["runs"]:
                 level = read_meta(path).get("control", "full")
-                env = proteo_env.make(proteo_env.registry.task_class(name).task_id(), control=level,
-                                      **(entry.get("env") or {}))
+                env = proteo_env.make(
+                    proteo_env.registry.task_class(name).task_id(), control=level, **(entry.get("env") or {})
+                )
                 assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
 
 
@@ -421,17 +705,25 @@ def test_a_malformed_eval_config_is_one_error_not_a_parser_traceback(tmp_path, c
     assert f"proteo: error: eval config {str(bad)!r} is not valid YAML at line 2, column 4" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("flag, value, allowed", [("--total-steps", "-5", "an integer >= 0"),
-                                                  ("--n-envs", "0", "an integer >= 1"),
-                                                  ("--gamma", "1.5", "a number in [0.0, 1.0]"),
-                                                  ("--learning-rate", "-0.001", "a number >= 0.0")])
-def test_ppo_refuses_a_negative_budget_or_a_bad_hyperparameter_before_writing_anything(flag, value, allowed,
-                                                                                      tmp_path, capsys):
+@pytest.mark.parametrize(
+    "flag, value, allowed",
+    [
+        ("--total-steps", "-5", "an integer >= 0"),
+        ("--n-envs", "0", "an integer >= 1"),
+        ("--gamma", "1.5", "a number in [0.0, 1.0]"),
+        ("--learning-rate", "-0.001", "a number >= 0.0"),
+    ],
+)
+def test_ppo_refuses_a_negative_budget_or_a_bad_hyperparameter_before_writing_anything(
+    flag, value, allowed, tmp_path, capsys
+):
     from training import ppo
     from training.common import run_script
 
     assert run_script(ppo.main, [flag, value, "--run-dir", str(tmp_path / "run")]) == 2
     name = flag[2:].replace("-", "_")
-    assert f"{name}={float(value) if '.' in value else int(value)!r} is not allowed; allowed: {allowed}" in \
-        capsys.readouterr().err
+    assert (
+        f"{name}={float(value) if '.' in value else int(value)!r} is not allowed; allowed: {allowed}"
+        in capsys.readouterr().err
+    )
     assert not (tmp_path / "run").exists()

@@ -15,12 +15,12 @@ import zipfile
 import numpy as np
 import pytest
 
-from training.cli import main
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.layouts import blob_sites, place_in_box
 from proteo_env.recording import Recording, load
 from proteo_env.render.colours import MODE_COLOURS, OBJECT_COLOUR, SEARCH_FAR, rgb
 from proteo_env.render.webview import episode_data, html_page, pack_array, unpack_array
+from training.cli import main
 
 MODES = ("SLEEP", "SEARCH", "SEED", "FINAL", "TOUCH")
 SLEEP, SEARCH, SEED, FINAL, TOUCH = range(5)
@@ -46,12 +46,27 @@ def hand_made_recording() -> Recording:
     scents[1:, 0, 5:25] = rng.integers(0, 6, (N_FRAMES - 1, 20))
     obj = sites[np.argmax(sites[:, 0])] + np.array([[3, 1, 0], [3, -1, 0], [4, 0, 0], [4, 0, 2]])
     return Recording(
-        task_id="grasp-v0", overrides={}, config={}, seed=5, policy="hand-made", success=True,
-        package_version="0.1.0", mode_names=MODES, n_agents=N_MODULES, box=tuple(int(b) + 6 for b in box), floor=True,
-        scent_max=65535, cycles=np.arange(N_FRAMES, dtype=np.int64), positions=positions, modes=modes,
-        scents=scents, anchored=np.zeros(N_MODULES, dtype=bool), solid_sites=np.zeros((0, 3), dtype=np.int64),
-        object_sites=obj.astype(np.int64), series={"coverage": np.linspace(0, 1, N_FRAMES),
-                                                    "reward": np.r_[np.nan, np.ones(N_FRAMES - 1)]})
+        task_id="grasp-v0",
+        overrides={},
+        config={},
+        seed=5,
+        policy="hand-made",
+        success=True,
+        package_version="0.1.0",
+        mode_names=MODES,
+        n_agents=N_MODULES,
+        box=tuple(int(b) + 6 for b in box),
+        floor=True,
+        scent_max=65535,
+        cycles=np.arange(N_FRAMES, dtype=np.int64),
+        positions=positions,
+        modes=modes,
+        scents=scents,
+        anchored=np.zeros(N_MODULES, dtype=bool),
+        solid_sites=np.zeros((0, 3), dtype=np.int64),
+        object_sites=obj.astype(np.int64),
+        series={"coverage": np.linspace(0, 1, N_FRAMES), "reward": np.r_[np.nan, np.ones(N_FRAMES - 1)]},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -179,14 +194,20 @@ def colour_pixels(browser) -> dict[str, int]:
     from PIL import Image
 
     settle(browser)
-    rect = browser.evaluate("(() => { const r = document.getElementById('view').getBoundingClientRect(); "
-                            "return [r.left, r.top, r.right, r.bottom].map(Math.round); })()")
+    rect = browser.evaluate(
+        "(() => { const r = document.getElementById('view').getBoundingClientRect(); "
+        "return [r.left, r.top, r.right, r.bottom].map(Math.round); })()"
+    )
     image = np.asarray(Image.open(io.BytesIO(browser.screenshot())).convert("RGB"), dtype=float) / 255
-    pixels = image[rect[1]:rect[3], rect[0]:rect[2]].reshape(-1, 3)
+    pixels = image[rect[1] : rect[3], rect[0] : rect[2]].reshape(-1, 3)
     bright = pixels[np.linalg.norm(pixels, axis=1) > 0.15]
     direction = bright / np.linalg.norm(bright, axis=1, keepdims=True)
-    shades = {"SEARCH": (MODE_COLOURS["SEARCH"], SEARCH_FAR), "SEED": (MODE_COLOURS["SEED"],),
-              "TOUCH": (MODE_COLOURS["TOUCH"],), "object": (OBJECT_COLOUR,)}
+    shades = {
+        "SEARCH": (MODE_COLOURS["SEARCH"], SEARCH_FAR),
+        "SEED": (MODE_COLOURS["SEED"],),
+        "TOUCH": (MODE_COLOURS["TOUCH"],),
+        "object": (OBJECT_COLOUR,),
+    }
     counts = {}
     for name, colours in shades.items():
         match = np.zeros(len(direction), dtype=bool)
@@ -227,8 +248,10 @@ def test_positions_follow_the_recording_when_stepping_and_seeking(browser, page,
             picked = int(browser.evaluate("document.body.dataset.picked"))
             if picked < 0:
                 continue  # hidden behind another module's edge; the next one is checked
-            row = browser.evaluate("Object.fromEntries([...document.querySelectorAll('#picked tr')]"
-                                   ".map(r => [r.dataset.key, r.cells[1].textContent]))")
+            row = browser.evaluate(
+                "Object.fromEntries([...document.querySelectorAll('#picked tr')]"
+                ".map(r => [r.dataset.key, r.cells[1].textContent]))"
+            )
             assert row["mode"] == MODES[recording.modes[frame, picked]]
             assert row["site"] == ", ".join(map(str, recording.positions[frame, picked]))
             scent = recording.scents[frame, 0, picked]
@@ -254,9 +277,11 @@ def test_play_toggles_and_cut_away(browser, page):
     browser.evaluate(f"document.querySelectorAll('#modes input')[{TOUCH}].click()")
 
     whole = colour_pixels(browser)
-    browser.evaluate("(() => { const a = document.getElementById('cut-axis'); a.value = '0'; "
-                     "a.dispatchEvent(new Event('change')); const c = document.getElementById('cut-at'); "
-                     "c.value = c.min; c.dispatchEvent(new Event('input')); })()")
+    browser.evaluate(
+        "(() => { const a = document.getElementById('cut-axis'); a.value = '0'; "
+        "a.dispatchEvent(new Event('change')); const c = document.getElementById('cut-at'); "
+        "c.value = c.min; c.dispatchEvent(new Event('input')); })()"
+    )
     cut = colour_pixels(browser)
     assert sum(cut.values()) < sum(whole.values()) / 4, (cut, whole)  # the plane hides almost everything
     assert browser.errors() == [] and browser.evaluate("document.body.dataset.errors") == "0"

@@ -33,6 +33,7 @@ from proteo_env.adapters.flatten import ObservationEncoder
 from .common import CheckpointError, read_meta
 from .policies import LogitsPolicy, NumpyMLP, torch_mlp
 
+
 def _check_compatible(meta: dict, env) -> ObservationEncoder:
     """The env's encoder, after checking the checkpoint was made for this task, control level and encoding."""
     where = f"checkpoint {meta['dir']!r}"
@@ -41,8 +42,10 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
         raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
     trained, level = meta.get("control", "full"), getattr(env, "control", "full")
     if trained != level:
-        raise CheckpointError(f"{where} was trained at control level {trained!r}; it cannot control {task!r} at "
-                              f"control level {level!r}; allowed: an env made with control={trained!r}")
+        raise CheckpointError(
+            f"{where} was trained at control level {trained!r}; it cannot control {task!r} at "
+            f"control level {level!r}; allowed: an env made with control={trained!r}"
+        )
     nvec = [int(n) for n in getattr(env, "control_nvec", env.action_layout.nvec)]
     if meta["nvec"] != nvec:
         raise CheckpointError(f"{where}: action nvec {meta['nvec']} does not match the environment's {nvec}")
@@ -52,8 +55,9 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     encoder = ObservationEncoder.for_env(env, **({k: saved[k] for k in options} if saved else {}))
     if saved is not None and saved != encoder.spec():
         diff = {k: (saved.get(k), v) for k, v in encoder.spec().items() if saved.get(k) != v}
-        raise CheckpointError(f"{where}: observation encoding does not match the environment "
-                              f"(field: (checkpoint, env)) {diff}")
+        raise CheckpointError(
+            f"{where}: observation encoding does not match the environment (field: (checkpoint, env)) {diff}"
+        )
     return encoder
 
 
@@ -67,14 +71,19 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         from baselines.base import constructor_parameters
 
         if meta.get("policy") not in POLICIES:
-            raise CheckpointError(f"checkpoint {str(folder)!r}: policy {meta.get('policy')!r} is not registered; "
-                                  f"allowed: {', '.join(sorted(POLICIES))}")
+            raise CheckpointError(
+                f"checkpoint {str(folder)!r}: policy {meta.get('policy')!r} is not registered; "
+                f"allowed: {', '.join(sorted(POLICIES))}"
+            )
         accepted = set(constructor_parameters(POLICIES[meta["policy"]]))
         params = dict(meta.get("params", {}))
         dropped = sorted(set(params) - accepted)
         if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name
-            warnings.warn(f"checkpoint {str(folder)!r}: evolved parameters {dropped} are no longer parameters of "
-                          f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py")
+            warnings.warn(
+                f"checkpoint {str(folder)!r}: evolved parameters {dropped} are no longer parameters of "
+                f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py",
+                stacklevel=2,
+            )
             params = {k: v for k, v in params.items() if k not in dropped}
         try:
             policy = make_policy(meta["policy"], env, seed=seed, **params)
@@ -94,10 +103,20 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         state_size = int(meta.get("recurrent", 0))
     else:
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
-    return LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed,
-                        encoder=encoder, logits_fn=logits_fn, label=label, deterministic=deterministic,
-                        nvec=meta["nvec"], memory=meta.get("memory", "none"), sampled=meta.get("sampled", "all"),
-                        state_size=state_size)
+    return LogitsPolicy(
+        env.action_layout,
+        env.task.modes,
+        scent_max=env.config.physics.scent_max,
+        seed=seed,
+        encoder=encoder,
+        logits_fn=logits_fn,
+        label=label,
+        deterministic=deterministic,
+        nvec=meta["nvec"],
+        memory=meta.get("memory", "none"),
+        sampled=meta.get("sampled", "all"),
+        state_size=state_size,
+    )
 
 
 def _need(file: Path) -> Path:
@@ -115,11 +134,14 @@ def _sb3_logits(file: Path, encoder: ObservationEncoder):
     except CheckpointError:
         raise
     except Exception as err:  # a damaged zip raises many kinds of errors
-        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable MaskablePPO model: "
-                              f"{type(err).__name__}: {err}") from None
+        raise CheckpointError(
+            f"checkpoint {str(file)!r} is not a loadable MaskablePPO model: {type(err).__name__}: {err}"
+        ) from None
     if model.observation_space.shape != (encoder.size,):
-        raise CheckpointError(f"checkpoint {str(file)!r}: observation size {model.observation_space.shape} "
-                              f"does not match the encoder's ({encoder.size},)")
+        raise CheckpointError(
+            f"checkpoint {str(file)!r}: observation size {model.observation_space.shape} "
+            f"does not match the encoder's ({encoder.size},)"
+        )
     policy = model.policy
     policy.set_training_mode(False)
 
@@ -141,8 +163,10 @@ def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     except CheckpointError:
         raise
     except Exception as err:
-        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable actor for layer sizes "
-                              f"{meta.get('hidden')}: {type(err).__name__}: {err}") from None
+        raise CheckpointError(
+            f"checkpoint {str(file)!r} is not a loadable actor for layer sizes "
+            f"{meta.get('hidden')}: {type(err).__name__}: {err}"
+        ) from None
     net.eval()
 
     def logits_fn(features: np.ndarray) -> np.ndarray:
@@ -158,17 +182,26 @@ def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     from training.networks import ActorCritic
 
     try:
-        net = ActorCritic(encoder, meta["nvec"], meta.get("arch", "mlp"), tuple(meta["hidden"]),
-                          memory=meta.get("memory", "none"), recurrent=int(meta.get("recurrent", 0)))
+        net = ActorCritic(
+            encoder,
+            meta["nvec"],
+            meta.get("arch", "mlp"),
+            tuple(meta["hidden"]),
+            memory=meta.get("memory", "none"),
+            recurrent=int(meta.get("recurrent", 0)),
+        )
         net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise
     except Exception as err:
-        raise CheckpointError(f"checkpoint {str(file)!r} is not a loadable ppo network (arch {meta.get('arch')!r}, "
-                              f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}") from None
+        raise CheckpointError(
+            f"checkpoint {str(file)!r} is not a loadable ppo network (arch {meta.get('arch')!r}, "
+            f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}"
+        ) from None
     net.eval()
 
     if net.recurrent:
+
         def recurrent_logits_fn(features: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             with torch.no_grad():
                 logits, _, state = net(torch.as_tensor(features), torch.as_tensor(state))
@@ -191,6 +224,7 @@ def _numpy_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     except CheckpointError:
         raise
     except Exception as err:
-        raise CheckpointError(f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: "
-                              f"{type(err).__name__}: {err}") from None
+        raise CheckpointError(
+            f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: {type(err).__name__}: {err}"
+        ) from None
     return net

@@ -19,45 +19,95 @@ DEMO_SETTINGS = {
     "chain": {"n_modules": 40, "max_cycles": 3000},
     "branch": {"n_modules": 100, "max_cycles": 400, "motion_model": "minimal"},
     "grasp": {"n_modules": 120, "object_size": 2.0, "distance": 4, "max_cycles": 1500},
-    "table": {"board_size": 18, "depth": 4, "n_spares": 60, "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)), "motion_model": "minimal"},
+    "table": {
+        "board_size": 18,
+        "depth": 4,
+        "n_spares": 60,
+        "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)),
+        "motion_model": "minimal",
+    },
 }
 """Per-task settings of ``proteo demo`` (tasks not listed run with their defaults)."""
 
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg", ".svg", ".pdf")
 
 
-def _run(task_id: str, overrides: dict, policy_name: str | None, seed: int, out: Path | None, *,
-         record: Path | None = None, movie: Path | None = None, plots: Path | None = None, camera=None,
-         fps: float = 20.0, max_frames: int | None = 300, view: Path | None = None):
-    from baselines import make_policy
+def _run(
+    task_id: str,
+    overrides: dict,
+    policy_name: str | None,
+    seed: int,
+    out: Path | None,
+    *,
+    record: Path | None = None,
+    movie: Path | None = None,
+    plots: Path | None = None,
+    camera=None,
+    fps: float = 20.0,
+    max_frames: int | None = 300,
+    view: Path | None = None,
+):
+    from tqdm import tqdm
 
+    from baselines import make_policy
     from proteo_env import make
     from proteo_env.recording import Recorder
     from proteo_env.rollout import run_episode
-
-    from tqdm import tqdm
 
     env = make(task_id, **overrides)
     policy = make_policy(policy_name or env.task.default_policy, env, seed=seed)
     label = f"{env.task.task_id()} / {policy.name}"
     wants_recording = any(x is not None for x in (out, record, movie, plots, view))
-    recorder = Recorder(env, task_id=env.task.task_id(), overrides=overrides, seed=seed,
-                        policy=policy.name) if wants_recording else None
+    recorder = (
+        Recorder(env, task_id=env.task.task_id(), overrides=overrides, seed=seed, policy=policy.name)
+        if wants_recording
+        else None
+    )
     with tqdm(total=env.max_cycles, desc=label, unit="cycle", leave=False) as bar:
         started = time.perf_counter()
         result = run_episode(env, policy, seed=seed, progress=lambda info: bar.update(1), observe=recorder)
         seconds = time.perf_counter() - started
     if recorder is not None:
         recording = recorder.recording(success=result.success)
-        _outputs(recording, label=label, out=out, record=record, movie=movie, plots=plots, camera=camera, fps=fps,
-                 max_frames=max_frames, view=view)
-    return {"task": env.task.task_id(), "policy": policy.name, "modules": env.engine.n_modules,
-            "cycles": result.cycles, "success": result.success, "reward": result.total_reward,
-            "seconds": seconds, "metrics": result.metrics}
+        _outputs(
+            recording,
+            label=label,
+            out=out,
+            record=record,
+            movie=movie,
+            plots=plots,
+            camera=camera,
+            fps=fps,
+            max_frames=max_frames,
+            view=view,
+        )
+    return {
+        "task": env.task.task_id(),
+        "policy": policy.name,
+        "modules": env.engine.n_modules,
+        "cycles": result.cycles,
+        "success": result.success,
+        "reward": result.total_reward,
+        "seconds": seconds,
+        "metrics": result.metrics,
+    }
 
 
-def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=None, camera=None, fps=20.0,
-             max_frames=300, still=None, still_frame=-1, view=None) -> None:
+def _outputs(
+    recording,
+    *,
+    label: str,
+    out=None,
+    record=None,
+    movie=None,
+    plots=None,
+    camera=None,
+    fps=20.0,
+    max_frames=300,
+    still=None,
+    still_frame=-1,
+    view=None,
+) -> None:
     """Write what was asked for from a recording: the file, demo pictures, a movie, a still, plots, a viewer page."""
     if record is not None:
         recording.save(record)
@@ -69,8 +119,7 @@ def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=
         from proteo_env.render.replay import render_still
 
         name = recording.task_id.rsplit("-v", 1)[0]
-        render_still(recording, out / f"{name}_start.png", frame=0, camera=camera,
-                     caption=f"{label}: start")
+        render_still(recording, out / f"{name}_start.png", frame=0, camera=camera, caption=f"{label}: start")
         end = f"{label}: cycle {int(recording.cycles[-1])}{' (success)' if recording.success else ''}"
         render_still(recording, out / f"{name}_end.png", frame=-1, camera=camera, caption=end)
         plots = plots if plots is not None else out / f"{name}_plots"
@@ -81,8 +130,9 @@ def _outputs(recording, *, label: str, out=None, record=None, movie=None, plots=
 
         total = len(frame_indices(recording.n_frames, max_frames))
         with tqdm(total=total, desc=f"rendering {movie.name}", unit="frame", leave=False) as bar:
-            render_movie(recording, movie, camera=camera, fps=fps, max_frames=max_frames,
-                         progress=lambda: bar.update(1))
+            render_movie(
+                recording, movie, camera=camera, fps=fps, max_frames=max_frames, progress=lambda: bar.update(1)
+            )
     if still is not None:
         from proteo_env.render.replay import render_still
 
@@ -98,8 +148,10 @@ def _table(rows: list[dict]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         metrics = ", ".join(f"{k}={v:g}" for k, v in r["metrics"].items())
-        lines.append(f"| {r['task']} | {r['policy']} | {r['modules']} | {r['cycles']} | "
-                     f"{'yes' if r['success'] else 'no'} | {r['reward']:.3f} | {r['seconds']:.1f} | {metrics} |")
+        lines.append(
+            f"| {r['task']} | {r['policy']} | {r['modules']} | {r['cycles']} | "
+            f"{'yes' if r['success'] else 'no'} | {r['reward']:.3f} | {r['seconds']:.1f} | {metrics} |"
+        )
     return "\n".join(lines)
 
 
@@ -189,15 +241,31 @@ def run(args) -> int:
     many = args.episodes > 1
     rows = []
     for seed in range(args.seed, args.seed + args.episodes):
-        rows.append(_run(task_id, overrides, args.policy, seed, Path(args.out) if args.out else None,
-                         record=_per_episode(args.record, seed, many), movie=_per_episode(args.render, seed, many),
-                         plots=_per_episode(args.plots, seed, many), camera=camera, fps=args.fps,
-                         max_frames=args.max_frames, view=_per_episode(args.view, seed, many)))
+        rows.append(
+            _run(
+                task_id,
+                overrides,
+                args.policy,
+                seed,
+                Path(args.out) if args.out else None,
+                record=_per_episode(args.record, seed, many),
+                movie=_per_episode(args.render, seed, many),
+                plots=_per_episode(args.plots, seed, many),
+                camera=camera,
+                fps=args.fps,
+                max_frames=args.max_frames,
+                view=_per_episode(args.view, seed, many),
+            )
+        )
     print(_table(rows))
     successes = sum(r["success"] for r in rows)
     print(f"\nsuccess {successes}/{len(rows)}")
-    for what, path in (("recording", args.record), ("movie", args.render), ("plots", args.plots),
-                       ("viewer page", args.view)):
+    for what, path in (
+        ("recording", args.record),
+        ("movie", args.render),
+        ("plots", args.plots),
+        ("viewer page", args.view),
+    ):
         if path is not None:
             print(f"{what}: {path}" + (" (one per seed: -seed<N>)" if many else ""))
     return 0
@@ -209,8 +277,9 @@ def replay(args) -> int:
     from proteo_env.recording import load
 
     if args.out is None and args.plots is None:
-        raise ValueError("replay needs --out (a .gif/.mp4 movie or a .png still) or --plots DIR; "
-                         "allowed: either or both")
+        raise ValueError(
+            "replay needs --out (a .gif/.mp4 movie or a .png still) or --plots DIR; allowed: either or both"
+        )
     movie = still = None
     if args.out is not None:
         suffix = Path(args.out).suffix.lower()
@@ -225,15 +294,28 @@ def replay(args) -> int:
     if args.cycle is not None:
         hits = (recording.cycles == args.cycle).nonzero()[0]
         if not len(hits):
-            raise ValueError(f"--cycle {args.cycle} is not in the recording; allowed: "
-                             f"{int(recording.cycles[0])}..{int(recording.cycles[-1])}")
+            raise ValueError(
+                f"--cycle {args.cycle} is not in the recording; allowed: "
+                f"{int(recording.cycles[0])}..{int(recording.cycles[-1])}"
+            )
         frame = int(hits[0])
-    print(f"{args.file}: {recording.task_id} / {recording.policy}, seed {recording.seed}, "
-          f"{recording.positions.shape[1]} modules, {int(recording.cycles[-1])} cycles, "
-          f"{'success' if recording.success else 'no success'}, written by proteo {recording.package_version}"
-          + ("" if recording.package_version == __version__ else f" (this is {__version__})"))
-    _outputs(recording, label=recording.task_id, movie=movie, plots=Path(args.plots) if args.plots else None,
-             camera=camera, fps=args.fps, max_frames=args.max_frames, still=still, still_frame=frame)
+    print(
+        f"{args.file}: {recording.task_id} / {recording.policy}, seed {recording.seed}, "
+        f"{recording.positions.shape[1]} modules, {int(recording.cycles[-1])} cycles, "
+        f"{'success' if recording.success else 'no success'}, written by proteo {recording.package_version}"
+        + ("" if recording.package_version == __version__ else f" (this is {__version__})")
+    )
+    _outputs(
+        recording,
+        label=recording.task_id,
+        movie=movie,
+        plots=Path(args.plots) if args.plots else None,
+        camera=camera,
+        fps=args.fps,
+        max_frames=args.max_frames,
+        still=still,
+        still_frame=frame,
+    )
     for what, path in (("movie", movie), ("picture", still), ("plots", args.plots)):
         if path is not None:
             print(f"{what}: {path}")
@@ -248,8 +330,10 @@ def view(args) -> int:
     _check_paths(view=out)
     recording = load(args.file)
     write_html(recording, out)
-    print(f"viewer page: {out} ({out.stat().st_size / 1e6:.1f} MB; {recording.positions.shape[1]} modules, "
-          f"{recording.n_frames} frames): open it in a browser, no network needed")
+    print(
+        f"viewer page: {out} ({out.stat().st_size / 1e6:.1f} MB; {recording.positions.shape[1]} modules, "
+        f"{recording.n_frames} frames): open it in a browser, no network needed"
+    )
     if args.screenshot:
         from proteo_env.render.browser import Chromium
 
@@ -258,10 +342,14 @@ def view(args) -> int:
             raise ValueError(f"--size {args.size!r} is not allowed; allowed: WIDTHxHEIGHT in pixels, e.g. 1200x800")
         with Chromium(width=int(width), height=int(height)) as browser:
             browser.open(out.resolve().as_uri() + (f"#cycle={args.cycle}" if args.cycle is not None else "#frame=-1"))
-            browser.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))",
-                             await_promise=True)
-            problems = browser.errors() + ([browser.evaluate("document.body.dataset.error")]
-                                           if browser.evaluate("document.body.dataset.errors") != "0" else [])
+            browser.evaluate(
+                "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))", await_promise=True
+            )
+            problems = browser.errors() + (
+                [browser.evaluate("document.body.dataset.error")]
+                if browser.evaluate("document.body.dataset.errors") != "0"
+                else []
+            )
             if problems:
                 raise RuntimeError(f"the viewer page reported errors: {problems}")
             browser.screenshot(args.screenshot)
@@ -292,15 +380,27 @@ def figures(args) -> int:
 def _picture_args(p, *, movie_default_frames: int = 300) -> None:
     g = p.add_argument_group("pictures")
     g.add_argument("--azimuth", type=float, default=None, help="camera azimuth in degrees (default -50)")
-    g.add_argument("--elevation", type=float, default=None, help="camera elevation in degrees (default 28; "
-                   "negative looks from underneath)")
+    g.add_argument(
+        "--elevation",
+        type=float,
+        default=None,
+        help="camera elevation in degrees (default 28; negative looks from underneath)",
+    )
     g.add_argument("--zoom", type=float, default=None, help="magnification (default 1: fit)")
-    g.add_argument("--follow", action=argparse.BooleanOptionalAction, default=None,
-                   help="frame the modules of each frame instead of the whole episode")
+    g.add_argument(
+        "--follow",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="frame the modules of each frame instead of the whole episode",
+    )
     g.add_argument("--size", default=None, help="image size WIDTHxHEIGHT (default 800x600)")
     g.add_argument("--fps", type=float, default=20.0, help="movie frames per second (default 20)")
-    g.add_argument("--max-frames", type=int, default=movie_default_frames,
-                   help=f"movie frames at most, spread over the episode (default {movie_default_frames})")
+    g.add_argument(
+        "--max-frames",
+        type=int,
+        default=movie_default_frames,
+        help=f"movie frames at most, spread over the episode (default {movie_default_frames})",
+    )
     g.add_argument("--plots", default=None, help="folder for the PNG plots of the metrics against cycles")
 
 
@@ -317,8 +417,12 @@ def main(argv=None) -> int:
 
     p = sub.add_parser("run", help="run a task (or a YAML config); record, render and plot it")
     p.add_argument("target", help="a registered task id (e.g. chain-v0) or a path to a YAML run config")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a setting (repeatable), e.g. --set n_modules=40 --set max_cycles=3000")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a setting (repeatable), e.g. --set n_modules=40 --set max_cycles=3000",
+    )
     p.add_argument("--policy", default=None, help="policy name (default: the task's hand-coded one)")
     p.add_argument("--seed", type=int, default=0, help="first seed")
     p.add_argument("--episodes", type=int, default=1)
@@ -347,36 +451,55 @@ def main(argv=None) -> int:
     p = sub.add_parser("figures", help="reproduce the paper's figures (pictures and plots) into docs/figures")
     p.add_argument("--out", default="docs/figures")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--only", action="append", default=None, help="only this figure (repeatable): chain, branch, "
-                   "table, grasp")
+    p.add_argument(
+        "--only", action="append", default=None, help="only this figure (repeatable): chain, branch, table, grasp"
+    )
     p.add_argument("--redraw", action="store_true", help="draw again from the recordings in --out (no episodes run)")
     p.set_defaults(func=figures)
 
     p = sub.add_parser("eval", help="compare hand-coded, random, learned and evolved policies over seeds")
-    p.add_argument("--config", default=None, help="per-task settings and checkpoints (YAML; default: "
-                   "configs/eval.yaml when it exists)")
+    p.add_argument(
+        "--config",
+        default=None,
+        help="per-task settings and checkpoints (YAML; default: configs/eval.yaml when it exists)",
+    )
     p.add_argument("--tasks", default=None, help="comma-separated task names (default: every task with a reward)")
     p.add_argument("--seeds", type=int, default=None, help="episodes per policy (default: the config's)")
     p.add_argument("--checkpoint", action="append", default=None, help="a checkpoint to add (repeatable)")
     p.add_argument("--out", default="out/eval", help="folder for results.md, results.json and eval.png")
     p.add_argument("--deterministic", action="store_true", help="neural policies take arg-max actions")
     p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--publish", action="append", default=None, metavar="FILE.md",
-                   help="also put the table into this markdown file, between its '<!-- proteo eval --out OUT -->' "
-                   "and '<!-- end of proteo eval table -->' markers (repeatable)")
-    p.add_argument("--pictures", action="store_true", help="draw the end of each policy's first episode into "
-                   "OUT/pictures/ (what it builds)")
-    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted run in --out "
-                   "(default: resume it)")
+    p.add_argument(
+        "--publish",
+        action="append",
+        default=None,
+        metavar="FILE.md",
+        help="also put the table into this markdown file, between its '<!-- proteo eval --out OUT -->' "
+        "and '<!-- end of proteo eval table -->' markers (repeatable)",
+    )
+    p.add_argument(
+        "--pictures",
+        action="store_true",
+        help="draw the end of each policy's first episode into OUT/pictures/ (what it builds)",
+    )
+    p.add_argument(
+        "--fresh", action="store_true", help="discard the episodes of an interrupted run in --out (default: resume it)"
+    )
     add_ray_flags(p)
     p.set_defaults(func=evaluate)
 
     p = sub.add_parser("sweep", help="a task over a grid of settings, policies and seeds: tidy tables and a plot")
     p.add_argument("config", help="a sweep config (YAML; see configs/sweeps/)")
-    p.add_argument("--out", default=None, help="folder for episodes.csv, summary.csv and sweep.png "
-                   "(default: out/sweeps/<config name>)")
-    p.add_argument("--fresh", action="store_true", help="discard the episodes of an interrupted sweep in --out "
-                   "(default: resume it)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="folder for episodes.csv, summary.csv and sweep.png (default: out/sweeps/<config name>)",
+    )
+    p.add_argument(
+        "--fresh",
+        action="store_true",
+        help="discard the episodes of an interrupted sweep in --out (default: resume it)",
+    )
     add_ray_flags(p)
     p.set_defaults(func=sweep)
     args = parser.parse_args(argv)

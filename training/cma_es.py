@@ -43,8 +43,15 @@ import numpy as np
 from tqdm import tqdm
 
 from baselines.base import constructor_parameters
-from training.common import (ProgressLog, checkpoint_folder, make_run_dir, parse_args, save_args, seed_everything,
-                             write_checkpoint_meta)
+from training.common import (
+    ProgressLog,
+    checkpoint_folder,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    write_checkpoint_meta,
+)
 
 
 @dataclass(frozen=True)
@@ -128,13 +135,18 @@ def rule_params(policy_cls, args: Args, defaults: dict | None = None) -> list[Pa
     from proteo_env.config import ConfigError
 
     skip = {"self", "layout", "modes", "scent_max", "seed", *args.fixed}
-    candidates = {name: p for name, p in constructor_parameters(policy_cls).items()
-                  if name not in skip and p.default is not inspect.Parameter.empty and p.default is not None}
+    candidates = {
+        name: p
+        for name, p in constructor_parameters(policy_cls).items()
+        if name not in skip and p.default is not inspect.Parameter.empty and p.default is not None
+    }
     for what, names in (("params", args.params), ("bounds", args.bounds), ("choices", args.choices)):
         unknown = sorted(set(names) - set(candidates))
         if unknown:
-            raise ConfigError(f"{what}: {unknown[0]!r} is not a parameter of policy {policy_cls.name!r}; "
-                              f"allowed: {', '.join(sorted(candidates))}")
+            raise ConfigError(
+                f"{what}: {unknown[0]!r} is not a parameter of policy {policy_cls.name!r}; "
+                f"allowed: {', '.join(sorted(candidates))}"
+            )
     out = []
     for name, p in candidates.items():
         if args.params and name not in args.params:
@@ -167,9 +179,11 @@ def policy_defaults(policy) -> dict:
         d = p.default
         if value is None or d is inspect.Parameter.empty or d is None:
             continue
-        same_kind = (isinstance(value, bool) == isinstance(d, bool)
-                     and (isinstance(value, str) == isinstance(d, str))
-                     and (isinstance(value, (int, float, str))))
+        same_kind = (
+            isinstance(value, bool) == isinstance(d, bool)
+            and (isinstance(value, str) == isinstance(d, str))
+            and (isinstance(value, (int, float, str)))
+        )
         if same_kind:
             out[name] = type(d)(value) if isinstance(d, (int, float)) and not isinstance(d, bool) else value
     return out
@@ -236,14 +250,22 @@ def build_policy(job: CandidateEpisode):
     if job.controller == "rules":
         from baselines import make_policy
 
-        return env, make_policy(job.policy, env, seed=job.seed,
-                                **{p.name: p.decode(v) for p, v in zip(job.params, job.genome)})
+        return env, make_policy(
+            job.policy, env, seed=job.seed, **{p.name: p.decode(v) for p, v in zip(job.params, job.genome)}
+        )
     from training.policies import LogitsPolicy, NumpyMLP
 
     nvec = env.action_layout.nvec
     net = NumpyMLP(encoder.size, int(nvec.sum()), job.hidden).set_flat(np.asarray(job.genome))
-    return env, LogitsPolicy(env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max,
-                             seed=job.seed, encoder=encoder, logits_fn=net, label="cma-neural")
+    return env, LogitsPolicy(
+        env.action_layout,
+        env.task.modes,
+        scent_max=env.config.physics.scent_max,
+        seed=job.seed,
+        encoder=encoder,
+        logits_fn=net,
+        label="cma-neural",
+    )
 
 
 def candidate_episode(job: CandidateEpisode) -> list | None:
@@ -277,8 +299,18 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
             return total, success, env.cycle
 
 
-RESUME_INDEPENDENT = ("generations", "time_limit_minutes", "checkpoint_every", "run_dir", "resume", "threads",
-                      "tensorboard", "ray", "address", "workers")
+RESUME_INDEPENDENT = (
+    "generations",
+    "time_limit_minutes",
+    "checkpoint_every",
+    "run_dir",
+    "resume",
+    "threads",
+    "tensorboard",
+    "ray",
+    "address",
+    "workers",
+)
 """Arguments that may change when an interrupted run is rerun (the others must stay)."""
 
 
@@ -305,8 +337,11 @@ def main(argv=None) -> Path:
     nvec = env.action_layout.nvec
     algorithm = f"cma-{args.controller}"
     resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = Path(args.run_dir or (resume_meta or {}).get("run_dir")
-                   or Path("runs") / f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}")
+    run_dir = Path(
+        args.run_dir
+        or (resume_meta or {}).get("run_dir")
+        or Path("runs") / f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}"
+    )
     state_file = run_dir / "state.pkl"
     """The state after the last finished generation; an interrupted run (no final/) resumes from it."""
     interrupted = state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
@@ -316,8 +351,10 @@ def main(argv=None) -> Path:
         state = pickle.loads(state_file.read_bytes())
         if state["fingerprint"] != fingerprint:
             diff = sorted(k for k in fingerprint if state["fingerprint"].get(k) != fingerprint[k])
-            raise ConfigError(f"run_dir {str(run_dir)!r} holds an interrupted run with other arguments (differing: "
-                              f"{', '.join(diff)}); allowed: the same arguments to resume it, or another run_dir")
+            raise ConfigError(
+                f"run_dir {str(run_dir)!r} holds an interrupted run with other arguments (differing: "
+                f"{', '.join(diff)}); allowed: the same arguments to resume it, or another run_dir"
+            )
     save_args(args, run_dir)
 
     # ------------------------------------------------------------------ genome <-> policy
@@ -353,9 +390,11 @@ def main(argv=None) -> Path:
         es = cma.CMAEvolutionStrategy(x0, args.sigma0, options)
     if es.N != len(x0):
         evolved = sorted((resume_meta or {}).get("params", {}))
-        raise ConfigError(f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
-                          f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
-                          f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run")
+        raise ConfigError(
+            f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
+            f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
+            f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run"
+        )
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -367,14 +406,31 @@ def main(argv=None) -> Path:
         else:
             np.save(folder / "genome.npy", mean.astype(np.float32))
             extra.update(hidden=list(args.hidden))
-        write_checkpoint_meta(folder, algorithm=algorithm, task=env.task.task_id(), env_overrides=dict(args.env),
-                              encoder_spec=encoder.spec() if args.controller == "neural" else None, nvec=nvec,
-                              agent_steps=agent_steps, seed=args.seed, extra=extra)
+        write_checkpoint_meta(
+            folder,
+            algorithm=algorithm,
+            task=env.task.task_id(),
+            env_overrides=dict(args.env),
+            encoder_spec=encoder.spec() if args.controller == "neural" else None,
+            nvec=nvec,
+            agent_steps=agent_steps,
+            seed=args.seed,
+            extra=extra,
+        )
 
     def save_state() -> None:
         tmp = state_file.with_suffix(".tmp")
-        tmp.write_bytes(pickle.dumps({"es": es, "agent_steps": agent_steps, "rng": rng.bit_generator.state,
-                                      "np_random": np.random.get_state(), "fingerprint": fingerprint}))
+        tmp.write_bytes(
+            pickle.dumps(
+                {
+                    "es": es,
+                    "agent_steps": agent_steps,
+                    "rng": rng.bit_generator.state,
+                    "np_random": np.random.get_state(),
+                    "fingerprint": fingerprint,
+                }
+            )
+        )
         os.replace(tmp, state_file)
 
     # ------------------------------------------------------------------ evolve
@@ -389,14 +445,32 @@ def main(argv=None) -> Path:
     while es.countiter < args.generations:
         seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
         candidates = es.ask()
-        jobs = [CandidateEpisode(task=args.task, env=overrides, controller=args.controller, policy=policy_name,
-                                 params=params, hidden=tuple(args.hidden), genome=tuple(float(v) for v in x), seed=s)
-                for x in candidates for s in seeds]
-        episodes = run_jobs(candidate_episode, jobs, [j.key for j in jobs], ray=ray, journal=journal,
-                            desc=f"generation {es.countiter + 1}", progress=True)
+        jobs = [
+            CandidateEpisode(
+                task=args.task,
+                env=overrides,
+                controller=args.controller,
+                policy=policy_name,
+                params=params,
+                hidden=tuple(args.hidden),
+                genome=tuple(float(v) for v in x),
+                seed=s,
+            )
+            for x in candidates
+            for s in seeds
+        ]
+        episodes = run_jobs(
+            candidate_episode,
+            jobs,
+            [j.key for j in jobs],
+            ray=ray,
+            journal=journal,
+            desc=f"generation {es.countiter + 1}",
+            progress=True,
+        )
         fitness, outcomes = [], []
         for c in range(len(candidates)):
-            results = episodes[c * len(seeds):(c + 1) * len(seeds)]
+            results = episodes[c * len(seeds) : (c + 1) * len(seeds)]
             if any(r is None for r in results):
                 fitness.append(None)
                 continue
@@ -405,17 +479,26 @@ def main(argv=None) -> Path:
             fitness.append(float(np.mean([r[0] for r in results])))
         valid = [f for f in fitness if f is not None]
         if not valid:
-            raise ValueError(f"generation {es.countiter + 1}: the policy rejected every candidate; "
-                             "narrow the ranges with bounds (or fixed) in the config")
+            raise ValueError(
+                f"generation {es.countiter + 1}: the policy rejected every candidate; "
+                "narrow the ranges with bounds (or fixed) in the config"
+            )
         worst = min(valid) - 1.0
         es.tell(candidates, [-(worst if f is None else f) for f in fitness])  # CMA-ES minimises
         bar.update(1)
-        values = {"episode/return": float(np.mean(valid)), "episode/best_candidate_return": max(valid),
-                  "episode/success": float(np.mean([r[1] for r in outcomes])),
-                  "episode/cycles": float(np.mean([r[2] for r in outcomes])), "cma/sigma": float(es.sigma),
-                  "cma/rejected": float(len(fitness) - len(valid)), "cma/generation": float(es.countiter)}
+        values = {
+            "episode/return": float(np.mean(valid)),
+            "episode/best_candidate_return": max(valid),
+            "episode/success": float(np.mean([r[1] for r in outcomes])),
+            "episode/cycles": float(np.mean([r[2] for r in outcomes])),
+            "cma/sigma": float(es.sigma),
+            "cma/rejected": float(len(fitness) - len(valid)),
+            "cma/generation": float(es.countiter),
+        }
         if args.controller == "rules":
-            values.update({f"param/{k}": float(v) for k, v in decode(distribution_mean(es)).items() if not isinstance(v, str)})
+            values.update(
+                {f"param/{k}": float(v) for k, v in decode(distribution_mean(es)).items() if not isinstance(v, str)}
+            )
         log.log(agent_steps, values)
         if es.countiter % args.checkpoint_every == 0:
             save(checkpoint_folder(run_dir, agent_steps))
@@ -426,8 +509,10 @@ def main(argv=None) -> Path:
     save(run_dir / "final")
     journal.complete()
     log.close()
-    print(f"final checkpoint: {run_dir / 'final'}  ({es.countiter} generations, {agent_steps} agent-steps, "
-          f"{log.seconds:.0f} s)")
+    print(
+        f"final checkpoint: {run_dir / 'final'}  ({es.countiter} generations, {agent_steps} agent-steps, "
+        f"{log.seconds:.0f} s)"
+    )
     return run_dir / "final"
 
 

@@ -50,8 +50,13 @@ def parse_args(args_cls, argv=None, *, description: str = ""):
     hints = typing.get_type_hints(args_cls)
     for f in dataclasses.fields(args_cls):
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-        parser.add_argument(f"--{f.name.replace('_', '-')}", dest=f.name, default=None, metavar="VALUE",
-                            help=f"{getattr(hints[f.name], '__name__', hints[f.name])} (default: {default!r})")
+        parser.add_argument(
+            f"--{f.name.replace('_', '-')}",
+            dest=f.name,
+            default=None,
+            metavar="VALUE",
+            help=f"{getattr(hints[f.name], '__name__', hints[f.name])} (default: {default!r})",
+        )
     ns = parser.parse_args(argv)
     values: dict = {}
     if ns.config:
@@ -149,8 +154,10 @@ def torch_device(name: str):
             return device
     elif device.type == "mps" and torch.backends.mps.is_available():
         return device
-    raise ConfigError(f"device={name!r} is not available on this machine; allowed: cpu"
-                      + "".join(f", cuda:{i}" for i in range(torch.cuda.device_count())))
+    raise ConfigError(
+        f"device={name!r} is not available on this machine; allowed: cpu"
+        + "".join(f", cuda:{i}" for i in range(torch.cuda.device_count()))
+    )
 
 
 def make_run_dir(run_dir: str | None, default_name: str, *, resume: bool) -> Path:
@@ -202,8 +209,11 @@ class ProgressLog:
         self.offset = float(kept[-1]["seconds"]) if kept else 0.0
 
     def log(self, agent_steps: int, values: dict) -> None:
-        row = {"agent_steps": agent_steps, "seconds": round(self.seconds, 3),
-               **{k: (float(v) if v is not None else "") for k, v in values.items()}}
+        row = {
+            "agent_steps": agent_steps,
+            "seconds": round(self.seconds, 3),
+            **{k: (float(v) if v is not None else "") for k, v in values.items()},
+        }
         new = not self.path.exists()
         if not new:
             with self.path.open() as fh:
@@ -237,15 +247,19 @@ def checkpoint_dir(path) -> Path:
     """The checkpoint folder that ``path`` names (folder, file inside it, or run folder)."""
     p = Path(path)
     if not p.exists():
-        raise CheckpointError(f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
-                              f"(with {META_FILE}), a file in one, or a run folder with final/")
+        raise CheckpointError(
+            f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
+            f"(with {META_FILE}), a file in one, or a run folder with final/"
+        )
     if p.is_file():
         p = p.parent
     if not (p / META_FILE).is_file() and (p / "final" / META_FILE).is_file():
         p = p / "final"
     if not (p / META_FILE).is_file():
-        raise CheckpointError(f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
-                              "allowed: a folder written by a script in training/")
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
+            "allowed: a folder written by a script in training/"
+        )
     return p
 
 
@@ -257,27 +271,51 @@ def read_meta(path) -> dict:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
     if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} has format "
-                              f"{meta.get('format') if isinstance(meta, dict) else None!r}; allowed: {CHECKPOINT_FORMAT!r}")
+        raise CheckpointError(
+            f"checkpoint {str(folder)!r}: {META_FILE} has format "
+            f"{meta.get('format') if isinstance(meta, dict) else None!r}; allowed: {CHECKPOINT_FORMAT!r}"
+        )
     if meta.get("version") != CHECKPOINT_VERSION:
-        raise CheckpointError(f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; "
-                              f"allowed: {CHECKPOINT_VERSION}")
+        raise CheckpointError(
+            f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}"
+        )
     if meta.get("algorithm") not in ALGORITHMS:
-        raise CheckpointError(f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "
-                              f"allowed: {', '.join(ALGORITHMS)}")
+        raise CheckpointError(
+            f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "
+            f"allowed: {', '.join(ALGORITHMS)}"
+        )
     for key in ("task", "nvec"):
         if key not in meta:
             raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} lacks {key!r}")
     return {**meta, "dir": str(folder)}
 
 
-def write_checkpoint_meta(folder: Path, *, algorithm: str, task: str, env_overrides: dict, encoder_spec: dict | None,
-                          nvec, agent_steps: int, seed: int, extra: dict | None = None) -> None:
+def write_checkpoint_meta(
+    folder: Path,
+    *,
+    algorithm: str,
+    task: str,
+    env_overrides: dict,
+    encoder_spec: dict | None,
+    nvec,
+    agent_steps: int,
+    seed: int,
+    extra: dict | None = None,
+) -> None:
     """Write ``proteo.json`` into a checkpoint folder (its payload files are the caller's)."""
-    meta = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "algorithm": algorithm, "task": task,
-            "env": env_overrides, "encoder": encoder_spec, "nvec": [int(n) for n in nvec],
-            "agent_steps": int(agent_steps), "seed": seed, "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-            **(extra or {})}
+    meta = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "algorithm": algorithm,
+        "task": task,
+        "env": env_overrides,
+        "encoder": encoder_spec,
+        "nvec": [int(n) for n in nvec],
+        "agent_steps": int(agent_steps),
+        "seed": seed,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        **(extra or {}),
+    }
     folder.mkdir(parents=True, exist_ok=True)
     tmp = folder / (META_FILE + ".tmp")
     tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
@@ -300,6 +338,8 @@ def episode_stats(episodes: list[dict]) -> dict:
     """Mean return, success rate and mean cycles of finished episodes (``None`` when there are none)."""
     if not episodes:
         return {"episode/return": None, "episode/success": None, "episode/cycles": None}
-    return {"episode/return": float(np.mean([e["r"] for e in episodes])),
-            "episode/success": float(np.mean([e["success"] for e in episodes])),
-            "episode/cycles": float(np.mean([e["l"] for e in episodes]))}
+    return {
+        "episode/return": float(np.mean([e["r"] for e in episodes])),
+        "episode/success": float(np.mean([e["success"] for e in episodes])),
+        "episode/cycles": float(np.mean([e["l"] for e in episodes])),
+    }

@@ -39,12 +39,16 @@ class Curriculum:
     def __init__(self, block: dict, check_env, stage: int = 0):
         if not isinstance(block, dict) or set(block) - set(KEYS) or "stages" not in block:
             unknown = sorted(set(block) - set(KEYS)) if isinstance(block, dict) else block
-            raise ConfigError(f"curriculum: {unknown or 'no stages'!r} is not allowed; allowed: a mapping with "
-                              f"stages (a list of env overrides), promote_at, window")
+            raise ConfigError(
+                f"curriculum: {unknown or 'no stages'!r} is not allowed; allowed: a mapping with "
+                f"stages (a list of env overrides), promote_at, window"
+            )
         self.stages = block["stages"]
         if not isinstance(self.stages, list) or not self.stages or not all(isinstance(s, dict) for s in self.stages):
-            raise ConfigError(f"curriculum.stages={self.stages!r} is not allowed; allowed: a non-empty list of "
-                              "mappings of env overrides")
+            raise ConfigError(
+                f"curriculum.stages={self.stages!r} is not allowed; allowed: a non-empty list of "
+                "mappings of env overrides"
+            )
         self.promote_at = block.get("promote_at", 0.8)
         if not isinstance(self.promote_at, (int, float)) or not 0.0 < self.promote_at <= 1.0:
             raise ConfigError(f"curriculum.promote_at={self.promote_at!r} is not allowed; allowed: a number in (0, 1]")
@@ -53,8 +57,10 @@ class Curriculum:
             raise ConfigError(f"curriculum.window={self.window!r} is not allowed; allowed: an integer >= 1")
         for i, overrides in enumerate(self.stages):
             if "obs_radius" in overrides:
-                raise ConfigError(f"curriculum stage {i}: obs_radius is not allowed; allowed: settings that keep "
-                                  "the observation encoding")
+                raise ConfigError(
+                    f"curriculum stage {i}: obs_radius is not allowed; allowed: settings that keep "
+                    "the observation encoding"
+                )
             try:
                 check_env(overrides)
             except (ValueError, TypeError, KeyError) as err:
@@ -72,8 +78,11 @@ class Curriculum:
         """Count the ended ``episodes`` (``{"success": bool, ...}``); True when they promote the
         curriculum to its next stage (the record then starts afresh)."""
         self.recent.extend(bool(e["success"]) for e in episodes)
-        if (self.stage + 1 < len(self.stages) and len(self.recent) == self.window
-                and np.mean(self.recent) >= self.promote_at):
+        if (
+            self.stage + 1 < len(self.stages)
+            and len(self.recent) == self.window
+            and np.mean(self.recent) >= self.promote_at
+        ):
             self.stage += 1
             self.recent.clear()
             return True

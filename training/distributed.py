@@ -25,8 +25,8 @@ import json
 import os
 import socket
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Callable, Sequence
 
 from proteo_env.config import ConfigError
 
@@ -52,8 +52,10 @@ def ray_options(args) -> dict | None:
     address, workers = getattr(args, "address", None), getattr(args, "workers", None)
     if not use and (address is not None or workers is not None):
         flag = "--address" if address is not None else "--workers"
-        raise ConfigError(f"{flag} {address if address is not None else workers!r} needs --ray; allowed: "
-                          f"--ray {flag} ... (or neither, to run serially)")
+        raise ConfigError(
+            f"{flag} {address if address is not None else workers!r} needs --ray; allowed: "
+            f"--ray {flag} ... (or neither, to run serially)"
+        )
     if workers is not None and int(workers) < 1:
         raise ConfigError(f"--workers {workers!r} is not allowed; allowed: an integer >= 1")
     return {"address": address, "workers": None if workers is None else int(workers)} if use else None
@@ -63,10 +65,18 @@ def add_ray_flags(parser) -> None:
     """Add ``--ray``, ``--address`` and ``--workers`` to an argparse parser."""
     g = parser.add_argument_group("Ray (pip install -e '.[distributed]')")
     g.add_argument("--ray", action="store_true", help="run the episodes as Ray tasks")
-    g.add_argument("--address", default=None, help="a running Ray cluster (HOST:PORT printed by `ray start "
-                   "--head`, or 'auto'); default: start a local Ray instance")
-    g.add_argument("--workers", type=int, default=None, help="CPUs of the local Ray instance, or at most this "
-                   "many tasks at once on a cluster (default: all CPUs)")
+    g.add_argument(
+        "--address",
+        default=None,
+        help="a running Ray cluster (HOST:PORT printed by `ray start "
+        "--head`, or 'auto'); default: start a local Ray instance",
+    )
+    g.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="CPUs of the local Ray instance, or at most this many tasks at once on a cluster (default: all CPUs)",
+    )
 
 
 # ---------------------------------------------------------------------- journal
@@ -97,9 +107,11 @@ class Journal:
                 if records[0].get("fingerprint") != fingerprint:
                     old = records[0].get("fingerprint") or {}
                     diff = sorted(k for k in set(old) | set(fingerprint) if old.get(k) != fingerprint.get(k))
-                    raise ConfigError(f"{str(self.path)!r} holds an unfinished {what} with other settings "
-                                      f"(differing: {', '.join(diff) or 'format'}); allowed: the same settings to "
-                                      "resume it, another output folder, or --fresh to discard it")
+                    raise ConfigError(
+                        f"{str(self.path)!r} holds an unfinished {what} with other settings "
+                        f"(differing: {', '.join(diff) or 'format'}); allowed: the same settings to "
+                        "resume it, another output folder, or --fresh to discard it"
+                    )
                 for r in records[1:]:
                     if "key" in r:
                         self.done.setdefault(r["key"], r["result"])
@@ -108,9 +120,12 @@ class Journal:
         if not self.resumed:
             self.path.write_text(json.dumps({"fingerprint": fingerprint}) + "\n")
         else:  # drop a torn last line so appended records start on a line of their own
-            self.path.write_text("".join(json.dumps(r) + "\n" for r in
-                                         [{"fingerprint": fingerprint}] +
-                                         [{"key": k, "result": v} for k, v in self.done.items()]))
+            self.path.write_text(
+                "".join(
+                    json.dumps(r) + "\n"
+                    for r in [{"fingerprint": fingerprint}] + [{"key": k, "result": v} for k, v in self.done.items()]
+                )
+            )
 
     def add(self, key: str, result) -> None:
         """Record one finished job (ignored when its key is already recorded)."""
@@ -129,9 +144,17 @@ class Journal:
 
 
 # ---------------------------------------------------------------------- running jobs
-def run_jobs(fn: Callable, jobs: Sequence, keys: Sequence[str], *, ray: dict | None = None,
-             journal: Journal | None = None, desc: str = "episodes", progress: bool = True,
-             max_retries: int = DEFAULT_MAX_RETRIES) -> list:
+def run_jobs(
+    fn: Callable,
+    jobs: Sequence,
+    keys: Sequence[str],
+    *,
+    ray: dict | None = None,
+    journal: Journal | None = None,
+    desc: str = "episodes",
+    progress: bool = True,
+    max_retries: int = DEFAULT_MAX_RETRIES,
+) -> list:
     """``[fn(job) for job in jobs]``, serially or as Ray tasks; results in job order.
 
     Args:
@@ -154,8 +177,9 @@ def run_jobs(fn: Callable, jobs: Sequence, keys: Sequence[str], *, ray: dict | N
     done = dict(journal.done) if journal is not None else {}
     todo = [i for i, k in enumerate(keys) if k not in done]
     results: dict[int, object] = {i: done[k] for i, k in enumerate(keys) if k in done}
-    bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="episode", leave=False,
-               disable=not progress)
+    bar = tqdm(
+        total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="episode", leave=False, disable=not progress
+    )
 
     def finished(i: int, result) -> None:
         results[i] = result
@@ -229,15 +253,20 @@ def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int)
                     cause = err.as_instanceof_cause()
                     raise (cause.cause if getattr(cause, "cause", None) is not None else cause) from None
                 except (ray.exceptions.WorkerCrashedError, ray.exceptions.NodeDiedError) as err:
-                    raise RuntimeError(f"job {keys[i]!r} failed: its worker died {max_retries + 1} times "
-                                       f"({type(err).__name__}); the finished jobs are kept, rerun the same "
-                                       "command to resume") from None
+                    raise RuntimeError(
+                        f"job {keys[i]!r} failed: its worker died {max_retries + 1} times "
+                        f"({type(err).__name__}); the finished jobs are kept, rerun the same "
+                        "command to resume"
+                    ) from None
                 finished(i, result)
     finally:
         retried = ray.get(ledger.retried.remote())
         if retried:
-            print(f"ray: {len(retried)} task(s) retried after their worker died: "
-                  + ", ".join(f"{k} ({n}x)" for k, n in sorted(retried.items())), file=sys.stderr)
+            print(
+                f"ray: {len(retried)} task(s) retried after their worker died: "
+                + ", ".join(f"{k} ({n}x)" for k, n in sorted(retried.items())),
+                file=sys.stderr,
+            )
         for ref in pending:
             ray.cancel(ref)
 
@@ -248,8 +277,10 @@ def require_ray():
     try:
         import ray
     except ImportError:
-        raise ClusterError("--ray needs Ray, which is not installed; allowed: pip install -c constraints.txt "
-                           "-e '.[distributed]' (ray 2.60.0)") from None
+        raise ClusterError(
+            "--ray needs Ray, which is not installed; allowed: pip install -c constraints.txt "
+            "-e '.[distributed]' (ray 2.60.0)"
+        ) from None
     return ray
 
 
@@ -259,14 +290,18 @@ def _check_reachable(address: str) -> None:
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")
     if not sep or not host or not port.isdigit():
-        raise ClusterError(f"--address {address!r} is not allowed; allowed: HOST:PORT of a Ray head node "
-                           "(as printed by `ray start --head`, e.g. 10.0.0.5:6379), ray://HOST:PORT, or 'auto'")
+        raise ClusterError(
+            f"--address {address!r} is not allowed; allowed: HOST:PORT of a Ray head node "
+            "(as printed by `ray start --head`, e.g. 10.0.0.5:6379), ray://HOST:PORT, or 'auto'"
+        )
     try:
         socket.create_connection((host, int(port)), timeout=5).close()
     except OSError as err:
-        raise ClusterError(f"--address {address!r}: no Ray head node answers there ({err.strerror or err}); "
-                           "allowed: the address printed by `ray start --head` on a running head node, or no "
-                           "--address for a local Ray instance") from None
+        raise ClusterError(
+            f"--address {address!r}: no Ray head node answers there ({err.strerror or err}); "
+            "allowed: the address printed by `ray start --head` on a running head node, or no "
+            "--address for a local Ray instance"
+        ) from None
 
 
 def connect(address: str | None = None, workers: int | None = None):
@@ -283,9 +318,11 @@ def connect(address: str | None = None, workers: int | None = None):
             try:
                 ray.init(address=address, include_dashboard=False, log_to_driver=False)
             except (ConnectionError, RuntimeError, ValueError) as err:
-                raise ClusterError(f"--address {address!r}: cannot join the Ray cluster there ({err}); allowed: "
-                                   "the address printed by `ray start --head`, reached with the same Ray version "
-                                   f"({ray.__version__})") from None
+                raise ClusterError(
+                    f"--address {address!r}: cannot join the Ray cluster there ({err}); allowed: "
+                    "the address printed by `ray start --head`, reached with the same Ray version "
+                    f"({ray.__version__})"
+                ) from None
         else:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         check_cluster()
@@ -326,8 +363,10 @@ def check_cluster(modules: tuple[str, ...] = PROJECT_MODULES) -> list[dict]:
 
     probe = ray.remote(num_cpus=0, max_retries=0)(_probe)
     nodes = [n for n in ray.nodes() if n.get("Alive")]
-    refs = [probe.options(scheduling_strategy=NodeAffinitySchedulingStrategy(n["NodeID"], soft=False)).remote(modules)
-            for n in nodes]
+    refs = [
+        probe.options(scheduling_strategy=NodeAffinitySchedulingStrategy(n["NodeID"], soft=False)).remote(modules)
+        for n in nodes
+    ]
     probes, problems = [], []
     mine = project_fingerprint()
     for node, ref in zip(nodes, refs):
@@ -343,7 +382,9 @@ def check_cluster(modules: tuple[str, ...] = PROJECT_MODULES) -> list[dict]:
         elif found["fingerprint"] != mine:
             problems.append(f"{where}: runs other proteo code (sources {found['fingerprint']}, here {mine})")
     if problems:
-        raise ClusterError("the Ray cluster cannot run proteo's jobs: " + "; ".join(problems) + "; allowed: every "
-                           "node with this checkout installed (pip install -c constraints.txt -e '.[distributed]') "
-                           "and its workers started from that environment")
+        raise ClusterError(
+            "the Ray cluster cannot run proteo's jobs: " + "; ".join(problems) + "; allowed: every "
+            "node with this checkout installed (pip install -c constraints.txt -e '.[distributed]') "
+            "and its workers started from that environment"
+        )
     return probes

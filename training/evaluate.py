@@ -54,9 +54,33 @@ DEFAULT_CONFIG = "configs/eval.yaml"
 EXCLUDED_TASKS = ("sandbox",)
 """Task names left out of the evaluation (no reward, no success)."""
 
-_T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262, 10: 2.228,
-          11: 2.201, 12: 2.179, 13: 2.160, 14: 2.145, 15: 2.131, 16: 2.120, 17: 2.110, 18: 2.101, 19: 2.093,
-          20: 2.086, 25: 2.060, 30: 2.042, 40: 2.021, 60: 2.000, 120: 1.980}
+_T_975 = {
+    1: 12.706,
+    2: 4.303,
+    3: 3.182,
+    4: 2.776,
+    5: 2.571,
+    6: 2.447,
+    7: 2.365,
+    8: 2.306,
+    9: 2.262,
+    10: 2.228,
+    11: 2.201,
+    12: 2.179,
+    13: 2.160,
+    14: 2.145,
+    15: 2.131,
+    16: 2.120,
+    17: 2.110,
+    18: 2.101,
+    19: 2.093,
+    20: 2.086,
+    25: 2.060,
+    30: 2.042,
+    40: 2.021,
+    60: 2.000,
+    120: 1.980,
+}
 
 
 def t_critical(df: int) -> float:
@@ -119,11 +143,24 @@ class PolicyResult:
         lo, hi = wilson(k, self.n)
         won = [c for c, s in zip(self.cycles, self.successes) if s]
         c_mean, c_half = mean_ci(won)
-        return {"task": self.task, "policy": self.policy, "kind": self.kind, "level": self.level,
-                "training_seeds": 1 if self.kind in ("learned", "evolved") else 0, "episodes": self.n,
-                "return_mean": mean, "return_ci": half, "successes": k, "success_rate": k / self.n if self.n else 0.0,
-                "success_lo": lo, "success_hi": hi, "cycles_to_success": c_mean, "cycles_ci": c_half,
-                "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"), "seconds": self.seconds}
+        return {
+            "task": self.task,
+            "policy": self.policy,
+            "kind": self.kind,
+            "level": self.level,
+            "training_seeds": 1 if self.kind in ("learned", "evolved") else 0,
+            "episodes": self.n,
+            "return_mean": mean,
+            "return_ci": half,
+            "successes": k,
+            "success_rate": k / self.n if self.n else 0.0,
+            "success_lo": lo,
+            "success_hi": hi,
+            "cycles_to_success": c_mean,
+            "cycles_ci": c_half,
+            "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"),
+            "seconds": self.seconds,
+        }
 
 
 @dataclass
@@ -153,14 +190,25 @@ class GroupResult:
         c_mean, c_half = mean_ci([s["cycles_to_success"] for s in per_run if s["successes"]])
         k = sum(s["successes"] for s in per_run)
         lo, hi = wilson(k, self.n)
-        return {"task": self.task, "policy": self.label, "kind": self.kind, "level": self.runs[0].level,
-                "training_seeds": len(self.runs), "episodes": self.n, "return_mean": mean, "return_ci": half,
-                "successes": k, "success_rate": rate, "success_rate_ci": rate_half,
-                "success_lo": max(0.0, rate - rate_half) if len(self.runs) > 1 else lo,
-                "success_hi": min(1.0, rate + rate_half) if len(self.runs) > 1 else hi,
-                "cycles_to_success": c_mean, "cycles_ci": c_half,
-                "mean_cycles": float(np.mean([s["mean_cycles"] for s in per_run])),
-                "seconds": sum(s["seconds"] for s in per_run)}
+        return {
+            "task": self.task,
+            "policy": self.label,
+            "kind": self.kind,
+            "level": self.runs[0].level,
+            "training_seeds": len(self.runs),
+            "episodes": self.n,
+            "return_mean": mean,
+            "return_ci": half,
+            "successes": k,
+            "success_rate": rate,
+            "success_rate_ci": rate_half,
+            "success_lo": max(0.0, rate - rate_half) if len(self.runs) > 1 else lo,
+            "success_hi": min(1.0, rate + rate_half) if len(self.runs) > 1 else hi,
+            "cycles_to_success": c_mean,
+            "cycles_ci": c_half,
+            "mean_cycles": float(np.mean([s["mean_cycles"] for s in per_run])),
+            "seconds": sum(s["seconds"] for s in per_run),
+        }
 
 
 def grouped(results: list[PolicyResult]) -> list:
@@ -189,20 +237,31 @@ def markdown_table(results: list) -> str:
     mean of the runs' means ± a 95 % t half-width, success is the mean rate ± its half-width
     with the pooled count in brackets.
     """
-    head = ["task", "policy", "kind", "level", "training seeds", "episodes", "return (95 % CI)",
-            "success (95 % CI)", "cycles to success (95 % CI)", "seconds"]
+    head = [
+        "task",
+        "policy",
+        "kind",
+        "level",
+        "training seeds",
+        "episodes",
+        "return (95 % CI)",
+        "success (95 % CI)",
+        "cycles to success (95 % CI)",
+        "seconds",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         s = r.summary()
         ret = f"{_fmt(s['return_mean'])} ± {_fmt(s['return_ci'])}"
         if s["training_seeds"] > 1:
-            succ = (f"{_fmt(s['success_rate'], 2)} ± {_fmt(s['success_rate_ci'], 2)} "
-                    f"({s['successes']}/{s['episodes']})")
+            succ = f"{_fmt(s['success_rate'], 2)} ± {_fmt(s['success_rate_ci'], 2)} ({s['successes']}/{s['episodes']})"
         else:
             succ = f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
         cyc = "–" if not s["successes"] else f"{_fmt(s['cycles_to_success'], 0)} ± {_fmt(s['cycles_ci'], 0)}"
-        lines.append(f"| {s['task']} | {s['policy']} | {s['kind']} | {s['level']} | {s['training_seeds'] or '–'} | "
-                     f"{s['episodes']} | {ret} | {succ} | {cyc} | {s['seconds']:.1f} |")
+        lines.append(
+            f"| {s['task']} | {s['policy']} | {s['kind']} | {s['level']} | {s['training_seeds'] or '–'} | "
+            f"{s['episodes']} | {ret} | {succ} | {cyc} | {s['seconds']:.1f} |"
+        )
     return "\n".join(lines)
 
 
@@ -219,11 +278,14 @@ def plot(results: list[PolicyResult], path: Path) -> None:
         rs = [r.summary() for r in results if r.task == task]
         names = [s["policy"] for s in rs]
         y = np.arange(len(rs))
-        colours = [{"hand-coded": "tab:green", "random": "tab:gray", "learned": "tab:blue",
-                    "evolved": "tab:orange"}.get(s["kind"], "tab:purple") for s in rs]
+        colours = [
+            {"hand-coded": "tab:green", "random": "tab:gray", "learned": "tab:blue", "evolved": "tab:orange"}.get(
+                s["kind"], "tab:purple"
+            )
+            for s in rs
+        ]
         ret = [s["return_mean"] for s in rs]
-        row[0].barh(y, ret, xerr=[0 if not np.isfinite(s["return_ci"]) else s["return_ci"] for s in rs],
-                    color=colours)
+        row[0].barh(y, ret, xerr=[0 if not np.isfinite(s["return_ci"]) else s["return_ci"] for s in rs], color=colours)
         row[0].set_title(f"{task}: mean return")
         rate = np.array([s["success_rate"] for s in rs])
         err = np.array([[r - s["success_lo"], s["success_hi"] - r] for r, s in zip(rate, rs)]).T
@@ -260,15 +322,24 @@ def load_config(path) -> dict:
     for name, entry in tasks.items():
         bad = sorted(set(entry or {}) - {"env", "checkpoints"})
         if bad:
-            raise ConfigError(f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env")
+            raise ConfigError(
+                f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env"
+            )
         for k, item in enumerate((entry or {}).get("checkpoints") or []):
-            ok = isinstance(item, str) or (isinstance(item, dict) and set(item) == {"label", "runs"}
-                                           and isinstance(item["label"], str) and isinstance(item["runs"], list)
-                                           and item["runs"] and all(isinstance(r, str) for r in item["runs"]))
+            ok = isinstance(item, str) or (
+                isinstance(item, dict)
+                and set(item) == {"label", "runs"}
+                and isinstance(item["label"], str)
+                and isinstance(item["runs"], list)
+                and item["runs"]
+                and all(isinstance(r, str) for r in item["runs"])
+            )
             if not ok:
-                raise ConfigError(f"eval config {str(p)!r}: tasks.{name}.checkpoints[{k}] = {item!r} is not allowed; "
-                                  "allowed: a checkpoint path, or {label: NAME, runs: [PATH, ...]} (one path per "
-                                  "training seed)")
+                raise ConfigError(
+                    f"eval config {str(p)!r}: tasks.{name}.checkpoints[{k}] = {item!r} is not allowed; "
+                    "allowed: a checkpoint path, or {label: NAME, runs: [PATH, ...]} (one path per "
+                    "training seed)"
+                )
     return {"seeds": int(data.get("seeds", 10)), "first_seed": int(data.get("first_seed", 0)), "tasks": tasks}
 
 
@@ -340,8 +411,11 @@ def built(job: EpisodeJob):
             _BUILT.pop(next(iter(_BUILT)))[0].close()
         overrides = json.loads(job.overrides)
         env = proteo_env.make(job.task_id, **overrides, **({} if job.level == "full" else {"control": job.level}))
-        policy = (load_policy(job.policy, env, seed=job.policy_seed, deterministic=job.deterministic)
-                  if job.checkpoint else make_policy(job.policy, env, seed=job.policy_seed))
+        policy = (
+            load_policy(job.policy, env, seed=job.policy_seed, deterministic=job.deterministic)
+            if job.checkpoint
+            else make_policy(job.policy, env, seed=job.policy_seed)
+        )
         _BUILT[spec] = (env, policy)
     return _BUILT[spec]
 
@@ -353,12 +427,18 @@ def run_episode_job(job: EpisodeJob) -> dict:
     env, policy = built(job)
     started = time.perf_counter()
     episode = run_episode(env, policy, seed=job.seed)
-    out = {"return": float(episode.total_reward), "success": bool(episode.success), "cycles": int(episode.cycles),
-           "metrics": {k: float(v) for k, v in episode.metrics.items()}, "seconds": time.perf_counter() - started,
-           "picture": None}
+    out = {
+        "return": float(episode.total_reward),
+        "success": bool(episode.success),
+        "cycles": int(episode.cycles),
+        "metrics": {k: float(v) for k, v in episode.metrics.items()},
+        "seconds": time.perf_counter() - started,
+        "picture": None,
+    }
     if job.picture:
-        out["picture"] = _picture_png(env, f"{job.picture} · seed {job.seed} · cycle {episode.cycles}"
-                                           f"{' · success' if episode.success else ''}")
+        out["picture"] = _picture_png(
+            env, f"{job.picture} · seed {job.seed} · cycle {episode.cycles}{' · success' if episode.success else ''}"
+        )
     return out
 
 
@@ -371,9 +451,20 @@ def _checkpoint_identity(path) -> str:
     return hashlib.sha256((checkpoint_dir(path) / META_FILE).read_bytes()).hexdigest()[:16]
 
 
-def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(), out="out/eval",
-             deterministic: bool = False, progress: bool = True, plots: bool = True,
-             pictures: bool = False, ray: dict | None = None, fresh: bool = False) -> list:
+def evaluate(
+    *,
+    config=None,
+    tasks=None,
+    seeds: int | None = None,
+    checkpoints=(),
+    out="out/eval",
+    deterministic: bool = False,
+    progress: bool = True,
+    plots: bool = True,
+    pictures: bool = False,
+    ray: dict | None = None,
+    fresh: bool = False,
+) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
     Every episode is one :class:`EpisodeJob`, run serially or as a Ray task (``ray``), and
@@ -423,8 +514,10 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
     for path in checkpoints:
         name = read_meta(path)["task"].split("-v")[0]
         if name not in by_task:
-            raise ConfigError(f"checkpoint {str(path)!r} was trained on task {name!r}, which is not evaluated; "
-                              f"allowed: checkpoints of {', '.join(by_task)}")
+            raise ConfigError(
+                f"checkpoint {str(path)!r} was trained on task {name!r}, which is not evaluated; "
+                f"allowed: checkpoints of {', '.join(by_task)}"
+            )
         by_task[name].append((str(path), ""))
 
     # Every policy's result row and its episodes as jobs; policies are built here once, so that a
@@ -453,27 +546,55 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
                 source = str(path)
             first_of_group = not group or not any(r.group == group and r.task == cls.task_id() for r in results)
             label = group or (policy.name if path is None else Path(path).name)
-            results.append(PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level,
-                                        group=group))
+            results.append(
+                PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level, group=group)
+            )
             for seed in seed_list:
-                picture = (f"{cls.task_id()} · {label} ({level})"
-                           if pictures and seed == seed_list[0] and first_of_group else "")
-                jobs.append((len(results) - 1, EpisodeJob(
-                    task_id=cls.task_id(), overrides=json.dumps(overrides, sort_keys=True), level=level,
-                    policy=name if path is None else str(path), checkpoint=path is not None, seed=seed,
-                    policy_seed=seed_list[0], deterministic=deterministic, picture=picture)))
+                picture = (
+                    f"{cls.task_id()} · {label} ({level})"
+                    if pictures and seed == seed_list[0] and first_of_group
+                    else ""
+                )
+                jobs.append(
+                    (
+                        len(results) - 1,
+                        EpisodeJob(
+                            task_id=cls.task_id(),
+                            overrides=json.dumps(overrides, sort_keys=True),
+                            level=level,
+                            policy=name if path is None else str(path),
+                            checkpoint=path is not None,
+                            seed=seed,
+                            policy_seed=seed_list[0],
+                            deterministic=deterministic,
+                            picture=picture,
+                        ),
+                    )
+                )
         for env in envs.values():
             env.close()
         _name_apart([r for r in results[first_task_row:] if not r.group])
 
     out_dir = Path(out)
     settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
-    fingerprint = {"seeds": seed_list, "settings": settings, "deterministic": deterministic, "pictures": pictures,
-                   "jobs": len(jobs), "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values()
-                                                      for p, _ in ps}}
+    fingerprint = {
+        "seeds": seed_list,
+        "settings": settings,
+        "deterministic": deterministic,
+        "pictures": pictures,
+        "jobs": len(jobs),
+        "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
+    }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
-    episodes = run_jobs(run_episode_job, [j for _, j in jobs], [j.key for _, j in jobs], ray=ray, journal=journal,
-                        desc="episodes", progress=progress)
+    episodes = run_jobs(
+        run_episode_job,
+        [j for _, j in jobs],
+        [j.key for _, j in jobs],
+        ray=ray,
+        journal=journal,
+        desc="episodes",
+        progress=progress,
+    )
     for (row, job), episode in zip(jobs, episodes):
         result = results[row]
         result.returns.append(episode["return"])
@@ -483,9 +604,15 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
         result.metrics.append(episode["metrics"])
         result.seconds += episode["seconds"]
         if episode["picture"]:
-            file = out_dir / "pictures" / (f"{job.task_id.split('-v')[0]}_"
-                                           f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
-                                           f"_{job.level}.png").replace("+", "-")
+            file = (
+                out_dir
+                / "pictures"
+                / (
+                    f"{job.task_id.split('-v')[0]}_"
+                    f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
+                    f"_{job.level}.png"
+                ).replace("+", "-")
+            )
             file.parent.mkdir(parents=True, exist_ok=True)
             file.write_bytes(base64.b64decode(episode["picture"]))
 
@@ -493,16 +620,34 @@ def evaluate(*, config=None, tasks=None, seeds: int | None = None, checkpoints=(
     rows = grouped(results)
     table = markdown_table(rows)
     runs = [r for r in results if r.group]
-    per_run = "" if not runs else (
-        "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
-        + markdown_table([dataclasses.replace(r, policy=f"{r.group} ({Path(r.source).name})") for r in runs]))
-    (out_dir / "results.md").write_text(f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per "
-                                        f"task: {json.dumps(settings)}\n")
-    (out_dir / "results.json").write_text(json.dumps(
-        {"seeds": seed_list, "settings": settings, "deterministic": deterministic,
-         "results": [{**asdict(r), "summary": r.summary()} for r in results],
-         "groups": [{"label": g.label, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
-                    for g in rows if isinstance(g, GroupResult)]}, indent=1, default=float))
+    per_run = (
+        ""
+        if not runs
+        else (
+            "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
+            + markdown_table([dataclasses.replace(r, policy=f"{r.group} ({Path(r.source).name})") for r in runs])
+        )
+    )
+    (out_dir / "results.md").write_text(
+        f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: {json.dumps(settings)}\n"
+    )
+    (out_dir / "results.json").write_text(
+        json.dumps(
+            {
+                "seeds": seed_list,
+                "settings": settings,
+                "deterministic": deterministic,
+                "results": [{**asdict(r), "summary": r.summary()} for r in results],
+                "groups": [
+                    {"label": g.label, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
+                    for g in rows
+                    if isinstance(g, GroupResult)
+                ],
+            },
+            indent=1,
+            default=float,
+        )
+    )
     if plots:
         plot(rows, out_dir / "eval.png")
     journal.complete()
@@ -522,8 +667,10 @@ def publish(table: str, out, files) -> None:
     for f in map(Path, files):
         text = f.read_text() if f.is_file() else ""
         if begin not in text or PUBLISH_END not in text.split(begin, 1)[1]:
-            raise ValueError(f"--publish {str(f)!r}: no {begin!r} ... {PUBLISH_END!r} markers; allowed: a "
-                             "markdown file that has them where the table goes")
+            raise ValueError(
+                f"--publish {str(f)!r}: no {begin!r} ... {PUBLISH_END!r} markers; allowed: a "
+                "markdown file that has them where the table goes"
+            )
         head, rest = text.split(begin, 1)
         texts[f] = f"{head}{begin}\n{table}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
     for f, text in texts.items():
@@ -537,9 +684,18 @@ def main(args) -> int:
         config = DEFAULT_CONFIG
     from training.distributed import ray_options
 
-    results = evaluate(config=config, tasks=args.tasks.split(",") if args.tasks else None, seeds=args.seeds,
-                       checkpoints=args.checkpoint or (), out=args.out, deterministic=args.deterministic,
-                       plots=not args.no_plots, pictures=args.pictures, ray=ray_options(args), fresh=args.fresh)
+    results = evaluate(
+        config=config,
+        tasks=args.tasks.split(",") if args.tasks else None,
+        seeds=args.seeds,
+        checkpoints=args.checkpoint or (),
+        out=args.out,
+        deterministic=args.deterministic,
+        plots=not args.no_plots,
+        pictures=args.pictures,
+        ray=ray_options(args),
+        fresh=args.fresh,
+    )
     if args.publish:
         publish(markdown_table(results), args.out, args.publish)
     print(markdown_table(results))

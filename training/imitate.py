@@ -51,11 +51,19 @@ from tqdm import tqdm
 
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
-from training.common import (ProgressLog, check_integers, make_run_dir, parse_args, save_args, seed_everything,
-                             torch_device, write_checkpoint_meta)
+from training.common import (
+    ProgressLog,
+    check_integers,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    torch_device,
+    write_checkpoint_meta,
+)
 from training.networks import ARCHS, ActorCritic
-from training.ppo import Worlds, masked_log_probs, sample, teacher_cross_entropy
 from training.policies import check_memory, check_sampled
+from training.ppo import Worlds, masked_log_probs, sample, teacher_cross_entropy
 from training.teachers import DEFAULT_TEACHER, Teachers
 
 ALGORITHM = "imitation"
@@ -112,8 +120,10 @@ class Args:
     progress_bar: bool = True
 
     def __post_init__(self):
-        check_integers(self, {"rounds": 0, "cycles_per_round": 1, "samples_per_round": 1, "epochs": 1,
-                              "minibatch_size": 1, "n_envs": 1})
+        check_integers(
+            self,
+            {"rounds": 0, "cycles_per_round": 1, "samples_per_round": 1, "epochs": 1, "minibatch_size": 1, "n_envs": 1},
+        )
         for name in ("beta", "beta_decay"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
@@ -139,8 +149,9 @@ def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[floa
     return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean()), same.float().mean(0).numpy()
 
 
-def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args,
-            bar) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+def collect(
+    worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args, bar
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
     """``cycles`` cycles of every world with each module playing the teacher's action with
     probability ``beta``, else the network's sample. Returns the stored samples' features
     ``(S, D)``, move masks ``(S, 13)``, teacher labels ``(S, F)``, and the episodes that ended."""
@@ -160,8 +171,9 @@ def collect(worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, c
         if beta < 1.0:
             device = next(net.parameters()).device
             with torch.no_grad():
-                log_probs = masked_log_probs(net.logits(torch.from_numpy(features).to(device)),
-                                             torch.from_numpy(move_mask).to(device), nvec)
+                log_probs = masked_log_probs(
+                    net.logits(torch.from_numpy(features).to(device)), torch.from_numpy(move_mask).to(device), nvec
+                )
                 learned = sample(log_probs, args.sampled)[0].cpu()
             play_learned = rng.random(n) >= beta
             actions[play_learned] = learned.numpy()[play_learned]
@@ -184,8 +196,9 @@ def train(args: Args) -> Path:
     """Run round 0 and ``args.rounds`` DAgger rounds; returns the final checkpoint's folder."""
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
-    run_dir = make_run_dir(args.run_dir, f"imitate_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}"
-                                         f"_s{args.seed}", resume=False)
+    run_dir = make_run_dir(
+        args.run_dir, f"imitate_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
+    )
     save_args(args, run_dir)
     worlds = Worlds(args, env_seed=args.seed)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
@@ -198,8 +211,9 @@ def train(args: Args) -> Path:
     data_x, data_m, data_y = [], [], []
     agent_steps = 0
     measured: dict = {}
-    bar = tqdm(total=(args.rounds + 1) * args.cycles_per_round, unit="cycle", desc="imitate",
-               disable=not args.progress_bar)
+    bar = tqdm(
+        total=(args.rounds + 1) * args.cycles_per_round, unit="cycle", desc="imitate", disable=not args.progress_bar
+    )
     for round_index in range(args.rounds + 1):
         started = time.perf_counter()
         beta = round_beta(args, round_index)
@@ -207,8 +221,11 @@ def train(args: Args) -> Path:
         x, m, y, finished = collect(worlds, teachers, net, beta, args.cycles_per_round, rng, args, bar)
         agent_steps += args.cycles_per_round * worlds.n_envs * worlds.n_agents
         x_t, m_t, y_t = torch.from_numpy(x), torch.from_numpy(m), torch.from_numpy(y)
-        held_out = (agreement(net, x_t, m_t, y_t, nvec) if round_index
-                    else (float("nan"), float("nan"), np.full(len(nvec), np.nan)))
+        held_out = (
+            agreement(net, x_t, m_t, y_t, nvec)
+            if round_index
+            else (float("nan"), float("nan"), np.full(len(nvec), np.nan))
+        )
         data_x.append(x_t)
         data_m.append(m_t)
         data_y.append(y_t)
@@ -219,7 +236,7 @@ def train(args: Args) -> Path:
         for _ in range(args.epochs):
             order = torch.randperm(len(all_x))
             for start in range(0, len(order), args.minibatch_size):
-                mb = order[start:start + args.minibatch_size]
+                mb = order[start : start + args.minibatch_size]
                 x_mb, m_mb, y_mb = all_x[mb].to(device), all_m[mb].to(device), all_y[mb].to(device)
                 loss = teacher_cross_entropy(masked_log_probs(net.logits(x_mb), m_mb, nvec), y_mb, m_mb)
                 optimiser.zero_grad(set_to_none=True)
@@ -227,16 +244,26 @@ def train(args: Args) -> Path:
                 optimiser.step()
                 losses.append(loss.item())
         successes = [e["success"] for e in finished]
-        measured = {"round": round_index, "beta": beta, "samples/new": len(x), "samples/total": len(all_x),
-                    "imitation/loss": float(np.mean(losses)), "imitation/agreement_move": held_out[0],
-                    "imitation/agreement_action": held_out[1],
-                    **({f"imitation/agreement_{name}": float(share) for name, share in zip(fields, held_out[2])}
-                       if len(fields) > 1 else {}),
-                    "episode/return": float(np.mean([e["r"] for e in finished])) if finished else None,
-                    "episode/success": float(np.mean(successes)) if successes else None,
-                    "episode/cycles": float(np.mean([e["l"] for e in finished])) if finished else None,
-                    "episode/count": len(finished),
-                    "time/collect_seconds": collected - started, "time/train_seconds": time.perf_counter() - collected}
+        measured = {
+            "round": round_index,
+            "beta": beta,
+            "samples/new": len(x),
+            "samples/total": len(all_x),
+            "imitation/loss": float(np.mean(losses)),
+            "imitation/agreement_move": held_out[0],
+            "imitation/agreement_action": held_out[1],
+            **(
+                {f"imitation/agreement_{name}": float(share) for name, share in zip(fields, held_out[2])}
+                if len(fields) > 1
+                else {}
+            ),
+            "episode/return": float(np.mean([e["r"] for e in finished])) if finished else None,
+            "episode/success": float(np.mean(successes)) if successes else None,
+            "episode/cycles": float(np.mean([e["l"] for e in finished])) if finished else None,
+            "episode/count": len(finished),
+            "time/collect_seconds": collected - started,
+            "time/train_seconds": time.perf_counter() - collected,
+        }
         log.log(agent_steps, measured)
         bar.set_postfix(agreement=f"{held_out[0]:.3f}", success=measured["episode/success"])
     bar.close()
@@ -244,15 +271,33 @@ def train(args: Args) -> Path:
     final.mkdir(parents=True, exist_ok=True)
     torch.save({k: v.cpu() for k, v in net.state_dict().items()}, final / "policy.pt")
     save_args(dataclasses.replace(args, run_dir=str(run_dir)), final)
-    write_checkpoint_meta(final, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=dict(args.env),
-                          encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
-                          extra={"label": "imitation", "control": args.control, "arch": args.arch,
-                                 "hidden": list(args.hidden), "memory": args.memory, "run_dir": str(run_dir),
-                                 "teacher": args.teacher, "sampled": args.sampled,
-                                 "last_round": measured, "args": asdict(args)})
+    write_checkpoint_meta(
+        final,
+        algorithm=ALGORITHM,
+        task=worlds.task_id,
+        env_overrides=dict(args.env),
+        encoder_spec=enc.spec(),
+        nvec=nvec,
+        agent_steps=agent_steps,
+        seed=args.seed,
+        extra={
+            "label": "imitation",
+            "control": args.control,
+            "arch": args.arch,
+            "hidden": list(args.hidden),
+            "memory": args.memory,
+            "run_dir": str(run_dir),
+            "teacher": args.teacher,
+            "sampled": args.sampled,
+            "last_round": measured,
+            "args": asdict(args),
+        },
+    )
     log.close()
-    print(f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s, held-out agreement "
-          f"{measured['imitation/agreement_move']:.3f})")
+    print(
+        f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s, held-out agreement "
+        f"{measured['imitation/agreement_move']:.3f})"
+    )
     return final
 
 

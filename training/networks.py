@@ -45,15 +45,22 @@ class LatticeActor(nn.Module):
         hidden: ``(embedding, head)`` sizes.
     """
 
-    SITE_BLOCKS = ("neighbour_kind", "neighbour_mode", "neighbour_scent_present", "neighbour_scent_value",
-                   "neighbour_scent_delta")
+    SITE_BLOCKS = (
+        "neighbour_kind",
+        "neighbour_mode",
+        "neighbour_scent_present",
+        "neighbour_scent_value",
+        "neighbour_scent_delta",
+    )
     OWN_BLOCKS = ("own_mode", "own_scent_present", "own_scent_value", "contact", "load", "hint")
 
     def __init__(self, encoder: ObservationEncoder, nvec, hidden: tuple[int, ...] = (32, 64)):
         super().__init__()
         if encoder.n_sites != 12:
-            raise ConfigError(f"arch='lattice' needs the 12 face neighbours (obs_radius=1); the observation has "
-                              f"{encoder.n_sites} sites; allowed: obs_radius=1, or arch='mlp'")
+            raise ConfigError(
+                f"arch='lattice' needs the 12 face neighbours (obs_radius=1); the observation has "
+                f"{encoder.n_sites} sites; allowed: obs_radius=1, or arch='mlp'"
+            )
         embed, head = (tuple(hidden) + (32, 64))[:2]
         self.nvec = [int(n) for n in nvec]
         slices = encoder.slices
@@ -113,20 +120,32 @@ class ActorCritic(nn.Module):
     feed-forward network); :meth:`unroll` runs a sequence, resetting the state where episodes end.
     """
 
-    def __init__(self, encoder: ObservationEncoder, nvec, arch: str = "mlp", hidden: tuple[int, ...] = (64, 64),
-                 memory: str = "none", recurrent: int = 0):
+    def __init__(
+        self,
+        encoder: ObservationEncoder,
+        nvec,
+        arch: str = "mlp",
+        hidden: tuple[int, ...] = (64, 64),
+        memory: str = "none",
+        recurrent: int = 0,
+    ):
         super().__init__()
         if arch not in ARCHS:
             raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
         if memory != "none" and arch == "lattice":
-            raise ConfigError(f"memory={memory!r} is not allowed with arch='lattice'; allowed: memory='none', "
-                              "or arch='mlp' or 'shared'")
+            raise ConfigError(
+                f"memory={memory!r} is not allowed with arch='lattice'; allowed: memory='none', "
+                "or arch='mlp' or 'shared'"
+            )
         if isinstance(recurrent, bool) or not isinstance(recurrent, int) or recurrent < 0:
-            raise ConfigError(f"recurrent={recurrent!r} is not allowed; allowed: 0 (feed-forward) or the GRU's "
-                              "state size, an integer >= 1")
+            raise ConfigError(
+                f"recurrent={recurrent!r} is not allowed; allowed: 0 (feed-forward) or the GRU's "
+                "state size, an integer >= 1"
+            )
         if recurrent and arch != "shared":
-            raise ConfigError(f"recurrent={recurrent!r} is not allowed with arch={arch!r}; allowed: recurrent=0, "
-                              "or arch='shared'")
+            raise ConfigError(
+                f"recurrent={recurrent!r} is not allowed with arch={arch!r}; allowed: recurrent=0, or arch='shared'"
+            )
         self.nvec = [int(n) for n in nvec]
         self.recurrent = recurrent
         """The GRU's state size ``R`` (0: feed-forward)."""
@@ -138,8 +157,11 @@ class ActorCritic(nn.Module):
             self.critic = _orthogonal(nn.Linear(hidden[-1], 1), 1.0)
         else:
             self.trunk = nn.Identity()
-            self.actor = (mlp(in_dim, sum(self.nvec), hidden, out_gain=0.01) if arch == "mlp"
-                          else LatticeActor(encoder, self.nvec, hidden))
+            self.actor = (
+                mlp(in_dim, sum(self.nvec), hidden, out_gain=0.01)
+                if arch == "mlp"
+                else LatticeActor(encoder, self.nvec, hidden)
+            )
             self.critic = mlp(in_dim, 1, hidden, out_gain=1.0)
         if recurrent:
             self.gru = nn.GRUCell(hidden[-1], recurrent)

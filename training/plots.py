@@ -29,23 +29,28 @@ def read_progress(run_dir) -> dict[str, np.ndarray]:
 def _smooth(y: np.ndarray, window: int) -> np.ndarray:
     out = np.full_like(y, np.nan)
     for i in range(len(y)):
-        part = y[max(0, i - window + 1):i + 1]
+        part = y[max(0, i - window + 1) : i + 1]
         part = part[np.isfinite(part)]
         if part.size:
             out[i] = part.mean()
     return out
 
 
-def plot_runs(runs: dict[str, str], out, *, window: int = 5, reference: dict | None = None,
-              title: str | None = None) -> None:
+def plot_runs(
+    runs: dict[str, str], out, *, window: int = 5, reference: dict | None = None, title: str | None = None
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
-    panels = [("agent_steps", "episode/return", "return"), ("agent_steps", "episode/success", "success rate"),
-              ("agent_steps", "episode/cycles", "cycles per episode"), ("seconds", "episode/return", "return")]
+    panels = [
+        ("agent_steps", "episode/return", "return"),
+        ("agent_steps", "episode/success", "success rate"),
+        ("agent_steps", "episode/cycles", "cycles per episode"),
+        ("seconds", "episode/return", "return"),
+    ]
     for label, run in runs.items():
         data = read_progress(run)
         for ax, (x, y, _) in zip(axes, panels):

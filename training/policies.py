@@ -17,7 +17,7 @@ Networks (``hidden`` sizes, tanh activations):
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -25,7 +25,6 @@ from baselines.base import Policy
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
-
 
 MEMORIES = ("none", "last_move", "last_action")
 """What a network remembers between cycles, as extra inputs after the observation's features:
@@ -75,8 +74,15 @@ def check_sampled(sampled) -> str:
     return sampled
 
 
-def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, rng: np.random.Generator, *,
-                   deterministic: bool = False, sampled: str = "all") -> np.ndarray:
+def sample_actions(
+    logits: np.ndarray,
+    nvec: np.ndarray,
+    move_mask: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    deterministic: bool = False,
+    sampled: str = "all",
+) -> np.ndarray:
     """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to
     ``move_mask``. ``sampled="move"``: fields after the move take their arg-max (the generator
     is drawn from the same either way)."""
@@ -90,7 +96,7 @@ def sample_actions(logits: np.ndarray, nvec: np.ndarray, move_mask: np.ndarray, 
     out = np.empty((logits.shape[0], len(nvec)), dtype=np.int64)
     start = 0
     for k, n in enumerate(nvec):
-        out[:, k] = logits[:, start:start + n].argmax(axis=1)
+        out[:, k] = logits[:, start : start + n].argmax(axis=1)
         start += n
     return out
 
@@ -117,10 +123,22 @@ class LogitsPolicy(Policy):
 
     name = "learned"
 
-    def __init__(self, layout, modes, *, scent_max: int = 65535, seed: int | None = None,
-                 encoder: ObservationEncoder, logits_fn: Callable[[np.ndarray], np.ndarray], label: str = "learned",
-                 deterministic: bool = False, nvec=None, memory: str = "none", sampled: str = "all",
-                 state_size: int = 0):
+    def __init__(
+        self,
+        layout,
+        modes,
+        *,
+        scent_max: int = 65535,
+        seed: int | None = None,
+        encoder: ObservationEncoder,
+        logits_fn: Callable[[np.ndarray], np.ndarray],
+        label: str = "learned",
+        deterministic: bool = False,
+        nvec=None,
+        memory: str = "none",
+        sampled: str = "all",
+        state_size: int = 0,
+    ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
         self.levels = (self.level_of(layout, self.nvec),)
@@ -171,8 +189,9 @@ class LogitsPolicy(Policy):
             self.states.update(zip(keys, states))
         else:
             logits = self.logits_fn(features)
-        actions = sample_actions(logits, self.nvec, move_mask, self.rng,
-                                 deterministic=self.deterministic, sampled=self.sampled)
+        actions = sample_actions(
+            logits, self.nvec, move_mask, self.rng, deterministic=self.deterministic, sampled=self.sampled
+        )
         if self.memory != "none":
             self.previous.update(zip(keys, actions))
         return actions
@@ -195,22 +214,25 @@ class NumpyMLP:
         self.sizes = (in_dim, *hidden, out_dim)
         self.params: list[tuple[np.ndarray, np.ndarray]] = [
             (np.zeros((a, b), dtype=np.float32), np.zeros(b, dtype=np.float32))
-            for a, b in zip(self.sizes[:-1], self.sizes[1:])]
+            for a, b in zip(self.sizes[:-1], self.sizes[1:])
+        ]
 
     @property
     def n_params(self) -> int:
         return sum(w.size + b.size for w, b in self.params)
 
-    def set_flat(self, genome: np.ndarray) -> "NumpyMLP":
+    def set_flat(self, genome: np.ndarray) -> NumpyMLP:
         genome = np.asarray(genome, dtype=np.float32)
         if genome.shape != (self.n_params,):
-            raise ValueError(f"genome of shape {genome.shape} is not allowed; allowed: ({self.n_params},) "
-                             f"for layer sizes {self.sizes}")
+            raise ValueError(
+                f"genome of shape {genome.shape} is not allowed; allowed: ({self.n_params},) "
+                f"for layer sizes {self.sizes}"
+            )
         start = 0
         for w, b in self.params:
-            w[...] = genome[start:start + w.size].reshape(w.shape)
+            w[...] = genome[start : start + w.size].reshape(w.shape)
             start += w.size
-            b[...] = genome[start:start + b.size]
+            b[...] = genome[start : start + b.size]
             start += b.size
         return self
 

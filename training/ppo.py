@@ -85,10 +85,20 @@ import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES, ObservationBuffers
+from training.common import (
+    ProgressLog,
+    check_integers,
+    checkpoint_folder,
+    episode_stats,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    torch_device,
+    write_checkpoint_meta,
+)
 from training.networks import ARCHS, ActorCritic
 from training.policies import check_memory, with_memory
-from training.common import (ProgressLog, check_integers, checkpoint_folder, episode_stats, make_run_dir, parse_args,
-                             save_args, seed_everything, torch_device, write_checkpoint_meta)
 
 ALGORITHM = "ppo"
 
@@ -160,15 +170,36 @@ class Args:
     """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
 
     def __post_init__(self):
-        check_integers(self, {"total_steps": 0, "n_envs": 1, "n_groups": 1, "n_steps": 1, "minibatch_size": 1,
-                              "n_epochs": 1, "checkpoint_every": 1, "distill_steps": 0, "recurrent": 0})
+        check_integers(
+            self,
+            {
+                "total_steps": 0,
+                "n_envs": 1,
+                "n_groups": 1,
+                "n_steps": 1,
+                "minibatch_size": 1,
+                "n_epochs": 1,
+                "checkpoint_every": 1,
+                "distill_steps": 0,
+                "recurrent": 0,
+            },
+        )
         if self.recurrent and self.arch != "shared":
-            raise ConfigError(f"recurrent={self.recurrent!r} is not allowed with arch={self.arch!r}; allowed: "
-                              "recurrent=0, or arch='shared'")
-        for name, low, high in (("learning_rate", 0.0, None), ("gamma", 0.0, 1.0), ("gae_lambda", 0.0, 1.0),
-                                ("clip_range", 0.0, None), ("ent_coef", 0.0, None), ("vf_coef", 0.0, None),
-                                ("max_grad_norm", 0.0, None), ("distill_coef", 0.0, None),
-                                ("time_limit_minutes", 0.0, None)):
+            raise ConfigError(
+                f"recurrent={self.recurrent!r} is not allowed with arch={self.arch!r}; allowed: "
+                "recurrent=0, or arch='shared'"
+            )
+        for name, low, high in (
+            ("learning_rate", 0.0, None),
+            ("gamma", 0.0, 1.0),
+            ("gae_lambda", 0.0, 1.0),
+            ("clip_range", 0.0, None),
+            ("ent_coef", 0.0, None),
+            ("vf_coef", 0.0, None),
+            ("max_grad_norm", 0.0, None),
+            ("distill_coef", 0.0, None),
+            ("time_limit_minutes", 0.0, None),
+        ):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
                 allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
@@ -186,7 +217,7 @@ def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[i
     """Per field, log-probabilities ``(N, nvec[k])``; illegal moves (``move_mask`` False) get ~zero probability."""
     out, start = [], 0
     for k, n in enumerate(nvec):
-        part = logits[:, start:start + n]
+        part = logits[:, start : start + n]
         if k == 0:
             part = part.masked_fill(~move_mask, -1e8)
         out.append(torch.log_softmax(part, dim=1))
@@ -199,13 +230,18 @@ def sample(log_probs: list[torch.Tensor], sampled: str = "all") -> tuple[torch.T
     ``sampled="move"`` (:data:`training.policies.SAMPLED`): the fields after the move take their
     arg-max; the generator is drawn from the same either way."""
     noisy = [lp - torch.log(-torch.log(torch.rand_like(lp))) for lp in log_probs]
-    actions = torch.stack([(noise if k == 0 or sampled == "all" else lp).argmax(dim=1)
-                           for k, (lp, noise) in enumerate(zip(log_probs, noisy))], 1)
+    actions = torch.stack(
+        [
+            (noise if k == 0 or sampled == "all" else lp).argmax(dim=1)
+            for k, (lp, noise) in enumerate(zip(log_probs, noisy))
+        ],
+        1,
+    )
     return actions, joint_log_prob(log_probs, actions)
 
 
 def joint_log_prob(log_probs: list[torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
-    return sum(lp.gather(1, actions[:, k:k + 1])[:, 0] for k, lp in enumerate(log_probs))
+    return sum(lp.gather(1, actions[:, k : k + 1])[:, 0] for k, lp in enumerate(log_probs))
 
 
 def teacher_cross_entropy(log_probs: list[torch.Tensor], labels: torch.Tensor, move_mask: torch.Tensor) -> torch.Tensor:
@@ -232,21 +268,27 @@ class Worlds:
 
     def __init__(self, args: Args, env_seed: int):
         if args.n_groups < 1 or args.n_envs % args.n_groups:
-            raise ConfigError(f"n_groups={args.n_groups!r} is not allowed with n_envs={args.n_envs}; allowed: a "
-                              "divisor of n_envs")
+            raise ConfigError(
+                f"n_groups={args.n_groups!r} is not allowed with n_envs={args.n_envs}; allowed: a divisor of n_envs"
+            )
         overrides = dict(args.env)
         self.b = args.n_envs // args.n_groups
-        self.groups = [proteo_env.make_batched(args.task, self.b, control=args.control, **overrides)
-                       for _ in range(args.n_groups)]
+        self.groups = [
+            proteo_env.make_batched(args.task, self.b, control=args.control, **overrides) for _ in range(args.n_groups)
+        ]
         first = self.groups[0]
         self.task_id = first.task.task_id()
         self.max_cycles = first.config.max_cycles
         self.n_envs, self.n_agents = args.n_envs, first.n_agents
         self.nvec = first.control_nvec
-        self.encoder = ObservationEncoder(n_sites=first.n_sites, n_channels=first.task.n_channels,
-                                          n_modes=len(first.task.modes), n_message_values=first.task.n_message_values,
-                                          scent_max=first.config.physics.scent_max,
-                                          message_encoding=args.message_encoding)
+        self.encoder = ObservationEncoder(
+            n_sites=first.n_sites,
+            n_channels=first.task.n_channels,
+            n_modes=len(first.task.modes),
+            n_message_values=first.task.n_message_values,
+            scent_max=first.config.physics.scent_max,
+            message_encoding=args.message_encoding,
+        )
         self.memory = getattr(args, "memory", "none")
         self.size = self.encoder.size + check_memory(self.memory, self.nvec)
         """Features per sample: the encoding, then the memory's inputs."""
@@ -268,8 +310,9 @@ class Worlds:
         if len(self.buffers) == 1:
             fields = {name: getattr(self.buffers[0], name) for name in ObservationBuffers.FIELDS}
         else:
-            fields = {name: np.concatenate([getattr(b, name) for b in self.buffers])
-                      for name in ObservationBuffers.FIELDS}
+            fields = {
+                name: np.concatenate([getattr(b, name) for b in self.buffers]) for name in ObservationBuffers.FIELDS
+            }
         features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
@@ -303,12 +346,18 @@ class Worlds:
         self.episode_return[ended] = 0.0
         rows, features = [], []
         for k, group in enumerate(self.groups):
-            restart = ended[k * self.b:(k + 1) * self.b]
+            restart = ended[k * self.b : (k + 1) * self.b]
             self.buffers[k] = group.observe_arrays()
-            for j in np.flatnonzero(truncated[k * self.b:(k + 1) * self.b]):
+            for j in np.flatnonzero(truncated[k * self.b : (k + 1) * self.b]):
                 rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
-                features.append(with_memory(self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)),
-                                            actions[k * self.b + j], self.memory, self.nvec))
+                features.append(
+                    with_memory(
+                        self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)),
+                        actions[k * self.b + j],
+                        self.memory,
+                        self.nvec,
+                    )
+                )
             if restart.any():
                 self.buffers[k] = group.reset_worlds(restart)
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
@@ -383,21 +432,39 @@ def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder, net: 
     meta = read_meta(args.init)
     where = f"init={args.init!r}"
     if meta["algorithm"] not in ("imitation", ALGORITHM):
-        raise CheckpointError(f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
-                              "training/imitate.py or training/ppo.py")
-    wanted = {"task": task_id.split("-v")[0], "control": args.control, "arch": args.arch,
-              "hidden": list(args.hidden), "memory": args.memory, "encoder": encoder.spec()}
-    found = {"task": meta["task"].split("-v")[0], "control": meta.get("control"), "arch": meta.get("arch"),
-             "hidden": meta.get("hidden"), "memory": meta.get("memory", "none"), "encoder": meta.get("encoder")}
+        raise CheckpointError(
+            f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
+            "training/imitate.py or training/ppo.py"
+        )
+    wanted = {
+        "task": task_id.split("-v")[0],
+        "control": args.control,
+        "arch": args.arch,
+        "hidden": list(args.hidden),
+        "memory": args.memory,
+        "encoder": encoder.spec(),
+    }
+    found = {
+        "task": meta["task"].split("-v")[0],
+        "control": meta.get("control"),
+        "arch": meta.get("arch"),
+        "hidden": meta.get("hidden"),
+        "memory": meta.get("memory", "none"),
+        "encoder": meta.get("encoder"),
+    }
     for key, value in wanted.items():
         if found[key] != value:
-            raise CheckpointError(f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
-                                  f"allowed: a checkpoint with {key}={value!r}")
+            raise CheckpointError(
+                f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
+                f"allowed: a checkpoint with {key}={value!r}"
+            )
     recurrent = int(meta.get("recurrent", 0))
     if recurrent not in (0, args.recurrent):
-        raise CheckpointError(f"{where} is recurrent (recurrent={recurrent}); this run has "
-                              f"recurrent={args.recurrent}; allowed: a feed-forward checkpoint or one with "
-                              f"recurrent={args.recurrent}")
+        raise CheckpointError(
+            f"{where} is recurrent (recurrent={recurrent}); this run has "
+            f"recurrent={args.recurrent}; allowed: a feed-forward checkpoint or one with "
+            f"recurrent={args.recurrent}"
+        )
     weights = torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
     if args.recurrent and not recurrent:  # the GRU keeps its fresh weights, its heads zero
         weights = {**net.state_dict(), **weights}
@@ -413,11 +480,11 @@ def minibatches(args: Args, t_steps: int, n: int):
         if not args.recurrent:
             order = torch.randperm(t_steps * n)
             for start in range(0, len(order), args.minibatch_size):
-                yield order[start:start + args.minibatch_size], None
+                yield order[start : start + args.minibatch_size], None
             continue
         order, width = torch.randperm(n), max(1, args.minibatch_size // t_steps)
         for start in range(0, n, width):
-            modules = order[start:start + width]
+            modules = order[start : start + width]
             yield (torch.arange(t_steps)[:, None] * n + modules[None, :]).reshape(-1), modules
 
 
@@ -446,16 +513,20 @@ def train(args: Args) -> Path:
         raise ConfigError(f"arch={args.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
     resume_meta = read_meta(args.resume) if args.resume else None
     if resume_meta is not None and resume_meta["algorithm"] != ALGORITHM:
-        raise CheckpointError(f"resume={args.resume!r} is a {resume_meta['algorithm']!r} checkpoint; "
-                              f"allowed: a checkpoint of training/ppo.py")
+        raise CheckpointError(
+            f"resume={args.resume!r} is a {resume_meta['algorithm']!r} checkpoint; "
+            f"allowed: a checkpoint of training/ppo.py"
+        )
     agent_steps = int(resume_meta["agent_steps"]) if resume_meta else 0
     curriculum = None
     if args.curriculum:
         from training.curriculum import Curriculum
 
-        curriculum = Curriculum(args.curriculum, lambda stage: proteo_env.make_batched(
-            args.task, 1, control=args.control, **{**args.env, **stage}),
-            stage=int((resume_meta or {}).get("curriculum_stage", 0)))
+        curriculum = Curriculum(
+            args.curriculum,
+            lambda stage: proteo_env.make_batched(args.task, 1, control=args.control, **{**args.env, **stage}),
+            stage=int((resume_meta or {}).get("curriculum_stage", 0)),
+        )
 
     def stage_args() -> Args:
         return args if curriculum is None else dataclasses.replace(args, env=curriculum.overrides(args.env))
@@ -466,19 +537,21 @@ def train(args: Args) -> Path:
     if args.init and resume_meta is None:
         net.load_state_dict(initial_weights(args, worlds.task_id, enc, net))
     # written only once the arguments, the worlds and the init checkpoint are known to be good
-    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
-                           f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
-                           resume=resume_meta is not None)
+    run_dir = make_run_dir(
+        args.run_dir or (resume_meta or {}).get("run_dir"),
+        f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
+        resume=resume_meta is not None,
+    )
     save_args(args, run_dir)
     net.to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate, eps=1e-5)
+
     def make_teachers():
         if args.distill_coef <= 0:
             return None
         from training.teachers import Teachers
 
-        return Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed + agent_steps,
-                        n_fields=len(nvec))
+        return Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed + agent_steps, n_fields=len(nvec))
 
     teachers = make_teachers()
     scale = ReturnScale(args.value_norm)
@@ -498,9 +571,15 @@ def train(args: Args) -> Path:
         n = args.n_envs * worlds.n_agents
         features = np.zeros((t_steps, n, worlds.size), dtype=np.float32)
         move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
-        return (n, features, move_mask, torch.from_numpy(features), torch.from_numpy(move_mask),
-                *(torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64) for _ in range(2)),
-                *(torch.zeros((t_steps, n)) for _ in range(3)))
+        return (
+            n,
+            features,
+            move_mask,
+            torch.from_numpy(features),
+            torch.from_numpy(move_mask),
+            *(torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64) for _ in range(2)),
+            *(torch.zeros((t_steps, n)) for _ in range(3)),
+        )
 
     n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
     state = net.initial_state(n)
@@ -511,19 +590,40 @@ def train(args: Args) -> Path:
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
-        torch.save({"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state(),
-                    "return_scale": scale.state_dict()}, folder / "trainer.pt")
+        torch.save(
+            {
+                "optimiser": optimiser.state_dict(),
+                "torch_rng": torch.get_rng_state(),
+                "return_scale": scale.state_dict(),
+            },
+            folder / "trainer.pt",
+        )
         save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
-        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=worlds.task_id, env_overrides=stage_args().env,
-                              encoder_spec=enc.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
-                              extra={"label": f"ppo-{args.arch}", "control": args.control, "arch": args.arch,
-                                     "hidden": list(args.hidden), "memory": args.memory,
-                                     "recurrent": args.recurrent, "run_dir": str(run_dir),
-                                     "args": asdict(args),
-                                     **({"curriculum_stage": curriculum.stage} if curriculum else {})})
+        write_checkpoint_meta(
+            folder,
+            algorithm=ALGORITHM,
+            task=worlds.task_id,
+            env_overrides=stage_args().env,
+            encoder_spec=enc.spec(),
+            nvec=nvec,
+            agent_steps=agent_steps,
+            seed=args.seed,
+            extra={
+                "label": f"ppo-{args.arch}",
+                "control": args.control,
+                "arch": args.arch,
+                "hidden": list(args.hidden),
+                "memory": args.memory,
+                "recurrent": args.recurrent,
+                "run_dir": str(run_dir),
+                "args": asdict(args),
+                **({"curriculum_stage": curriculum.stage} if curriculum else {}),
+            },
+        )
 
-    bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM,
-               disable=not args.progress_bar)
+    bar = tqdm(
+        total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM, disable=not args.progress_bar
+    )
     next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
     finished: list[dict] = []
     while agent_steps < args.total_steps:
@@ -547,8 +647,10 @@ def train(args: Args) -> Path:
                 if distill > 0:
                     teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
-                    final_values = net.value(torch.from_numpy(worlds.final_features).to(device),
-                                             None if state is None else state[worlds.final_rows])
+                    final_values = net.value(
+                        torch.from_numpy(worlds.final_features).to(device),
+                        None if state is None else state[worlds.final_rows],
+                    )
                     bootstrap_t[t, worlds.final_rows] = scale.value(final_values).cpu()
                 if state is not None:  # a world's next episode starts from zero state
                     state = state * torch.from_numpy(~np.repeat(terminal | truncated, a)).to(state)[:, None]
@@ -556,27 +658,48 @@ def train(args: Args) -> Path:
             worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
             last_value = scale.value(net.value(torch.from_numpy(last).to(device), state)).cpu()
         collected = time.perf_counter()
-        terminal, truncated, rewards = (torch.from_numpy(np.repeat(w, a, axis=1))
-                                        for w in (terminal_w, truncated_w, rewards_w))
+        terminal, truncated, rewards = (
+            torch.from_numpy(np.repeat(w, a, axis=1)) for w in (terminal_w, truncated_w, rewards_w)
+        )
         next_values = torch.where(truncated, bootstrap_t, torch.cat([values_t[1:], last_value[None]]))
-        advantages = gae(rewards, values_t, next_values, terminal.float(), (terminal | truncated).float(),
-                         args.gamma, args.gae_lambda)
+        advantages = gae(
+            rewards,
+            values_t,
+            next_values,
+            terminal.float(),
+            (terminal | truncated).float(),
+            args.gamma,
+            args.gae_lambda,
+        )
         returns = advantages + values_t
         scale.update(returns)
         # ---- update
         used = t_steps * n
-        flat = (mask_t.reshape(-1, N_MOVES), actions_t.reshape(-1, len(nvec)), logp_t.reshape(-1),
-                advantages.reshape(-1), returns.reshape(-1), labels_t.reshape(-1, len(nvec)))
-        stats = {"loss/policy": [], "loss/value": [], "loss/entropy": [], "loss/approx_kl": [], "loss/clip_fraction": [],
-                 "loss/distill": []}
+        flat = (
+            mask_t.reshape(-1, N_MOVES),
+            actions_t.reshape(-1, len(nvec)),
+            logp_t.reshape(-1),
+            advantages.reshape(-1),
+            returns.reshape(-1),
+            labels_t.reshape(-1, len(nvec)),
+        )
+        stats = {
+            "loss/policy": [],
+            "loss/value": [],
+            "loss/entropy": [],
+            "loss/approx_kl": [],
+            "loss/clip_fraction": [],
+            "loss/distill": [],
+        }
         for mb, modules in minibatches(args, t_steps, n):
             m, act, old_logp, adv, ret, labels = (v[mb].to(device) for v in flat)
             adv = (adv - adv.mean()) / (adv.std() + 1e-8)
             if modules is None:
                 logits, values, _ = net(obs_t.reshape(-1, worlds.size)[mb].to(device))
             else:  # whole sequences of these modules, from their state at the rollout's start
-                logits, values = net.unroll(obs_t[:, modules].to(device), first_state[modules],
-                                            (terminal | truncated)[:, modules].to(device))
+                logits, values = net.unroll(
+                    obs_t[:, modules].to(device), first_state[modules], (terminal | truncated)[:, modules].to(device)
+                )
                 logits, values = logits.reshape(len(mb), -1), values.reshape(-1)
             log_probs = masked_log_probs(logits, m, nvec)
             ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
@@ -608,14 +731,21 @@ def train(args: Args) -> Path:
         env_time, enc_time = worlds.env_seconds - env_s, worlds.encode_seconds - enc_s
         seconds = updated - started
         v, r = values_t.reshape(-1), returns.reshape(-1)
-        log.log(agent_steps, {**episode_stats(finished), **{k: float(np.mean(x)) for k, x in stats.items() if x},
-                              "loss/distill_weight": distill,
-                              **({"curriculum/stage": curriculum.stage} if curriculum else {}),
-                              "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
-                              "time/env_seconds": env_time, "time/encode_seconds": enc_time,
-                              "time/forward_seconds": collected - started - env_time - enc_time,
-                              "time/update_seconds": updated - collected,
-                              "throughput/agent_steps_per_s": used / seconds})
+        log.log(
+            agent_steps,
+            {
+                **episode_stats(finished),
+                **{k: float(np.mean(x)) for k, x in stats.items() if x},
+                "loss/distill_weight": distill,
+                **({"curriculum/stage": curriculum.stage} if curriculum else {}),
+                "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
+                "time/env_seconds": env_time,
+                "time/encode_seconds": enc_time,
+                "time/forward_seconds": collected - started - env_time - enc_time,
+                "time/update_seconds": updated - collected,
+                "throughput/agent_steps_per_s": used / seconds,
+            },
+        )
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
             worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)
             a, teachers = worlds.n_agents, make_teachers()

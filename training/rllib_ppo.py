@@ -34,8 +34,15 @@ from pathlib import Path
 
 import numpy as np
 
-from training.common import (ProgressLog, checkpoint_folder, make_run_dir, parse_args, save_args, seed_everything,
-                             write_checkpoint_meta)
+from training.common import (
+    ProgressLog,
+    checkpoint_folder,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    write_checkpoint_meta,
+)
 
 SHARED = "shared"
 """The one policy (RLModule id) every module maps to."""
@@ -95,9 +102,12 @@ def _rllib_env_class():
             self.encoder = ObservationEncoder.for_env(self.env)
             self.possible_agents = list(self.env.possible_agents)
             self.agents = list(self.possible_agents)
-            space = gym.spaces.Dict({
-                "observations": gym.spaces.Box(-1.0, 1.0, (self.encoder.size,), np.float32),
-                "action_mask": gym.spaces.Box(0.0, 1.0, (N_MOVES,), np.float32)})
+            space = gym.spaces.Dict(
+                {
+                    "observations": gym.spaces.Box(-1.0, 1.0, (self.encoder.size,), np.float32),
+                    "action_mask": gym.spaces.Box(0.0, 1.0, (N_MOVES,), np.float32),
+                }
+            )
             self.observation_spaces = {a: space for a in self.possible_agents}
             self.action_spaces = {a: gym.spaces.Discrete(N_MOVES) for a in self.possible_agents}
 
@@ -105,9 +115,10 @@ def _rllib_env_class():
             if not observations:
                 return {}
             features = self.encoder.encode_observations(observations)
-            return {a: {"observations": features[i],
-                        "action_mask": np.asarray(o["action_mask"], dtype=np.float32)}
-                    for i, (a, o) in enumerate(observations.items())}
+            return {
+                a: {"observations": features[i], "action_mask": np.asarray(o["action_mask"], dtype=np.float32)}
+                for i, (a, o) in enumerate(observations.items())
+            }
 
         def reset(self, *, seed=None, options=None):
             observations, infos = self.env.reset(seed=seed, options=options)
@@ -115,14 +126,18 @@ def _rllib_env_class():
             return self._encode(observations), {a: {} for a in observations}
 
         def step(self, action_dict):
-            observations, rewards, terminated, truncated, _ = self.env.step(
-                {a: int(m) for a, m in action_dict.items()})
+            observations, rewards, terminated, truncated, _ = self.env.step({a: int(m) for a, m in action_dict.items()})
             done = not self.env.agents
             self.agents = list(self.env.agents)
             terminated = {**{a: bool(v) for a, v in terminated.items()}, "__all__": done and any(terminated.values())}
             truncated = {**{a: bool(v) for a, v in truncated.items()}, "__all__": done and not terminated["__all__"]}
-            return (self._encode(observations), {a: float(r) for a, r in rewards.items()}, terminated, truncated,
-                    {a: {} for a in observations})
+            return (
+                self._encode(observations),
+                {a: float(r) for a, r in rewards.items()},
+                terminated,
+                truncated,
+                {a: {} for a in observations},
+            )
 
     return ProteoMultiAgentEnv
 
@@ -166,19 +181,34 @@ def build_config(args: Args):
     from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-    return (PPOConfig()
-            .environment(_rllib_env_class(), env_config={"task": args.task, "env": dict(args.env)})
-            .env_runners(num_env_runners=args.env_runners, num_envs_per_env_runner=1, num_cpus_per_env_runner=1)
-            .multi_agent(policies={SHARED}, policy_mapping_fn=lambda agent_id, *a, **k: SHARED)
-            .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs={SHARED: RLModuleSpec(
-                module_class=_masked_module_class(), model_config={"hidden": list(args.hidden)})}))
-            .training(train_batch_size_per_learner=args.train_batch_size, minibatch_size=args.minibatch_size,
-                      num_epochs=args.epochs, lr=args.lr, gamma=args.gamma)
-            .debugging(seed=args.seed))
+    return (
+        PPOConfig()
+        .environment(_rllib_env_class(), env_config={"task": args.task, "env": dict(args.env)})
+        .env_runners(num_env_runners=args.env_runners, num_envs_per_env_runner=1, num_cpus_per_env_runner=1)
+        .multi_agent(policies={SHARED}, policy_mapping_fn=lambda agent_id, *a, **k: SHARED)
+        .rl_module(
+            rl_module_spec=MultiRLModuleSpec(
+                rl_module_specs={
+                    SHARED: RLModuleSpec(
+                        module_class=_masked_module_class(), model_config={"hidden": list(args.hidden)}
+                    )
+                }
+            )
+        )
+        .training(
+            train_batch_size_per_learner=args.train_batch_size,
+            minibatch_size=args.minibatch_size,
+            num_epochs=args.epochs,
+            lr=args.lr,
+            gamma=args.gamma,
+        )
+        .debugging(seed=args.seed)
+    )
 
 
-def save_checkpoint(algo, args: Args, folder: Path, *, run_dir: Path, agent_steps: int, iteration: int,
-                    rllib: bool = False) -> Path:
+def save_checkpoint(
+    algo, args: Args, folder: Path, *, run_dir: Path, agent_steps: int, iteration: int, rllib: bool = False
+) -> Path:
     """Write the proteo checkpoint (``proteo.json``, ``policy.pt``) into ``folder``; with ``rllib``
     also RLlib's own checkpoint into ``folder/rllib``."""
     import torch
@@ -190,11 +220,24 @@ def save_checkpoint(algo, args: Args, folder: Path, *, run_dir: Path, agent_step
     module = algo.get_module(SHARED)
     folder.mkdir(parents=True, exist_ok=True)
     torch.save({k: v.detach().cpu() for k, v in module.pi.state_dict().items()}, folder / "policy.pt")
-    write_checkpoint_meta(folder, algorithm="rllib-ppo", task=env.task.task_id(), env_overrides=dict(args.env),
-                          encoder_spec=ObservationEncoder.for_env(env).spec(), nvec=env.control_nvec,
-                          agent_steps=agent_steps, seed=args.seed,
-                          extra={"label": "rllib-ppo", "control": "move", "hidden": list(args.hidden),
-                                 "run_dir": str(run_dir), "iteration": iteration, "args": asdict(args)})
+    write_checkpoint_meta(
+        folder,
+        algorithm="rllib-ppo",
+        task=env.task.task_id(),
+        env_overrides=dict(args.env),
+        encoder_spec=ObservationEncoder.for_env(env).spec(),
+        nvec=env.control_nvec,
+        agent_steps=agent_steps,
+        seed=args.seed,
+        extra={
+            "label": "rllib-ppo",
+            "control": "move",
+            "hidden": list(args.hidden),
+            "run_dir": str(run_dir),
+            "iteration": iteration,
+            "args": asdict(args),
+        },
+    )
     env.close()
     if rllib:
         algo.save_to_path(str((folder / "rllib").resolve()))
@@ -209,8 +252,10 @@ def main(argv=None) -> Path:
     if args.control != "move":
         raise ConfigError(f"control={args.control!r} is not allowed; allowed: move")
     if args.env_runners < 0 or args.iterations < 1:
-        raise ConfigError(f"env_runners={args.env_runners!r}, iterations={args.iterations!r} are not allowed; "
-                          "allowed: env_runners >= 0, iterations >= 1")
+        raise ConfigError(
+            f"env_runners={args.env_runners!r}, iterations={args.iterations!r} are not allowed; "
+            "allowed: env_runners >= 0, iterations >= 1"
+        )
     seed_everything(args.seed, threads=1)
     run_dir = make_run_dir(args.run_dir, f"rllib_ppo_{args.task.split('-v')[0]}_s{args.seed}", resume=False)
     save_args(args, run_dir)
@@ -230,18 +275,31 @@ def main(argv=None) -> Path:
             runners = result.get("env_runners", {})
             agent_steps = int(sum(runners.get("num_agent_steps_sampled_lifetime", {}).values()))
             learner = result.get("learners", {}).get(SHARED, {})
-            log.log(agent_steps, {  # RLlib's episode return sums every agent's; each module gets the team reward
-                "episode/return": _finite(runners.get("episode_return_mean", np.nan) / n_agents),
-                "episode/cycles": _finite(runners.get("episode_len_mean")),
-                "loss/policy": _finite(learner.get("policy_loss")), "loss/value": _finite(learner.get("vf_loss")),
-                "loss/entropy": _finite(learner.get("entropy")), "rllib/iteration": float(iteration)})
+            log.log(
+                agent_steps,
+                {  # RLlib's episode return sums every agent's; each module gets the team reward
+                    "episode/return": _finite(runners.get("episode_return_mean", np.nan) / n_agents),
+                    "episode/cycles": _finite(runners.get("episode_len_mean")),
+                    "loss/policy": _finite(learner.get("policy_loss")),
+                    "loss/value": _finite(learner.get("vf_loss")),
+                    "loss/entropy": _finite(learner.get("entropy")),
+                    "rllib/iteration": float(iteration),
+                },
+            )
             if iteration % args.checkpoint_every == 0:
-                save_checkpoint(algo, args, checkpoint_folder(run_dir, agent_steps), run_dir=run_dir,
-                                agent_steps=agent_steps, iteration=iteration)
+                save_checkpoint(
+                    algo,
+                    args,
+                    checkpoint_folder(run_dir, agent_steps),
+                    run_dir=run_dir,
+                    agent_steps=agent_steps,
+                    iteration=iteration,
+                )
             if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
                 break
-        final = save_checkpoint(algo, args, run_dir / "final", run_dir=run_dir, agent_steps=agent_steps,
-                                iteration=iteration, rllib=True)
+        final = save_checkpoint(
+            algo, args, run_dir / "final", run_dir=run_dir, agent_steps=agent_steps, iteration=iteration, rllib=True
+        )
     finally:
         algo.stop()
         log.close()

@@ -23,8 +23,17 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
-                             seed_everything, torch_device, write_checkpoint_meta)
+from training.common import (
+    ProgressLog,
+    checkpoint_folder,
+    episode_stats,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    torch_device,
+    write_checkpoint_meta,
+)
 
 ALGORITHM = "sb3-maskable-ppo"
 
@@ -77,36 +86,63 @@ def main(argv=None) -> Path:
     from training.checkpoints import read_meta
 
     resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
-                           f"sb3_ppo_{args.task.split('-v')[0]}_s{args.seed}", resume=resume_meta is not None)
+    run_dir = make_run_dir(
+        args.run_dir or (resume_meta or {}).get("run_dir"),
+        f"sb3_ppo_{args.task.split('-v')[0]}_s{args.seed}",
+        resume=resume_meta is not None,
+    )
     save_args(args, run_dir)
     venv = ProteoVecEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
     tb_dir = str(run_dir / "tb") if args.tensorboard else None
     if resume_meta is not None:
-        model = MaskablePPO.load(Path(resume_meta["dir"]) / "model.zip", env=venv, device=device,
-                                 tensorboard_log=tb_dir)
+        model = MaskablePPO.load(
+            Path(resume_meta["dir"]) / "model.zip", env=venv, device=device, tensorboard_log=tb_dir
+        )
     else:
-        model = MaskablePPO("MlpPolicy", venv, n_steps=args.n_steps, batch_size=args.batch_size,
-                            n_epochs=args.n_epochs, learning_rate=args.learning_rate, gamma=args.gamma,
-                            gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
-                            vf_coef=args.vf_coef, policy_kwargs={"net_arch": list(args.hidden)},
-                            tensorboard_log=tb_dir, seed=args.seed, device=device, verbose=0)
+        model = MaskablePPO(
+            "MlpPolicy",
+            venv,
+            n_steps=args.n_steps,
+            batch_size=args.batch_size,
+            n_epochs=args.n_epochs,
+            learning_rate=args.learning_rate,
+            gamma=args.gamma,
+            gae_lambda=args.gae_lambda,
+            clip_range=args.clip_range,
+            ent_coef=args.ent_coef,
+            vf_coef=args.vf_coef,
+            policy_kwargs={"net_arch": list(args.hidden)},
+            tensorboard_log=tb_dir,
+            seed=args.seed,
+            device=device,
+            verbose=0,
+        )
     log = ProgressLog(run_dir, tensorboard=False)  # SB3 writes TensorBoard itself
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         model.save(folder / "model.zip")
-        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=venv.task_id, env_overrides=dict(args.env),
-                              encoder_spec=venv.encoder.spec(), nvec=venv.nvec, agent_steps=model.num_timesteps,
-                              seed=args.seed, extra={"label": "sb3-ppo", "hidden": list(args.hidden),
-                                                     "run_dir": str(run_dir), "args": asdict(args)})
+        write_checkpoint_meta(
+            folder,
+            algorithm=ALGORITHM,
+            task=venv.task_id,
+            env_overrides=dict(args.env),
+            encoder_spec=venv.encoder.spec(),
+            nvec=venv.nvec,
+            agent_steps=model.num_timesteps,
+            seed=args.seed,
+            extra={"label": "sb3-ppo", "hidden": list(args.hidden), "run_dir": str(run_dir), "args": asdict(args)},
+        )
 
     class Progress(BaseCallback):
         """Progress bar, episode statistics, the time split, and periodic checkpoints."""
 
         def _on_training_start(self):
             self.bar = tqdm(total=args.total_steps, initial=self.num_timesteps, unit="agent-step", desc=ALGORITHM)
-            self.episodes, self.next_checkpoint = [], (self.num_timesteps // args.checkpoint_every + 1) * args.checkpoint_every
+            self.episodes, self.next_checkpoint = (
+                [],
+                (self.num_timesteps // args.checkpoint_every + 1) * args.checkpoint_every,
+            )
             self.rollout_started = self.rollout_ended = time.perf_counter()
             self.env_seconds = venv.step_seconds
 
@@ -131,11 +167,14 @@ def main(argv=None) -> Path:
             collect = self.rollout_ended - self.rollout_started
             env_s = venv.step_seconds - self.env_seconds
             steps = args.n_steps * venv.num_envs
-            values = {**episode_stats(self.episodes),
-                      "time/env_seconds": env_s, "time/policy_seconds": collect - env_s,
-                      "time/update_seconds": getattr(self, "update_seconds", None),
-                      "throughput/collect_agent_steps_per_s": steps / collect,
-                      "throughput/env_agent_steps_per_s": steps / env_s if env_s else None}
+            values = {
+                **episode_stats(self.episodes),
+                "time/env_seconds": env_s,
+                "time/policy_seconds": collect - env_s,
+                "time/update_seconds": getattr(self, "update_seconds", None),
+                "throughput/collect_agent_steps_per_s": steps / collect,
+                "throughput/env_agent_steps_per_s": steps / env_s if env_s else None,
+            }
             for k, v in values.items():
                 if v is not None:
                     self.logger.record(k, v)
@@ -145,8 +184,12 @@ def main(argv=None) -> Path:
         def _on_training_end(self):
             self.bar.close()
 
-    model.learn(total_timesteps=max(args.total_steps - model.num_timesteps, 1), callback=Progress(),
-                reset_num_timesteps=resume_meta is None, tb_log_name="sb3_ppo")
+    model.learn(
+        total_timesteps=max(args.total_steps - model.num_timesteps, 1),
+        callback=Progress(),
+        reset_num_timesteps=resume_meta is None,
+        tb_log_name="sb3_ppo",
+    )
     save(run_dir / "final")
     log.close()
     venv.close()

@@ -46,9 +46,12 @@ from pathlib import Path
 
 from training.common import parse_args
 
-
-RECIPES = {"ppo": ("training.ppo", "ppo"), "imitation": ("training.imitate", "bc"),
-           "kickstart": ("training.ppo", "kickstart"), "curriculum": ("training.ppo", "curriculum")}
+RECIPES = {
+    "ppo": ("training.ppo", "ppo"),
+    "imitation": ("training.imitate", "bc"),
+    "kickstart": ("training.ppo", "kickstart"),
+    "curriculum": ("training.ppo", "curriculum"),
+}
 """Recipe name: (script module, prefix of its configs in configs/train)."""
 
 
@@ -81,15 +84,28 @@ def _config(recipe: str, task: str, level: str) -> Path:
     prefix = RECIPES[recipe][1]
     path = Path("configs/train") / f"{prefix}_{task}_{level.replace('+', '-')}.yaml"
     if not path.is_file():
-        raise ValueError(f"no training config {str(path)!r} for recipe {recipe!r} on task {task!r} at level "
-                         f"{level!r}; allowed: {', '.join(sorted(p.name for p in Path('configs/train').glob(prefix + '_*.yaml')))}")
+        raise ValueError(
+            f"no training config {str(path)!r} for recipe {recipe!r} on task {task!r} at level "
+            f"{level!r}; allowed: {', '.join(sorted(p.name for p in Path('configs/train').glob(prefix + '_*.yaml')))}"
+        )
     return path
 
 
 def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone: Path) -> list[str]:
     module = RECIPES[recipe][0]
-    cmd = [sys.executable, "-m", module, "--config", str(_config(recipe, task, args.level)), "--seed", str(seed),
-           "--run-dir", str(run_dir), "--progress-bar", "false"]
+    cmd = [
+        sys.executable,
+        "-m",
+        module,
+        "--config",
+        str(_config(recipe, task, args.level)),
+        "--seed",
+        str(seed),
+        "--run-dir",
+        str(run_dir),
+        "--progress-bar",
+        "false",
+    ]
     if module == "training.ppo":
         cmd += ["--time-limit-minutes", str(args.minutes)]
         cmd += ["--total-steps", str(args.total_steps)] if args.total_steps else []
@@ -132,8 +148,9 @@ def main(argv=None) -> int:
             running.remove(job)
             recipe, task, seed, run_dir, started, proc = job
             if proc.returncode != 0:
-                raise RuntimeError(f"training {recipe} {task} seed {seed} failed (exit {proc.returncode}); "
-                                   f"see {run_dir}")
+                raise RuntimeError(
+                    f"training {recipe} {task} seed {seed} failed (exit {proc.returncode}); see {run_dir}"
+                )
             seconds = time.perf_counter() - started
             print(f"finished {recipe} {task} seed {seed} in {seconds / 60:.1f} min", flush=True)
             keep = kept(recipe, task, seed)
@@ -142,24 +159,36 @@ def main(argv=None) -> int:
             shutil.copytree(run_dir / "final", keep, ignore=shutil.ignore_patterns("trainer.pt"))  # resume: run_dir
             shutil.copy(run_dir / "progress.csv", docs / "progress" / f"{recipe}_{task}_{level}_s{seed}.csv")
             meta = json.loads((keep / "proteo.json").read_text())
-            summary.append({"recipe": recipe, "task": task, "seed": seed, "level": args.level,
-                            "agent_steps": meta.get("agent_steps"), "wall_clock_minutes": round(seconds / 60.0, 2),
-                            "checkpoint": str(keep)})
+            summary.append(
+                {
+                    "recipe": recipe,
+                    "task": task,
+                    "seed": seed,
+                    "level": args.level,
+                    "agent_steps": meta.get("agent_steps"),
+                    "wall_clock_minutes": round(seconds / 60.0, 2),
+                    "checkpoint": str(keep),
+                }
+            )
 
     record = docs / f"study_{level}.json"
     before = json.loads(record.read_text()) if record.is_file() else []
     trained = {(run["recipe"], run["task"], run["seed"]) for run in summary}
     runs = [run for run in before if (run.get("recipe", "ppo"), run["task"], run["seed"]) not in trained] + summary
-    record.write_text(json.dumps(sorted(runs, key=lambda run: (run.get("recipe", "ppo"), run["task"], run["seed"])),
-                                 indent=1))
+    record.write_text(
+        json.dumps(sorted(runs, key=lambda run: (run.get("recipe", "ppo"), run["task"], run["seed"])), indent=1)
+    )
 
     from training.plots import plot_runs
 
     for recipe in args.recipes:
         for task in args.tasks:
             runs = {f"seed {s}": str(docs / "progress" / f"{recipe}_{task}_{level}_s{s}.csv") for s in args.seeds}
-            plot_runs(runs, docs / f"curves_{recipe}_{task}_{level}.png",
-                      title=f"{recipe} ({RECIPES[recipe][0].replace('.', '/')}.py) on {task} at {args.level}")
+            plot_runs(
+                runs,
+                docs / f"curves_{recipe}_{task}_{level}.png",
+                title=f"{recipe} ({RECIPES[recipe][0].replace('.', '/')}.py) on {task} at {args.level}",
+            )
     print(json.dumps(summary, indent=1))
     return 0
 

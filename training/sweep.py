@@ -86,30 +86,38 @@ def load_sweep(path) -> SweepConfig:
     p = Path(path)
     data = load_yaml(p, "sweep config", "a YAML file such as configs/sweeps/chain_cycles.yaml")
     if not isinstance(data, dict):
-        raise ConfigError(f"sweep config {str(p)!r}: a mapping of keys is required; allowed keys: "
-                          "task, grid, env, policies, seeds, first_seed, search, samples, sample_seed, plot")
+        raise ConfigError(
+            f"sweep config {str(p)!r}: a mapping of keys is required; allowed keys: "
+            "task, grid, env, policies, seeds, first_seed, search, samples, sample_seed, plot"
+        )
     where = f"sweep config {str(p)!r}: "
     for key in ("task", "grid"):
         if key not in data:
-            raise ConfigError(f"{where}{key!r} is missing; allowed: a {'task id' if key == 'task' else 'mapping of setting: [values]'}")
+            raise ConfigError(
+                f"{where}{key!r} is missing; allowed: a {'task id' if key == 'task' else 'mapping of setting: [values]'}"
+            )
     cfg = build(SweepConfig, data, where=where)
     task_class(cfg.task)  # an unknown task lists the registered ones
     if not isinstance(cfg.grid, dict) or not cfg.grid:
-        raise ConfigError(f"{where}grid={cfg.grid!r} is empty; allowed: a mapping of setting: [value, ...] with at "
-                          "least one setting")
+        raise ConfigError(
+            f"{where}grid={cfg.grid!r} is empty; allowed: a mapping of setting: [value, ...] with at least one setting"
+        )
     for key, values in cfg.grid.items():
         if not isinstance(values, list) or not values:
             raise ConfigError(f"{where}grid.{key}={values!r} is not allowed; allowed: a non-empty list of values")
         clash = set(overrides_of({key: 0})) & set(cfg.env)
         if clash:
-            raise ConfigError(f"{where}grid.{key} and env.{sorted(clash)[0]} both set {sorted(clash)[0]!r}; allowed: "
-                              "each setting in one of them")
+            raise ConfigError(
+                f"{where}grid.{key} and env.{sorted(clash)[0]} both set {sorted(clash)[0]!r}; allowed: "
+                "each setting in one of them"
+            )
     if cfg.search not in ("grid", "random"):
         raise ConfigError(f"{where}search={cfg.search!r} is not allowed; allowed: grid, random")
     size = int(np.prod([len(v) for v in cfg.grid.values()]))
     if cfg.search == "random" and not 1 <= cfg.samples <= size:
-        raise ConfigError(f"{where}samples={cfg.samples!r} is not allowed with search: random; allowed: 1..{size} "
-                          "(the grid's points)")
+        raise ConfigError(
+            f"{where}samples={cfg.samples!r} is not allowed with search: random; allowed: 1..{size} (the grid's points)"
+        )
     if cfg.seeds < 1:
         raise ConfigError(f"{where}seeds={cfg.seeds!r} is not allowed; allowed: an integer >= 1")
     if not cfg.policies:
@@ -118,15 +126,17 @@ def load_sweep(path) -> SweepConfig:
 
     for name in cfg.policies:
         if name != "default" and name not in POLICIES:
-            raise ConfigError(f"{where}policies: {name!r} is not allowed; allowed: default, "
-                              f"{', '.join(sorted(POLICIES))}")
+            raise ConfigError(
+                f"{where}policies: {name!r} is not allowed; allowed: default, {', '.join(sorted(POLICIES))}"
+            )
     bad = sorted(set(cfg.plot) - {"x", "y", "hue"})
     if bad:
         raise ConfigError(f"{where}plot.{bad[0]} is not allowed; allowed: x, y, hue")
     for axis in ("x", "hue"):
         if axis in cfg.plot and cfg.plot[axis] not in (*cfg.grid, "policy"):
-            raise ConfigError(f"{where}plot.{axis}={cfg.plot[axis]!r} is not allowed; allowed: "
-                              f"{', '.join([*cfg.grid, 'policy'])}")
+            raise ConfigError(
+                f"{where}plot.{axis}={cfg.plot[axis]!r} is not allowed; allowed: {', '.join([*cfg.grid, 'policy'])}"
+            )
     return cfg
 
 
@@ -153,23 +163,55 @@ def sweep(config, *, out, ray: dict | None = None, progress: bool = True, fresh:
         policies = [env.task.default_policy if name == "default" else name for name in cfg.policies]
         env.close()
         for policy in dict.fromkeys(policies):
-            jobs += [(point, policy, EpisodeJob(task_id=cfg.task, overrides=json.dumps(overrides, sort_keys=True),
-                                                level="full", policy=policy, checkpoint=False, seed=s,
-                                                policy_seed=seeds[0])) for s in seeds]
+            jobs += [
+                (
+                    point,
+                    policy,
+                    EpisodeJob(
+                        task_id=cfg.task,
+                        overrides=json.dumps(overrides, sort_keys=True),
+                        level="full",
+                        policy=policy,
+                        checkpoint=False,
+                        seed=s,
+                        policy_seed=seeds[0],
+                    ),
+                )
+                for s in seeds
+            ]
     out = Path(out)
     fingerprint = {"config": json.loads(json.dumps(cfg.__dict__, default=list)), "jobs": len(jobs)}
     journal = Journal(out / "episodes.jsonl", fingerprint, fresh=fresh, what="sweep")
-    episodes = run_jobs(run_episode_job, [j for _, _, j in jobs], [j.key for _, _, j in jobs], ray=ray,
-                        journal=journal, desc="episodes", progress=progress)
+    episodes = run_jobs(
+        run_episode_job,
+        [j for _, _, j in jobs],
+        [j.key for _, _, j in jobs],
+        ray=ray,
+        journal=journal,
+        desc="episodes",
+        progress=progress,
+    )
 
     rows = []
     for (point, policy, job), e in zip(jobs, episodes):
-        rows.append({**point, "policy": policy, "seed": job.seed, "return": e["return"], "success": int(e["success"]),
-                     "cycles": e["cycles"], "cycles_to_success": e["cycles"] if e["success"] else "", **e["metrics"]})
+        rows.append(
+            {
+                **point,
+                "policy": policy,
+                "seed": job.seed,
+                "return": e["return"],
+                "success": int(e["success"]),
+                "cycles": e["cycles"],
+                "cycles_to_success": e["cycles"] if e["success"] else "",
+                **e["metrics"],
+            }
+        )
     y = cfg.plot.get("y", "cycles_to_success")
     if y not in rows[0]:
-        raise ConfigError(f"sweep config {str(config)!r}: plot.y={y!r} is not allowed; allowed: "
-                          f"{', '.join(k for k in rows[0] if k not in (*cfg.grid, 'policy', 'seed'))}")
+        raise ConfigError(
+            f"sweep config {str(config)!r}: plot.y={y!r} is not allowed; allowed: "
+            f"{', '.join(k for k in rows[0] if k not in (*cfg.grid, 'policy', 'seed'))}"
+        )
     summary = []
     for point in points:
         for policy in dict.fromkeys(r["policy"] for r in rows):
@@ -179,9 +221,20 @@ def sweep(config, *, out, ray: dict | None = None, progress: bool = True, fresh:
             ret, ret_ci = mean_ci([r["return"] for r in mine])
             known = [float(r[y]) for r in mine if r[y] != "" and float(r[y]) >= 0]
             y_mean, y_ci = mean_ci(known)
-            summary.append({**point, "policy": policy, "episodes": len(mine),
-                            "success_rate": float(np.mean([r["success"] for r in mine])), "return_mean": ret,
-                            "return_ci": ret_ci, "y": y, "y_mean": y_mean, "y_ci": y_ci, "y_n": len(known)})
+            summary.append(
+                {
+                    **point,
+                    "policy": policy,
+                    "episodes": len(mine),
+                    "success_rate": float(np.mean([r["success"] for r in mine])),
+                    "return_mean": ret,
+                    "return_ci": ret_ci,
+                    "y": y,
+                    "y_mean": y_mean,
+                    "y_ci": y_ci,
+                    "y_n": len(known),
+                }
+            )
     out.mkdir(parents=True, exist_ok=True)
     _write_csv(out / "episodes.csv", rows)
     _write_csv(out / "summary.csv", summary)
@@ -222,8 +275,9 @@ def plot_sweep(summary: list[dict], cfg: SweepConfig, path: Path, *, title: str)
         ax.errorbar(xs, ys, yerr=err, marker="o", capsize=3, label=label)
         for xv, yv, r in zip(xs, ys, rs):
             if np.isfinite(yv):
-                ax.annotate(f"{r['y_n']}/{r['episodes']}", (xv, yv), textcoords="offset points", xytext=(4, 4),
-                            fontsize=7)
+                ax.annotate(
+                    f"{r['y_n']}/{r['episodes']}", (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=7
+                )
     ax.set_xlabel(x)
     ax.set_ylabel(f"{summary[0]['y']} (mean ± 95 % CI over the episodes that reached it)")
     ax.set_title(title, fontsize=10)

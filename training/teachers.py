@@ -42,10 +42,14 @@ def check_teacher(name: str, task_name: str) -> str:
     if name in allowed and task_name in POLICIES:
         return task_name
     if task_name not in POLICIES:
-        raise ConfigError(f"teacher={name!r}: task {task_name!r} has no hand-coded rules to teach; allowed: a task "
-                          f"with rules ({', '.join(sorted(set(POLICIES) - {'random'}))})")
-    raise ConfigError(f"teacher={name!r} does not fit task {task_name!r}; allowed: "
-                      f"{', '.join(map(repr, allowed))} (the task's hand-coded rules) or a checkpoint of the task")
+        raise ConfigError(
+            f"teacher={name!r}: task {task_name!r} has no hand-coded rules to teach; allowed: a task "
+            f"with rules ({', '.join(sorted(set(POLICIES) - {'random'}))})"
+        )
+    raise ConfigError(
+        f"teacher={name!r} does not fit task {task_name!r}; allowed: "
+        f"{', '.join(map(repr, allowed))} (the task's hand-coded rules) or a checkpoint of the task"
+    )
 
 
 class Teachers:
@@ -82,8 +86,9 @@ class Teachers:
         if self.checkpoint is not None:  # the learned teacher's memory is kept by row
             self.checkpoint.forget(range(b * self.n_agents, (b + 1) * self.n_agents))
             return
-        self.policies[b].reset(seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])])
-                                        .generate_state(1, np.uint64)[0] >> 1))
+        self.policies[b].reset(
+            seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])]).generate_state(1, np.uint64)[0] >> 1)
+        )
         self.episodes[b] += 1
 
     def labels(self, groups) -> np.ndarray:
@@ -96,12 +101,12 @@ class Teachers:
             encoder = self.checkpoint.encoder
             features = np.concatenate([encoder.encode_buffers(buffers) for buffers in groups])
             mask = np.concatenate([buffers.action_mask for buffers in groups]).astype(bool)
-            return self.checkpoint.act_arrays(features, mask)[:, :self.n_fields]
+            return self.checkpoint.act_arrays(features, mask)[:, : self.n_fields]
         rows = [buffers.rows(b * a, (b + 1) * a) for buffers in groups for b in range(len(buffers.own_mode) // a)]
-        return np.concatenate([p.act_arrays(r)[:, :self.n_fields] for p, r in zip(self.policies, rows, strict=True)])
+        return np.concatenate([p.act_arrays(r)[:, : self.n_fields] for p, r in zip(self.policies, rows, strict=True)])
 
     def restart(self, worlds) -> None:
         """New episodes for the teachers of ``worlds`` (indices or ``(n_envs,)`` bool)."""
         worlds = np.asarray(worlds)
-        for b in (np.flatnonzero(worlds) if worlds.dtype == np.bool_ else worlds):
+        for b in np.flatnonzero(worlds) if worlds.dtype == np.bool_ else worlds:
             self._reset(int(b))

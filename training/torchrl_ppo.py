@@ -25,8 +25,16 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from training.common import (ProgressLog, checkpoint_folder, episode_stats, make_run_dir, parse_args, save_args,
-                             seed_everything, write_checkpoint_meta)
+from training.common import (
+    ProgressLog,
+    checkpoint_folder,
+    episode_stats,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    write_checkpoint_meta,
+)
 
 ALGORITHM = "torchrl-ppo"
 
@@ -83,7 +91,7 @@ def make_distribution_class(nvec):
             self.heads = [Categorical(logits=part) for part in torch.split(logits, sizes, dim=-1)]
             super().__init__(batch_shape=logits.shape[:-1], validate_args=False)
 
-        def sample(self, sample_shape=torch.Size()):
+        def sample(self, sample_shape=()):
             return torch.stack([h.sample(sample_shape) for h in self.heads], dim=-1)
 
         def log_prob(self, value):
@@ -125,9 +133,11 @@ def main(argv=None) -> Path:
 
     # ------------------------------------------------------------------ environment
     resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = make_run_dir(args.run_dir or (resume_meta or {}).get("run_dir"),
-                           f"torchrl_{args.variant}_{args.task.split('-v')[0]}_s{args.seed}",
-                           resume=resume_meta is not None)
+    run_dir = make_run_dir(
+        args.run_dir or (resume_meta or {}).get("run_dir"),
+        f"torchrl_{args.variant}_{args.task.split('-v')[0]}_s{args.seed}",
+        resume=resume_meta is not None,
+    )
     save_args(args, run_dir)
     env = ProteoTorchRLEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
     n_agents, obs_size, nvec = env.n_agents, env.encoder.size, env.nvec
@@ -137,17 +147,37 @@ def main(argv=None) -> Path:
     actor = ProbabilisticActor(
         TensorDictModule(actor_net, in_keys=[("agents", "observation")], out_keys=[("agents", "logits")]),
         in_keys={"logits": ("agents", "logits"), "mask": ("agents", "action_mask")},
-        out_keys=[("agents", "action")], distribution_class=make_distribution_class(nvec),
-        return_log_prob=True, log_prob_key=("agents", "sample_log_prob"))
-    critic_net = MultiAgentMLP(n_agent_inputs=obs_size, n_agent_outputs=1, n_agents=n_agents,
-                               centralised=args.variant == "mappo", share_params=True, depth=len(args.hidden),
-                               num_cells=args.hidden[0], activation_class=torch.nn.Tanh)
+        out_keys=[("agents", "action")],
+        distribution_class=make_distribution_class(nvec),
+        return_log_prob=True,
+        log_prob_key=("agents", "sample_log_prob"),
+    )
+    critic_net = MultiAgentMLP(
+        n_agent_inputs=obs_size,
+        n_agent_outputs=1,
+        n_agents=n_agents,
+        centralised=args.variant == "mappo",
+        share_params=True,
+        depth=len(args.hidden),
+        num_cells=args.hidden[0],
+        activation_class=torch.nn.Tanh,
+    )
     critic = TensorDictModule(critic_net, in_keys=[("agents", "observation")], out_keys=[("agents", "state_value")])
-    loss = ClipPPOLoss(actor_network=actor, critic_network=critic, clip_epsilon=args.clip_range,
-                       entropy_coeff=args.ent_coef, normalize_advantage=True)
-    loss.set_keys(reward=("agents", "reward"), action=("agents", "action"), value=("agents", "state_value"),
-                  sample_log_prob=("agents", "sample_log_prob"), done=("agents", "done"),
-                  terminated=("agents", "terminated"))
+    loss = ClipPPOLoss(
+        actor_network=actor,
+        critic_network=critic,
+        clip_epsilon=args.clip_range,
+        entropy_coeff=args.ent_coef,
+        normalize_advantage=True,
+    )
+    loss.set_keys(
+        reward=("agents", "reward"),
+        action=("agents", "action"),
+        value=("agents", "state_value"),
+        sample_log_prob=("agents", "sample_log_prob"),
+        done=("agents", "done"),
+        terminated=("agents", "terminated"),
+    )
     loss.make_value_estimator(ValueEstimators.GAE, gamma=args.gamma, lmbda=args.gae_lambda)
     optimizer = torch.optim.Adam(loss.parameters(), lr=args.learning_rate)
     agent_steps = 0
@@ -161,19 +191,47 @@ def main(argv=None) -> Path:
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         torch.save(actor_net.state_dict(), folder / "policy.pt")
-        torch.save({"actor": actor_net.state_dict(), "critic": critic_net.state_dict(),
-                    "optimizer": optimizer.state_dict(), "agent_steps": agent_steps}, folder / "trainer.pt")
-        write_checkpoint_meta(folder, algorithm=ALGORITHM, task=env.task_id, env_overrides=dict(args.env),
-                              encoder_spec=env.encoder.spec(), nvec=nvec, agent_steps=agent_steps, seed=args.seed,
-                              extra={"label": f"torchrl-{args.variant}", "hidden": list(args.hidden),
-                                     "run_dir": str(run_dir), "args": asdict(args)})
+        torch.save(
+            {
+                "actor": actor_net.state_dict(),
+                "critic": critic_net.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "agent_steps": agent_steps,
+            },
+            folder / "trainer.pt",
+        )
+        write_checkpoint_meta(
+            folder,
+            algorithm=ALGORITHM,
+            task=env.task_id,
+            env_overrides=dict(args.env),
+            encoder_spec=env.encoder.spec(),
+            nvec=nvec,
+            agent_steps=agent_steps,
+            seed=args.seed,
+            extra={
+                "label": f"torchrl-{args.variant}",
+                "hidden": list(args.hidden),
+                "run_dir": str(run_dir),
+                "args": asdict(args),
+            },
+        )
 
     # ------------------------------------------------------------------ data
     steps_per_batch = args.n_steps * args.n_copies * n_agents
-    collector = Collector(env, actor, frames_per_batch=args.n_steps * args.n_copies,
-                                  total_frames=-1, device="cpu", auto_register_policy_transforms=False)
-    buffer = ReplayBuffer(storage=LazyTensorStorage(args.n_steps * args.n_copies),
-                          sampler=SamplerWithoutReplacement(), batch_size=max(1, args.minibatch_size // n_agents))
+    collector = Collector(
+        env,
+        actor,
+        frames_per_batch=args.n_steps * args.n_copies,
+        total_frames=-1,
+        device="cpu",
+        auto_register_policy_transforms=False,
+    )
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(args.n_steps * args.n_copies),
+        sampler=SamplerWithoutReplacement(),
+        batch_size=max(1, args.minibatch_size // n_agents),
+    )
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
     running_return = np.zeros(args.n_copies)
     running_cycles = np.zeros(args.n_copies, dtype=np.int64)
@@ -205,7 +263,9 @@ def main(argv=None) -> Path:
 
         # PPO update
         with torch.no_grad():
-            loss.value_estimator(data, params=loss.critic_network_params, target_params=loss.target_critic_network_params)
+            loss.value_estimator(
+                data, params=loss.critic_network_params, target_params=loss.target_critic_network_params
+            )
         buffer.extend(data.reshape(-1))
         for _ in range(args.n_epochs):
             for _ in range(max(1, len(buffer) // buffer._batch_size)):
@@ -220,12 +280,20 @@ def main(argv=None) -> Path:
 
         agent_steps += steps_per_batch
         bar.update(steps_per_batch)
-        log.log(agent_steps, {**episode_stats(episodes), "loss/objective": parts["loss_objective"].item(),
-                              "loss/critic": parts["loss_critic"].item(), "loss/entropy": parts["loss_entropy"].item(),
-                              "time/env_seconds": env_s, "time/policy_seconds": collect_s - env_s,
-                              "time/update_seconds": update_s,
-                              "throughput/collect_agent_steps_per_s": steps_per_batch / collect_s,
-                              "throughput/env_agent_steps_per_s": steps_per_batch / env_s if env_s else None})
+        log.log(
+            agent_steps,
+            {
+                **episode_stats(episodes),
+                "loss/objective": parts["loss_objective"].item(),
+                "loss/critic": parts["loss_critic"].item(),
+                "loss/entropy": parts["loss_entropy"].item(),
+                "time/env_seconds": env_s,
+                "time/policy_seconds": collect_s - env_s,
+                "time/update_seconds": update_s,
+                "throughput/collect_agent_steps_per_s": steps_per_batch / collect_s,
+                "throughput/env_agent_steps_per_s": steps_per_batch / env_s if env_s else None,
+            },
+        )
         if agent_steps >= next_checkpoint:
             save(checkpoint_folder(run_dir, agent_steps))
             next_checkpoint += args.checkpoint_every

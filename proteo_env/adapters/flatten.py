@@ -42,8 +42,8 @@ every checkpoint, so a policy is only ever fed the encoding it was trained on.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -77,29 +77,46 @@ class ObservationEncoder:
 
     def __post_init__(self):
         if self.message_encoding not in MESSAGE_ENCODINGS:
-            raise ValueError(f"message_encoding={self.message_encoding!r} is not allowed; allowed: "
-                             f"{', '.join(map(repr, MESSAGE_ENCODINGS))}")
+            raise ValueError(
+                f"message_encoding={self.message_encoding!r} is not allowed; allowed: "
+                f"{', '.join(map(repr, MESSAGE_ENCODINGS))}"
+            )
 
     @classmethod
-    def for_env(cls, env, *, scent_scale: int = SCENT_SCALE,
-                message_encoding: str = "per_direction") -> "ObservationEncoder":
+    def for_env(
+        cls, env, *, scent_scale: int = SCENT_SCALE, message_encoding: str = "per_direction"
+    ) -> ObservationEncoder:
         """The encoder of a :class:`~proteo_env.env.ProteoEnv` (from its static interface only)."""
         space = env.observation_space(env.possible_agents[0])
-        return cls(n_sites=space["neighbour_kind"].shape[0], n_channels=env.task.n_channels,
-                   n_modes=len(env.task.modes),
-                   n_message_values=env.task.n_message_values, scent_max=env.config.physics.scent_max,
-                   scent_scale=scent_scale, message_encoding=message_encoding)
+        return cls(
+            n_sites=space["neighbour_kind"].shape[0],
+            n_channels=env.task.n_channels,
+            n_modes=len(env.task.modes),
+            n_message_values=env.task.n_message_values,
+            scent_max=env.config.physics.scent_max,
+            scent_scale=scent_scale,
+            message_encoding=message_encoding,
+        )
 
     # ------------------------------------------------------------------ layout
     @property
     def blocks(self) -> tuple[tuple[str, int], ...]:
         """``(name, size)`` of every block, in order."""
-        k, c, m, v = self.n_sites, self.n_channels, self.n_modes, self.n_message_values
-        return (("neighbour_kind", k * 4), ("neighbour_mode", k * (m + 1)),
-                ("neighbour_scent_present", k * c), ("neighbour_scent_value", k * c),
-                ("neighbour_scent_delta", k * c), ("own_mode", m), ("own_scent_present", c),
-                ("own_scent_value", c)) + self.message_blocks + (
-                ("contact", 2), ("load", 1), ("hint", 3), ("action_mask", N_MOVES))
+        k, c, m = self.n_sites, self.n_channels, self.n_modes
+        return (
+            (
+                ("neighbour_kind", k * 4),
+                ("neighbour_mode", k * (m + 1)),
+                ("neighbour_scent_present", k * c),
+                ("neighbour_scent_value", k * c),
+                ("neighbour_scent_delta", k * c),
+                ("own_mode", m),
+                ("own_scent_present", c),
+                ("own_scent_value", c),
+            )
+            + self.message_blocks
+            + (("contact", 2), ("load", 1), ("hint", 3), ("action_mask", N_MOVES))
+        )
 
     @property
     def message_blocks(self) -> tuple[tuple[str, int], ...]:
@@ -193,8 +210,18 @@ class ObservationEncoder:
 MESSAGE_ENCODINGS = ("per_direction", "compact")
 """How :class:`ObservationEncoder` encodes the messages received (module docstring)."""
 
-_FIELDS = ("neighbour_kind", "neighbour_mode", "neighbour_scent", "own_mode", "own_scent", "messages",
-           "contact", "load", "hint", "action_mask")
+_FIELDS = (
+    "neighbour_kind",
+    "neighbour_mode",
+    "neighbour_scent",
+    "own_mode",
+    "own_scent",
+    "messages",
+    "contact",
+    "load",
+    "hint",
+    "action_mask",
+)
 
 
 def flat_action_mask(move_mask: np.ndarray, nvec: np.ndarray) -> np.ndarray:

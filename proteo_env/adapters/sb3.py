@@ -25,7 +25,8 @@ others follow a fixed policy) with the same spaces and encoding; it exists so th
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -126,8 +127,11 @@ class ProteoVecEnv(VecEnv):
                 for i in range(rows.start, rows.stop):
                     infos[i] = {"terminal_observation": self._obs[i].copy(), "TimeLimit.truncated": truncated}
                 first = infos[rows.start]
-                first["episode"] = {"r": float(self._returns[c]), "l": int(env.cycle),
-                                    "t": round(time.perf_counter() - self._started[c], 6)}
+                first["episode"] = {
+                    "r": float(self._returns[c]),
+                    "l": int(env.cycle),
+                    "t": round(time.perf_counter() - self._started[c], 6),
+                }
                 first["is_success"] = success
                 first.update({f"metric/{k}": v for k, v in env.task.metrics(env.engine).items()})
                 self._reset_copy(c, None)
@@ -179,8 +183,14 @@ class ProteoAgentEnv(gym.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, task_id: str, *, agent: int = 0,
-                 co_policy: Callable[[Any, Any, np.random.Generator], np.ndarray] | None = None, **overrides):
+    def __init__(
+        self,
+        task_id: str,
+        *,
+        agent: int = 0,
+        co_policy: Callable[[Any, Any, np.random.Generator], np.ndarray] | None = None,
+        **overrides,
+    ):
         self.env = make(task_id, **overrides)
         self.agent = agent
         self.encoder = ObservationEncoder.for_env(self.env)
@@ -212,7 +222,7 @@ class ProteoAgentEnv(gym.Env):
 
     def action_masks(self) -> np.ndarray:
         """``(sum(nvec),)`` bool: the learning module's move mask then all-ones."""
-        return flat_action_mask(self._buffers.action_mask[self.agent:self.agent + 1], self.nvec)[0]
+        return flat_action_mask(self._buffers.action_mask[self.agent : self.agent + 1], self.nvec)[0]
 
 
 def _random_legal(env, buffers, rng: np.random.Generator) -> np.ndarray:

@@ -65,23 +65,30 @@ class ProteoTorchRLEnv(EnvBase):
             agents=Composite(
                 observation=Unbounded(shape=(b, a, d), dtype=torch.float32, device=device),
                 action_mask=Binary(n=n, shape=(b, a, n), dtype=torch.bool, device=device),
-                shape=(b, a)),
+                shape=(b, a),
+            ),
             state=Unbounded(shape=(b, self.state_size), dtype=torch.float32, device=device),
-            shape=(b,))
+            shape=(b,),
+        )
         self.action_spec = Composite(
             agents=Composite(
-                action=MultiCategorical(nvec=torch.as_tensor(self.nvec), shape=(b, a, len(self.nvec)),
-                                        dtype=torch.int64, device=device),
-                shape=(b, a)),
-            shape=(b,))
+                action=MultiCategorical(
+                    nvec=torch.as_tensor(self.nvec), shape=(b, a, len(self.nvec)), dtype=torch.int64, device=device
+                ),
+                shape=(b, a),
+            ),
+            shape=(b,),
+        )
         self.reward_spec = Composite(
             agents=Composite(reward=Unbounded(shape=(b, a, 1), dtype=torch.float32, device=device), shape=(b, a)),
-            shape=(b,))
+            shape=(b,),
+        )
         self.done_spec = Composite(
             done=Categorical(2, shape=(b, 1), dtype=torch.bool, device=device),
             terminated=Categorical(2, shape=(b, 1), dtype=torch.bool, device=device),
             truncated=Categorical(2, shape=(b, 1), dtype=torch.bool, device=device),
-            shape=(b,))
+            shape=(b,),
+        )
         self._obs = np.zeros((b, a, d), dtype=np.float32)
         self._mask = np.ones((b, a, n), dtype=bool)
         self._state = np.zeros((b, self.state_size), dtype=np.float32)
@@ -99,8 +106,10 @@ class ProteoTorchRLEnv(EnvBase):
         agents = {"observation": torch.from_numpy(self._obs.copy()), "action_mask": torch.from_numpy(self._mask.copy())}
         if reward is not None:
             agents["reward"] = torch.from_numpy(reward)
-        return {"agents": TensorDict(agents, batch_size=(self.n_copies, self.n_agents), device=self.device),
-                "state": torch.from_numpy(self._state.copy())}
+        return {
+            "agents": TensorDict(agents, batch_size=(self.n_copies, self.n_agents), device=self.device),
+            "state": torch.from_numpy(self._state.copy()),
+        }
 
     # ------------------------------------------------------------------ EnvBase API
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
@@ -113,8 +122,11 @@ class ProteoTorchRLEnv(EnvBase):
             self.envs[c].reset(seed=seed)
             self._observe(c)
         false = torch.zeros((self.n_copies, 1), dtype=torch.bool)
-        return TensorDict({**self._observation_td(), "done": false.clone(), "terminated": false.clone(),
-                           "truncated": false.clone()}, batch_size=self.batch_size, device=self.device)
+        return TensorDict(
+            {**self._observation_td(), "done": false.clone(), "terminated": false.clone(), "truncated": false.clone()},
+            batch_size=self.batch_size,
+            device=self.device,
+        )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         import time
@@ -130,8 +142,16 @@ class ProteoTorchRLEnv(EnvBase):
             self._observe(c)
             terminated[c] = bool(env.task.success(env.engine))
             truncated[c] = env.cycle >= env.max_cycles and not terminated[c]
-        out = TensorDict({**self._observation_td(reward), "done": torch.from_numpy(terminated | truncated), "terminated": torch.from_numpy(terminated),
-                          "truncated": torch.from_numpy(truncated)}, batch_size=self.batch_size, device=self.device)
+        out = TensorDict(
+            {
+                **self._observation_td(reward),
+                "done": torch.from_numpy(terminated | truncated),
+                "terminated": torch.from_numpy(terminated),
+                "truncated": torch.from_numpy(truncated),
+            },
+            batch_size=self.batch_size,
+            device=self.device,
+        )
         self.step_seconds += time.perf_counter() - started
         return out
 

@@ -20,30 +20,139 @@ from .world import LOCAL_ADJACENCY_BITS, Scratch, World
 
 
 @parallel_kernel
-def _run_cycles(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
-                keep_connected, exact, sweeps, scent_max, move, new_mode, role, message_target,
-                message_value, moved, dir_delta, directions, opposite, roll_delta, local_delta,
-                local_adjacent, roll_table, movers, mark, queue, stacks, search, scent_buffer):
+def _run_cycles(
+    grid,
+    cell,
+    n_agents,
+    anchored,
+    mode,
+    scent,
+    inbox,
+    rng_state,
+    passive_role,
+    surface,
+    keep_connected,
+    exact,
+    sweeps,
+    scent_max,
+    move,
+    new_mode,
+    role,
+    message_target,
+    message_value,
+    moved,
+    dir_delta,
+    directions,
+    opposite,
+    roll_delta,
+    local_delta,
+    local_adjacent,
+    roll_table,
+    movers,
+    mark,
+    queue,
+    stacks,
+    search,
+    scent_buffer,
+):
     for b in prange(grid.shape[0]):
-        kernels.run_cycle(grid[b], cell[b], n_agents, anchored[b], mode[b], scent[b], inbox[b],
-                          rng_state[b], passive_role, surface, keep_connected, exact, sweeps, scent_max,
-                          move[b], new_mode[b], role[b], message_target[b], message_value[b], moved[b],
-                          dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent,
-                          roll_table, movers[b], mark[b], queue[b], stacks[b], search[b],
-                          scent_buffer[b])
+        kernels.run_cycle(
+            grid[b],
+            cell[b],
+            n_agents,
+            anchored[b],
+            mode[b],
+            scent[b],
+            inbox[b],
+            rng_state[b],
+            passive_role,
+            surface,
+            keep_connected,
+            exact,
+            sweeps,
+            scent_max,
+            move[b],
+            new_mode[b],
+            role[b],
+            message_target[b],
+            message_value[b],
+            moved[b],
+            dir_delta,
+            directions,
+            opposite,
+            roll_delta,
+            local_delta,
+            local_adjacent,
+            roll_table,
+            movers[b],
+            mark[b],
+            queue[b],
+            stacks[b],
+            search[b],
+            scent_buffer[b],
+        )
 
 
 @parallel_kernel
-def _observe_worlds(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected, nb_delta,
-                    dir_delta, roll_delta, roll_table, scent_max, is_cut, adjacency, disc, low,
-                    stack_node, stack_k, neighbour_kind, neighbour_mode, neighbour_scent, own_mode,
-                    own_scent, messages, contact, action_mask):
+def _observe_worlds(
+    grid,
+    cell,
+    n_agents,
+    mode,
+    scent,
+    inbox,
+    anchored,
+    keep_connected,
+    nb_delta,
+    dir_delta,
+    roll_delta,
+    roll_table,
+    scent_max,
+    is_cut,
+    adjacency,
+    disc,
+    low,
+    stack_node,
+    stack_k,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_mode,
+    own_scent,
+    messages,
+    contact,
+    action_mask,
+):
     for b in prange(grid.shape[0]):
-        kernels.observe_world(grid[b], cell[b], n_agents, mode[b], scent[b], inbox[b], anchored[b],
-                              keep_connected, nb_delta, dir_delta, roll_delta, roll_table,
-                              scent_max, is_cut[b], adjacency[b], disc[b], low[b], stack_node[b], stack_k[b],
-                              neighbour_kind[b], neighbour_mode[b], neighbour_scent[b], own_mode[b],
-                              own_scent[b], messages[b], contact[b], action_mask[b])
+        kernels.observe_world(
+            grid[b],
+            cell[b],
+            n_agents,
+            mode[b],
+            scent[b],
+            inbox[b],
+            anchored[b],
+            keep_connected,
+            nb_delta,
+            dir_delta,
+            roll_delta,
+            roll_table,
+            scent_max,
+            is_cut[b],
+            adjacency[b],
+            disc[b],
+            low[b],
+            stack_node[b],
+            stack_k[b],
+            neighbour_kind[b],
+            neighbour_mode[b],
+            neighbour_scent[b],
+            own_mode[b],
+            own_scent[b],
+            messages[b],
+            contact[b],
+            action_mask[b],
+        )
 
 
 class WorldBatch:
@@ -63,12 +172,19 @@ class WorldBatch:
             raise ValueError("a WorldBatch needs at least one world")
         first = worlds[0]
         for w in worlds[1:]:
-            same = (w.shape.padded == first.shape.padded and w.n_modules == first.n_modules
-                    and w.n_agents == first.n_agents and w.n_channels == first.n_channels
-                    and w.physics == first.physics and w.obs_radius == first.obs_radius)
+            same = (
+                w.shape.padded == first.shape.padded
+                and w.n_modules == first.n_modules
+                and w.n_agents == first.n_agents
+                and w.n_channels == first.n_channels
+                and w.physics == first.physics
+                and w.obs_radius == first.obs_radius
+            )
             if not same:
-                raise ValueError("worlds of a batch must share grid extent, module and agent counts, "
-                                 "channels, physics and observation radius")
+                raise ValueError(
+                    "worlds of a batch must share grid extent, module and agent counts, "
+                    "channels, physics and observation radius"
+                )
         self.worlds = list(worlds)
         self.n_worlds = len(worlds)
         self.n_agents = first.n_agents
@@ -91,8 +207,11 @@ class WorldBatch:
     def replace(self, b: int, world: World) -> None:
         """Put ``world`` (built on this batch's grid layout) in row ``b``, state copied into the row."""
         first = self.worlds[0]
-        if (world.shape.padded != first.shape.padded or world.n_modules != first.n_modules
-                or world.n_agents != first.n_agents):
+        if (
+            world.shape.padded != first.shape.padded
+            or world.n_modules != first.n_modules
+            or world.n_agents != first.n_agents
+        ):
             raise ValueError("a world replacing one of a batch must share its grid extent, module and agent counts")
         for name in World.STATE:
             getattr(self, name)[b] = getattr(world, name)
@@ -113,19 +232,51 @@ class WorldBatch:
         parallel region costs a thread wake-up, which on a busy machine can cost milliseconds).
         """
         if self.n_worlds == 1:
-            return self.worlds[0].step(move=move[0], mode=mode[0], scent_role=scent_role[0],
-                                       message_target=message_target[0], message_value=message_value[0])[None]
+            return self.worlds[0].step(
+                move=move[0],
+                mode=mode[0],
+                scent_role=scent_role[0],
+                message_target=message_target[0],
+                message_value=message_value[0],
+            )[None]
         w, s = self.worlds[0], self.scratch
         p = w.physics
         moved = np.zeros((self.n_worlds, self.n_agents), dtype=np.bool_)
-        _run_cycles(self.grid, self.cell, self.n_agents, self.anchored, self.mode, self.scent, self.inbox,
-                    self.rng_state, w.passive_role, w.surface_channels, p.keep_connected, p.exact_scent,
-                    p.scent_sweeps, p.scent_max, np.asarray(move, dtype=np.int64),
-                    np.asarray(mode, dtype=np.int32), np.asarray(scent_role, dtype=np.int8),
-                    np.asarray(message_target, dtype=np.int64), np.asarray(message_value, dtype=np.int32),
-                    moved, w.dir_delta, DIRECTIONS, OPPOSITE, w.roll_delta, w.local_delta, LOCAL_ADJACENCY_BITS,
-                    w.roll_table, s.movers, s.mark, s.queue, s.stacks, s.search,
-                    s.scent_buffer)
+        _run_cycles(
+            self.grid,
+            self.cell,
+            self.n_agents,
+            self.anchored,
+            self.mode,
+            self.scent,
+            self.inbox,
+            self.rng_state,
+            w.passive_role,
+            w.surface_channels,
+            p.keep_connected,
+            p.exact_scent,
+            p.scent_sweeps,
+            p.scent_max,
+            np.asarray(move, dtype=np.int64),
+            np.asarray(mode, dtype=np.int32),
+            np.asarray(scent_role, dtype=np.int8),
+            np.asarray(message_target, dtype=np.int64),
+            np.asarray(message_value, dtype=np.int32),
+            moved,
+            w.dir_delta,
+            DIRECTIONS,
+            OPPOSITE,
+            w.roll_delta,
+            w.local_delta,
+            LOCAL_ADJACENCY_BITS,
+            w.roll_table,
+            s.movers,
+            s.mark,
+            s.queue,
+            s.stacks,
+            s.search,
+            s.scent_buffer,
+        )
         return moved
 
     def observe(self, out) -> None:
@@ -139,9 +290,32 @@ class WorldBatch:
         def rows(x):
             return x.reshape((b, a) + x.shape[1:])
 
-        _observe_worlds(self.grid, self.cell, a, self.mode, self.scent, self.inbox, self.anchored,
-                        w.physics.keep_connected, w.neighbourhood_delta, w.dir_delta, w.roll_delta,
-                        w.roll_table, w.physics.scent_max, s.is_cut, s.adjacency, s.disc, s.low,
-                        s.stack_node, s.stack_k, rows(out.neighbour_kind), rows(out.neighbour_mode),
-                        rows(out.neighbour_scent), rows(out.own_mode), rows(out.own_scent),
-                        rows(out.messages), rows(out.contact), rows(out.action_mask))
+        _observe_worlds(
+            self.grid,
+            self.cell,
+            a,
+            self.mode,
+            self.scent,
+            self.inbox,
+            self.anchored,
+            w.physics.keep_connected,
+            w.neighbourhood_delta,
+            w.dir_delta,
+            w.roll_delta,
+            w.roll_table,
+            w.physics.scent_max,
+            s.is_cut,
+            s.adjacency,
+            s.disc,
+            s.low,
+            s.stack_node,
+            s.stack_k,
+            rows(out.neighbour_kind),
+            rows(out.neighbour_mode),
+            rows(out.neighbour_scent),
+            rows(out.own_mode),
+            rows(out.own_scent),
+            rows(out.messages),
+            rows(out.contact),
+            rows(out.action_mask),
+        )

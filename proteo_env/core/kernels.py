@@ -125,8 +125,7 @@ LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1
 
 
 @kernel
-def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent,
-                           mark, stacks, search):
+def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent, mark, stacks, search):
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
@@ -350,9 +349,26 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 
 @kernel
-def execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                  dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table,
-                  movers, moved, mark, stacks, search):
+def execute_moves(
+    grid,
+    cell,
+    n_agents,
+    move,
+    anchored,
+    keep_connected,
+    rng_state,
+    dir_delta,
+    directions,
+    roll_delta,
+    local_delta,
+    local_adjacent,
+    roll_table,
+    movers,
+    moved,
+    mark,
+    stacks,
+    search,
+):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
     ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
@@ -451,10 +467,29 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 
 # ---------------------------------------------------------------- observations
 @kernel
-def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, roll_delta, roll_table, scent_max,
-            neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
-            messages, contact, action_mask):
+def observe(
+    grid,
+    cell,
+    n_agents,
+    mode,
+    scent,
+    inbox,
+    anchored,
+    is_cut,
+    keep_connected,
+    nb_delta,
+    roll_delta,
+    roll_table,
+    scent_max,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_mode,
+    own_scent,
+    messages,
+    contact,
+    action_mask,
+):
     """Fill the per-agent observation arrays (first axis: agent) from the world state.
 
     One pass over each agent's neighbourhood sites (``nb_delta``, the 12 face neighbours
@@ -519,18 +554,65 @@ def observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_con
 
 # ---------------------------------------------------------------- whole cycle, whole observation
 @kernel
-def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, passive_role, surface,
-              keep_connected, exact, sweeps, scent_max,
-              move, new_mode, role, message_target, message_value, moved,
-              dir_delta, directions, opposite, roll_delta, local_delta, local_adjacent, roll_table,
-              movers, mark, queue, stacks, search, scent_buffer):
+def run_cycle(
+    grid,
+    cell,
+    n_agents,
+    anchored,
+    mode,
+    scent,
+    inbox,
+    rng_state,
+    passive_role,
+    surface,
+    keep_connected,
+    exact,
+    sweeps,
+    scent_max,
+    move,
+    new_mode,
+    role,
+    message_target,
+    message_value,
+    moved,
+    dir_delta,
+    directions,
+    opposite,
+    roll_delta,
+    local_delta,
+    local_adjacent,
+    roll_table,
+    movers,
+    mark,
+    queue,
+    stacks,
+    search,
+    scent_buffer,
+):
     """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
     n_modules = len(cell)
     mode[:n_agents] = new_mode
     deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
-    n_moved = execute_moves(grid, cell, n_agents, move, anchored, keep_connected, rng_state,
-                            dir_delta, directions, roll_delta, local_delta, local_adjacent, roll_table, movers,
-                            moved, mark, stacks, search)
+    n_moved = execute_moves(
+        grid,
+        cell,
+        n_agents,
+        move,
+        anchored,
+        keep_connected,
+        rng_state,
+        dir_delta,
+        directions,
+        roll_delta,
+        local_delta,
+        local_adjacent,
+        roll_table,
+        movers,
+        moved,
+        mark,
+        stacks,
+        search,
+    )
     channel_role = np.empty(n_modules, dtype=np.int8)
     for ch in range(scent.shape[0]):
         channel_role[:n_agents] = role[:, ch]
@@ -538,21 +620,65 @@ def run_cycle(grid, cell, n_agents, anchored, mode, scent, inbox, rng_state, pas
         if exact:
             exact_scent(grid, cell, n_modules, channel_role, surface[ch], scent[ch], queue, scent_max, dir_delta)
         else:
-            relax_scent(grid, cell, n_modules, channel_role, surface[ch], scent[ch], scent_buffer, sweeps,
-                        scent_max, dir_delta)
+            relax_scent(
+                grid, cell, n_modules, channel_role, surface[ch], scent[ch], scent_buffer, sweeps, scent_max, dir_delta
+            )
     return n_moved
 
 
 @kernel
-def observe_world(grid, cell, n_agents, mode, scent, inbox, anchored, keep_connected,
-                  nb_delta, dir_delta, roll_delta, roll_table, scent_max,
-                  is_cut, adjacency, disc, low, stack_node, stack_k,
-                  neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
-                  messages, contact, action_mask):
+def observe_world(
+    grid,
+    cell,
+    n_agents,
+    mode,
+    scent,
+    inbox,
+    anchored,
+    keep_connected,
+    nb_delta,
+    dir_delta,
+    roll_delta,
+    roll_table,
+    scent_max,
+    is_cut,
+    adjacency,
+    disc,
+    low,
+    stack_node,
+    stack_k,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    own_mode,
+    own_scent,
+    messages,
+    contact,
+    action_mask,
+):
     """Every agent's observation of one world (cut modules found first when connectivity is kept)."""
     if keep_connected:
         articulation_points(grid, cell, len(cell), dir_delta, is_cut, adjacency, disc, low, stack_node, stack_k)
-    observe(grid, cell, n_agents, mode, scent, inbox, anchored, is_cut, keep_connected,
-            nb_delta, roll_delta, roll_table, scent_max,
-            neighbour_kind, neighbour_mode, neighbour_scent, own_mode, own_scent,
-            messages, contact, action_mask)
+    observe(
+        grid,
+        cell,
+        n_agents,
+        mode,
+        scent,
+        inbox,
+        anchored,
+        is_cut,
+        keep_connected,
+        nb_delta,
+        roll_delta,
+        roll_table,
+        scent_max,
+        neighbour_kind,
+        neighbour_mode,
+        neighbour_scent,
+        own_mode,
+        own_scent,
+        messages,
+        contact,
+        action_mask,
+    )

@@ -63,11 +63,7 @@ def neighbourhood_offsets(radius: int) -> np.ndarray:
         raise ValueError(f"obs_radius={radius!r} is not allowed; allowed: 1 or 2")
     offsets = [tuple(d) for d in DIRECTIONS]
     if radius == 2:
-        ring = {
-            tuple(a + b)
-            for a, b in itertools.product(DIRECTIONS, DIRECTIONS)
-            if (a + b).any()
-        } - set(offsets)
+        ring = {tuple(a + b) for a, b in itertools.product(DIRECTIONS, DIRECTIONS) if (a + b).any()} - set(offsets)
         offsets += sorted(ring)
     return np.array(offsets, dtype=np.int64)
 

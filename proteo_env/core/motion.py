@@ -11,7 +11,7 @@ that each case is reached exactly once.
 from __future__ import annotations
 
 import itertools
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -23,13 +23,25 @@ CANONICAL_TARGET = (1, 1, 0)
 CANONICAL_SWEEPS: dict[str, tuple[tuple[int, int, int], ...]] = {
     # exact rhombic dodecahedron swept through the turn
     "rhombic": (
-        (1, 0, -1), (0, 1, -1), (2, 0, 0), (1, -1, 0), (0, -1, -1),
-        (2, 1, -1), (1, 0, 1), (-1, 0, -1), (1, 2, -1),
+        (1, 0, -1),
+        (0, 1, -1),
+        (2, 0, 0),
+        (1, -1, 0),
+        (0, -1, -1),
+        (2, 1, -1),
+        (1, 0, 1),
+        (-1, 0, -1),
+        (1, 2, -1),
     ),
     # the same body shrunk to 90 % of its cell
     "rounded": (
-        (1, 0, -1), (0, 1, -1), (2, 0, 0), (1, -1, 0), (0, -1, -1),
-        (2, 1, -1), (1, 0, 1),
+        (1, 0, -1),
+        (0, 1, -1),
+        (2, 0, 0),
+        (1, -1, 0),
+        (0, -1, -1),
+        (2, 1, -1),
+        (1, 0, 1),
     ),
     # equal spheres rolling about the pivot
     "sphere": ((1, 0, 1), (1, 0, -1), (0, 1, -1), (1, -1, 0), (2, 0, 0)),
@@ -65,7 +77,7 @@ def common_neighbours(direction) -> np.ndarray:
     return np.array([q for q in DIRECTIONS if tuple(d - q) in {tuple(x) for x in DIRECTIONS}])
 
 
-@lru_cache(maxsize=None)
+@cache
 def swept_cells(model: str) -> dict[tuple[tuple[int, ...], tuple[int, ...]], frozenset]:
     """All 48 cases of a model: ``{(direction, pivot): frozenset of swept cells}``.
 
@@ -117,7 +129,7 @@ def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
     return roll_offsets.copy(), roll_table.copy()
 
 
-@lru_cache(maxsize=None)
+@cache
 def _motion_tables(model: str) -> tuple[np.ndarray, np.ndarray]:
     cases = swept_cells(model)
     swept = {cell for cells in cases.values() for cell in cells}

@@ -92,13 +92,29 @@ def shuffled(items: list, x: int) -> tuple[list, int]:
 class ReferenceWorld:
     """Plain-Python twin of :class:`~proteo_env.core.world.World` (same constructor keywords)."""
 
-    def __init__(self, *, size, positions, n_agents, physics, anchored=None, solid=None,
-                 object_sites=None, floor=False, n_channels=1, surface_channels=None,
-                 passive_role=None, modes=None, obs_radius=1):
+    def __init__(
+        self,
+        *,
+        size,
+        positions,
+        n_agents,
+        physics,
+        anchored=None,
+        solid=None,
+        object_sites=None,
+        floor=False,
+        n_channels=1,
+        surface_channels=None,
+        passive_role=None,
+        modes=None,
+        obs_radius=1,
+    ):
         self.size = tuple(int(s) for s in size)
         self.physics = physics
-        self.sweeps = {(_ints(d), _ints(q)): [_ints(c) for c in cells]
-                       for (d, q), cells in swept_cells(physics.motion_model).items()}
+        self.sweeps = {
+            (_ints(d), _ints(q)): [_ints(c) for c in cells]
+            for (d, q), cells in swept_cells(physics.motion_model).items()
+        }
         self.site_of = [tuple(int(v) for v in p) for p in np.asarray(positions).reshape(-1, 3)]
         self.n_modules = n = len(self.site_of)
         self.n_agents = int(n_agents)
@@ -108,8 +124,11 @@ class ReferenceWorld:
         assert len(self.module_at) == n, "two modules on one site"
         self.anchored = [False] * n if anchored is None else [bool(v) for v in np.asarray(anchored)]
         self.solid = set() if solid is None else {tuple(int(v) for v in p) for p in np.asarray(solid).reshape(-1, 3)}
-        self.object = set() if object_sites is None else \
-            {tuple(int(v) for v in p) for p in np.asarray(object_sites).reshape(-1, 3)}
+        self.object = (
+            set()
+            if object_sites is None
+            else {tuple(int(v) for v in p) for p in np.asarray(object_sites).reshape(-1, 3)}
+        )
         self.surface = [False] * c if surface_channels is None else [bool(v) for v in np.asarray(surface_channels)]
         self.passive_role = [RELAY] * c if passive_role is None else [int(v) for v in np.asarray(passive_role)]
         self.mode = [0] * n if modes is None else [int(v) for v in np.asarray(modes)]
@@ -334,9 +353,19 @@ class ReferenceWorld:
     def observe(self) -> dict[str, np.ndarray]:
         """Observation fields of every agent (first axis: agent), as ``World.observe`` fills them."""
         top = self.physics.scent_max
-        out: dict[str, list] = {f: [] for f in ("neighbour_kind", "neighbour_mode", "neighbour_scent",
-                                                "own_mode", "own_scent", "messages", "contact",
-                                                "action_mask")}
+        out: dict[str, list] = {
+            f: []
+            for f in (
+                "neighbour_kind",
+                "neighbour_mode",
+                "neighbour_scent",
+                "own_mode",
+                "own_scent",
+                "messages",
+                "contact",
+                "action_mask",
+            )
+        }
         for a in range(self.n_agents):
             p = self.site_of[a]
             kinds, modes, scents = [], [], []
@@ -358,7 +387,14 @@ class ReferenceWorld:
             legal = self.legal_moves(a)
             out["action_mask"].append([1] + [int(k in legal) for k in range(12)])
         a, k, c = self.n_agents, len(self.offsets), self.n_channels
-        shapes = {"neighbour_kind": (a, k), "neighbour_mode": (a, k), "neighbour_scent": (a, k, c),
-                  "own_mode": (a, 1), "own_scent": (a, c), "messages": (a, 12), "contact": (a, 2),
-                  "action_mask": (a, 13)}
+        shapes = {
+            "neighbour_kind": (a, k),
+            "neighbour_mode": (a, k),
+            "neighbour_scent": (a, k, c),
+            "own_mode": (a, 1),
+            "own_scent": (a, c),
+            "messages": (a, 12),
+            "contact": (a, 2),
+            "action_mask": (a, 13),
+        }
         return {f: np.array(v, dtype=np.int64).reshape(shapes[f]) for f, v in out.items()}

@@ -62,6 +62,7 @@ class StructureProbe:
     def measure(self, world):
         module_degrees(world.grid, world.cell, world.n_modules, world.dir_delta, self.degree)
         edges = int(self.degree.sum()) // 2
-        thin = largest_thin_piece(world.grid, world.cell, world.n_modules, world.dir_delta, self.degree,
-                                  self.mark, self.queue)
+        thin = largest_thin_piece(
+            world.grid, world.cell, world.n_modules, world.dir_delta, self.degree, self.mark, self.queue
+        )
         return self.degree, edges, int(thin)

@@ -110,8 +110,20 @@ class Scratch:
     """Work arrays of one world's kernels (never part of the state), for ``n`` modules on a
     grid of ``cells`` cells."""
 
-    NAMES = ("mark", "queue", "movers", "stacks", "search", "adjacency", "disc", "low", "stack_node", "stack_k",
-             "scent_buffer", "is_cut")
+    NAMES = (
+        "mark",
+        "queue",
+        "movers",
+        "stacks",
+        "search",
+        "adjacency",
+        "disc",
+        "low",
+        "stack_node",
+        "stack_k",
+        "scent_buffer",
+        "is_cut",
+    )
 
     def __init__(self, n: int, cells: int):
         self.mark = np.full(cells, -1, dtype=np.int32)
@@ -149,9 +161,24 @@ class World:
     STATE = ("grid", "cell", "anchored", "mode", "scent", "inbox", "rng_state")
     """Names of the per-world state arrays (stacked by a batch)."""
 
-    def __init__(self, *, size, positions, n_agents, physics, anchored=None, solid=None,
-                 object_sites=None, floor=False, n_channels=1, surface_channels=None,
-                 passive_role=None, modes=None, obs_radius=1, extent=None):
+    def __init__(
+        self,
+        *,
+        size,
+        positions,
+        n_agents,
+        physics,
+        anchored=None,
+        solid=None,
+        object_sites=None,
+        floor=False,
+        n_channels=1,
+        surface_channels=None,
+        passive_role=None,
+        modes=None,
+        obs_radius=1,
+        extent=None,
+    ):
         self.shape = GridShape(size, extent)
         self.physics = physics
         positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
@@ -162,14 +189,23 @@ class World:
         self.n_channels = int(n_channels)
         self.floor = bool(floor)
         self.obs_radius = obs_radius
-        self.surface_channels = np.zeros(n_channels, dtype=np.bool_) if surface_channels is None \
+        self.surface_channels = (
+            np.zeros(n_channels, dtype=np.bool_)
+            if surface_channels is None
             else np.asarray(surface_channels, dtype=np.bool_)
-        self.passive_role = np.full(n_channels, kernels.RELAY, dtype=np.int8) if passive_role is None \
+        )
+        self.passive_role = (
+            np.full(n_channels, kernels.RELAY, dtype=np.int8)
+            if passive_role is None
             else np.asarray(passive_role, dtype=np.int8)
+        )
         self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.array(anchored, dtype=np.bool_)
-        for field, value, length in (("anchored", self.anchored, n), ("modes", modes, n),
-                                     ("surface_channels", self.surface_channels, n_channels),
-                                     ("passive_role", self.passive_role, n_channels)):
+        for field, value, length in (
+            ("anchored", self.anchored, n),
+            ("modes", modes, n),
+            ("surface_channels", self.surface_channels, n_channels),
+            ("passive_role", self.passive_role, n_channels),
+        ):
             if value is not None and np.shape(value) != (length,):
                 raise LayoutError(f"{field} has shape {np.shape(value)}; allowed: ({length},)")
         self.solid_sites = _sites(solid)
@@ -194,7 +230,8 @@ class World:
         if physics.keep_connected and n > 0 and self.n_components() != 1:
             raise LayoutError(
                 f"positions form {self.n_components()} connected pieces; allowed: one connected "
-                "whole when keep_connected=True")
+                "whole when keep_connected=True"
+            )
 
     # ------------------------------------------------------------------ building
     def _static_grid(self) -> np.ndarray:
@@ -217,12 +254,16 @@ class World:
         shape = self.shape
         odd = positions.sum(axis=1) % 2 != 0
         if odd.any():
-            raise LayoutError(f"module site {tuple(positions[odd][0].tolist())} is not an FCC site; "
-                              "allowed: integer sites with x + y + z even")
+            raise LayoutError(
+                f"module site {tuple(positions[odd][0].tolist())} is not an FCC site; "
+                "allowed: integer sites with x + y + z even"
+            )
         inside = shape.inside(positions)
         if not inside.all():
-            raise LayoutError(f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
-                              f"{shape.size}; allowed: 0 <= site < size")
+            raise LayoutError(
+                f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
+                f"{shape.size}; allowed: 0 <= site < size"
+            )
         index = shape.index(positions)
         occupied = self.grid[index]
         if (occupied != EMPTY).any():
@@ -242,14 +283,32 @@ class World:
 
     def n_components(self) -> int:
         """Number of connected pieces of the module graph (board modules included)."""
-        return int(kernels.count_components(self.grid, self.cell, self.n_modules, self.dir_delta,
-                                            np.zeros(self.n_modules, dtype=np.int64), self.scratch.queue))
+        return int(
+            kernels.count_components(
+                self.grid,
+                self.cell,
+                self.n_modules,
+                self.dir_delta,
+                np.zeros(self.n_modules, dtype=np.int64),
+                self.scratch.queue,
+            )
+        )
 
     def cut_modules(self) -> np.ndarray:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
         s = self.scratch
-        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, s.is_cut,
-                                    s.adjacency, s.disc, s.low, s.stack_node, s.stack_k)
+        kernels.articulation_points(
+            self.grid,
+            self.cell,
+            self.n_modules,
+            self.dir_delta,
+            s.is_cut,
+            s.adjacency,
+            s.disc,
+            s.low,
+            s.stack_node,
+            s.stack_k,
+        )
         return s.is_cut
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
@@ -260,9 +319,20 @@ class World:
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
         s = self.scratch
-        return bool(kernels.detach_keeps_connected(
-            self.grid, self.cell, module, self.dir_delta, DIRECTIONS, self.local_delta, LOCAL_ADJACENCY_BITS,
-            s.mark, s.stacks, s.search))
+        return bool(
+            kernels.detach_keeps_connected(
+                self.grid,
+                self.cell,
+                module,
+                self.dir_delta,
+                DIRECTIONS,
+                self.local_delta,
+                LOCAL_ADJACENCY_BITS,
+                s.mark,
+                s.stacks,
+                s.search,
+            )
+        )
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -282,38 +352,98 @@ class World:
         moved = np.zeros(self.n_agents, dtype=np.bool_)
         p, s = self.physics, self.scratch
         kernels.run_cycle(
-            self.grid, self.cell, self.n_agents, self.anchored, self.mode, self.scent, self.inbox,
-            self.rng_state, self.passive_role, self.surface_channels, p.keep_connected, p.exact_scent,
-            p.scent_sweeps, p.scent_max,
-            np.asarray(move, dtype=np.int64), np.asarray(mode, dtype=np.int32),
-            np.asarray(scent_role, dtype=np.int8), np.asarray(message_target, dtype=np.int64),
-            np.asarray(message_value, dtype=np.int32), moved,
-            self.dir_delta, DIRECTIONS, OPPOSITE, self.roll_delta, self.local_delta, LOCAL_ADJACENCY_BITS,
-            self.roll_table, s.movers, s.mark, s.queue, s.stacks, s.search, s.scent_buffer)
+            self.grid,
+            self.cell,
+            self.n_agents,
+            self.anchored,
+            self.mode,
+            self.scent,
+            self.inbox,
+            self.rng_state,
+            self.passive_role,
+            self.surface_channels,
+            p.keep_connected,
+            p.exact_scent,
+            p.scent_sweeps,
+            p.scent_max,
+            np.asarray(move, dtype=np.int64),
+            np.asarray(mode, dtype=np.int32),
+            np.asarray(scent_role, dtype=np.int8),
+            np.asarray(message_target, dtype=np.int64),
+            np.asarray(message_value, dtype=np.int32),
+            moved,
+            self.dir_delta,
+            DIRECTIONS,
+            OPPOSITE,
+            self.roll_delta,
+            self.local_delta,
+            LOCAL_ADJACENCY_BITS,
+            self.roll_table,
+            s.movers,
+            s.mark,
+            s.queue,
+            s.stacks,
+            s.search,
+            s.scent_buffer,
+        )
         return moved
 
     def observe(self, out) -> None:
         """Fill an :class:`~proteo_env.spaces.ObservationBuffers`-like ``out`` for all agents."""
         s = self.scratch
-        kernels.observe_world(self.grid, self.cell, self.n_agents, self.mode, self.scent, self.inbox,
-                              self.anchored, self.physics.keep_connected, self.neighbourhood_delta,
-                              self.dir_delta, self.roll_delta, self.roll_table,
-                              self.physics.scent_max, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k,
-                              out.neighbour_kind, out.neighbour_mode, out.neighbour_scent, out.own_mode,
-                              out.own_scent, out.messages, out.contact, out.action_mask)
+        kernels.observe_world(
+            self.grid,
+            self.cell,
+            self.n_agents,
+            self.mode,
+            self.scent,
+            self.inbox,
+            self.anchored,
+            self.physics.keep_connected,
+            self.neighbourhood_delta,
+            self.dir_delta,
+            self.roll_delta,
+            self.roll_table,
+            self.physics.scent_max,
+            s.is_cut,
+            s.adjacency,
+            s.disc,
+            s.low,
+            s.stack_node,
+            s.stack_k,
+            out.neighbour_kind,
+            out.neighbour_mode,
+            out.neighbour_scent,
+            out.own_mode,
+            out.own_scent,
+            out.messages,
+            out.contact,
+            out.action_mask,
+        )
 
-    def regrid(self, extent) -> "World":
+    def regrid(self, extent) -> World:
         """This world, same state, on a grid of a larger ``extent`` (a fresh ``World``).
 
         The box, the modules' sites, modes, scents, inbox and move-order generator are
         kept; only the padding (and so every grid cell index) changes, so the trajectory from
         here is the one the world would have followed on its old grid.
         """
-        world = World(size=self.shape.size, positions=self.positions, n_agents=self.n_agents,
-                      physics=self.physics, anchored=self.anchored.copy(), solid=self.solid_sites,
-                      object_sites=self.object_sites, floor=self.floor, n_channels=self.n_channels,
-                      surface_channels=self.surface_channels, passive_role=self.passive_role,
-                      modes=self.mode.copy(), obs_radius=self.obs_radius, extent=extent)
+        world = World(
+            size=self.shape.size,
+            positions=self.positions,
+            n_agents=self.n_agents,
+            physics=self.physics,
+            anchored=self.anchored.copy(),
+            solid=self.solid_sites,
+            object_sites=self.object_sites,
+            floor=self.floor,
+            n_channels=self.n_channels,
+            surface_channels=self.surface_channels,
+            passive_role=self.passive_role,
+            modes=self.mode.copy(),
+            obs_radius=self.obs_radius,
+            extent=extent,
+        )
         world.scent[:] = self.scent
         world.inbox[:] = self.inbox
         world.rng_state[:] = self.rng_state
@@ -322,8 +452,13 @@ class World:
     # ------------------------------------------------------------------ snapshots
     def snapshot(self) -> dict:
         """Copies of the mutable state, independent of the grid layout (for checks)."""
-        return {"positions": self.positions, "mode": self.mode.copy(), "scent": self.scent.copy(),
-                "inbox": self.inbox.copy(), "rng_state": self.rng_state.copy()}
+        return {
+            "positions": self.positions,
+            "mode": self.mode.copy(),
+            "scent": self.scent.copy(),
+            "inbox": self.inbox.copy(),
+            "rng_state": self.rng_state.copy(),
+        }
 
 
 def _sites(sites) -> np.ndarray:

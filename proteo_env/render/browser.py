@@ -21,9 +21,20 @@ import time
 from pathlib import Path
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
-FLAGS = ("--headless", "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
-         "--disable-quic", "--disable-extensions", "--mute-audio", "--hide-scrollbars")
+FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--use-gl=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+    "--disable-extensions",
+    "--mute-audio",
+    "--hide-scrollbars",
+)
 
 
 class BrowserError(RuntimeError):
@@ -34,9 +45,11 @@ def find_chromium() -> str:
     """The path of a Chromium executable (``$PROTEO_CHROMIUM`` first, then ``chromium`` and kin on ``PATH``)."""
     path = os.environ.get("PROTEO_CHROMIUM") or next((p for p in map(shutil.which, CANDIDATES) if p), None)
     if not path:
-        raise BrowserError("headless Chromium is needed and none was found (looked for $PROTEO_CHROMIUM, "
-                           f"{', '.join(CANDIDATES)} on PATH); install it, e.g. on Debian or Ubuntu: "
-                           "apt-get update && apt-get install -y chromium")
+        raise BrowserError(
+            "headless Chromium is needed and none was found (looked for $PROTEO_CHROMIUM, "
+            f"{', '.join(CANDIDATES)} on PATH); install it, e.g. on Debian or Ubuntu: "
+            "apt-get update && apt-get install -y chromium"
+        )
     return path
 
 
@@ -56,8 +69,7 @@ class Chromium:
         timeout: seconds any one command may take.
     """
 
-    def __init__(self, *, width: int = 1280, height: int = 800, executable: str | None = None,
-                 timeout: float = 60.0):
+    def __init__(self, *, width: int = 1280, height: int = 800, executable: str | None = None, timeout: float = 60.0):
         self.timeout = timeout
         self._profile = tempfile.TemporaryDirectory(prefix="proteo-chromium-")
         to_browser_r, to_browser_w = (_high_fd(fd) for fd in os.pipe())
@@ -67,11 +79,18 @@ class Chromium:
             os.dup2(to_browser_r, 3)
             os.dup2(from_browser_w, 4)
 
-        command = [executable or find_chromium(), *FLAGS, f"--window-size={width},{height}",
-                   f"--user-data-dir={self._profile.name}", "--remote-debugging-pipe", "about:blank"]
+        command = [
+            executable or find_chromium(),
+            *FLAGS,
+            f"--window-size={width},{height}",
+            f"--user-data-dir={self._profile.name}",
+            "--remote-debugging-pipe",
+            "about:blank",
+        ]
         self._log = open(Path(self._profile.name) / "chromium.log", "w+b")
-        self.process = subprocess.Popen(command, preexec_fn=wire, pass_fds=(3, 4),
-                                        stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
+        self.process = subprocess.Popen(
+            command, preexec_fn=wire, pass_fds=(3, 4), stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log
+        )
         os.close(to_browser_r)
         os.close(from_browser_w)
         self._out = os.fdopen(to_browser_w, "wb", buffering=0)
@@ -122,23 +141,32 @@ class Chromium:
                 self.events.append(reply)
 
     # ------------------------------------------------------------------ page
-    def open(self, url_or_path, *, ready: str = "document.body && document.body.dataset.ready === '1'",
-             timeout: float | None = None) -> None:
+    def open(
+        self,
+        url_or_path,
+        *,
+        ready: str = "document.body && document.body.dataset.ready === '1'",
+        timeout: float | None = None,
+    ) -> None:
         """Load a URL (or a local file) and wait until the JavaScript expression ``ready`` is true or an error shows."""
         url = url_or_path if "://" in str(url_or_path) else Path(url_or_path).resolve().as_uri()
         self.events.clear()
         self.call("Page.navigate", url=url)
-        self.wait_for(f"({ready}) || (document.body && document.body.dataset.errors > 0) || "
-                      "(document.readyState === 'complete' && !document.getElementById('proteo-data'))",
-                      timeout=timeout)
+        self.wait_for(
+            f"({ready}) || (document.body && document.body.dataset.errors > 0) || "
+            "(document.readyState === 'complete' && !document.getElementById('proteo-data'))",
+            timeout=timeout,
+        )
 
     def wait_for(self, expression: str, *, timeout: float | None = None, interval: float = 0.05) -> None:
         """Poll the page until ``expression`` is truthy (raises :class:`BrowserError` after ``timeout`` s)."""
         deadline = time.monotonic() + (timeout or self.timeout)
         while not self.evaluate(expression):
             if time.monotonic() > deadline:
-                raise BrowserError(f"the page did not reach {expression!r} within {timeout or self.timeout:g} s; "
-                                   f"errors: {self.errors()}")
+                raise BrowserError(
+                    f"the page did not reach {expression!r} within {timeout or self.timeout:g} s; "
+                    f"errors: {self.errors()}"
+                )
             time.sleep(interval)
 
     def evaluate(self, expression: str, *, await_promise: bool = False):
@@ -146,7 +174,9 @@ class Chromium:
         result = self.call("Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=await_promise)
         if "exceptionDetails" in result:
             details = result["exceptionDetails"]
-            raise BrowserError(f"{expression[:80]!r} threw: {details.get('exception', {}).get('description') or details.get('text')}")
+            raise BrowserError(
+                f"{expression[:80]!r} threw: {details.get('exception', {}).get('description') or details.get('text')}"
+            )
         return result["result"].get("value")
 
     def errors(self) -> list[str]:
@@ -193,7 +223,7 @@ class Chromium:
             stream.close()
         self._profile.cleanup()
 
-    def __enter__(self) -> "Chromium":
+    def __enter__(self) -> Chromium:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -47,15 +47,17 @@ class Camera:
                 raise ValueError(f"camera {name}={value!r} is not allowed; allowed: an integer 16..8192 (pixels)")
 
     @classmethod
-    def from_options(cls, options) -> "Camera":
+    def from_options(cls, options) -> Camera:
         """A camera from ``None``, a :class:`Camera` or a dict of its fields (unknown keys raise)."""
         if options is None:
             return cls()
         if isinstance(options, cls):
             return options
         if not isinstance(options, dict):
-            raise ValueError(f"camera={options!r} is not allowed; allowed: None, a Camera or a dict of "
-                             f"{', '.join(f.name for f in dataclasses.fields(cls))}")
+            raise ValueError(
+                f"camera={options!r} is not allowed; allowed: None, a Camera or a dict of "
+                f"{', '.join(f.name for f in dataclasses.fields(cls))}"
+            )
         allowed = [f.name for f in dataclasses.fields(cls)]
         unknown = [k for k in options if k not in allowed]
         if unknown:

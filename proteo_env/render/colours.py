@@ -11,9 +11,19 @@ from __future__ import annotations
 import numpy as np
 
 MODE_COLOURS: dict[str, str] = {
-    "SLEEP": "#8c8c8c", "SEARCH": "#d0202a", "SEED": "#f5cf10", "FINAL": "#f7f7f7",
-    "NODE": "#8e3fb0", "INODE": "#b993d1", "ROOT": "#1f5fcf", "IROOT": "#7d9bd1", "AROOT": "#3f86ff",
-    "FIXED": "#f0f0f0", "TOUCH": "#1f5fcf", "TOUCHSEED": "#f5cf10", "DISBAND": "#ff9f1c",
+    "SLEEP": "#8c8c8c",
+    "SEARCH": "#d0202a",
+    "SEED": "#f5cf10",
+    "FINAL": "#f7f7f7",
+    "NODE": "#8e3fb0",
+    "INODE": "#b993d1",
+    "ROOT": "#1f5fcf",
+    "IROOT": "#7d9bd1",
+    "AROOT": "#3f86ff",
+    "FIXED": "#f0f0f0",
+    "TOUCH": "#1f5fcf",
+    "TOUCHSEED": "#f5cf10",
+    "DISBAND": "#ff9f1c",
 }
 """Base colour of each mode name (lit faces are this colour times the Lambert shade)."""
 
@@ -32,7 +42,7 @@ BACKGROUND = "#dfe5ec"
 def rgb(hex_colour: str) -> np.ndarray:
     """``(3,)`` float in ``[0, 1]`` from ``#rrggbb``."""
     h = hex_colour.lstrip("#")
-    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)], dtype=float) / 255.0
+    return np.array([int(h[i : i + 2], 16) for i in (0, 2, 4)], dtype=float) / 255.0
 
 
 def mode_palette(mode_names) -> np.ndarray:

@@ -44,16 +44,25 @@ class MovieWriter:
         if self.kind == ".gif":
             from PIL import Image
 
-            self._gif_frames.append(Image.fromarray(frame).quantize(colors=255, method=Image.Quantize.MEDIANCUT,
-                                                                   dither=Image.Dither.NONE))
+            self._gif_frames.append(
+                Image.fromarray(frame).quantize(colors=255, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+            )
         else:
             if self._ffmpeg is None:
                 import imageio_ffmpeg
 
                 h, w = frame.shape[:2]
                 self._ffmpeg = imageio_ffmpeg.write_frames(
-                    str(self._tmp), (w, h), fps=self.fps, codec="libx264", pix_fmt_in="rgb24",
-                    pix_fmt_out="yuv420p", quality=8, macro_block_size=2, output_params=["-movflags", "+faststart"])
+                    str(self._tmp),
+                    (w, h),
+                    fps=self.fps,
+                    codec="libx264",
+                    pix_fmt_in="rgb24",
+                    pix_fmt_out="yuv420p",
+                    quality=8,
+                    macro_block_size=2,
+                    output_params=["-movflags", "+faststart"],
+                )
                 self._ffmpeg.send(None)
             self._ffmpeg.send(frame)
         self.n_frames += 1
@@ -62,8 +71,16 @@ class MovieWriter:
         try:
             if self.kind == ".gif" and self._gif_frames and exc_type is None:
                 first, *rest = self._gif_frames
-                first.save(self._tmp, format="GIF", save_all=True, append_images=rest,
-                           duration=int(round(1000 / self.fps)), loop=0, optimize=False, disposal=1)
+                first.save(
+                    self._tmp,
+                    format="GIF",
+                    save_all=True,
+                    append_images=rest,
+                    duration=int(round(1000 / self.fps)),
+                    loop=0,
+                    optimize=False,
+                    disposal=1,
+                )
             if self._ffmpeg is not None:
                 self._ffmpeg.close()
             if exc_type is None and self.n_frames:

@@ -13,8 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .camera import Camera
-from .colours import (BACKGROUND, FLOOR_COLOUR, MODE_COLOURS, OBJECT_COLOUR, PALETTE, SOLID_COLOUR, module_colours,
-                      rgb)
+from .colours import BACKGROUND, FLOOR_COLOUR, MODE_COLOURS, OBJECT_COLOUR, PALETTE, SOLID_COLOUR, module_colours, rgb
 from .geometry import FACE_NORMALS, FACE_QUADS, occupancy_grid, visible_faces
 from .scene import Scene
 
@@ -41,8 +40,15 @@ class Renderer:
             :data:`EDGE_MIN_PIXELS` pixels; outlines of tiny faces cost time and add nothing).
     """
 
-    def __init__(self, camera=None, *, frame_points=None, scent_scale: float | None = None, legend: bool = True,
-                 edges: bool | None = None):
+    def __init__(
+        self,
+        camera=None,
+        *,
+        frame_points=None,
+        scent_scale: float | None = None,
+        legend: bool = True,
+        edges: bool | None = None,
+    ):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.collections import LineCollection, PolyCollection
         from matplotlib.figure import Figure
@@ -63,8 +69,9 @@ class Renderer:
         self._faces = PolyCollection([], zorder=2, joinstyle="round")
         for c in (self._floor, self._grid, self._faces):
             ax.add_collection(c)
-        self._caption = ax.text(0.015, 0.985, "", transform=ax.transAxes, va="top", ha="left", fontsize=11,
-                                color="#222222", zorder=5)
+        self._caption = ax.text(
+            0.015, 0.985, "", transform=ax.transAxes, va="top", ha="left", fontsize=11, color="#222222", zorder=5
+        )
         self._legend_key = None
         self.n_faces = 0
 
@@ -88,9 +95,11 @@ class Renderer:
         obj = np.asarray(scene.object_sites, dtype=np.int64).reshape(-1, 3)
         grid, origin = occupancy_grid((positions, solid, obj), floor=scene.floor)
         scale = self.scent_scale if self.scent_scale is not None else scene.scent_range()
-        groups = [(positions, module_colours(scene.mode_names, scene.modes, scene.scent, scale)),
-                  (solid, np.broadcast_to(rgb(SOLID_COLOUR), solid.shape)),
-                  (obj, np.broadcast_to(rgb(OBJECT_COLOUR), obj.shape))]
+        groups = [
+            (positions, module_colours(scene.mode_names, scene.modes, scene.scent, scale)),
+            (solid, np.broadcast_to(rgb(SOLID_COLOUR), solid.shape)),
+            (obj, np.broadcast_to(rgb(OBJECT_COLOUR), obj.shape)),
+        ]
         facing = FACE_NORMALS @ view > 1e-9  # faces turned towards the camera
         centres, faces, colours = [], [], []
         for sites, base in groups:
@@ -176,8 +185,14 @@ class Renderer:
 
         if self.ax.get_legend() is not None:
             self.ax.get_legend().remove()
-        handles = [Patch(facecolor=MODE_COLOURS.get(scene.mode_names[m], PALETTE[m % len(PALETTE)]),
-                         edgecolor="#444444", label=scene.mode_names[m]) for m in present]
+        handles = [
+            Patch(
+                facecolor=MODE_COLOURS.get(scene.mode_names[m], PALETTE[m % len(PALETTE)]),
+                edgecolor="#444444",
+                label=scene.mode_names[m],
+            )
+            for m in present
+        ]
         if has_object:
             handles.append(Patch(facecolor=OBJECT_COLOUR, edgecolor="#444444", label="object"))
         if handles:

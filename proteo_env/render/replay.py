@@ -33,8 +33,9 @@ def recording_renderer(recording, camera=None, *, follow: bool = False) -> Rende
     return Renderer(camera, frame_points=recording.sites_visited(), scent_scale=recording.scent_range())
 
 
-def render_movie(recording, path, *, camera=None, fps: float = 20.0, max_frames: int | None = 300,
-                 progress=None) -> Path:
+def render_movie(
+    recording, path, *, camera=None, fps: float = 20.0, max_frames: int | None = 300, progress=None
+) -> Path:
     """Write a GIF or MP4 of ``recording`` and return its path.
 
     Args:
@@ -67,4 +68,3 @@ def render_still(recording, path, *, frame: int = -1, camera=None, caption: str 
     finally:
         renderer.close()
     return path
-

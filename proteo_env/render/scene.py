@@ -36,12 +36,20 @@ class Scene:
     caption: str = ""
 
     @classmethod
-    def from_world(cls, world, caption: str | None = None) -> "Scene":
+    def from_world(cls, world, caption: str | None = None) -> Scene:
         """The scene of a :class:`~proteo_env.env.WorldView` (caption: the cycle by default)."""
-        return cls(positions=world.positions, modes=world.modes, mode_names=tuple(world.mode_names),
-                   scent=world.scents[0] if world.scents.shape[0] else None, scent_max=world.scent_max,
-                   solid_sites=world.solid_sites, object_sites=world.object_sites, box=tuple(world.box),
-                   floor=world.floor, caption=f"cycle {world.cycle}" if caption is None else caption)
+        return cls(
+            positions=world.positions,
+            modes=world.modes,
+            mode_names=tuple(world.mode_names),
+            scent=world.scents[0] if world.scents.shape[0] else None,
+            scent_max=world.scent_max,
+            solid_sites=world.solid_sites,
+            object_sites=world.object_sites,
+            box=tuple(world.box),
+            floor=world.floor,
+            caption=f"cycle {world.cycle}" if caption is None else caption,
+        )
 
     def scent_range(self) -> int:
         """The largest scent below ``scent_max`` on a SEARCH module (1 if none): the palest SEARCH shade."""

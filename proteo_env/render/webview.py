@@ -65,8 +65,12 @@ def pack_array(a: np.ndarray, *, along_time: bool) -> dict:
         values = np.diff(values, axis=0, prepend=np.zeros((1,) + values.shape[1:], dtype=np.int64))
     dtype = _smallest_int(values)
     raw = values.astype(np.dtype(dtype).newbyteorder("<")).tobytes()
-    return {"shape": list(values.shape), "dtype": np.dtype(dtype).name, "delta": bool(along_time),
-            "zlib_base64": base64.b64encode(zlib.compress(raw, 9)).decode("ascii")}
+    return {
+        "shape": list(values.shape),
+        "dtype": np.dtype(dtype).name,
+        "delta": bool(along_time),
+        "zlib_base64": base64.b64encode(zlib.compress(raw, 9)).decode("ascii"),
+    }
 
 
 def unpack_array(packed: dict) -> np.ndarray:
@@ -81,25 +85,37 @@ def episode_data(recording) -> dict:
     """Everything the page shows of ``recording``, JSON-ready (per-cycle arrays packed)."""
     names = list(recording.mode_names)
     scents = np.where(recording.scents >= recording.scent_max, -1, recording.scents)
-    series = {k: [None if not math.isfinite(v) else float(v) for v in np.asarray(values, dtype=float)]
-              for k, values in recording.series.items()}
+    series = {
+        k: [None if not math.isfinite(v) else float(v) for v in np.asarray(values, dtype=float)]
+        for k, values in recording.series.items()
+    }
     return {
-        "format": "proteo-view", "format_version": 1,
-        "task_id": recording.task_id, "policy": recording.policy, "seed": recording.seed,
-        "success": bool(recording.success), "package_version": recording.package_version,
+        "format": "proteo-view",
+        "format_version": 1,
+        "task_id": recording.task_id,
+        "policy": recording.policy,
+        "seed": recording.seed,
+        "success": bool(recording.success),
+        "package_version": recording.package_version,
         "mode_names": names,
         "mode_colours": [MODE_COLOURS.get(name, PALETTE[i % len(PALETTE)]) for i, name in enumerate(names)],
         "search_mode": names.index("SEARCH") if "SEARCH" in names else -1,
-        "search_far": SEARCH_FAR, "scent_scale": int(recording.scent_range()),
+        "search_far": SEARCH_FAR,
+        "scent_scale": int(recording.scent_range()),
         "colours": {"object": OBJECT_COLOUR, "solid": SOLID_COLOUR, "floor": FLOOR_COLOUR, "background": BACKGROUND},
         "light": {"ambient": AMBIENT, "direction_in_camera": [float(v) for v in LIGHT_IN_CAMERA]},
         "view_direction": [float(v) for v in Camera(azimuth=side_azimuth(recording.positions[-1])).axes()[2]],
-        "face_quads": FACE_QUADS.tolist(), "directions": DIRECTIONS.tolist(), "floor_level": FLOOR_LEVEL,
-        "box": [int(v) for v in recording.box], "floor": bool(recording.floor),
-        "n_frames": int(recording.n_frames), "n_modules": int(recording.positions.shape[1]),
+        "face_quads": FACE_QUADS.tolist(),
+        "directions": DIRECTIONS.tolist(),
+        "floor_level": FLOOR_LEVEL,
+        "box": [int(v) for v in recording.box],
+        "floor": bool(recording.floor),
+        "n_frames": int(recording.n_frames),
+        "n_modules": int(recording.positions.shape[1]),
         "n_channels": int(recording.scents.shape[1]),
         "cycles": [int(c) for c in recording.cycles],
-        "metric_names": recording.metric_names(), "series": series,
+        "metric_names": recording.metric_names(),
+        "series": series,
         "positions": pack_array(recording.positions, along_time=True),
         "modes": pack_array(recording.modes, along_time=True),
         "scents": pack_array(scents, along_time=True),

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -108,8 +109,10 @@ class Task:
             return np.ones((len(self.modes), self.n_channels), dtype=np.int64)
         table = np.array(self.mode_roles, dtype=np.int64)
         if table.shape != (len(self.modes), self.n_channels):
-            raise ValueError(f"{self.task_id()}: mode_roles has shape {table.shape}; allowed: "
-                             f"({len(self.modes)}, {self.n_channels}), one role per mode and channel")
+            raise ValueError(
+                f"{self.task_id()}: mode_roles has shape {table.shape}; allowed: "
+                f"({len(self.modes)}, {self.n_channels}), one role per mode and channel"
+            )
         return table
 
     # ------------------------------------------------------------------ hooks

@@ -60,8 +60,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..layouts import Layout, blob_sites, place_in_box
 from ..core.kernels import EMIT, RELAY
+from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, branch_settle, measure_tree
 
@@ -170,16 +170,30 @@ class Branch(Task):
 
     def _measure(self, world):
         size, edges, points, levels, children, dsum, dcount, leaves = measure_tree(
-            world.grid, world.cell, world.mode, world.n_modules, world.dir_delta, self._root_now(world),
-            self.params.min_gap, *self._scratch)
+            world.grid,
+            world.cell,
+            world.mode,
+            world.n_modules,
+            world.dir_delta,
+            self._root_now(world),
+            self.params.min_gap,
+            *self._scratch,
+        )
         tree = size > 0 and edges == size - 1
         mode = world.mode
-        return {"size": int(size), "tree": bool(tree), "points": int(points), "levels": int(levels),
-                "branches_per_point": children / points if points else 0.0,
-                "point_distance": dsum / dcount if dcount else 0.0, "leaves": int(leaves),
-                "nodes": int(((mode == NODE) | (mode == INODE)).sum()), "seeds": int((mode == SEED).sum()),
-                "searching": int(((mode == SLEEP) | (mode == SEARCH)).sum()),
-                "complete": bool(tree and levels >= self.params.target_levels)}
+        return {
+            "size": int(size),
+            "tree": bool(tree),
+            "points": int(points),
+            "levels": int(levels),
+            "branches_per_point": children / points if points else 0.0,
+            "point_distance": dsum / dcount if dcount else 0.0,
+            "leaves": int(leaves),
+            "nodes": int(((mode == NODE) | (mode == INODE)).sum()),
+            "seeds": int((mode == SEED).sum()),
+            "searching": int(((mode == SLEEP) | (mode == SEARCH)).sum()),
+            "complete": bool(tree and levels >= self.params.target_levels),
+        }
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
@@ -187,24 +201,37 @@ class Branch(Task):
     def reward_terms(self, world, moved):
         n = world.n_modules
         prev = getattr(self, "_previous", self._last)
-        return {"grown": (self._last["size"] - prev["size"]) / n,
-                "levels": 0.5 * (self._last["levels"] - prev["levels"]),
-                "success": 1.0 if self._last["complete"] else 0.0,
-                "time": -self.params.time_penalty}
+        return {
+            "grown": (self._last["size"] - prev["size"]) / n,
+            "levels": 0.5 * (self._last["levels"] - prev["levels"]),
+            "success": 1.0 if self._last["complete"] else 0.0,
+            "time": -self.params.time_penalty,
+        }
 
     def metrics(self, world):
         m = self._last
-        return {"tree_size": float(m["size"]), "tree": float(m["tree"]), "branch_points": float(m["points"]),
-                "levels": float(m["levels"]), "branches_per_point": float(m["branches_per_point"]),
-                "point_distance": float(m["point_distance"]), "leaves": float(m["leaves"]),
-                "used_share": m["size"] / world.n_modules, "nodes": float(m["nodes"]),
-                "seeds": float(m["seeds"]), "searching": float(m["searching"]),
-                "success": float(m["complete"])}
+        return {
+            "tree_size": float(m["size"]),
+            "tree": float(m["tree"]),
+            "branch_points": float(m["points"]),
+            "levels": float(m["levels"]),
+            "branches_per_point": float(m["branches_per_point"]),
+            "point_distance": float(m["point_distance"]),
+            "leaves": float(m["leaves"]),
+            "used_share": m["size"] / world.n_modules,
+            "nodes": float(m["nodes"]),
+            "seeds": float(m["seeds"]),
+            "searching": float(m["searching"]),
+            "success": float(m["complete"]),
+        }
 
     def kernels(self, world):
         root = self.first_node if self.params.initial_node else -1
-        return TaskKernels(no_sensor, branch_settle, (root, self.params.min_gap, self.params.target_levels,
-                                                      np.zeros((9, world.n_modules), dtype=np.int64)))
+        return TaskKernels(
+            no_sensor,
+            branch_settle,
+            (root, self.params.min_gap, self.params.target_levels, np.zeros((9, world.n_modules), dtype=np.int64)),
+        )
 
     def success(self, world):
         return self._last["complete"]

@@ -11,8 +11,24 @@ SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
 
 
 @kernel
-def measure_tree(grid, cell, mode, n_modules, dir_delta, root, min_gap, degree, parent, queue, arm, longc,
-                 real_up, real_d, any_d, level):
+def measure_tree(
+    grid,
+    cell,
+    mode,
+    n_modules,
+    dir_delta,
+    root,
+    min_gap,
+    degree,
+    parent,
+    queue,
+    arm,
+    longc,
+    real_up,
+    real_d,
+    any_d,
+    level,
+):
     """Breadth-first search of the grown piece from ``root`` and its branching levels (O(N)).
 
     A module is grown when its mode is SEED, FINAL, NODE or INODE. Scratch (N,) arrays are
@@ -127,6 +143,21 @@ def branch_settle(grid, cell, mode, anchored, dir_delta, cycle, test):
                 root = n
                 break
     size, edges, _, levels, _, _, _, _ = measure_tree(
-        grid, cell, mode, n_modules, dir_delta, root, min_gap, scratch[0], scratch[1], scratch[2], scratch[3],
-        scratch[4], scratch[5], scratch[6], scratch[7], scratch[8])
+        grid,
+        cell,
+        mode,
+        n_modules,
+        dir_delta,
+        root,
+        min_gap,
+        scratch[0],
+        scratch[1],
+        scratch[2],
+        scratch[3],
+        scratch[4],
+        scratch[5],
+        scratch[6],
+        scratch[7],
+        scratch[8],
+    )
     return size > 0 and edges == size - 1 and levels >= target_levels

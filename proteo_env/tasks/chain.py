@@ -36,9 +36,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.kernels import EMIT, RELAY
 from ..core.structure import StructureProbe
 from ..layouts import Layout, blob_sites, place_in_box
-from ..core.kernels import EMIT, RELAY
 from .base import Task, TaskKernels, no_sensor
 from .chain_kernels import chain_settle
 
@@ -117,23 +117,28 @@ class Chain(Task):
         n = world.n_modules
         thin = int((degree <= 2).sum())
         complete = edges == n - 1 and thin == n and thin_piece == n
-        return {"thin": thin, "max_degree": int(degree.max()), "chain_length": thin_piece,
-                "complete": complete}
+        return {"thin": thin, "max_degree": int(degree.max()), "chain_length": thin_piece, "complete": complete}
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
 
     def reward_terms(self, world, moved):
         n = world.n_modules
-        return {"thin": (self._last["thin"] - self._previous["thin"]) / n,
-                "success": 1.0 if self._last["complete"] else 0.0,
-                "time": -self.params.time_penalty}
+        return {
+            "thin": (self._last["thin"] - self._previous["thin"]) / n,
+            "success": 1.0 if self._last["complete"] else 0.0,
+            "time": -self.params.time_penalty,
+        }
 
     def metrics(self, world):
         m = self._last
-        return {"chain_length": float(m["chain_length"]), "thin_share": m["thin"] / world.n_modules,
-                "max_degree": float(m["max_degree"]), "components": float(world.n_components()),
-                "success": float(m["complete"])}
+        return {
+            "chain_length": float(m["chain_length"]),
+            "thin_share": m["thin"] / world.n_modules,
+            "max_degree": float(m["max_degree"]),
+            "components": float(world.n_components()),
+            "success": float(m["complete"]),
+        }
 
     def success(self, world):
         return self._last["complete"]

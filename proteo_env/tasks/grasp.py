@@ -62,9 +62,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.kernels import EMIT, RELAY
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
-from ..core.kernels import EMIT, RELAY
 from .base import Task, TaskKernels, no_sensor
 from .grasp_kernels import GraspSurface, grasp_hold, grasp_settle
 
@@ -181,7 +181,7 @@ class GraspLayout(Layout):
 def _fcc_grid(r: float) -> np.ndarray:
     """FCC sites of the cube ``[-r, r]^3`` around the origin."""
     n = int(np.ceil(r)) + 1
-    g = np.mgrid[-n:n + 1, -n:n + 1, -n:n + 1].reshape(3, -1).T
+    g = np.mgrid[-n : n + 1, -n : n + 1, -n : n + 1].reshape(3, -1).T
     return g[g.sum(axis=1) % 2 == 0]
 
 
@@ -192,7 +192,7 @@ def object_offsets(shape: str, size: float, aspect, rng: np.random.Generator) ->
         g = _fcc_grid(float(half.max()))
         return g[(np.abs(g) <= half + 1e-9).all(axis=1)]
     g = _fcc_grid(size)
-    ball = g[(g ** 2).sum(axis=1) <= size * size + 1e-9]
+    ball = g[(g**2).sum(axis=1) <= size * size + 1e-9]
     if shape == "sphere":
         return ball
     return blob_sites(len(ball), rng)
@@ -298,8 +298,9 @@ class Grasp(Task):
         size = tuple(int(v) for v in hi - lo + 1)
         mask = np.zeros(len(base), dtype=bool)
         mask[seeds] = True
-        self._built = GraspLayout(size=size, modules=base + shift, object_sites=obj + shift, seed_mask=mask,
-                                  direction=direction, hint=hint)
+        self._built = GraspLayout(
+            size=size, modules=base + shift, object_sites=obj + shift, seed_mask=mask, direction=direction, hint=hint
+        )
         return self._built
 
     def initial_modes(self, layout):
@@ -346,9 +347,13 @@ class Grasp(Task):
         towards_base = -(SIDES @ np.asarray(self._direction, dtype=np.float64))
         side = np.argmax(rel @ SIDES.T + 1e-6 * towards_base[None, :], axis=1).astype(np.int64)
         p = self.params
-        self.surface = GraspSurface(cell=np.ascontiguousarray(self._surface_cell, dtype=np.int64), side=side,
-                                    n_sides=len(np.unique(side)), coverage_threshold=float(p.coverage_threshold),
-                                    surround_threshold=float(p.surround_threshold))
+        self.surface = GraspSurface(
+            cell=np.ascontiguousarray(self._surface_cell, dtype=np.int64),
+            side=side,
+            n_sides=len(np.unique(side)),
+            coverage_threshold=float(p.coverage_threshold),
+            surround_threshold=float(p.surround_threshold),
+        )
         """The object's surface sites and the success thresholds (:class:`GraspSurface`)."""
         self._gap_field = self._hop_field(world)
 
@@ -372,8 +377,13 @@ class Grasp(Task):
     def _measure(self, world) -> dict:
         contact, coverage, surround, success = grasp_hold(world.grid, self.surface)
         gap = int(self._gap_field[world.cell[: world.n_agents]].min())
-        return {"gap": gap, "contact": int(contact), "coverage": float(coverage), "surround": float(surround),
-                "success": bool(success)}
+        return {
+            "gap": gap,
+            "contact": int(contact),
+            "coverage": float(coverage),
+            "surround": float(surround),
+            "success": bool(success),
+        }
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
@@ -384,16 +394,23 @@ class Grasp(Task):
 
     def reward_terms(self, world, moved):
         p, now, before = self.params, self._last, self._previous
-        return {"reach": (before["gap"] - now["gap"]) / self._gap0,
-                "coverage": p.coverage_weight * (now["coverage"] - before["coverage"]),
-                "surround": p.surround_weight * (now["surround"] - before["surround"]),
-                "success": 1.0 if now["success"] else 0.0,
-                "time": -p.time_penalty}
+        return {
+            "reach": (before["gap"] - now["gap"]) / self._gap0,
+            "coverage": p.coverage_weight * (now["coverage"] - before["coverage"]),
+            "surround": p.surround_weight * (now["surround"] - before["surround"]),
+            "success": 1.0 if now["success"] else 0.0,
+            "time": -p.time_penalty,
+        }
 
     def metrics(self, world):
         m = self._last
-        return {"gap": float(m["gap"]), "contact": float(m["contact"]), "coverage": float(m["coverage"]),
-                "surround": float(m["surround"]), "success": float(m["success"])}
+        return {
+            "gap": float(m["gap"]),
+            "contact": float(m["contact"]),
+            "coverage": float(m["coverage"]),
+            "surround": float(m["surround"]),
+            "success": float(m["success"]),
+        }
 
     def kernels(self, world):
         return TaskKernels(no_sensor, grasp_settle, self.surface)

@@ -91,15 +91,19 @@ class LocomotionParams:
 
         if not isinstance(self.n_modules, int) or self.n_modules < 2:
             bad("n_modules", "an integer >= 2")
-        for name, low in (("step_height", 0), ("distance", 1), ("tunnel_height", 0), ("tunnel_length", 1),
-                          ("margin", 1)):
+        for name, low in (
+            ("step_height", 0),
+            ("distance", 1),
+            ("tunnel_height", 0),
+            ("tunnel_length", 1),
+            ("margin", 1),
+        ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 bad(name, f"an integer >= {low}")
         if self.tunnel_height == 1:
             bad("tunnel_height", "0 (no tunnel) or an integer >= 2 (one free layer leaves no module a pivot)")
-        if self.room is not None and (isinstance(self.room, bool) or not isinstance(self.room, int)
-                                      or self.room < 1):
+        if self.room is not None and (isinstance(self.room, bool) or not isinstance(self.room, int) or self.room < 1):
             bad("room", "None or an integer >= 1")
         if self.time_penalty < 0:
             bad("time_penalty", "a number >= 0")
@@ -126,10 +130,12 @@ class Locomotion(Task):
         roof = p.step_height + p.tunnel_height
         top = max(int(blob[:, 2].max()), p.step_height, roof if p.tunnel_height else 0)
         size = (finish + room, int(blob[:, 1].max()) + 1 + p.margin, top + 1 + p.margin)
-        grid = np.mgrid[face:size[0], 0:size[1], 0:size[2]].reshape(3, -1).T
+        grid = np.mgrid[face : size[0], 0 : size[1], 0 : size[2]].reshape(3, -1).T
         grid = grid[grid.sum(axis=1) % 2 == 0]
-        solid = grid[(grid[:, 2] < p.step_height)
-                     | (bool(p.tunnel_height) & (grid[:, 2] == roof) & (grid[:, 0] < face + p.tunnel_length))]
+        solid = grid[
+            (grid[:, 2] < p.step_height)
+            | (bool(p.tunnel_height) & (grid[:, 2] == roof) & (grid[:, 0] < face + p.tunnel_length))
+        ]
         self._finish = finish
         return Layout(size=size, modules=blob, solid=solid, floor=True)
 
@@ -163,16 +169,22 @@ class Locomotion(Task):
         return np.broadcast_to(GOAL, (world.n_agents, 3))
 
     def reward_terms(self, world, moved):
-        return {"progress": (self._last - self._previous) / self._course,
-                "success": 1.0 if self._success else 0.0,
-                "time": -self.params.time_penalty}
+        return {
+            "progress": (self._last - self._previous) / self._course,
+            "success": 1.0 if self._success else 0.0,
+            "time": -self.params.time_penalty,
+        }
 
     def metrics(self, world):
         x = world.positions[:, 0]
         distance = self._last - self._start
-        return {"distance": distance, "speed": distance / max(self._cycles, 1),
-                "beyond": float((x >= self._finish).mean()), "components": float(world.n_components()),
-                "success": float(self._success)}
+        return {
+            "distance": distance,
+            "speed": distance / max(self._cycles, 1),
+            "beyond": float((x >= self._finish).mean()),
+            "components": float(world.n_components()),
+            "success": float(self._success),
+        }
 
     def success(self, world):
         return self._success

@@ -67,8 +67,10 @@ class SandboxParams:
         if not 1 <= self.n_channels <= 4:
             raise ValueError(f"n_channels={self.n_channels!r} is not allowed; allowed: 1..4")
         if self.layout not in GENERATORS and not self.layout.endswith(".txt"):
-            raise ValueError(f"layout={self.layout!r} is not allowed; allowed: {', '.join(GENERATORS)} "
-                             "or a path to a .txt layout file")
+            raise ValueError(
+                f"layout={self.layout!r} is not allowed; allowed: {', '.join(GENERATORS)} "
+                "or a path to a .txt layout file"
+            )
 
 
 class Sandbox(Task):

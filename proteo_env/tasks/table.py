@@ -100,9 +100,28 @@ from ..core.kernels import EMIT, RELAY
 from ..core.lattice import DIRECTIONS
 from ..layouts import Layout
 from .base import Task, TaskKernels
-from .table_kernels import (AROOT, CREATIONS, CYCLE, DISBANDS, FINAL, FIXED, IROOT, ROOT, SEED, SHIFT, SINCE, SLEEP,
-                            TableLedger, grounded_legs, region_loads, root_loads, table_after_cycle, table_sense,
-                            table_settle, weight_carried)
+from .table_kernels import (
+    AROOT,
+    CREATIONS,
+    CYCLE,
+    DISBANDS,
+    FINAL,
+    FIXED,
+    IROOT,
+    ROOT,
+    SEED,
+    SHIFT,
+    SINCE,
+    SLEEP,
+    TableLedger,
+    grounded_legs,
+    region_loads,
+    root_loads,
+    table_after_cycle,
+    table_sense,
+    table_settle,
+    weight_carried,
+)
 
 MODES = ("FIXED", "ROOT", "IROOT", "AROOT", "SLEEP", "SEARCH", "SEED", "FINAL", "DISBAND")
 ACTIVE = (ROOT, AROOT)
@@ -160,7 +179,7 @@ class TableParams:
             bad("board_size", self.board_size, f"an integer >= root_spacing + 1 = {self.root_spacing + 1}")
         if not isinstance(self.depth, int) or self.depth < 1:
             bad("depth", self.depth, "an integer >= 1")
-        room = (self.board_size ** 2 // 2) * self.depth
+        room = (self.board_size**2 // 2) * self.depth
         if not isinstance(self.n_spares, int) or not 1 <= self.n_spares <= room // 2:
             bad("n_spares", self.n_spares, f"an integer in [1, {room // 2}] (half the room under the board)")
         schedule = _check_schedule(self.schedule)
@@ -201,8 +220,11 @@ def _check_schedule(schedule) -> tuple:
         ok = False
     if ok:
         ok = all(isinstance(c, int) and not isinstance(c, bool) for c, _, _ in entries)
-        ok = ok and all(isinstance(w, (int, float)) and not isinstance(w, bool) and w >= 0
-                        for _, w1, w2 in entries for w in (w1, w2))
+        ok = ok and all(
+            isinstance(w, (int, float)) and not isinstance(w, bool) and w >= 0
+            for _, w1, w2 in entries
+            for w in (w1, w2)
+        )
         ok = ok and entries[0][0] == 0 and all(a[0] < b[0] for a, b in zip(entries, entries[1:]))
     if not ok:
         raise ValueError(f"schedule={schedule!r} is not allowed; allowed: {allowed}")
@@ -254,14 +276,15 @@ class Table(Task):
     def build_layout(self, rng):
         p = self.params
         roots, fixed = board_sites(p)
-        return Layout(size=(p.board_size, p.board_size, p.depth + 1), modules=spare_sites(p), roots=roots,
-                      fixed=fixed, floor=True)
+        return Layout(
+            size=(p.board_size, p.board_size, p.depth + 1), modules=spare_sites(p), roots=roots, fixed=fixed, floor=True
+        )
 
     def initial_modes(self, layout):
         modes = np.full(len(layout.positions), FIXED, dtype=np.int32)
         n_spares, n_roots = len(layout.modules), len(layout.roots)
         modes[:n_spares] = SLEEP
-        modes[n_spares:n_spares + n_roots] = IROOT
+        modes[n_spares : n_spares + n_roots] = IROOT
         return modes
 
     # ------------------------------------------------------------------ episode state
@@ -270,16 +293,25 @@ class Table(Task):
         roots = np.arange(p.n_spares, world.n_agents)
         r = len(roots)
         self.ledger = TableLedger(
-            roots=roots, left=world.positions[roots, 0] < p.board_size / 2,
+            roots=roots,
+            left=world.positions[roots, 0] < p.board_size / 2,
             down_delta=np.ascontiguousarray(world.dir_delta[DOWN]),
             shift_cycles=np.array(p.shift_cycles, dtype=np.int64),
             schedule_weights=np.array([entry[1:] for entry in p.schedule], dtype=np.float64),
-            depth=p.depth, stable_window=p.stable_window, load_cap=float(p.load_cap),
-            active=np.isin(world.mode[roots], ACTIVE), grounded=np.zeros(r, dtype=np.bool_),
-            signature=np.zeros((2, r), dtype=np.bool_), clock=np.zeros(5, dtype=np.int64),
-            weights=np.array(p.schedule[0][1:], dtype=np.float64), restabilise=np.full(len(p.schedule), -1.0),
-            scratch=np.zeros((3, world.n_modules), dtype=np.int64), stamp=np.zeros(1, dtype=np.int64),
-            f_max=float(p.f_max), carry=self.carry_weight)
+            depth=p.depth,
+            stable_window=p.stable_window,
+            load_cap=float(p.load_cap),
+            active=np.isin(world.mode[roots], ACTIVE),
+            grounded=np.zeros(r, dtype=np.bool_),
+            signature=np.zeros((2, r), dtype=np.bool_),
+            clock=np.zeros(5, dtype=np.int64),
+            weights=np.array(p.schedule[0][1:], dtype=np.float64),
+            restabilise=np.full(len(p.schedule), -1.0),
+            scratch=np.zeros((3, world.n_modules), dtype=np.int64),
+            stamp=np.zeros(1, dtype=np.int64),
+            f_max=float(p.f_max),
+            carry=self.carry_weight,
+        )
         """The episode's bookkeeping (:class:`TableLedger`)."""
         book = self.ledger
         grounded_legs(world.grid, world.cell, world.mode, world.anchored, book)
@@ -321,14 +353,21 @@ class Table(Task):
         load_left, load_right = region_loads(book)
         start = max(clock[SINCE], p.shift_cycles[clock[SHIFT]])
         stable = self._complete() and clock[CYCLE] - start >= p.stable_window
-        out = {"weight_left": float(book.weights[0]), "weight_right": float(book.weights[1]),
-               "legs_left": float(legs_left), "legs_right": float(legs_right),
-               "grounded_legs": float(legs_left + legs_right),
-               "active_left": float((active & left).sum()),
-               "active_right": float((active & ~left).sum()),
-               "load_left": float(load_left), "load_right": float(load_right),
-               "support": self._support(), "stable": float(stable),
-               "leg_creations": float(clock[CREATIONS]), "leg_disbands": float(clock[DISBANDS])}
+        out = {
+            "weight_left": float(book.weights[0]),
+            "weight_right": float(book.weights[1]),
+            "legs_left": float(legs_left),
+            "legs_right": float(legs_right),
+            "grounded_legs": float(legs_left + legs_right),
+            "active_left": float((active & left).sum()),
+            "active_right": float((active & ~left).sum()),
+            "load_left": float(load_left),
+            "load_right": float(load_right),
+            "support": self._support(),
+            "stable": float(stable),
+            "leg_creations": float(clock[CREATIONS]),
+            "leg_disbands": float(clock[DISBANDS]),
+        }
         for k, value in enumerate(book.restabilise):
             out[f"restabilise_{k}"] = float(value)
         out["success"] = float(self.success(world))
