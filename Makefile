@@ -12,7 +12,7 @@ install: $(BIN)/python
 	$(BIN)/pip install -q -c constraints.txt torch==2.13.0
 	$(BIN)/pip install -q -c constraints.txt -e ".[test,train]"
 
-# The tests also cover Ray (the distributed extra, docs/distributed.md).
+# The tests also cover Ray (the distributed extra, docs/guides/distributed.md).
 install-distributed: install
 	$(BIN)/pip install -q -c constraints.txt -e ".[test,train,distributed]"
 
@@ -32,22 +32,22 @@ bench: install
 	$(BIN)/python benchmarks/mobility.py
 
 eval: install
-	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/learning.md --publish README.md
+	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/guides/learning.md
 
 # The multi-seed study at control level move (python -m training.study): plain PPO (16 M
 # agent-steps per run), then the clones of the rules (training/imitate.py) and PPO kickstarted
 # from them (6 M agent-steps), three training seeds each, about 80 minutes on 2 cores; then its
 # evaluation: the table with the spread over training seeds goes into docs/eval/study,
-# docs/learning.md and README.md; the same checkpoints at twice their size into
-# docs/eval/study_larger and docs/learning.md.
+# docs/guides/learning.md and README.md; the same checkpoints at twice their size into
+# docs/eval/study_larger and docs/guides/learning.md.
 learning-results: install
 	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
 	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
 	$(BIN)/python -m training.study --recipes "[imitation]" --level full --tasks "[chain, grasp]" --seeds "[0]" --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
-		--publish docs/learning.md --publish README.md
+		--publish docs/guides/learning.md --publish README.md
 	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \
-		--publish docs/learning.md
+		--publish docs/guides/learning.md
 
 # One task of the study, every recipe (make learning-task TASK=grasp, about 15 minutes): its
 # checkpoints and curves are replaced; the evaluation goes to docs/eval/study_<task> (not published).

@@ -57,7 +57,7 @@ TOUCHSEEDs emit (see ``prefer_touch`` below); every module that relays, relays b
 
 Our additions to the paper's rules (all on by default; ``relocate=False, retire=False,
 straight=False, wrap_forward=False, prefer_touch=False`` gives the paper's rules alone;
-``docs/grasp_evidence.md`` measures both):
+``docs/evidence/grasp.md`` measures both):
 
 ``retire``: a finger that misses the object grows on until it meets the wall of the box,
 and a seed buried in the base (its growth sites are pockets no searcher can roll into)

@@ -61,7 +61,7 @@ class LocomotionPolicy(KernelPolicy):
             this many modules (of the 4 seen next to both here and there) when there are any,
             so the robot stays two layers thick rather than thinning into strands (0: off; 2:
             52 and 55 of 80 robots of 20 and 40 modules over a step 2 high, against 53 and 43
-            with 0; docs/locomotion_evidence.md).
+            with 0; docs/evidence/locomotion.md).
     """
 
     name = "locomotion"

@@ -16,7 +16,7 @@ The policy runs through the array API (``env.observe_arrays`` / ``env.step_array
 
 Usage::
 
-    .venv/bin/python benchmarks/branch_evidence.py --out docs/branch_evidence.md
+    .venv/bin/python benchmarks/branch_evidence.py --out docs/evidence/branch.md
     .venv/bin/python benchmarks/branch_evidence.py --seeds 3 --sizes 60 --Ts 4 --Bs 2
 """
 

@@ -17,7 +17,7 @@ per-agent observations as ``act`` without building dicts; the random one draws w
 
 Usage::
 
-    .venv/bin/python benchmarks/chain_evidence.py --out docs/chain_evidence.md
+    .venv/bin/python benchmarks/chain_evidence.py --out docs/evidence/chain.md
     .venv/bin/python benchmarks/chain_evidence.py --seeds 5 --sizes 30 --models sphere --scaling-sizes 50 100 \
         --scaling-models sphere
 

@@ -1,6 +1,6 @@
 """Evidence for the grasp task: success, coverage and timing per object shape and size.
 
-Runs four suites and writes one Markdown report (the tables of ``docs/grasp_evidence.md``)
+Runs four suites and writes one Markdown report (the tables of ``docs/evidence/grasp.md``)
 plus, optionally, the per-episode rows as JSON:
 
 0. the hand-coded grasp policy, per motion model (``sphere``, ``minimal``), object shape and

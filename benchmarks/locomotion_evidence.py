@@ -1,7 +1,7 @@
 """Evidence for the locomotion task: success, cycles and speed over seeds, step heights, a
 tunnel, robot sizes and motion models, with the hand-coded policy in compiled rollouts.
 
-Writes ``docs/locomotion_evidence.md`` (the tables) and ``docs/figures/locomotion_evidence.png``
+Writes ``docs/evidence/locomotion.md`` (the tables) and ``docs/figures/locomotion_evidence.png``
 (success and speed against step height).
 
 Usage::
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--max-cycles", type=int, default=3000)
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "locomotion_evidence.md")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "evidence" / "locomotion.md")
     parser.add_argument("--figure", type=Path, default=ROOT / "docs" / "figures" / "locomotion_evidence.png")
     args = parser.parse_args(argv)
     started = time.perf_counter()

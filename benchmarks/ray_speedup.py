@@ -1,5 +1,5 @@
 """Speed-up of proteo eval's episodes and of one CMA-ES generation on Ray (2 workers) against serial,
-and Ray's overhead per task, measured in one run (docs/distributed.md).
+and Ray's overhead per task, measured in one run (docs/guides/distributed.md).
 
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 python benchmarks/ray_speedup.py
 

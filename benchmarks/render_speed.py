@@ -9,7 +9,7 @@ projects and sorts them and rasterises them with matplotlib's Agg.
 
 Usage::
 
-    python benchmarks/render_speed.py --sizes 200 2000 20000 --frames 10 --markdown docs/render_speed.md
+    python benchmarks/render_speed.py --sizes 200 2000 20000 --frames 10 --markdown docs/speed/render.md
 
 Results go to stdout as a markdown table and, with ``--json``/``--markdown``, to files together
 with the machine and library versions.

@@ -38,7 +38,7 @@ Usage::
     python benchmarks/suite.py --sizes 100 1000 10000 100000 --threads 1 --out docs/speed/suite
 
 ``--out docs/speed/suite`` writes ``suite.json`` (machine, arguments, every row), ``suite.md``
-(the table) and ``suite.png`` (the log-log plot); ``docs/benchmarks.md`` explains them.
+(the table) and ``suite.png`` (the log-log plot); ``docs/speed/engine.md`` explains them.
 """
 
 from __future__ import annotations

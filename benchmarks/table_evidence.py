@@ -1,4 +1,4 @@
-"""Evidence for the table task (paper section 4.3), written to ``docs/table_evidence.md``.
+"""Evidence for the table task (paper section 4.3), written to ``docs/evidence/table.md``.
 
 Measures, over many seeds of the paper's experiment (``configs/table.yaml``):
 
@@ -14,7 +14,7 @@ Measures, over many seeds of the paper's experiment (``configs/table.yaml``):
 Regenerate (about 10 minutes on 2 busy cores; single-threaded numba is much faster for one
 world than the default thread pool)::
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/table_evidence.py --seeds 10 --out docs/table_evidence.md
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/table_evidence.py --seeds 10 --out docs/evidence/table.md
 """
 
 from __future__ import annotations
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
         "",
         "```",
         f"NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/table_evidence.py --seeds {args.seeds} "
-        f"--out docs/table_evidence.md",
+        f"--out docs/evidence/table.md",
         "```",
         "",
         f"Experiment: `{_shown(args.config)}` "

@@ -15,7 +15,7 @@ CPU rasteriser: no GPU) and measures:
 
 Usage::
 
-    python benchmarks/viewer_speed.py --sizes 200 2000 20000 --markdown docs/viewer_speed.md
+    python benchmarks/viewer_speed.py --sizes 200 2000 20000 --markdown docs/speed/viewer.md
 
 Results go to stdout as a markdown table and, with ``--json``/``--markdown``, to files together
 with the machine, the browser and the load average.
@@ -176,8 +176,8 @@ def main(argv=None) -> int:
                 "from navigation start to the first picture (data inflated). Frames per second counts "
                 "pictures drawn per wall-clock second; script is the JavaScript part of a frame (seek, "
                 "instance update, draw calls); the rest is rasterising and compositing. The machine may "
-                "be shared: its load is recorded. See `docs/viewer.md` for the viewer and "
-                "`docs/render_speed.md` for the matplotlib pictures.\n\n"
+                "be shared: its load is recorded. See `docs/guides/viewer.md` for the viewer and "
+                "`docs/speed/render.md` for the matplotlib pictures.\n\n"
                 f"{text}\n\nMachine: {described}.\n"
             )
     return 0

@@ -2,7 +2,7 @@
 hand-made layouts and on real runs (checked by an independent computation from sites and
 modes), the policy grows at least two levels of branching, and it acts on observations alone.
 
-Limits come from measurements (``benchmarks/branch_evidence.py``, ``docs/branch_evidence.md``):
+Limits come from measurements (``benchmarks/branch_evidence.py``, ``docs/evidence/branch.md``):
 40-module blobs with ``T = 4``, ``B = 3`` reach a tree with 2 levels of branching in 37..52
 cycles under ``minimal`` (seeds 0..9, measured while writing this test); the limit here is
 400. Seeds are 0..5, not picked. Under the other models the same instance is slower and less

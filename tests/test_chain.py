@@ -1,7 +1,7 @@
 """The chain task (paper 4.1) with its hand-coded policy: the chain really forms, the random
 policy does not form it, and the policy acts on observations alone.
 
-Limits come from measurements (``benchmarks/chain_evidence.py``, ``docs/chain_evidence.md``):
+Limits come from measurements (``benchmarks/chain_evidence.py``, ``docs/evidence/chain.md``):
 30-module blobs form the chain in a median 174 (``minimal``), 231 (``rounded``) and 226
 (``sphere``) cycles, the slowest of seeds 0..19 in 260; the limit here, 600, is more than
 twice that. Seeds are 0..4, not picked. ``rhombic`` is left out: compact parts of a blob

@@ -69,17 +69,46 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
         )
 
 
-def test_publish_puts_the_table_between_the_markers_and_refuses_a_page_without_them(tmp_path):
-    from training.evaluate import PUBLISH_END, publish
+def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
+    from training.evaluate import PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
 
+    def result(task, policy, kind, successes, cycles):
+        return PolicyResult(
+            task=task,
+            policy=policy,
+            kind=kind,
+            source="",
+            level="move",
+            returns=[1.0] * len(cycles),
+            successes=successes,
+            cycles=cycles,
+        )
+
+    results = [
+        result("chain-v1", "chain", "hand-coded", [True, True], [80, 90]),
+        result("chain-v1", "random", "random", [False, False], [300, 300]),
+        result("chain-v1", "ppo-move", "learned", [True, False], [40, 300]),
+        result("grasp-v0", "grasp", "hand-coded", [False, True], [300, 100]),
+    ]
+    assert summary_table(results).splitlines() == [
+        "| task | rules | ppo-move |",
+        "|---|---|---|",
+        "| chain-v1 | 2/2, 85 | 1/2, 40 |",
+        "| grasp-v0 | 1/2, 100 | – |",
+    ]
     page = tmp_path / "page.md"
     page.write_text(
-        "intro\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n"
+        "intro\n<!-- proteo eval --out docs/eval/x --summary -->\nold\n<!-- end of proteo eval table -->\n"
+        "middle\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n"
     )
-    publish("| new |", "docs/eval/x", [page])
-    assert page.read_text() == (f"intro\n<!-- proteo eval --out docs/eval/x -->\n| new |\n{PUBLISH_END}\nrest\n")
+    publish(results, "docs/eval/x", [page])
+    assert page.read_text() == (
+        f"intro\n<!-- proteo eval --out docs/eval/x --summary -->\n{summary_table(results)}\n{PUBLISH_END}\n"
+        f"middle\n<!-- proteo eval --out docs/eval/x -->\n{markdown_table(results)}\n{PUBLISH_END}\nrest\n"
+    )
     other = tmp_path / "other.md"
     other.write_text("no markers\n")
-    with pytest.raises(ValueError, match="no '<!-- proteo eval --out docs/eval/x -->'"):
-        publish("| t |", "docs/eval/x", [page, other])
-    assert "| new |" in page.read_text()  # nothing written when one file lacks the markers
+    before = page.read_text()
+    with pytest.raises(ValueError, match="no '<!-- proteo eval --out docs/eval/y -->'"):
+        publish(results, "docs/eval/y", [page, other])
+    assert page.read_text() == before  # nothing written when one file lacks the markers

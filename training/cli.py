@@ -63,9 +63,21 @@ def _run(
         if wants_recording
         else None
     )
-    with tqdm(total=env.max_cycles, desc=label, unit="cycle", leave=False) as bar:
+    # numba compiles the kernels during the reset and the first cycle (once per machine: the
+    # cache is on disk); the bar says so, then restarts its clock so its estimate is the cycles'
+    with tqdm(total=env.max_cycles, desc=f"{label}: compiling (first run only)", unit="cycle", leave=False) as bar:
+        compiling = True
+
+        def progress(info) -> None:
+            nonlocal compiling
+            if compiling:  # the first cycle is done, so is the compiling
+                compiling = False
+                bar.set_description(label)
+                bar.reset()
+            bar.update(1)
+
         started = time.perf_counter()
-        result = run_episode(env, policy, seed=seed, progress=lambda info: bar.update(1), observe=recorder)
+        result = run_episode(env, policy, seed=seed, progress=progress, observe=recorder)
         seconds = time.perf_counter() - started
     if recorder is not None:
         recording = recorder.recording(success=result.success)

@@ -34,7 +34,7 @@ Each episode is one job (:class:`EpisodeJob`): ``--ray`` runs them as Ray tasks,
 Ray instance (``--workers N`` CPUs) or a cluster (``--address``), with results identical to
 the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
 an interrupted evaluation with the same settings runs only the missing episodes
-(``--fresh`` starts over). See docs/distributed.md.
+(``--fresh`` starts over). See docs/guides/distributed.md.
 """
 
 from __future__ import annotations
@@ -655,24 +655,55 @@ def evaluate(
 
 
 PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"
+"""Where the whole table goes (:func:`markdown_table`)."""
+PUBLISH_SUMMARY_BEGIN = "<!-- proteo eval --out {out} --summary -->"
+"""Where the one-row-per-task summary goes (:func:`summary_table`)."""
 PUBLISH_END = "<!-- end of proteo eval table -->"
 
 
-def publish(table: str, out, files) -> None:
-    """Put ``table`` between the markers :data:`PUBLISH_BEGIN` (naming the ``--out`` folder) and
-    :data:`PUBLISH_END` in each of ``files`` (a markdown page that shows the table); a file
-    without the begin marker is an error that says what to add, and nothing is written."""
-    begin = PUBLISH_BEGIN.format(out=Path(out).as_posix())
+def summary_table(results: list) -> str:
+    """The results as one row per task and one column per policy (the random floor left out;
+    the hand-coded policy is the column ``rules``): successes over episodes and the mean cycles
+    to success, e.g. ``28/30, 47``."""
+    columns: dict[str, None] = {}
+    cells: dict[str, dict[str, str]] = {}
+    for r in results:
+        s = r.summary()
+        if s["kind"] == "random":
+            continue
+        column = "rules" if s["kind"] == "hand-coded" else s["policy"]
+        columns.setdefault(column)
+        cycles = f", {_fmt(s['cycles_to_success'], 0)}" if s["successes"] else ""
+        cells.setdefault(s["task"], {})[column] = f"{s['successes']}/{s['episodes']}{cycles}"
+    head = ["task", *columns]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join([task, *(row.get(c, "–") for c in columns)]) + " |" for task, row in cells.items()]
+    return "\n".join(lines)
+
+
+def publish(results: list, out, files) -> None:
+    """Put the results of ``proteo eval --out OUT`` into each of ``files`` (markdown pages):
+    the whole table (:func:`markdown_table`) between :data:`PUBLISH_BEGIN` and
+    :data:`PUBLISH_END`, the summary (:func:`summary_table`) between
+    :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever a page has those markers
+    (naming ``OUT``). A page with neither is an error that says what to add, and nothing is written."""
+    tables = {
+        PUBLISH_BEGIN.format(out=Path(out).as_posix()): markdown_table(results),
+        PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): summary_table(results),
+    }
     texts = {}
     for f in map(Path, files):
         text = f.read_text() if f.is_file() else ""
-        if begin not in text or PUBLISH_END not in text.split(begin, 1)[1]:
+        found = [begin for begin in tables if begin in text and PUBLISH_END in text.split(begin, 1)[1]]
+        for begin in found:
+            head, rest = text.split(begin, 1)
+            text = f"{head}{begin}\n{tables[begin]}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
+        if not found:
             raise ValueError(
-                f"--publish {str(f)!r}: no {begin!r} ... {PUBLISH_END!r} markers; allowed: a "
-                "markdown file that has them where the table goes"
+                f"--publish {str(f)!r}: no {' or '.join(map(repr, tables))} ... {PUBLISH_END!r} markers; "
+                "allowed: a markdown file that has them where the table goes"
             )
-        head, rest = text.split(begin, 1)
-        texts[f] = f"{head}{begin}\n{table}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
+        texts[f] = text
     for f, text in texts.items():
         f.write_text(text)
 
@@ -697,7 +728,7 @@ def main(args) -> int:
         fresh=args.fresh,
     )
     if args.publish:
-        publish(markdown_table(results), args.out, args.publish)
+        publish(results, args.out, args.publish)
     print(markdown_table(results))
     print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
     return 0

@@ -77,7 +77,7 @@ Termination
     configuration, each region's grounded legs carry ``min(W, f_max * R)`` of its weight
     (``R`` its roots: all of it when the roots suffice). Truncation at ``max_cycles``: set it past the last
     shift plus the time to re-stabilise and ``stable_window``. With the default schedule the
-    hand-coded policy succeeds after 920-1120 cycles (docs/table_evidence.md), so the env's
+    hand-coded policy succeeds after 920-1120 cycles (docs/evidence/table.md), so the env's
     default of 1000 is too short; ``configs/table.yaml`` uses 1300.
 Motion model
     Legs reach the floor only under ``minimal``. Under ``sphere``, ``rounded`` and
