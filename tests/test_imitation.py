@@ -366,3 +366,12 @@ def test_a_checkpoint_teaches_its_own_actions_and_one_of_another_task_is_refused
     assert float(log[1]["imitation/agreement_move"]) > 0.5 and read_meta(student)["teacher"] == str(clone)
     with pytest.raises(CheckpointError, match=r"was trained on task 'chain-v0'; it cannot control 'branch-v0'"):
         Teachers(proteo_env.make_batched("branch-v0", 1, control="move"), 1, str(clone))
+
+
+def test_the_distillation_weight_falls_to_distill_final_and_stays_there():
+    args = ppo.Args(distill_coef=1.0, distill_steps=1000, distill_final=0.1)
+    weights = [args.distill_weight(s) for s in (0, 500, 1000, 5000)]
+    assert weights[0] == 1.0 and abs(weights[1] - 0.55) < 1e-12 and weights[2] == weights[3] == 0.1
+    assert ppo.Args(distill_coef=1.0, distill_steps=1000).distill_weight(2000) == 0.0
+    with pytest.raises(ConfigError, match=r"distill_final=0.5 is not allowed with distill_coef=0.2"):
+        ppo.Args(distill_coef=0.2, distill_final=0.5)

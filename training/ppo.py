@@ -37,9 +37,10 @@ Kickstarting. ``init`` starts from the network of another checkpoint (a clone fr
 :mod:`training.imitate`, or a PPO run) of the same task, level, encoding and network shape.
 ``distill_coef > 0`` adds to the loss the cross-entropy between the policy and the teacher's
 action (:mod:`training.teachers`, the task's rules by default) on the learner's own states,
-weighted by ``distill_coef``, which falls linearly to zero over the first ``distill_steps``
-agent-steps (0: it stays); after that the teacher is no longer consulted and the learner is
-free to leave it behind.
+weighted by ``distill_coef``, which falls linearly to ``distill_final`` (default zero) over
+the first ``distill_steps`` agent-steps (0: it stays); at zero the teacher is no longer
+consulted and the learner is free to leave it behind, while a small ``distill_final`` keeps
+it near the teacher.
 
 Memory. ``memory`` feeds each module's previous action back as inputs
 (:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
@@ -165,7 +166,9 @@ class Args:
     distill_coef: float = 0.0
     """Weight of the cross-entropy to the teacher's action on the learner's states at the start (0: off)."""
     distill_steps: int = 0
-    """Agent-steps over which distill_coef falls linearly to zero (0: it stays)."""
+    """Agent-steps over which the weight falls linearly from distill_coef to distill_final (0: it stays)."""
+    distill_final: float = 0.0
+    """The distillation weight after distill_steps (0: the teacher is let go; at most distill_coef)."""
     curriculum: dict = field(default_factory=dict)
     """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
 
@@ -184,6 +187,11 @@ class Args:
                 "recurrent": 0,
             },
         )
+        if not 0.0 <= self.distill_final <= self.distill_coef:
+            raise ConfigError(
+                f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
+                "allowed: a number in [0, distill_coef]"
+            )
         if self.recurrent and self.arch != "shared":
             raise ConfigError(
                 f"recurrent={self.recurrent!r} is not allowed with arch={self.arch!r}; allowed: "
@@ -209,7 +217,8 @@ class Args:
         """The distillation weight after ``agent_steps`` agent-steps."""
         if self.distill_steps <= 0:
             return self.distill_coef
-        return self.distill_coef * max(0.0, 1.0 - agent_steps / self.distill_steps)
+        left = max(0.0, 1.0 - agent_steps / self.distill_steps)
+        return self.distill_final + (self.distill_coef - self.distill_final) * left
 
 
 # ---------------------------------------------------------------------- actions
