@@ -20,6 +20,8 @@ and the environment fills in the rest before the cycle.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .config import EnvConfig, check_seed
@@ -29,6 +31,30 @@ from .core.world import World
 from .layouts import Layout
 from .spaces import ActionLayout, ObservationBuffers
 from .tasks.base import Task
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one cycle gives for each of ``B`` worlds (:meth:`BatchedEnv.step_arrays`; a
+    :class:`~proteo_env.env.ProteoEnv`'s ``step_arrays`` gives one with ``B = 1``).
+
+    Attributes:
+        reward: ``(B,)`` float64, each world's team reward (the sum of its terms; every module
+            of the world receives it).
+        terminated: ``(B,)`` bool, the task succeeded: the episode ends.
+        truncated: ``(B,)`` bool, the episode reached ``max_cycles`` without success.
+        terms: ``B`` dicts of the named reward terms (name -> value).
+    """
+
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    terms: list[dict[str, float]]
+
+    @property
+    def done(self) -> np.ndarray:
+        """``(B,)`` bool: the episode ended (terminated or truncated)."""
+        return self.terminated | self.truncated
 
 
 class BatchedEnv:
@@ -251,9 +277,9 @@ class BatchedEnv:
             self.observe_arrays()
         return self._observed
 
-    def step_arrays(self, actions) -> list[dict[str, float]]:
+    def step_arrays(self, actions) -> StepResult:
         """One cycle of every world from a ``(B, A, F)`` action array (``F`` fields of the
-        control level; ``F = L`` at ``full``); the reward terms per world.
+        control level; ``F = L`` at ``full``): each world's reward, end and reward terms.
 
         A bad batch raises ``ValueError`` and changes nothing.
         """
@@ -274,7 +300,13 @@ class BatchedEnv:
         for task, world, moved, cycle in zip(self.tasks, self.worlds, self.last_moved, self.cycles.tolist()):
             task.after_cycle(world, cycle)
             terms.append(task.reward_terms(world, moved))
-        return terms
+        terminated = self.success()
+        return StepResult(
+            reward=np.array([float(sum(t.values())) for t in terms]),
+            terminated=terminated,
+            truncated=(self.cycles >= self.config.max_cycles) & ~terminated,
+            terms=terms,
+        )
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh observation arrays of every agent of every world (``B * A`` rows, world-major)."""

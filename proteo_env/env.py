@@ -8,7 +8,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .batched import BatchedEnv
+from .batched import BatchedEnv, StepResult
 from .config import EnvConfig
 from .core.world import World
 from .spaces import ModuleActionSpace, ObservationBuffers, observation_space
@@ -187,18 +187,16 @@ class ProteoEnv(ParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called after the episode ended; call reset() first")
         batch = self._action_batch(actions)
-        rewards_terms = self.step_arrays(batch)
+        result = self.step_arrays(batch)
         buffers = self.observe_arrays()
         metrics = self.batch.metrics()[0]
-        success = bool(self.batch.success()[0])
-        reward = float(sum(rewards_terms.values()))
+        success, truncated, reward = bool(result.terminated[0]), bool(result.truncated[0]), float(result.reward[0])
         info = {
             "cycle": self.cycle,
             "moved": int(self.last_moved.sum()),
-            **{f"reward/{k}": v for k, v in rewards_terms.items()},
+            **{f"reward/{k}": v for k, v in result.terms[0].items()},
             **{f"metric/{k}": v for k, v in metrics.items()},
         }
-        truncated = self.cycle >= self.max_cycles and not success
         agents = self.agents
         observations = buffers.per_agent(self.agents)
         rewards = dict.fromkeys(agents, reward)
@@ -244,12 +242,14 @@ class ProteoEnv(ParallelEnv):
         return batch.reshape(len(self.agents), len(fields)).astype(np.int64, copy=False)
 
     # ------------------------------------------------------------------ array API
-    def step_arrays(self, actions: np.ndarray) -> dict[str, float]:
+    def step_arrays(self, actions: np.ndarray) -> StepResult:
         """One cycle from an ``(A, F)`` int array of actions (rows in agent order; ``F`` fields
         of the control level, ``F = L`` at ``"full"``).
 
         Checks the batch first (a bad one raises ``ValueError`` and changes nothing), runs
-        the cycle, and returns the task's reward terms. ``self.last_moved`` says who moved.
+        the cycle, and returns its :class:`~proteo_env.batched.StepResult` (``B = 1``: the
+        team reward ``reward[0]``, ``terminated[0]``, ``truncated[0]``, the reward terms
+        ``terms[0]``). ``self.last_moved`` says who moved.
         """
         actions = np.asarray(actions)
         expected = (self.batch.n_agents, len(self.control_fields))
@@ -258,7 +258,7 @@ class ProteoEnv(ParallelEnv):
                 f"actions shape {actions.shape} is not allowed{self.batch.at_level}; "
                 f"allowed: {expected}, one row per agent of {list(self.control_fields)}"
             )
-        return self.batch.step_arrays(actions[None])[0]
+        return self.batch.step_arrays(actions[None])
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh :class:`~proteo_env.spaces.ObservationBuffers` with every agent's observation."""

@@ -38,7 +38,9 @@ def test_batch_matches_single_envs(task_id, motion_model):
         terms = batched.step_arrays(actions)
         obs = batched.observe_arrays()
         for b, env in enumerate(singles):
-            assert env.step_arrays(actions[b]) == terms[b]
+            single = env.step_arrays(actions[b])
+            assert single.terms[0] == terms.terms[b] and single.reward[0] == terms.reward[b]
+            assert single.terminated[0] == terms.terminated[b] and single.truncated[0] == terms.truncated[b]
             single_obs = env.observe_arrays()
             for field in ObservationBuffers.FIELDS:
                 np.testing.assert_array_equal(
@@ -90,7 +92,9 @@ def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
             for field in ObservationBuffers.FIELDS:
                 np.testing.assert_array_equal(getattr(before, field), getattr(kept, field), err_msg=field)
         for b, env in enumerate(singles):
-            assert env.step_arrays(actions[b]) == terms[b]
+            single = env.step_arrays(actions[b])
+            assert single.terms[0] == terms.terms[b] and single.reward[0] == terms.reward[b]
+            assert single.terminated[0] == terms.terminated[b] and single.truncated[0] == terms.truncated[b]
             if restart[b]:
                 env.reset()
             single_obs = env.observe_arrays()
@@ -146,3 +150,17 @@ def test_bad_batch_names_world_agent_and_field():
             np.testing.assert_array_equal(value, snap[key])
     with pytest.raises(proteo_env.ConfigError, match=r"n_envs=0 is not allowed"):
         proteo_env.make_batched("sandbox-v0", 0)
+
+
+def test_the_step_result_sums_the_terms_and_says_how_each_world_ended():
+    batched = proteo_env.make_batched("chain-v0", 3, n_modules=6, max_cycles=4)
+    obs = batched.reset(seed=0)
+    lay, rng = batched.action_layout, np.random.default_rng(0)
+    for cycle in range(1, 5):
+        result = batched.step_arrays(_random_actions(lay, obs.action_mask, rng).reshape(3, 6, lay.length))
+        obs = batched.observe_arrays()
+        assert result.reward.shape == result.terminated.shape == result.truncated.shape == (3,)
+        assert result.reward.tolist() == [sum(t.values()) for t in result.terms]
+        assert result.terminated.tolist() == batched.success().tolist()
+        assert result.truncated.tolist() == [cycle == 4 and not s for s in result.terminated]
+        assert result.done.tolist() == (result.terminated | result.truncated).tolist()

@@ -289,14 +289,14 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
         return result.total_reward, result.success, result.cycles
     env.reset(seed=seed)
     policy.reset(seed)
-    total, success = 0.0, False
+    total = 0.0
     while True:
         buffers = env.observe_arrays()
         features = policy.encoder.encode_buffers(buffers)
-        total += sum(env.step_arrays(policy.act_arrays(features, buffers.action_mask)).values())
-        success = bool(env.task.success(env.engine))
-        if success or env.cycle >= env.max_cycles:
-            return total, success, env.cycle
+        result = env.step_arrays(policy.act_arrays(features, buffers.action_mask))
+        total += float(result.reward[0])
+        if result.done[0]:
+            return total, bool(result.terminated[0]), env.cycle
 
 
 RESUME_INDEPENDENT = (

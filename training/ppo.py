@@ -287,7 +287,6 @@ class Worlds:
         ]
         first = self.groups[0]
         self.task_id = first.task.task_id()
-        self.max_cycles = first.config.max_cycles
         self.n_envs, self.n_agents = args.n_envs, first.n_agents
         self.nvec = first.control_nvec
         self.encoder = ObservationEncoder(
@@ -338,14 +337,13 @@ class Worlds:
         a = self.n_agents
         reward = np.zeros(self.n_envs)
         terminal = np.zeros(self.n_envs, dtype=bool)
+        truncated = np.zeros(self.n_envs, dtype=bool)
         cycles = np.zeros(self.n_envs, dtype=np.int64)
         for k, group in enumerate(self.groups):
             worlds = slice(k * self.b, (k + 1) * self.b)
-            terms = group.step_arrays(actions[worlds])
-            reward[worlds] = [sum(t.values()) for t in terms]
-            terminal[worlds] = group.success()
+            result = group.step_arrays(actions[worlds])
+            reward[worlds], terminal[worlds], truncated[worlds] = result.reward, result.terminated, result.truncated
             cycles[worlds] = group.cycles
-        truncated = (cycles >= self.max_cycles) & ~terminal
         ended = terminal | truncated
         self.episode_return += reward
         played = actions.reshape(len(self.previous_actions), -1)

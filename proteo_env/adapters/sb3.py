@@ -115,13 +115,12 @@ class ProteoVecEnv(VecEnv):
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         for c, env in enumerate(self.envs):
             rows = self._rows(c)
-            terms = env.step_arrays(self._actions[rows])
-            reward = float(sum(terms.values()))
+            result = env.step_arrays(self._actions[rows])
+            reward = float(result.reward[0])
             self._returns[c] += reward
             rewards[rows] = reward
             self._observe(c)
-            success = bool(env.task.success(env.engine))
-            truncated = env.cycle >= env.max_cycles and not success
+            success, truncated = bool(result.terminated[0]), bool(result.truncated[0])
             if success or truncated:
                 dones[rows] = True
                 for i in range(rows.start, rows.stop):
@@ -212,13 +211,11 @@ class ProteoAgentEnv(gym.Env):
     def step(self, action):
         actions = np.asarray(self.co_policy(self.env, self._buffers, self._rng), dtype=np.int64)
         actions[self.agent] = np.asarray(action, dtype=np.int64)
-        terms = self.env.step_arrays(actions)
+        result = self.env.step_arrays(actions)
         self._buffers = self.env.observe_arrays()
-        success = bool(self.env.task.success(self.env.engine))
-        truncated = self.env.cycle >= self.env.max_cycles and not success
-        info = {f"reward/{k}": v for k, v in terms.items()}
+        info = {f"reward/{k}": v for k, v in result.terms[0].items()}
         obs = self.encoder.encode_buffers(self._buffers)[self.agent]
-        return obs, float(sum(terms.values())), success, truncated, info
+        return obs, float(result.reward[0]), bool(result.terminated[0]), bool(result.truncated[0]), info
 
     def action_masks(self) -> np.ndarray:
         """``(sum(nvec),)`` bool: the learning module's move mask then all-ones."""

@@ -137,11 +137,10 @@ class ProteoTorchRLEnv(EnvBase):
         terminated = np.zeros((self.n_copies, 1), dtype=bool)
         truncated = np.zeros((self.n_copies, 1), dtype=bool)
         for c, env in enumerate(self.envs):
-            terms = env.step_arrays(actions[c])
-            reward[c] = sum(terms.values())
+            result = env.step_arrays(actions[c])
+            reward[c] = result.reward[0]
             self._observe(c)
-            terminated[c] = bool(env.task.success(env.engine))
-            truncated[c] = env.cycle >= env.max_cycles and not terminated[c]
+            terminated[c], truncated[c] = result.terminated[0], result.truncated[0]
         out = TensorDict(
             {
                 **self._observation_td(reward),
