@@ -22,11 +22,13 @@ action at a level is the prefix of a full action.
 Where the autopilot comes from. ``proteo_env`` holds the engine and the tasks, and the
 paper's rules live one layer up, in ``baselines``; ``proteo_env`` must not import it. The
 rules therefore reach the environment through a *registration made by the layer above*: an
-autopilot factory per task name, found in the ``proteo_env.autopilots`` entry-point group
-(``baselines`` declares its four in ``pyproject.toml``, so an installed project finds them
-without importing anything by name), or registered at run time with
-:func:`register_autopilot` (for a behaviour of your own, or a source tree that is not
-installed). We chose entry points over copying each task's finite-state machine into its
+entry point of the ``proteo_env.autopilots`` group is a function that returns a dict of
+autopilot factories by task name (``baselines`` declares one in ``pyproject.toml``,
+:func:`baselines.autopilot.autopilots`, which serves every task whose rules are in
+``baselines.POLICIES``, so an installed project finds them without importing anything by
+name, and a new behaviour's rules need no new registration), or a factory registered at run
+time with :func:`register_autopilot` (for a behaviour of your own, or a source tree that is
+not installed). We chose entry points over copying each task's finite-state machine into its
 task file: the rules exist once, in ``baselines``, where the hand-coded policies, the
 compiled rollouts and the evolved parameters already share them.
 
@@ -103,14 +105,14 @@ def register_autopilot(task_name: str, factory: Callable) -> None:
 
 def autopilot_factory(task_name: str) -> Callable:
     """The autopilot factory of ``task_name``: registered at run time, else from the
-    :data:`AUTOPILOT_GROUP` entry points; a :class:`~proteo_env.config.ConfigError` when none."""
+    :data:`AUTOPILOT_GROUP` entry points (each a function returning ``{task name: factory}``);
+    a :class:`~proteo_env.config.ConfigError` when none."""
     if task_name not in _autopilots:
         for point in metadata.entry_points(group=AUTOPILOT_GROUP):
-            if point.name == task_name:
-                _autopilots[task_name] = point.load()
-                break
+            for name, factory in point.load()().items():
+                _autopilots.setdefault(name, factory)  # a run-time registration stays
     if task_name not in _autopilots:
-        known = sorted(set(_autopilots) | {p.name for p in metadata.entry_points(group=AUTOPILOT_GROUP)})
+        known = sorted(_autopilots)
         raise ConfigError(
             f"control='move' needs the hand-coded rules of task {task_name!r}, and none is "
             f"registered; allowed: tasks with rules ({', '.join(known) or 'none found'}); "
