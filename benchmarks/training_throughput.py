@@ -217,6 +217,7 @@ def main(argv=None) -> int:
     import torch
     import yaml
 
+    from proteo_env.registry import task_name
     from training.common import limit_threads
 
     overrides = yaml.safe_load(args.env) or {}
@@ -225,7 +226,7 @@ def main(argv=None) -> int:
     overrides.setdefault("max_cycles", 300)
     if args.modules is not None or args.task.startswith("chain"):
         overrides.setdefault("n_modules", args.modules or 12)
-    ppo_config = args.ppo_config or f"configs/train/ppo_{args.task.split('-v')[0]}_move.yaml"
+    ppo_config = args.ppo_config or f"configs/train/ppo_{task_name(args.task)}_move.yaml"
 
     limit_threads(1)
     torch.manual_seed(0)

@@ -17,6 +17,19 @@ TASKS: dict[str, type[Task]] = {
 """Registered task classes by id ``<name>-v<version>``."""
 
 
+def split_task_id(task_id: str) -> tuple[str, int | None]:
+    """``"chain-v1"`` -> ``("chain", 1)``; a bare name (``"chain"``) -> ``("chain", None)``."""
+    name, sep, version = task_id.rpartition("-v")
+    if sep and name and version.isdigit():
+        return name, int(version)
+    return task_id, None
+
+
+def task_name(task_id: str) -> str:
+    """The task's name without its version: ``"chain-v1"`` -> ``"chain"``."""
+    return split_task_id(task_id)[0]
+
+
 def newest_tasks() -> dict[str, type[Task]]:
     """The newest version of every task name, by id (what ``proteo demo`` runs)."""
     newest = {cls.name: task_class(cls.name) for cls in TASKS.values()}

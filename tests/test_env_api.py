@@ -371,3 +371,11 @@ def test_env_sample_with_observation_mask(task_id, make_small):
         space = env.action_space(agent)
         for _ in range(10):
             assert mask[space.sample(mask)[0]] == 1
+
+
+def test_task_ids_split_into_name_and_version_in_one_place():
+    from proteo_env.registry import split_task_id, task_name
+
+    assert split_task_id("chain-v1") == ("chain", 1) and split_task_id("chain") == ("chain", None)
+    assert split_task_id("my-velocity-v12") == ("my-velocity", 12) and task_name("my-velocity") == "my-velocity"
+    assert all(task_name(task_id) == cls.name for task_id, cls in proteo_env.TASKS.items())

@@ -18,6 +18,7 @@ import pytest
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
+from proteo_env.registry import task_name
 from proteo_env.spaces import ObservationBuffers
 
 TINY = {"n_modules": 6, "max_cycles": 8}
@@ -537,7 +538,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     from training.evaluate import evaluate
 
     settings = yaml.safe_load((Path("configs/train") / config).read_text())
-    task = settings["task"].split("-v")[0]
+    task = task_name(settings["task"])
     module, flags = next(v for k, v in TINY_BUDGET.items() if config.startswith(k))
     if "hidden" in settings and module == "cma_es":
         flags = [*flags, "--hidden", "[4]"]

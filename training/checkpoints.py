@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.registry import task_name
 
 from .common import CheckpointError, read_meta
 from .policies import LogitsPolicy, NumpyMLP, torch_mlp
@@ -38,7 +39,7 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     """The env's encoder, after checking the checkpoint was made for this task, control level and encoding."""
     where = f"checkpoint {meta['dir']!r}"
     task = env.task.task_id()
-    if meta["task"].split("-v")[0] != env.task.name:
+    if task_name(meta["task"]) != env.task.name:
         raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
     trained, level = meta.get("control", "full"), getattr(env, "control", "full")
     if trained != level:

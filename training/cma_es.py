@@ -43,6 +43,7 @@ import numpy as np
 from tqdm import tqdm
 
 from baselines.base import constructor_parameters
+from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
     checkpoint_folder,
@@ -340,7 +341,7 @@ def main(argv=None) -> Path:
     run_dir = Path(
         args.run_dir
         or (resume_meta or {}).get("run_dir")
-        or Path("runs") / f"cma_{args.controller}_{args.task.split('-v')[0]}_s{args.seed}"
+        or Path("runs") / f"cma_{args.controller}_{task_name(args.task)}_s{args.seed}"
     )
     state_file = run_dir / "state.pkl"
     """The state after the last finished generation; an interrupted run (no final/) resumes from it."""

@@ -48,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
+from proteo_env.registry import task_name
+
 DEFAULT_CONFIG = "configs/eval.yaml"
 """The config ``proteo eval`` reads when run from the repository root without ``--config``."""
 
@@ -492,7 +494,7 @@ def evaluate(
     import proteo_env
     from baselines import make_policy
     from proteo_env.config import ConfigError
-    from proteo_env.registry import task_class
+    from proteo_env.registry import newest_tasks, task_class
     from training.checkpoints import load_policy, read_meta
     from training.distributed import Journal, run_jobs
 
@@ -504,15 +506,14 @@ def evaluate(
     if tasks:
         classes = [task_class(t) for t in tasks]
     else:
-        classes = [cls for _, cls in sorted(proteo_env.TASKS.items()) if cls.name not in EXCLUDED_TASKS]
-        classes = [c for c in classes if proteo_env.TASKS.get(f"{c.name}-v{c.version}") is task_class(c.name)]
+        classes = [cls for _, cls in sorted(newest_tasks().items()) if cls.name not in EXCLUDED_TASKS]
     by_task: dict[str, list[tuple[str, str]]] = {c.name: [] for c in classes}
     """(path, training-seed group label or "") of every checkpoint, per task name."""
     for c in classes:
         for item in (cfg["tasks"].get(c.name) or {}).get("checkpoints") or []:
             by_task[c.name] += [(item, "")] if isinstance(item, str) else [(r, item["label"]) for r in item["runs"]]
     for path in checkpoints:
-        name = read_meta(path)["task"].split("-v")[0]
+        name = task_name(read_meta(path)["task"])
         if name not in by_task:
             raise ConfigError(
                 f"checkpoint {str(path)!r} was trained on task {name!r}, which is not evaluated; "
@@ -608,7 +609,7 @@ def evaluate(
                 out_dir
                 / "pictures"
                 / (
-                    f"{job.task_id.split('-v')[0]}_"
+                    f"{task_name(job.task_id)}_"
                     f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
                     f"_{job.level}.png"
                 ).replace("+", "-")

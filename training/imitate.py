@@ -50,6 +50,7 @@ import torch
 from tqdm import tqdm
 
 from proteo_env.config import ConfigError
+from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
 from training.common import (
     ProgressLog,
@@ -197,7 +198,7 @@ def train(args: Args) -> Path:
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
     run_dir = make_run_dir(
-        args.run_dir, f"imitate_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
+        args.run_dir, f"imitate_{task_name(args.task)}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
     )
     save_args(args, run_dir)
     worlds = Worlds(args, env_seed=args.seed)

@@ -85,6 +85,7 @@ from tqdm import tqdm
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
+from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES, ObservationBuffers
 from training.common import (
     ProgressLog,
@@ -444,7 +445,7 @@ def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder, net: 
             "training/imitate.py or training/ppo.py"
         )
     wanted = {
-        "task": task_id.split("-v")[0],
+        "task": task_name(task_id),
         "control": args.control,
         "arch": args.arch,
         "hidden": list(args.hidden),
@@ -452,7 +453,7 @@ def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder, net: 
         "encoder": encoder.spec(),
     }
     found = {
-        "task": meta["task"].split("-v")[0],
+        "task": task_name(meta["task"]),
         "control": meta.get("control"),
         "arch": meta.get("arch"),
         "hidden": meta.get("hidden"),
@@ -546,7 +547,7 @@ def train(args: Args) -> Path:
     # written only once the arguments, the worlds and the init checkpoint are known to be good
     run_dir = make_run_dir(
         args.run_dir or (resume_meta or {}).get("run_dir"),
-        f"ppo_{args.task.split('-v')[0]}_{args.control.replace('+', '-')}_s{args.seed}",
+        f"ppo_{task_name(args.task)}_{args.control.replace('+', '-')}_s{args.seed}",
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
     checkpoint_folder,
@@ -257,7 +258,7 @@ def main(argv=None) -> Path:
             "allowed: env_runners >= 0, iterations >= 1"
         )
     seed_everything(args.seed, threads=1)
-    run_dir = make_run_dir(args.run_dir, f"rllib_ppo_{args.task.split('-v')[0]}_s{args.seed}", resume=False)
+    run_dir = make_run_dir(args.run_dir, f"rllib_ppo_{task_name(args.task)}_s{args.seed}", resume=False)
     save_args(args, run_dir)
     import ray
 

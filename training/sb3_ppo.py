@@ -23,6 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
     checkpoint_folder,
@@ -88,7 +89,7 @@ def main(argv=None) -> Path:
     resume_meta = read_meta(args.resume) if args.resume else None
     run_dir = make_run_dir(
         args.run_dir or (resume_meta or {}).get("run_dir"),
-        f"sb3_ppo_{args.task.split('-v')[0]}_s{args.seed}",
+        f"sb3_ppo_{task_name(args.task)}_s{args.seed}",
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)

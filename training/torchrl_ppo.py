@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
     checkpoint_folder,
@@ -135,7 +136,7 @@ def main(argv=None) -> Path:
     resume_meta = read_meta(args.resume) if args.resume else None
     run_dir = make_run_dir(
         args.run_dir or (resume_meta or {}).get("run_dir"),
-        f"torchrl_{args.variant}_{args.task.split('-v')[0]}_s{args.seed}",
+        f"torchrl_{args.variant}_{task_name(args.task)}_s{args.seed}",
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)
