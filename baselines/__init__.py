@@ -18,6 +18,19 @@ POLICIES: dict[str, type[Policy]] = {
 }
 
 
+def register_policy(cls: type[Policy]) -> type[Policy]:
+    """Add a policy class defined anywhere to :data:`POLICIES` under ``cls.name``; returns it (a
+    class decorator). Named as a registered task, it is that task's hand-coded rules: the
+    ``move`` level's autopilot and ``proteo eval``'s rules row find it. A class that is not a
+    :class:`~baselines.base.Policy`, or a name taken by another class, is a ``ValueError``."""
+    if not (isinstance(cls, type) and issubclass(cls, Policy)):
+        raise ValueError(f"register_policy({cls!r}) is not allowed; allowed: a subclass of baselines.base.Policy")
+    if POLICIES.get(cls.name, cls) is not cls:
+        raise ValueError(f"policy name {cls.name!r} is taken by {POLICIES[cls.name].__qualname__}; allowed: a new name")
+    POLICIES[cls.name] = cls
+    return cls
+
+
 def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:
     """Build policy ``name`` for ``env`` (from its static interface only)."""
     if name not in POLICIES:
@@ -25,4 +38,4 @@ def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:
     return POLICIES[name].for_env(env, seed=seed, **params)
 
 
-__all__ = ["POLICIES", "Policy", "make_policy"]
+__all__ = ["POLICIES", "Policy", "make_policy", "register_policy"]

@@ -13,7 +13,7 @@ from .core.lattice import DIRECTIONS
 from .core.motion import MOTION_MODELS
 from .core.world import LayoutError, Physics
 from .env import ProteoEnv, WorldView
-from .registry import TASKS, make, make_batched
+from .registry import TASKS, make, make_batched, register
 
 __all__ = [
     "BatchedEnv",
@@ -28,5 +28,6 @@ __all__ = [
     "WorldView",
     "make",
     "make_batched",
+    "register",
 ]
 __version__ = "0.1.0"

@@ -17,6 +17,22 @@ TASKS: dict[str, type[Task]] = {
 """Registered task classes by id ``<name>-v<version>``."""
 
 
+def register(cls: type[Task]) -> type[Task]:
+    """Register a task class defined anywhere (a module of your own) as ``cls.task_id()``;
+    returns it, so it serves as a class decorator. A class that is not a
+    :class:`~proteo_env.tasks.base.Task`, or an id already taken by another class, is a
+    :class:`~proteo_env.config.ConfigError`."""
+    if not (isinstance(cls, type) and issubclass(cls, Task)):
+        raise ConfigError(f"register({cls!r}) is not allowed; allowed: a subclass of proteo_env.tasks.base.Task")
+    task_id = cls.task_id()
+    if TASKS.get(task_id, cls) is not cls:
+        raise ConfigError(
+            f"task id {task_id!r} is taken by {TASKS[task_id].__qualname__}; allowed: a new name or version"
+        )
+    TASKS[task_id] = cls
+    return cls
+
+
 def split_task_id(task_id: str) -> tuple[str, int | None]:
     """``"chain-v1"`` -> ``("chain", 1)``; a bare name (``"chain"``) -> ``("chain", None)``."""
     name, sep, version = task_id.rpartition("-v")
