@@ -411,3 +411,17 @@ def test_a_seed_that_is_not_a_non_negative_integer_is_refused_naming_it(seed):
     with pytest.raises(ConfigError, match=re.escape(f"seed={seed!r} is not allowed")):
         batch.reset(seed=seed)
     env.reset(seed=np.int64(3))  # NumPy integers are seeds
+
+
+def test_a_world_too_large_for_memory_is_refused_before_anything_is_allocated():
+    from proteo_env.core.world import LayoutError, Physics, World
+
+    with pytest.raises(
+        ConfigError,
+        match=r"n_modules=10000000 with room=None needs a box of at least 20000011 x "
+        r"20000011 x 11 sites, .* GiB for its grid; allowed: a grid within the memory available",
+    ):
+        proteo_env.make("chain-v1", n_modules=10**7)
+    with pytest.raises(LayoutError, match=r"a box of 100000 x 100000 x 100 sites needs .* GiB for its grid"):
+        World(size=(10**5, 10**5, 100), positions=[[0, 0, 0]], n_agents=1, physics=Physics())
+    proteo_env.make("chain-v1", n_modules=10**5, room=8)  # a small room keeps a large chain's box small

@@ -27,6 +27,7 @@ relaxed with this cycle's roles. Same seed and actions give the same trajectory,
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,44 @@ MESSAGE_TO_ALL = 12
 
 class LayoutError(ValueError):
     """A start layout that the world cannot hold (names the field, value and what is allowed)."""
+
+
+GRID_BYTES_PER_CELL = 20
+"""Bytes a world holds per cell of its padded grid at reset, measured: ``chain-v1`` with 1,000
+modules (a 2,036 x 2,026 x 33 box, 1.4e8 cells) peaks at 2.5 GiB (the grid and the
+connectivity search's marks, ``int32`` each, and their copies while the batch stacks them)."""
+
+
+def machine_memory() -> int:
+    """Bytes of memory available now (``MemAvailable`` of ``/proc/meminfo``; the physical
+    memory where that cannot be read)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def gib(n_bytes: float) -> str:
+    """``n_bytes`` in GiB, readably (``"98.9 GiB"``, ``"5.4e+06 GiB"``)."""
+    value = n_bytes / 2**30
+    return f"{value:.3g} GiB" if value < 1e5 else f"{value:.2g} GiB"
+
+
+def check_grid_fits(shape: GridShape) -> None:
+    """A :class:`LayoutError` when the grid of ``shape`` would not fit in this machine's
+    memory, naming the box, the memory it needs and what is allowed (before anything is
+    allocated)."""
+    need, have = shape.n_cells * GRID_BYTES_PER_CELL, machine_memory()
+    if need > have:
+        raise LayoutError(
+            f"a box of {' x '.join(map(str, shape.size))} sites needs {gib(need)} for its grid "
+            f"({shape.n_cells:.3g} cells); allowed: a box whose grid fits in the memory available "
+            f"({gib(have)}): fewer modules, or a task setting that keeps the box small"
+        )
 
 
 @dataclass(frozen=True)
@@ -180,6 +219,7 @@ class World:
         extent=None,
     ):
         self.shape = GridShape(size, extent)
+        check_grid_fits(self.shape)
         self.physics = physics
         positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
         self.n_modules = n = len(positions)

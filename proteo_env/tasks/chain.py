@@ -37,7 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.kernels import EMIT, RELAY
+from ..core.lattice import PAD
 from ..core.structure import StructureProbe
+from ..core.world import GRID_BYTES_PER_CELL, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .chain_kernels import chain_settle
@@ -66,7 +68,9 @@ class ChainParams:
             large worlds in memory, and walls ``room`` sites away cannot touch a module in its
             first ``room - 3`` cycles (a module moves at most one site per axis and cycle, and
             a roll reads sites at most two away), so those cycles are the same as in the
-            default box.
+            default box. A size whose smallest box would not fit in the memory available is
+            refused when the env is made (``n_modules=10**7``: about 8e7 GiB), and any world
+            whose grid would not fit when it is built, each time naming the memory needed.
     """
 
     n_modules: int = 50
@@ -82,6 +86,15 @@ class ChainParams:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if self.room is not None and self.room < 1:
             raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
+        room = self.n_modules + self.margin if self.room is None else self.room
+        side, height = 2 * room + 1 + 2 * PAD, 2 * self.margin + 1 + 2 * PAD  # the smallest box of this room
+        need = side * side * height * GRID_BYTES_PER_CELL
+        if need > machine_memory():
+            raise ValueError(
+                f"n_modules={self.n_modules!r} with room={self.room!r} needs a box of at least {side} x {side} x "
+                f"{height} sites, {gib(need)} for its grid; allowed: a grid within the memory available "
+                f"({gib(machine_memory())}): a smaller room (walls that many sites from the blob), or fewer modules"
+            )
 
 
 class Chain(Task):
