@@ -74,8 +74,6 @@ from .branch_kernels import NO_COUNT, BranchRules, branch_decide
 from .chain import ChainPolicy, ModuleMemory
 from .chain_kernels import ChainRules
 
-SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
-
 
 class BranchMemory(ModuleMemory):
     """The branch rule's private memory: the chain's (:class:`~baselines.chain.ModuleMemory`) and,

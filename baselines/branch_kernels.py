@@ -15,8 +15,9 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
+from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
 
-from .chain_kernels import BECOME_SEED, FINAL, SEARCH, SEED, SLEEP, search_actions, seed_blocked
+from .chain_kernels import BECOME_SEED, search_actions, seed_blocked
 from .primitives import (
     ALL_BITS,
     HORIZONTAL_BITS,
@@ -28,7 +29,6 @@ from .primitives import (
     write_action,
 )
 
-NODE, INODE = 4, 5
 REFUSE = 14
 """Message value: "I will not become your seed: I touch another part of the tree"."""
 GROWN_BITS = (1 << SEED) | (1 << FINAL) | (1 << NODE) | (1 << INODE)

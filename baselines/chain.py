@@ -72,8 +72,6 @@ import numpy as np
 from .base import KernelPolicy, SlotMemory
 from .chain_kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
 
-SLEEP, SEARCH, SEED, FINAL = range(4)
-
 ON_STUCK = ("stay", "random")
 
 

@@ -47,6 +47,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
+from proteo_env.tasks.chain_kernels import FINAL, SEARCH, SEED, SLEEP
 
 from .primitives import (
     EQUATOR_BITS,
@@ -65,7 +66,6 @@ from .primitives import (
     write_action,
 )
 
-SLEEP, SEARCH, SEED, FINAL = range(4)
 BECOME_SEED = 13
 """Message value asking the receiver to become the new SEED (it grows on in the same direction)."""
 OCTAHEDRA_OFF, OCTAHEDRA_CHAIN, OCTAHEDRA_ALL = range(3)

@@ -87,20 +87,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
+
 from .base import KernelPolicy, SlotMemory
-from .grasp_kernels import (
-    FINAL,
-    PASS_SEED,
-    SEARCH,
-    SEED,
-    SET_FINAL,
-    SET_TOUCH,
-    SLEEP,
-    TOUCH,
-    TOUCHSEED,
-    GraspRules,
-    grasp_decide,
-)
+from .grasp_kernels import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRules, grasp_decide
 
 
 class GraspMemory(SlotMemory):

@@ -35,6 +35,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
+from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .primitives import (
     AROUND_BITS,
@@ -46,8 +47,6 @@ from .primitives import (
     uniform_pick,
     write_action,
 )
-
-SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 
 SET_FINAL = 13
 """Message value: "go FINAL" (the searcher that takes over to the SEED it replaces)."""

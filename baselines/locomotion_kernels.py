@@ -24,6 +24,7 @@ import numpy as np
 from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
+from proteo_env.tasks.locomotion_kernels import SEARCH, SEED
 
 from .primitives import (
     AROUND_BITS,
@@ -37,8 +38,6 @@ from .primitives import (
     seen_scent,
     write_action,
 )
-
-SEARCH, SEED = range(2)
 
 
 class LocomotionRules(NamedTuple):

@@ -73,22 +73,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
+
 from .base import KernelPolicy, SlotMemory, check_level
-from .table_kernels import (
-    AROOT,
-    DISBAND,
-    DISBAND_NOW,
-    FINAL,
-    FIXED,
-    IROOT,
-    ROOT,
-    SEARCH,
-    SEED,
-    SLEEP,
-    SPOT_TAKEN,
-    TableRules,
-    table_decide,
-)
+from .table_kernels import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
 

@@ -38,6 +38,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
+from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .primitives import (
     FAR,
@@ -49,8 +50,6 @@ from .primitives import (
     uniform_pick,
     write_action,
 )
-
-FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
 
 SPOT_TAKEN = 13
 """Message: "I took your growth spot" (a SEED goes FINAL, an AROOT goes ROOT)."""

@@ -43,7 +43,8 @@ STATS = ("levels", "branch_points", "branches_per_point", "point_distance", "tre
 def run_one(job: dict) -> dict:
     """One episode of ``job`` (``n``, ``T``, ``B``, ``model``, ``seed``, ``max_cycles``, ``settle``, ``policy``)."""
     import proteo_env
-    from baselines.branch import INODE, NODE, BranchPolicy
+    from baselines.branch import BranchPolicy
+    from proteo_env.tasks.branch_kernels import INODE, NODE
 
     env = proteo_env.make(
         "branch",

@@ -63,7 +63,7 @@ import numpy as np
 from ..core.kernels import EMIT, RELAY
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
-from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, branch_settle, measure_tree
+from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, BranchMode, branch_settle, measure_tree
 
 REGULAR, NODE_SCENT = 0, 1
 
@@ -118,7 +118,7 @@ class BranchParams:
 class Branch(Task):
     name = "branch"
     version = 0
-    modes = ("SLEEP", "SEARCH", "SEED", "FINAL", "NODE", "INODE")
+    modes = tuple(BranchMode.__members__)
     Params = BranchParams
     n_channels = 2
     surface_channels = (False, False)

@@ -4,9 +4,24 @@ compiled rollout tests success with :func:`branch_settle`."""
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 from ..core.jit import kernel
 
-SLEEP, SEARCH, SEED, FINAL, NODE, INODE = range(6)
+
+class BranchMode(IntEnum):
+    """The branch task's modes (paper section 4.2): the chain's four, then the branching points; the one definition the task and its rules share."""
+
+    SLEEP = 0
+    SEARCH = 1
+    SEED = 2
+    FINAL = 3
+    NODE = 4
+    INODE = 5
+
+
+SLEEP, SEARCH, SEED, FINAL, NODE, INODE = (int(m) for m in BranchMode)
+"""The same modes as plain ints, for the numba kernels."""
 """The branch task's modes."""
 
 

@@ -42,9 +42,7 @@ from ..core.structure import StructureProbe
 from ..core.world import GRID_BYTES_PER_CELL, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
-from .chain_kernels import chain_settle
-
-SLEEP, SEARCH, SEED, FINAL = range(4)
+from .chain_kernels import SEED, SLEEP, ChainMode, chain_settle
 
 
 @dataclass(frozen=True)
@@ -100,7 +98,7 @@ class ChainParams:
 class Chain(Task):
     name = "chain"
     version = 0
-    modes = ("SLEEP", "SEARCH", "SEED", "FINAL")
+    modes = tuple(ChainMode.__members__)
     Params = ChainParams
     n_message_values = 15
     default_policy = "chain"

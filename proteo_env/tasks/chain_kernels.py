@@ -3,8 +3,23 @@ for compiled rollouts (:meth:`~proteo_env.tasks.chain.Chain.kernels`)."""
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 from ..core.jit import kernel
 from ..core.structure import largest_thin_piece
+
+
+class ChainMode(IntEnum):
+    """The chain's modes (paper section 4.1): the one definition the task and its rules share."""
+
+    SLEEP = 0
+    SEARCH = 1
+    SEED = 2
+    FINAL = 3
+
+
+SLEEP, SEARCH, SEED, FINAL = (int(m) for m in ChainMode)
+"""The same modes as plain ints, for the numba kernels."""
 
 
 @kernel

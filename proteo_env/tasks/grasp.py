@@ -66,9 +66,8 @@ from ..core.kernels import EMIT, RELAY
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
-from .grasp_kernels import GraspSurface, grasp_hold, grasp_settle
+from .grasp_kernels import SEED, SLEEP, GraspMode, GraspSurface, grasp_hold, grasp_settle
 
-SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = range(6)
 SHAPES = ("sphere", "box", "blob")
 BASES = ("blob", "ball")
 
@@ -262,7 +261,7 @@ def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seeds: int, spread:
 class Grasp(Task):
     name = "grasp"
     version = 0
-    modes = ("SLEEP", "SEARCH", "SEED", "FINAL", "TOUCHSEED", "TOUCH")
+    modes = tuple(GraspMode.__members__)
     Params = GraspParams
     n_channels = 2
     surface_channels = (False, False)

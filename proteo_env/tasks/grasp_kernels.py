@@ -5,11 +5,27 @@ both test a hold with :func:`grasp_hold`.
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
 
 from ..core.jit import kernel
+
+
+class GraspMode(IntEnum):
+    """The grasp task's modes (paper section 4.4): the one definition the task and its rules share."""
+
+    SLEEP = 0
+    SEARCH = 1
+    SEED = 2
+    FINAL = 3
+    TOUCHSEED = 4
+    TOUCH = 5
+
+
+SLEEP, SEARCH, SEED, FINAL, TOUCHSEED, TOUCH = (int(m) for m in GraspMode)
+"""The same modes as plain ints, for the numba kernels."""
 
 
 class GraspSurface(NamedTuple):

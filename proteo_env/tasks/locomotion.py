@@ -52,9 +52,8 @@ from ..core.kernels import EMIT, RELAY
 from ..core.lattice import PAD
 from ..layouts import Layout, blob_sites
 from .base import Task, TaskKernels, no_sensor
-from .locomotion_kernels import all_beyond, locomotion_settle
+from .locomotion_kernels import LocomotionMode, all_beyond, locomotion_settle
 
-SEARCH, SEED = range(2)
 GOAL = np.array([1.0, 0.0, 0.0], dtype=np.float32)
 """The goal direction, ``+x``."""
 
@@ -112,7 +111,7 @@ class LocomotionParams:
 class Locomotion(Task):
     name = "locomotion"
     version = 0
-    modes = ("SEARCH", "SEED")
+    modes = tuple(LocomotionMode.__members__)
     Params = LocomotionParams
     default_policy = "locomotion"
     mode_roles = ((RELAY,), (EMIT,))

@@ -3,7 +3,20 @@ task), for the environment and for compiled rollouts (:meth:`~proteo_env.tasks.l
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 from ..core.jit import kernel
+
+
+class LocomotionMode(IntEnum):
+    """The locomotion task's modes: the one definition the task and its rules share."""
+
+    SEARCH = 0
+    SEED = 1
+
+
+SEARCH, SEED = (int(m) for m in LocomotionMode)
+"""The same modes as plain ints, for the numba kernels."""
 
 
 @kernel

@@ -114,6 +114,7 @@ from .table_kernels import (
     SINCE,
     SLEEP,
     TableLedger,
+    TableMode,
     grounded_legs,
     region_loads,
     root_loads,
@@ -123,7 +124,7 @@ from .table_kernels import (
     weight_carried,
 )
 
-MODES = ("FIXED", "ROOT", "IROOT", "AROOT", "SLEEP", "SEARCH", "SEED", "FINAL", "DISBAND")
+MODES = tuple(TableMode.__members__)
 ACTIVE = (ROOT, AROOT)
 LEG_MODES = (SEED, FINAL)
 DOWN = np.flatnonzero(DIRECTIONS[:, 2] == -1)

@@ -7,14 +7,30 @@ The environment calls them after every cycle; the compiled rollout of the hand-c
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
 
 from ..core.jit import kernel
 
-FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = range(9)
-"""The table task's modes (their names: :data:`proteo_env.tasks.table.MODES`)."""
+
+class TableMode(IntEnum):
+    """The table task's modes (paper section 4.3): the board (FIXED), the roots, the legs; the one definition the task and its rules share."""
+
+    FIXED = 0
+    ROOT = 1
+    IROOT = 2
+    AROOT = 3
+    SLEEP = 4
+    SEARCH = 5
+    SEED = 6
+    FINAL = 7
+    DISBAND = 8
+
+
+FIXED, ROOT, IROOT, AROOT, SLEEP, SEARCH, SEED, FINAL, DISBAND = (int(m) for m in TableMode)
+"""The same modes as plain ints, for the numba kernels."""
 CYCLE, SHIFT, SINCE, CREATIONS, DISBANDS = range(5)
 """Entries of :attr:`TableLedger.clock`: the last cycle, the schedule entry in force, the cycle the
 signature last changed, leg creations and leg disbands so far."""
