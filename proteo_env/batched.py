@@ -20,7 +20,7 @@ and the environment fills in the rest before the cycle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,8 +33,7 @@ from .spaces import ActionLayout, ObservationBuffers
 from .tasks.base import Task
 
 
-@dataclass(frozen=True)
-class StepResult:
+class StepResult(NamedTuple):
     """What one cycle gives for each of ``B`` worlds (:meth:`BatchedEnv.step_arrays`; a
     :class:`~proteo_env.env.ProteoEnv`'s ``step_arrays`` gives one with ``B = 1``).
 
@@ -296,17 +295,17 @@ class BatchedEnv:
         )
         self.cycles += 1
         self._observed = None
-        terms = []
-        for task, world, moved, cycle in zip(self.tasks, self.worlds, self.last_moved, self.cycles.tolist()):
+        terms, max_cycles = [], self.config.max_cycles
+        reward, terminated, truncated = np.empty(self.n_envs), np.empty(self.n_envs, bool), np.empty(self.n_envs, bool)
+        for b, (task, world, moved, cycle) in enumerate(
+            zip(self.tasks, self.worlds, self.last_moved, self.cycles.tolist())
+        ):
             task.after_cycle(world, cycle)
             terms.append(task.reward_terms(world, moved))
-        terminated = self.success()
-        return StepResult(
-            reward=np.array([float(sum(t.values())) for t in terms]),
-            terminated=terminated,
-            truncated=(self.cycles >= self.config.max_cycles) & ~terminated,
-            terms=terms,
-        )
+            reward[b] = sum(terms[b].values())
+            terminated[b] = success = task.success(world)
+            truncated[b] = cycle >= max_cycles and not success
+        return StepResult(reward, terminated, truncated, terms)
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh observation arrays of every agent of every world (``B * A`` rows, world-major)."""
