@@ -488,15 +488,14 @@ def evaluate(
 
     Returns:
         one :class:`PolicyResult` per policy, or :class:`GroupResult` per training-seed group.
-    """
-    import base64
 
-    import proteo_env
-    from baselines import make_policy
+    It chooses the tasks and checkpoints, then plans every episode (:func:`plan_episodes`), runs
+    them (:func:`run_episodes`) and writes the tables (:func:`write_results`).
+    """
     from proteo_env.config import ConfigError
     from proteo_env.registry import newest_tasks, task_class
-    from training.checkpoints import load_policy, read_meta
-    from training.distributed import Journal, run_jobs
+    from training.checkpoints import read_meta
+    from training.distributed import Journal
 
     cfg = load_config(config)
     n_seeds = seeds if seeds is not None else cfg["seeds"]
@@ -521,8 +520,41 @@ def evaluate(
             )
         by_task[name].append((str(path), ""))
 
-    # Every policy's result row and its episodes as jobs; policies are built here once, so that a
-    # bad checkpoint fails before any episode runs.
+    results, jobs = plan_episodes(cfg, classes, by_task, seed_list, deterministic=deterministic, pictures=pictures)
+
+    out_dir = Path(out)
+    settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
+    fingerprint = {
+        "seeds": seed_list,
+        "settings": settings,
+        "deterministic": deterministic,
+        "pictures": pictures,
+        "jobs": len(jobs),
+        "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
+    }
+    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
+    run_episodes(results, jobs, out_dir, ray=ray, journal=journal, progress=progress)
+    rows = write_results(
+        results, out_dir, seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots
+    )
+    journal.complete()
+    return rows
+
+
+def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool):
+    """Every policy's result row and its episodes as jobs: ``(results, jobs)``, ``jobs`` a list of
+    ``(row in results, EpisodeJob)``. Policies are built here once, so that a bad checkpoint fails
+    before any episode runs.
+
+    Args:
+        cfg: the eval config (:func:`load_config`); classes: the task classes evaluated;
+        by_task: ``{task name: [(checkpoint path, training-seed group label or "")]}``;
+        seed_list: the episodes' seeds; deterministic, pictures: as for :func:`evaluate`.
+    """
+    import proteo_env
+    from baselines import make_policy
+    from training.checkpoints import load_policy, read_meta
+
     results: list[PolicyResult] = []
     jobs: list[tuple[int, EpisodeJob]] = []
     for cls in classes:
@@ -575,18 +607,16 @@ def evaluate(
         for env in envs.values():
             env.close()
         _name_apart([r for r in results[first_task_row:] if not r.group])
+    return results, jobs
 
-    out_dir = Path(out)
-    settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
-    fingerprint = {
-        "seeds": seed_list,
-        "settings": settings,
-        "deterministic": deterministic,
-        "pictures": pictures,
-        "jobs": len(jobs),
-        "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
-    }
-    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
+
+def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool) -> None:
+    """Run the planned ``jobs`` (serially or on Ray, recorded in ``journal``) and add each
+    episode to its row of ``results``; pictures go to ``out_dir/pictures``."""
+    import base64
+
+    from training.distributed import run_jobs
+
     episodes = run_jobs(
         run_episode_job,
         [j for _, j in jobs],
@@ -617,6 +647,12 @@ def evaluate(
             file.parent.mkdir(parents=True, exist_ok=True)
             file.write_bytes(base64.b64decode(episode["picture"]))
 
+
+def write_results(
+    results: list, out_dir: Path, *, seed_list: list, settings: dict, deterministic: bool, plots: bool
+) -> list:
+    """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out_dir``;
+    returns the rows (training-seed groups summarised)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = grouped(results)
     table = markdown_table(rows)
@@ -651,7 +687,6 @@ def evaluate(
     )
     if plots:
         plot(rows, out_dir / "eval.png")
-    journal.complete()
     return rows
 
 
