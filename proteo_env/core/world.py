@@ -72,11 +72,16 @@ def gib(n_bytes: float) -> str:
     return f"{value:.3g} GiB" if value < 1e5 else f"{value:.2g} GiB"
 
 
+def grid_memory(shape: GridShape) -> tuple[int, int]:
+    """``(bytes the grid of shape needs, bytes available)``."""
+    return shape.n_cells * GRID_BYTES_PER_CELL, machine_memory()
+
+
 def check_grid_fits(shape: GridShape) -> None:
     """A :class:`LayoutError` when the grid of ``shape`` would not fit in this machine's
     memory, naming the box, the memory it needs and what is allowed (before anything is
     allocated)."""
-    need, have = shape.n_cells * GRID_BYTES_PER_CELL, machine_memory()
+    need, have = grid_memory(shape)
     if need > have:
         raise LayoutError(
             f"a box of {' x '.join(map(str, shape.size))} sites needs {gib(need)} for its grid "

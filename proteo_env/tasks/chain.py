@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.kernels import EMIT, RELAY
-from ..core.lattice import PAD
+from ..core.lattice import GridShape
 from ..core.structure import StructureProbe
-from ..core.world import GRID_BYTES_PER_CELL, gib, machine_memory
+from ..core.world import gib, grid_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .chain_kernels import SEED, SLEEP, ChainMode, chain_settle
@@ -84,15 +84,20 @@ class ChainParams:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if self.room is not None and self.room < 1:
             raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
-        room = self.n_modules + self.margin if self.room is None else self.room
-        side, height = 2 * room + 1 + 2 * PAD, 2 * self.margin + 1 + 2 * PAD  # the smallest box of this room
-        need = side * side * height * GRID_BYTES_PER_CELL
-        if need > machine_memory():
+        smallest = GridShape((2 * self.side_room + 1, 2 * self.side_room + 1, 2 * self.margin + 1))
+        need, have = grid_memory(smallest)
+        if need > have:
             raise ValueError(
-                f"n_modules={self.n_modules!r} with room={self.room!r} needs a box of at least {side} x {side} x "
-                f"{height} sites, {gib(need)} for its grid; allowed: a grid within the memory available "
-                f"({gib(machine_memory())}): a smaller room (walls that many sites from the blob), or fewer modules"
+                f"n_modules={self.n_modules!r} with room={self.room!r} needs a box of at least "
+                f"{' x '.join(map(str, smallest.padded))} sites, {gib(need)} for its grid; allowed: a grid within "
+                f"the memory available ({gib(have)}): a smaller room (walls that many sites from the blob), or "
+                "fewer modules"
             )
+
+    @property
+    def side_room(self) -> int:
+        """Free sites on each horizontal side of the blob: ``room``, or ``n_modules + margin``."""
+        return self.n_modules + self.margin if self.room is None else self.room
 
 
 class Chain(Task):
@@ -107,7 +112,7 @@ class Chain(Task):
 
     def build_layout(self, rng):
         p = self.params
-        room = p.n_modules + p.margin if p.room is None else p.room  # default: any straight chain fits
+        room = p.side_room  # by default any straight chain fits
         sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin))
         return Layout(size=size, modules=sites)
 
