@@ -28,7 +28,7 @@ modes of the grown tree (SEED, FINAL, NODE, INODE) all count as "the structure":
   not through the unused blob), and goes SEARCH when it or a neighbour carries regular scent.
 - SEARCH: relays both scents (with ``search_relays_node``, the paper's rule; off, it is
   silent on the node scent) and climbs the regular gradient exactly as the chain's SEARCH
-  (:func:`baselines.chain_kernels.search_moves`), seeing a NODE neighbour as a seed (it rolls over the
+  (:func:`baselines.chain_rules.search_moves`), seeing a NODE neighbour as a seed (it rolls over the
   node's faces to the growth spot the node broadcasts) and an INODE neighbour as FINAL.
 - SEED: emits the regular scent, relays the node scent, and otherwise is the chain's seed:
   it broadcasts its growth direction; a SLEEP or SEARCH module at its growth site gets the
@@ -61,7 +61,7 @@ modes of the grown tree (SEED, FINAL, NODE, INODE) all count as "the structure":
   that is capped by the geometry.
 - INODE: emits the node scent, relays the regular scent, never moves.
 
-The rules run as the numba kernels of :mod:`baselines.branch_kernels` (:func:`~baselines.branch_kernels.branch_actions`,
+The rules run as the numba kernels of :mod:`baselines.branch_rules` (:func:`~baselines.branch_rules.branch_actions`,
 which calls the chain's SEARCH and seed kernels) on the observation fields stacked over modules;
 the private memory is one row per module (:class:`BranchMemory`).
 """
@@ -70,14 +70,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .branch_kernels import NO_COUNT, BranchRules, branch_decide
+from .branch_rules import NO_COUNT, BranchRules, branch_decide
 from .chain import ChainPolicy, ModuleMemory
-from .chain_kernels import ChainRules
+from .chain_rules import ChainRules
 
 
 class BranchMemory(ModuleMemory):
     """The branch rule's private memory: the chain's (:class:`~baselines.chain.ModuleMemory`) and,
-    per slot, a NODE's seeds spawned (``spawned``, :data:`~baselines.branch_kernels.NO_COUNT`: none
+    per slot, a NODE's seeds spawned (``spawned``, :data:`~baselines.branch_rules.NO_COUNT`: none
     yet), its current growth spot (``spot_direction``, -1: none; ``spot_announced``;
     ``spot_waited``, cycles) and the directions whose module refused to become a seed
     (``refused``, a bit set)."""
@@ -145,7 +145,7 @@ class BranchPolicy(ChainPolicy):
 
     @property
     def branch_rules(self) -> BranchRules:
-        """The branch's own parameters as the kernels of :mod:`baselines.branch_kernels` read them."""
+        """The branch's own parameters as the kernels of :mod:`baselines.branch_rules` read them."""
         return BranchRules(
             T=int(self.T),
             B=int(self.B),
@@ -165,5 +165,5 @@ class BranchPolicy(ChainPolicy):
 
     @property
     def kernel_rules(self) -> tuple[ChainRules, BranchRules]:
-        """The chain's and the branch's parameters, as :func:`~baselines.branch_kernels.branch_decide` reads them."""
+        """The chain's and the branch's parameters, as :func:`~baselines.branch_rules.branch_decide` reads them."""
         return self.rules, self.branch_rules

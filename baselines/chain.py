@@ -16,7 +16,7 @@ one action out, plus the module's own private memory; nothing else is read):
   legal move. With ``p_seed > 0`` a SLEEP module that detects no scent becomes a SEED with
   that probability each cycle (the paper's decentralised start; the task's default is one
   seed picked centrally).
-- SEARCH, "move along scent gradient" (``_climb`` in :mod:`baselines.chain_kernels`): the value of a
+- SEARCH, "move along scent gradient" (``_climb`` in :mod:`baselines.chain_rules`): the value of a
   site is one more than the smallest scent next to it. A module sees only 4 of a target
   site's neighbours (those next to both sites), so no single roll is ever *seen* to lower its
   value; the gradient says which neighbour is lowest and the module rolls over that
@@ -60,7 +60,7 @@ one action out, plus the module's own private memory; nothing else is read):
   90 degrees from the old one whose site touches no FINAL module it can see.
 - FINAL: relays scent and never moves.
 
-The rules run as the numba kernels of :mod:`baselines.chain_kernels` (:func:`~baselines.chain_kernels.chain_actions`)
+The rules run as the numba kernels of :mod:`baselines.chain_rules` (:func:`~baselines.chain_rules.chain_actions`)
 on the observation fields stacked over modules; the private memory is one row per module
 (:class:`ModuleMemory`).
 """
@@ -70,7 +70,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .chain_kernels import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
+from .chain_rules import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
 
 ON_STUCK = ("stay", "random")
 
@@ -179,7 +179,7 @@ class ChainPolicy(KernelPolicy):
 
     @property
     def rules(self) -> ChainRules:
-        """The parameters as the kernels of :mod:`baselines.chain_kernels` read them."""
+        """The parameters as the kernels of :mod:`baselines.chain_rules` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
         return ChainRules(
             scent_max=int(self.scent_max),

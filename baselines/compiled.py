@@ -12,10 +12,10 @@ A behaviour plugs in through two small protocols and nothing here names one:
 - the policy is a :class:`~baselines.base.KernelPolicy`: its ``rule`` kernel, its
   :attr:`~baselines.base.KernelPolicy.kernel_rules` and its memory
   (:meth:`~baselines.base.SlotMemory.arrays`);
-- the task gives :meth:`~proteo_env.tasks.base.Task.kernels`: a ``sense`` and a ``settle``
+- the task gives :meth:`~proteo_env.tasks.base.Task.kernels`: a ``sense`` and an ``update_and_test``
   kernel and the state they read (:class:`~proteo_env.tasks.base.TaskKernels`).
 
-:func:`rollout_loop` makes the loop for one (rule, sense, settle) triple, closing over the three
+:func:`rollout_loop` makes the loop for one (rule, sense, update_and_test) triple, closing over the three
 kernels, and keeps it for the process (numba compiles it at the first call).
 
 Example::
@@ -36,8 +36,7 @@ import numpy as np
 
 from proteo_env.core import kernels as engine
 from proteo_env.core.jit import generated_kernel
-from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
-from proteo_env.core.world import LOCAL_ADJACENCY_BITS, Scratch
+from proteo_env.core.records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 from proteo_env.env import ProteoEnv
 from proteo_env.spaces import ObservationBuffers
 
@@ -73,23 +72,25 @@ class Rollout:
 
 
 @functools.cache
-def rollout_loop(rule, sense, settle):
+def rollout_loop(rule, sense, update_and_test):
     """The compiled loop of one behaviour: ``rule`` (a policy's :attr:`~baselines.base.KernelPolicy.rule`),
-    ``sense`` and ``settle`` (a task's :class:`~proteo_env.tasks.base.TaskKernels`).
+    ``sense`` and ``update_and_test`` (a task's :class:`~proteo_env.tasks.base.TaskKernels`).
 
-    Returns a kernel ``cycles(world, scratch, seen, slots, memory, rules, rng, task, start_cycle,
-    max_cycles, record_every, recorded_cycles, recorded_cell, recorded_mode) -> (cycles, success,
-    recorded)`` that runs up to ``max_cycles`` cycles of observe, sense, decide, step, settle:
-    ``world`` is the tuple :data:`WORLD_FIELDS` of arrays and settings, ``scratch`` the engine's
-    scratch arrays (:data:`SCRATCH_FIELDS`), ``seen`` an :class:`~baselines.base.Observed`
-    (``hint`` filled), ``slots`` (A,) the memory slot of each agent row, ``memory``, ``rules``
-    and ``rng`` as the rule reads them, ``task`` the task's kernel state, ``start_cycle`` the
-    env's cycle before the first; ``recorded_*`` (R, ...) are filled in order.
+    Returns a kernel ``cycles(state, settings, geometry, scratch, seen, slots, memory, rules, rng,
+    task, start_cycle, max_cycles, record_every, recorded_cycles, recorded_cell, recorded_mode) ->
+    (cycles, success, recorded)`` that runs up to ``max_cycles`` cycles of observe, sense, decide,
+    step, update and test: ``state``, ``settings``, ``geometry`` and ``scratch`` are the engine's records
+    (:mod:`proteo_env.core.records`, named or plain tuples), ``seen`` an :class:`~baselines.base.Observed` (``hint``
+    filled), ``slots`` (A,) the memory slot of each agent row, ``memory``, ``rules`` and ``rng``
+    as the rule reads them, ``task`` the task's kernel state, ``start_cycle`` the env's cycle
+    before the first; ``recorded_*`` (R, ...) are filled in order.
     """
 
     @generated_kernel
     def cycles(
-        world,
+        state,
+        settings,
+        geometry,
         scratch,
         seen,
         slots,
@@ -104,116 +105,52 @@ def rollout_loop(rule, sense, settle):
         recorded_cell,
         recorded_mode,
     ):
-        (
-            grid,
-            cell,
-            n_agents,
-            anchored,
-            mode,
-            scent,
-            inbox,
-            rng_state,
-            passive_role,
-            surface,
-            keep_connected,
-            exact,
-            sweeps,
-            scent_max,
-            nb_delta,
-            dir_delta,
-            roll_delta,
-            local_delta,
-            roll_table,
-        ) = world
-        (movers, mark, queue, stacks, search, scent_buffer, is_cut, adjacency, disc, low, stack_node, stack_k) = scratch
-        n_channels = scent.shape[0]
+        state, settings, geometry, scratch = (
+            WorldState(*state),
+            Settings(*settings),
+            Geometry(*geometry),
+            Scratch(*scratch),
+        )
+        n_agents, n_channels = settings.n_agents, state.scent.shape[0]
+        out = Observation(
+            seen.neighbour_kind,
+            seen.neighbour_mode,
+            seen.neighbour_scent,
+            seen.own_mode,
+            seen.own_scent,
+            seen.messages,
+            seen.contact,
+            seen.action_mask,
+        )
         actions = np.empty((n_agents, 4 + n_channels), dtype=np.int64)
-        move = np.empty(n_agents, dtype=np.int64)
-        new_mode = np.empty(n_agents, dtype=np.int32)
-        role = np.empty((n_agents, n_channels), dtype=np.int8)
-        target = np.empty(n_agents, dtype=np.int64)
-        value = np.empty(n_agents, dtype=np.int32)
+        step = Actions(
+            np.empty(n_agents, dtype=np.int64),
+            np.empty(n_agents, dtype=np.int32),
+            np.empty((n_agents, n_channels), dtype=np.int8),
+            np.empty(n_agents, dtype=np.int64),
+            np.empty(n_agents, dtype=np.int32),
+        )
         moved = np.empty(n_agents, dtype=np.bool_)
         recorded = 0
         for cycle in range(1, max_cycles + 1):
-            engine.observe_world(
-                grid,
-                cell,
-                n_agents,
-                mode,
-                scent,
-                inbox,
-                anchored,
-                keep_connected,
-                nb_delta,
-                dir_delta,
-                roll_delta,
-                roll_table,
-                scent_max,
-                is_cut,
-                adjacency,
-                disc,
-                low,
-                stack_node,
-                stack_k,
-                seen.neighbour_kind,
-                seen.neighbour_mode,
-                seen.neighbour_scent,
-                seen.own_mode,
-                seen.own_scent,
-                seen.messages,
-                seen.contact,
-                seen.action_mask,
-            )
+            engine.observe_world(state, settings, geometry, scratch, out)
             sense(task, seen.load)
             rule(seen, slots, memory, rules, rng, actions)
             for a in range(n_agents):
-                move[a] = actions[a, 0]
-                new_mode[a] = actions[a, 1]
+                step.move[a] = actions[a, 0]
+                step.mode[a] = actions[a, 1]
                 for ch in range(n_channels):
-                    role[a, ch] = actions[a, 2 + ch]
-                target[a] = actions[a, 2 + n_channels]
-                value[a] = actions[a, 3 + n_channels]
-            engine.run_cycle(
-                grid,
-                cell,
-                n_agents,
-                anchored,
-                mode,
-                scent,
-                inbox,
-                rng_state,
-                passive_role,
-                surface,
-                keep_connected,
-                exact,
-                sweeps,
-                scent_max,
-                move,
-                new_mode,
-                role,
-                target,
-                value,
-                moved,
-                dir_delta,
-                DIRECTIONS,
-                OPPOSITE,
-                roll_delta,
-                local_delta,
-                LOCAL_ADJACENCY_BITS,
-                roll_table,
-                movers,
-                mark,
-                queue,
-                stacks,
-                search,
-                scent_buffer,
+                    step.scent_role[a, ch] = actions[a, 2 + ch]
+                step.message_target[a] = actions[a, 2 + n_channels]
+                step.message_value[a] = actions[a, 3 + n_channels]
+            engine.run_cycle(state, settings, geometry, step, moved, scratch)
+            success = update_and_test(
+                state.grid, state.cell, state.mode, state.anchored, geometry.dir_delta, start_cycle + cycle, task
             )
-            success = settle(grid, cell, mode, anchored, dir_delta, start_cycle + cycle, task)
             if record_every > 0 and (cycle % record_every == 0 or success):
                 recorded_cycles[recorded] = cycle
-                recorded_cell[recorded] = cell
-                recorded_mode[recorded] = mode
+                recorded_cell[recorded] = state.cell
+                recorded_mode[recorded] = state.mode
                 recorded += 1
             if success:
                 return cycle, True, recorded
@@ -222,23 +159,8 @@ def rollout_loop(rule, sense, settle):
     return cycles
 
 
-SCRATCH_FIELDS = (
-    "movers",
-    "mark",
-    "queue",
-    "stacks",
-    "search",
-    "scent_buffer",
-    "is_cut",
-    "adjacency",
-    "disc",
-    "low",
-    "stack_node",
-    "stack_k",
-)
-"""The engine's :class:`~proteo_env.core.world.Scratch` arrays the loop uses, in its order."""
-STATE_FIELDS = ("grid", "cell", "mode", "scent", "inbox", "rng_state")
-"""The world's arrays a rollout changes (it runs on copies of them)."""
+CHANGED_FIELDS = ("grid", "cell", "mode", "scent", "inbox", "rng_state")
+"""The world's state arrays a rollout changes (it runs on copies of them)."""
 
 
 class CompiledRollout:
@@ -286,13 +208,13 @@ class CompiledRollout:
         if policy.layout != env.action_layout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
-        self.loop = rollout_loop(policy.rule, kernels.sense, kernels.settle)
+        self.loop = rollout_loop(policy.rule, kernels.sense, kernels.update_and_test)
         self.task_state = kernels.state
         self.rules = policy.kernel_rules
         self.rng = copy.deepcopy(policy.rng)
         self.memory = policy.memory_rows(env.possible_agents).arrays()
-        self.state = {name: getattr(world, name).copy() for name in STATE_FIELDS}
-        self.scratch = Scratch(world.n_modules, len(world.grid))
+        self.state = world.state._replace(**{name: getattr(world, name).copy() for name in CHANGED_FIELDS})
+        self.scratch = Scratch.allocate(world.n_modules, len(world.grid))
         observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
         observation.hint[:] = task.hint(world)
         self.seen = Observed(*(getattr(observation, name) for name in Observed._fields))
@@ -313,36 +235,15 @@ class CompiledRollout:
         n = w.n_modules
         capacity = max_cycles // record_every + 1 if record_every else 0
         recorded_cycles = np.zeros(capacity, dtype=np.int64)
-        recorded_cell = np.zeros((capacity, n), dtype=st["cell"].dtype)
-        recorded_mode = np.zeros((capacity, n), dtype=st["mode"].dtype)
+        recorded_cell = np.zeros((capacity, n), dtype=st.cell.dtype)
+        recorded_mode = np.zeros((capacity, n), dtype=st.mode.dtype)
         ran, recorded = 0, 0
         if not self.success:
-            p = w.physics
-            world = (
-                st["grid"],
-                st["cell"],
-                w.n_agents,
-                w.anchored,
-                st["mode"],
-                st["scent"],
-                st["inbox"],
-                st["rng_state"],
-                w.passive_role,
-                w.surface_channels,
-                p.keep_connected,
-                p.exact_scent,
-                p.scent_sweeps,
-                int(p.scent_max),
-                w.neighbourhood_delta,
-                w.dir_delta,
-                w.roll_delta,
-                w.local_delta,
-                w.roll_table,
-            )
-            scratch = tuple(getattr(self.scratch, name) for name in SCRATCH_FIELDS)
-            ran, self.success, recorded = self.loop(
-                world,
-                scratch,
+            ran, self.success, recorded = self.loop(  # records as plain tuples: see proteo_env.core.records
+                tuple(st),
+                tuple(w.settings),
+                tuple(w.geometry),
+                tuple(self.scratch),
                 self.seen,
                 np.arange(w.n_agents, dtype=np.int64),
                 self.memory,
@@ -362,8 +263,8 @@ class CompiledRollout:
         return Rollout(
             cycles=self.cycle,
             success=bool(self.success),
-            positions=shape.point(st["cell"]),
-            modes=st["mode"].copy(),
+            positions=shape.point(st.cell),
+            modes=st.mode.copy(),
             recorded_cycles=recorded_cycles[:recorded],
             recorded_positions=shape.point(recorded_cell[:recorded]),
             recorded_modes=recorded_mode[:recorded],

@@ -78,7 +78,7 @@ seed thus wanders through the TOUCH patch to its rim, where growth can go on.
 scent, so once the object is reached ("seeds transfer to the TOUCHSEED state", paper) the
 searchers go to the grasp rather than to fingers that missed.
 
-The rules run as the numba kernel :func:`baselines.grasp_kernels.grasp_actions` on the
+The rules run as the numba kernel :func:`baselines.grasp_rules.grasp_actions` on the
 observation fields stacked over modules; every decision reads only that agent's own
 observation and private memory (:class:`GraspMemory`, one row per module).
 """
@@ -90,7 +90,7 @@ import numpy as np
 from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .base import KernelPolicy, SlotMemory
-from .grasp_kernels import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRules, grasp_decide
+from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRules, grasp_decide
 
 
 class GraspMemory(SlotMemory):
@@ -197,7 +197,7 @@ class GraspPolicy(KernelPolicy):
 
     @property
     def rules(self) -> GraspRules:
-        """The parameters as :func:`~baselines.grasp_kernels.grasp_actions` reads them."""
+        """The parameters as :func:`~baselines.grasp_rules.grasp_actions` reads them."""
         return GraspRules(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),

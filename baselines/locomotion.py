@@ -26,7 +26,7 @@ robot: modules roll over the others to the front and down ahead of it, a tread. 
 step the front piles up the step's face (each module that reaches the top of the pile is the
 new SEED) until one can roll onto the step over the pile's top.
 
-The rule runs as the numba kernel :func:`baselines.locomotion_kernels.locomotion_actions`;
+The rule runs as the numba kernel :func:`baselines.locomotion_rules.locomotion_actions`;
 every decision reads only that agent's observation and its private memory
 (:class:`LocomotionMemory`, one row per module).
 """
@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .locomotion_kernels import LocomotionRules, locomotion_decide
+from .locomotion_rules import LocomotionRules, locomotion_decide
 
 
 class LocomotionMemory(SlotMemory):
@@ -97,7 +97,7 @@ class LocomotionPolicy(KernelPolicy):
 
     @property
     def rules(self) -> LocomotionRules:
-        """The parameters as :func:`~baselines.locomotion_kernels.locomotion_actions` reads them."""
+        """The parameters as :func:`~baselines.locomotion_rules.locomotion_actions` reads them."""
         return LocomotionRules(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),

@@ -21,9 +21,9 @@ same actions wherever a rule runs (a policy's ``act``, the compiled rollout): a 
 among a set of directions draws 12 uniforms (one key per direction, the largest key among the
 set wins), also when the set has one member or none; :func:`uniform_pick` draws one integer.
 
-The behaviours' rules (:mod:`baselines.chain_kernels`, :mod:`baselines.branch_kernels`,
-:mod:`baselines.table_kernels`, :mod:`baselines.grasp_kernels`,
-:mod:`baselines.locomotion_kernels`) are written with these.
+The behaviours' rules (:mod:`baselines.chain_rules`, :mod:`baselines.branch_rules`,
+:mod:`baselines.table_rules`, :mod:`baselines.grasp_rules`,
+:mod:`baselines.locomotion_rules`) are written with these.
 """
 
 from __future__ import annotations

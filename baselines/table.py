@@ -64,7 +64,7 @@ Private memory per module (reset by :meth:`TablePolicy.reset`): its growth spot 
 AROOT), the side of the seed it took over from (new SEED) and the side of its leg's next
 module (ROOT, FINAL, DISBAND).
 
-The rules run as the numba kernel :func:`baselines.table_kernels.table_actions` on the
+The rules run as the numba kernel :func:`baselines.table_rules.table_actions` on the
 observation fields stacked over modules; the private memory is one row per module
 (:class:`TableMemory`).
 """
@@ -76,7 +76,7 @@ import numpy as np
 from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .base import KernelPolicy, SlotMemory, check_level
-from .table_kernels import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
+from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
 
@@ -135,7 +135,7 @@ class TablePolicy(KernelPolicy):
 
     @property
     def rules(self) -> TableRules:
-        """The parameters as :func:`~baselines.table_kernels.table_actions` reads them."""
+        """The parameters as :func:`~baselines.table_rules.table_actions` reads them."""
         return TableRules(
             scent_max=int(self.scent_max),
             p_max=self.p_max,

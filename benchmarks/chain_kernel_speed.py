@@ -148,10 +148,9 @@ def profile(n: int, cycles: int) -> dict:
     """
     import numba
 
-    from baselines.chain_kernels import chain_actions
+    from baselines.chain_rules import chain_actions
     from proteo_env.core import kernels
-    from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
-    from proteo_env.core.world import LOCAL_ADJACENCY_BITS
+    from proteo_env.core.records import Actions, Observation
     from proteo_env.tasks.chain_kernels import is_chain
 
     @numba.njit
@@ -163,7 +162,7 @@ def profile(n: int, cycles: int) -> dict:
 
     def run(n: int, cycles: int) -> dict:
         env, policy = fresh(n, cycles, room=cycles + 4)
-        w, s, p = env.engine, env.engine.scratch, env.engine.physics
+        w, s = env.engine, env.engine.scratch
         obs = env.observe_arrays()
         memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rules, np.arange(n)
         actions = np.empty((n, env.action_layout.length), dtype=np.int64)
@@ -185,33 +184,9 @@ def profile(n: int, cycles: int) -> dict:
         n_search = n_requested = n_moved = 0
         for _ in range(cycles):
             t0 = time.perf_counter()
-            kernels.articulation_points(
-                w.grid, w.cell, n, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k
-            )
+            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s)
             t1 = time.perf_counter()
-            kernels.observe(
-                w.grid,
-                w.cell,
-                n,
-                w.mode,
-                w.scent,
-                w.inbox,
-                w.anchored,
-                s.is_cut,
-                p.keep_connected,
-                w.neighbourhood_delta,
-                w.roll_delta,
-                w.roll_table,
-                p.scent_max,
-                obs.neighbour_kind,
-                obs.neighbour_mode,
-                obs.neighbour_scent,
-                obs.own_mode,
-                obs.own_scent,
-                obs.messages,
-                obs.contact,
-                obs.action_mask,
-            )
+            kernels.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(obs))
             t2 = time.perf_counter()
             searching = int((obs.own_mode[:, 0] == 1).sum())
             spare = copy.deepcopy(policy.rng)
@@ -237,66 +212,20 @@ def profile(n: int, cycles: int) -> dict:
             t5 = time.perf_counter()
             move = actions[:, 0].copy()
             for keep, part in ((True, "moves"), (False, "moves without the connectivity check")):
-                grid, cell, order = w.grid.copy(), w.cell.copy(), w.rng_state.copy()
+                trial = w.state._replace(grid=w.grid.copy(), cell=w.cell.copy(), rng_state=w.rng_state.copy())
                 started = time.perf_counter()
-                kernels.execute_moves(
-                    grid,
-                    cell,
-                    n,
-                    move,
-                    w.anchored,
-                    keep,
-                    order,
-                    w.dir_delta,
-                    DIRECTIONS,
-                    w.roll_delta,
-                    w.local_delta,
-                    LOCAL_ADJACENCY_BITS,
-                    w.roll_table,
-                    s.movers,
-                    moved,
-                    s.mark,
-                    s.stacks,
-                    s.search,
-                )
+                kernels.execute_moves(trial, w.settings._replace(keep_connected=keep), w.geometry, move, moved, s)
                 parts[part] += time.perf_counter() - started
             n_requested += int((move > 0).sum())
             t6 = time.perf_counter()
-            kernels.run_cycle(
-                w.grid,
-                w.cell,
-                n,
-                w.anchored,
-                w.mode,
-                w.scent,
-                w.inbox,
-                w.rng_state,
-                w.passive_role,
-                w.surface_channels,
-                p.keep_connected,
-                p.exact_scent,
-                p.scent_sweeps,
-                p.scent_max,
-                move,
-                actions[:, 1].astype(np.int32),
-                actions[:, 2:-2].astype(np.int8),
-                actions[:, -2].copy(),
-                actions[:, -1].astype(np.int32),
-                moved,
-                w.dir_delta,
-                DIRECTIONS,
-                OPPOSITE,
-                w.roll_delta,
-                w.local_delta,
-                LOCAL_ADJACENCY_BITS,
-                w.roll_table,
-                s.movers,
-                s.mark,
-                s.queue,
-                s.stacks,
-                s.search,
-                s.scent_buffer,
+            step = Actions.of(
+                move=move,
+                mode=actions[:, 1],
+                scent_role=actions[:, 2:-2],
+                message_target=actions[:, -2].copy(),
+                message_value=actions[:, -1],
             )
+            kernels.run_cycle(w.state, w.settings, w.geometry, step, moved, s)
             t7 = time.perf_counter()
             n_moved += int(moved.sum())
             is_chain(w.grid, w.cell, n, w.dir_delta, *test)

@@ -30,13 +30,13 @@ import yaml
 
 from training.common import seed_everything
 from training.policies import with_memory
-from training.ppo import ActorCritic, Worlds, masked_log_probs, teacher_cross_entropy
+from training.ppo import ActorCritic, TrainingEnvs, masked_log_probs, teacher_cross_entropy
 from training.teachers import Teachers
 
 
 def collect(task: str, env: dict, n_envs: int, cycles: int, seed: int) -> dict[str, np.ndarray]:
     """Samples of rules-driven worlds: features, masks, labels, previous moves and the rules' memory."""
-    worlds = Worlds(
+    worlds = TrainingEnvs(
         SimpleNamespace(task=task, control="move", env=env, n_envs=n_envs, n_groups=1, message_encoding="compact"),
         env_seed=seed,
     )

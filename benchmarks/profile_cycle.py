@@ -42,7 +42,8 @@ def best_ms(run, prepare, repeats: int) -> float:
 def profile(n: int, at: int, repeats: int) -> dict[str, float]:
     import proteo_env
     from proteo_env.core import kernels
-    from proteo_env.core.world import DIRECTIONS, LOCAL_ADJACENCY_BITS, OPPOSITE
+    from proteo_env.core.lattice import OPPOSITE
+    from proteo_env.core.records import Actions, Observation
     from proteo_env.spaces import ObservationBuffers
 
     env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
@@ -60,8 +61,13 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
             getattr(w, name)[:] = value
 
     move = actions[:, lay.move].copy()
-    target = actions[:, lay.message_target].copy()
-    value = actions[:, lay.message_value].astype(np.int32)
+    messages = Actions.of(
+        move=move,
+        mode=actions[:, lay.mode],
+        scent_role=actions[:, lay.roles],
+        message_target=actions[:, lay.message_target],
+        message_value=actions[:, lay.message_value],
+    )
     role = np.full(w.n_modules, kernels.RELAY, dtype=np.int8)
     role[:n] = actions[:, lay.roles][:, 0]
     scent = w.scent[0].copy()
@@ -69,63 +75,21 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
     buffers = ObservationBuffers(n, env.batch.n_sites, w.n_channels)
 
     def moves(keep_connected):
-        return lambda: kernels.execute_moves(
-            w.grid,
-            w.cell,
-            n,
-            move,
-            w.anchored,
-            keep_connected,
-            w.rng_state,
-            w.dir_delta,
-            DIRECTIONS,
-            w.roll_delta,
-            w.local_delta,
-            LOCAL_ADJACENCY_BITS,
-            w.roll_table,
-            s.movers,
-            moved,
-            s.mark,
-            s.stacks,
-            s.search,
-        )
+        settings = w.settings._replace(keep_connected=keep_connected)
+        return lambda: kernels.execute_moves(w.state, settings, w.geometry, move, moved, s)
 
     def observation():
-        kernels.observe(
-            w.grid,
-            w.cell,
-            n,
-            w.mode,
-            w.scent,
-            w.inbox,
-            w.anchored,
-            s.is_cut,
-            p.keep_connected,
-            w.neighbourhood_delta,
-            w.roll_delta,
-            w.roll_table,
-            p.scent_max,
-            buffers.neighbour_kind,
-            buffers.neighbour_mode,
-            buffers.neighbour_scent,
-            buffers.own_mode,
-            buffers.own_scent,
-            buffers.messages,
-            buffers.contact,
-            buffers.action_mask,
-        )
+        kernels.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(buffers))
 
     parts = {
         "checks": lambda: env.batch.check_actions(actions[None]),
-        "messages": lambda: kernels.deliver_messages(w.grid, w.cell, n, target, value, w.dir_delta, OPPOSITE, w.inbox),
+        "messages": lambda: kernels.deliver_messages(w.state, n, messages, w.dir_delta, OPPOSITE),
         "moves": moves(True),
         "moves without connectivity": moves(False),
         "scent": lambda: kernels.relax_scent(
             w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer, p.scent_sweeps, p.scent_max, w.dir_delta
         ),
-        "cut modules": lambda: kernels.articulation_points(
-            w.grid, w.cell, w.n_modules, w.dir_delta, s.is_cut, s.adjacency, s.disc, s.low, s.stack_node, s.stack_k
-        ),
+        "cut modules": lambda: kernels.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s),
         "observation": observation,
         "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
     }

@@ -69,7 +69,7 @@ class BatchedEnv:
             ``control``, ``control_fields`` and ``control_nvec`` are its name, the fields an
             action row holds and their number of values.
         n_envs, n_agents: ``B`` and ``A``.
-        engine: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
+        world_batch: the :class:`~proteo_env.core.batch.WorldBatch` (after :meth:`reset`).
         cycles: ``(B,)`` int, cycles of each world's current episode (the cycle number the
             task sees); all equal unless :meth:`reset_worlds` restarted some worlds.
         last_moved: ``(B, A)`` bool, who moved in the last cycle.
@@ -98,7 +98,7 @@ class BatchedEnv:
         self.build_world(task, probe)  # checks the layout now, not at the first reset
         self.n_agents = probe.n_agents
         self.n_modules = len(probe.positions)
-        self.engine: WorldBatch | None = None
+        self.world_batch: WorldBatch | None = None
         self.cycles = np.zeros(self.n_envs, dtype=np.int64)
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         self._rngs = [np.random.default_rng() for _ in tasks]
@@ -124,7 +124,7 @@ class BatchedEnv:
 
     @property
     def worlds(self) -> list[World]:
-        return self.engine.worlds
+        return self.world_batch.worlds
 
     @property
     def task(self) -> Task:
@@ -159,7 +159,7 @@ class BatchedEnv:
         worlds = [self.build_world(task, layout, extent) for task, layout in zip(self.tasks, layouts)]
         for world, rng in zip(worlds, self._rngs):
             world.seed(int(rng.integers(2**63)))
-        self.engine = WorldBatch(worlds)
+        self.world_batch = WorldBatch(worlds)
         for b in range(self.n_envs):
             self._start_episode(b)
         self.cycles[:] = 0
@@ -176,7 +176,7 @@ class BatchedEnv:
         current cycle was observed already, only the restarted worlds are observed anew (into a
         copy; buffers returned before are not changed).
         """
-        if self.engine is None:
+        if self.world_batch is None:
             raise RuntimeError("no world yet; call reset() first")
         which = np.asarray(which)
         rows = np.flatnonzero(which) if which.dtype == np.bool_ else which.astype(np.int64).reshape(-1)
@@ -190,13 +190,13 @@ class BatchedEnv:
         needed = tuple(np.max([extent] + [layout.size for layout in layouts.values()], axis=0))
         observed = None if needed != extent or self._observed is None else self._observed.copy()
         if needed != extent:
-            self.engine = WorldBatch([world.regrid(needed) for world in self.worlds])
+            self.world_batch = WorldBatch([world.regrid(needed) for world in self.worlds])
             for task, world in zip(self.tasks, self.worlds):
                 task.regrid(world)
         for b, layout in layouts.items():
             world = self.build_world(self.tasks[b], layout, needed)
             world.seed(int(self._rngs[b].integers(2**63)))
-            self.engine.replace(b, world)
+            self.world_batch.replace(b, world)
             self._start_episode(b)
         self.cycles[rows] = 0
         self.last_moved[rows] = False
@@ -282,11 +282,11 @@ class BatchedEnv:
 
         A bad batch raises ``ValueError`` and changes nothing.
         """
-        if self.engine is None:
+        if self.world_batch is None:
             raise RuntimeError("no world yet; call reset() first")
         actions = self.full_actions(self.check_actions(actions))
         lay = self.action_layout
-        self.last_moved = self.engine.step(
+        self.last_moved = self.world_batch.step(
             move=actions[..., lay.move],
             mode=actions[..., lay.mode],
             scent_role=actions[..., lay.roles],
@@ -311,7 +311,7 @@ class BatchedEnv:
         """Fresh observation arrays of every agent of every world (``B * A`` rows, world-major)."""
         a = self.n_agents
         buffers = ObservationBuffers(self.n_envs * a, self.n_sites, self.tasks[0].n_channels)
-        self.engine.observe(buffers)
+        self.world_batch.observe(buffers)
         for b in range(self.n_envs):
             self._sense(b, buffers.rows(b * a, (b + 1) * a))
         self._observed = buffers

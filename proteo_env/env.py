@@ -131,7 +131,7 @@ class ProteoEnv(ParallelEnv):
     @property
     def engine(self) -> World | None:
         """The underlying :class:`~proteo_env.core.world.World` (``None`` before :meth:`reset`)."""
-        return None if self.batch.engine is None else self.batch.worlds[0]
+        return None if self.batch.world_batch is None else self.batch.worlds[0]
 
     @property
     def cycle(self) -> int:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from baselines import POLICIES, make_policy
 from baselines.compiled import compiled_rollout
 from proteo_env import control
 from proteo_env.config import ConfigError
+from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.rollout import run_episode
 
 MODULE = '''
@@ -95,3 +97,37 @@ def test_registering_a_taken_name_or_a_non_task_is_refused(snake):
         proteo_env.register(dict)
     with pytest.raises(ValueError, match=r"policy name 'snake' is taken by SnakePolicy"):
         register_policy(type("Twin", (snake.SnakePolicy,), {}))
+
+
+def test_the_task_base_class_example_is_a_working_task():
+    """The example in ``Task``'s docstring, run as written: a ball flattens under random moves."""
+    from proteo_env.tasks.base import Task
+
+    source = Task.__doc__.split("touches the ground; ``tests/test_plugin.py`` runs it)::")[1]
+    source = source.split("\n\n    ``docs/guides")[0]
+    namespace = {}
+    exec(compile(textwrap.dedent(source), "Task example", "exec"), namespace)
+    flatten = namespace["Flatten"]
+    proteo_env.register(flatten)
+    try:
+        with pytest.raises(TypeError, match="build_layout"):
+            type("NoLayout", (Task,), {"name": "none"})()  # the one required hook
+        env = proteo_env.make("flatten", max_cycles=3000)
+        env.reset(seed=0)
+        start = env.world.positions
+        assert (start[:, 2] > 0).any(), "the ball starts above the ground"
+        rng = np.random.default_rng(0)
+        down = np.concatenate([[0.0], -DIRECTIONS[:, 2]])  # per move: +1 rolls down, -1 up, 0 stay/level
+        buffers = env.observe_arrays()
+        terminated = False
+        while not terminated and env.cycle < env.max_cycles:  # roll down when possible, else wander level
+            actions = np.zeros((len(env.possible_agents), env.action_layout.length), dtype=np.int64)
+            score = (rng.random(buffers.action_mask.shape) + 2 * down) * buffers.action_mask
+            score[:, 1:][:, DIRECTIONS[:, 2] > 0] = 0
+            actions[:, env.action_layout.move] = score.argmax(axis=1)
+            result = env.step_arrays(actions)
+            terminated = bool(result.terminated[0])
+            buffers = env.observe_arrays()
+        assert terminated and (env.world.positions[:, 2] == 0).all()
+    finally:
+        proteo_env.TASKS.pop("flatten-v0", None)

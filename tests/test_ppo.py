@@ -183,7 +183,7 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
     observation are kept for the value bootstrap."""
     env = {"n_modules": 8, "max_cycles": 5}
     args = ppo.Args(task="chain-v1", control="move", env=env, n_envs=3, n_groups=1, message_encoding="compact")
-    worlds = ppo.Worlds(args, env_seed=11)
+    worlds = ppo.TrainingEnvs(args, env_seed=11)
     singles = [proteo_env.make("chain-v1", control="move", **env) for _ in range(3)]
     for w, single in enumerate(singles):
         single.reset(seed=11 + w)

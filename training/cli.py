@@ -14,21 +14,6 @@ import sys
 import time
 from pathlib import Path
 
-DEMO_SETTINGS = {
-    "sandbox": {"n_modules": 40, "max_cycles": 200},
-    "chain": {"n_modules": 40, "max_cycles": 3000},
-    "branch": {"n_modules": 100, "max_cycles": 400, "motion_model": "minimal"},
-    "grasp": {"n_modules": 120, "object_size": 2.0, "distance": 4, "max_cycles": 1500},
-    "table": {
-        "board_size": 18,
-        "depth": 4,
-        "n_spares": 60,
-        "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)),
-        "motion_model": "minimal",
-    },
-}
-"""Per-task settings of ``proteo demo`` (tasks not listed run with their defaults)."""
-
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg", ".svg", ".pdf")
 
 
@@ -173,7 +158,7 @@ def demo(args) -> int:
     out = Path(args.out)
     rows = []
     for task_id, cls in sorted(newest_tasks().items()):
-        overrides = dict(DEMO_SETTINGS.get(cls.name, {}))
+        overrides = dict(cls.demo_settings)
         if args.motion_model:
             overrides["motion_model"] = args.motion_model
         rows.append(_run(task_id, overrides, None, args.seed, out))

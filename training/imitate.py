@@ -64,7 +64,7 @@ from training.common import (
 )
 from training.networks import ARCHS, ActorCritic
 from training.policies import check_memory, check_sampled
-from training.ppo import Worlds, masked_log_probs, sample, teacher_cross_entropy
+from training.ppo import TrainingEnvs, masked_log_probs, sample, teacher_cross_entropy
 from training.teachers import DEFAULT_TEACHER, Teachers
 
 ALGORITHM = "imitation"
@@ -151,7 +151,7 @@ def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[floa
 
 
 def collect(
-    worlds: Worlds, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args, bar
+    worlds: TrainingEnvs, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args, bar
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
     """``cycles`` cycles of every world with each module playing the teacher's action with
     probability ``beta``, else the network's sample. Returns the stored samples' features
@@ -201,7 +201,7 @@ def train(args: Args) -> Path:
         args.run_dir, f"imitate_{task_name(args.task)}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
     )
     save_args(args, run_dir)
-    worlds = Worlds(args, env_seed=args.seed)
+    worlds = TrainingEnvs(args, env_seed=args.seed)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
     fields = worlds.groups[0].control_fields
     teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))

@@ -267,7 +267,7 @@ def entropy(log_probs: list[torch.Tensor]) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------- environment side
-class Worlds:
+class TrainingEnvs:
     """``n_envs`` worlds as ``n_groups`` BatchedEnvs, each world restarted as soon as its episode ends.
 
     Rows are world-major across groups: sample ``w * A + i`` is module ``i`` of world ``w``,
@@ -539,7 +539,9 @@ def train(args: Args) -> Path:
     def stage_args() -> Args:
         return args if curriculum is None else dataclasses.replace(args, env=curriculum.overrides(args.env))
 
-    worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)  # a resumed run does not replay its first episodes
+    worlds = TrainingEnvs(
+        stage_args(), env_seed=args.seed + agent_steps
+    )  # a resumed run does not replay its first episodes
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory, args.recurrent)
     if args.init and resume_meta is None:
@@ -755,7 +757,7 @@ def train(args: Args) -> Path:
             },
         )
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
-            worlds = Worlds(stage_args(), env_seed=args.seed + agent_steps)
+            worlds = TrainingEnvs(stage_args(), env_seed=args.seed + agent_steps)
             a, teachers = worlds.n_agents, make_teachers()
             n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
             state = net.initial_state(n)

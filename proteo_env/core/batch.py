@@ -15,144 +15,24 @@ import numpy as np
 
 from . import kernels
 from .jit import parallel_kernel, prange
-from .lattice import DIRECTIONS, OPPOSITE
-from .world import LOCAL_ADJACENCY_BITS, Scratch, World
+from .records import Actions, Observation, Scratch, WorldState, row
+from .world import World
 
 
 @parallel_kernel
-def _run_cycles(
-    grid,
-    cell,
-    n_agents,
-    anchored,
-    mode,
-    scent,
-    inbox,
-    rng_state,
-    passive_role,
-    surface,
-    keep_connected,
-    exact,
-    sweeps,
-    scent_max,
-    move,
-    new_mode,
-    role,
-    message_target,
-    message_value,
-    moved,
-    dir_delta,
-    directions,
-    opposite,
-    roll_delta,
-    local_delta,
-    local_adjacent,
-    roll_table,
-    movers,
-    mark,
-    queue,
-    stacks,
-    search,
-    scent_buffer,
-):
-    for b in prange(grid.shape[0]):
-        kernels.run_cycle(
-            grid[b],
-            cell[b],
-            n_agents,
-            anchored[b],
-            mode[b],
-            scent[b],
-            inbox[b],
-            rng_state[b],
-            passive_role,
-            surface,
-            keep_connected,
-            exact,
-            sweeps,
-            scent_max,
-            move[b],
-            new_mode[b],
-            role[b],
-            message_target[b],
-            message_value[b],
-            moved[b],
-            dir_delta,
-            directions,
-            opposite,
-            roll_delta,
-            local_delta,
-            local_adjacent,
-            roll_table,
-            movers[b],
-            mark[b],
-            queue[b],
-            stacks[b],
-            search[b],
-            scent_buffer[b],
-        )
+def _run_cycles(state, settings, geometry, actions, moved, scratch):
+    """:func:`~.kernels.run_cycle` of every world; ``state``, ``actions``, ``moved`` and
+    ``scratch`` have a leading ``B`` axis."""
+    for b in prange(moved.shape[0]):
+        kernels.run_cycle(row(state, b), settings, geometry, row(actions, b), moved[b], row(scratch, b))
 
 
 @parallel_kernel
-def _observe_worlds(
-    grid,
-    cell,
-    n_agents,
-    mode,
-    scent,
-    inbox,
-    anchored,
-    keep_connected,
-    nb_delta,
-    dir_delta,
-    roll_delta,
-    roll_table,
-    scent_max,
-    is_cut,
-    adjacency,
-    disc,
-    low,
-    stack_node,
-    stack_k,
-    neighbour_kind,
-    neighbour_mode,
-    neighbour_scent,
-    own_mode,
-    own_scent,
-    messages,
-    contact,
-    action_mask,
-):
-    for b in prange(grid.shape[0]):
-        kernels.observe_world(
-            grid[b],
-            cell[b],
-            n_agents,
-            mode[b],
-            scent[b],
-            inbox[b],
-            anchored[b],
-            keep_connected,
-            nb_delta,
-            dir_delta,
-            roll_delta,
-            roll_table,
-            scent_max,
-            is_cut[b],
-            adjacency[b],
-            disc[b],
-            low[b],
-            stack_node[b],
-            stack_k[b],
-            neighbour_kind[b],
-            neighbour_mode[b],
-            neighbour_scent[b],
-            own_mode[b],
-            own_scent[b],
-            messages[b],
-            contact[b],
-            action_mask[b],
-        )
+def _observe_worlds(state, settings, geometry, scratch, out):
+    """:func:`~.kernels.observe_world` of every world; ``state``, ``scratch`` and ``out`` have a
+    leading ``B`` axis."""
+    for b in prange(state[0].shape[0]):
+        kernels.observe_world(row(state, b), settings, geometry, row(scratch, b), row(out, b))
 
 
 class WorldBatch:
@@ -164,7 +44,8 @@ class WorldBatch:
 
     Attributes:
         worlds: the ``World`` objects; ``worlds[b]`` works on row ``b``.
-        grid, cell, anchored, mode, scent, inbox, rng_state: ``(B, ...)`` stacked state.
+        state: the worlds' :class:`~.records.WorldState` arrays, stacked (``(B, ...)`` each).
+        scratch: the worlds' :class:`~.records.Scratch` arrays, stacked.
     """
 
     def __init__(self, worlds: list[World]):
@@ -188,21 +69,16 @@ class WorldBatch:
         self.worlds = list(worlds)
         self.n_worlds = len(worlds)
         self.n_agents = first.n_agents
-        for name in World.STATE:
-            setattr(self, name, np.stack([getattr(w, name) for w in worlds]))
-        self.scratch = Scratch(0, 0)
-        for name in Scratch.NAMES:
-            setattr(self.scratch, name, np.stack([getattr(w.scratch, name) for w in worlds]))
+        self.state = WorldState(*(np.stack(arrays) for arrays in zip(*(w.state for w in worlds))))
+        self.scratch = Scratch(*(np.stack(arrays) for arrays in zip(*(w.scratch for w in worlds))))
         self._rehome()
 
     def _rehome(self, rows=None) -> None:
         """Point every world's arrays (or those of ``rows``) at its row of the stacked arrays."""
         for b in range(self.n_worlds) if rows is None else rows:
             w = self.worlds[b]
-            for name in World.STATE:
-                setattr(w, name, getattr(self, name)[b])
-            for name in Scratch.NAMES:
-                setattr(w.scratch, name, getattr(self.scratch, name)[b])
+            w.state = WorldState(*row(self.state, b))
+            w.scratch = Scratch(*row(self.scratch, b))
 
     def replace(self, b: int, world: World) -> None:
         """Put ``world`` (built on this batch's grid layout) in row ``b``, state copied into the row."""
@@ -213,10 +89,9 @@ class WorldBatch:
             or world.n_agents != first.n_agents
         ):
             raise ValueError("a world replacing one of a batch must share its grid extent, module and agent counts")
-        for name in World.STATE:
-            getattr(self, name)[b] = getattr(world, name)
-        for name in Scratch.NAMES:
-            getattr(self.scratch, name)[b] = getattr(world.scratch, name)
+        for record, into in ((world.state, self.state), (world.scratch, self.scratch)):
+            for arrays, rows in zip(record, into):
+                rows[b] = arrays
         self.worlds[b] = world
         self._rehome([b])
 
@@ -239,44 +114,12 @@ class WorldBatch:
                 message_target=message_target[0],
                 message_value=message_value[0],
             )[None]
-        w, s = self.worlds[0], self.scratch
-        p = w.physics
         moved = np.zeros((self.n_worlds, self.n_agents), dtype=np.bool_)
-        _run_cycles(
-            self.grid,
-            self.cell,
-            self.n_agents,
-            self.anchored,
-            self.mode,
-            self.scent,
-            self.inbox,
-            self.rng_state,
-            w.passive_role,
-            w.surface_channels,
-            p.keep_connected,
-            p.exact_scent,
-            p.scent_sweeps,
-            p.scent_max,
-            np.asarray(move, dtype=np.int64),
-            np.asarray(mode, dtype=np.int32),
-            np.asarray(scent_role, dtype=np.int8),
-            np.asarray(message_target, dtype=np.int64),
-            np.asarray(message_value, dtype=np.int32),
-            moved,
-            w.dir_delta,
-            DIRECTIONS,
-            OPPOSITE,
-            w.roll_delta,
-            w.local_delta,
-            LOCAL_ADJACENCY_BITS,
-            w.roll_table,
-            s.movers,
-            s.mark,
-            s.queue,
-            s.stacks,
-            s.search,
-            s.scent_buffer,
+        actions = Actions.of(
+            move=move, mode=mode, scent_role=scent_role, message_target=message_target, message_value=message_value
         )
+        w = self.worlds[0]
+        _run_cycles(tuple(self.state), tuple(w.settings), tuple(w.geometry), tuple(actions), moved, tuple(self.scratch))
         return moved
 
     def observe(self, out) -> None:
@@ -284,38 +127,7 @@ class WorldBatch:
         if self.n_worlds == 1:
             self.worlds[0].observe(out)
             return
-        w, s = self.worlds[0], self.scratch
-        b, a = self.n_worlds, self.n_agents
-
-        def rows(x):
-            return x.reshape((b, a) + x.shape[1:])
-
-        _observe_worlds(
-            self.grid,
-            self.cell,
-            a,
-            self.mode,
-            self.scent,
-            self.inbox,
-            self.anchored,
-            w.physics.keep_connected,
-            w.neighbourhood_delta,
-            w.dir_delta,
-            w.roll_delta,
-            w.roll_table,
-            w.physics.scent_max,
-            s.is_cut,
-            s.adjacency,
-            s.disc,
-            s.low,
-            s.stack_node,
-            s.stack_k,
-            rows(out.neighbour_kind),
-            rows(out.neighbour_mode),
-            rows(out.neighbour_scent),
-            rows(out.own_mode),
-            rows(out.own_scent),
-            rows(out.messages),
-            rows(out.contact),
-            rows(out.action_mask),
-        )
+        w = self.worlds[0]
+        shape = (self.n_worlds, self.n_agents)
+        out = tuple(x.reshape(shape + x.shape[1:]) for x in Observation.plain(out))
+        _observe_worlds(tuple(self.state), tuple(w.settings), tuple(w.geometry), tuple(self.scratch), out)

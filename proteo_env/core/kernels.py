@@ -1,8 +1,10 @@
 """Numba kernels of one cycle: random numbers, roll legality, connectivity, scents, observations.
 
-All state lives in plain arrays (see :class:`proteo_env.core.world.World` for their shapes);
-kernels index the padded flat grid directly. These functions are internal: call them through
-:mod:`proteo_env.core.world`.
+All state lives in plain arrays, carried by the named records of :mod:`proteo_env.core.records`
+(:class:`~proteo_env.core.records.WorldState`, ``Settings``, ``Geometry``, ``Scratch``,
+``Actions``, ``Observation``); kernels index the padded flat grid directly. The two entry
+points are :func:`run_cycle` and :func:`observe_world`. These functions are internal: call them
+through :mod:`proteo_env.core.world`.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ import numpy as np
 
 from .jit import kernel
 from .lattice import EMPTY, OBJECT, SOLID
+from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SILENT, RELAY, EMIT = 0, 1, 2
 KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
@@ -125,7 +128,7 @@ LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1
 
 
 @kernel
-def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, local_adjacent, mark, stacks, search):
+def detach_keeps_connected(grid, cell, m, geometry, scratch):
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
@@ -143,6 +146,9 @@ def detach_keeps_connected(grid, cell, m, dir_delta, directions, local_delta, lo
     groups' union-find parents and seed directions are packed 4 bits per group in two
     integers, so a search allocates nothing.
     """
+    dir_delta, directions = geometry.dir_delta, geometry.directions
+    local_delta, local_adjacent = geometry.local_delta, geometry.local_adjacency
+    mark, stacks, search = scratch.mark, scratch.stacks, scratch.search
     c = cell[m]
     touching = 0
     for i in range(12):
@@ -253,13 +259,15 @@ def module_adjacency(grid, cell, n_modules, dir_delta, adjacency):
 
 
 @kernel
-def articulation_points(grid, cell, n_modules, dir_delta, is_cut, adjacency, disc, low, stack_node, stack_k):
-    """Mark in ``is_cut`` (N,) the modules whose removal disconnects the module graph.
+def articulation_points(grid, cell, n_modules, dir_delta, scratch):
+    """Mark in ``scratch.is_cut`` (N,) the modules whose removal disconnects the module graph.
 
     Iterative Tarjan depth-first search over every component, on the neighbour lists of
-    :func:`module_adjacency` (so each edge costs one read); ``adjacency`` (N, 13) and
-    ``disc``, ``low``, ``stack_node``, ``stack_k`` (N,) are int32 scratch arrays.
+    :func:`module_adjacency` (so each edge costs one read); it works in the scratch arrays
+    ``adjacency`` (N, 13) and ``disc``, ``low``, ``stack_node``, ``stack_k`` (N,).
     """
+    is_cut, adjacency, disc, low = scratch.is_cut, scratch.adjacency, scratch.disc, scratch.low
+    stack_node, stack_k = scratch.stack_node, scratch.stack_k
     module_adjacency(grid, cell, n_modules, dir_delta, adjacency)
     for n in range(n_modules):
         disc[n] = -1
@@ -328,20 +336,23 @@ def count_components(grid, cell, n_modules, dir_delta, mark, queue):
 
 # ---------------------------------------------------------------- the cycle
 @kernel
-def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opposite, inbox):
-    """Clear ``inbox`` (N, 12) and deliver this cycle's messages, in agent order.
+def deliver_messages(state, n_agents, actions, dir_delta, opposite):
+    """Clear ``state.inbox`` (N, 12) and deliver this cycle's messages, in agent order.
 
-    ``msg_target[a]`` is a direction ``0..11`` or ``12`` for all neighbours; a value of 0 sends
-    nothing. The receiver finds the value in the slot of the direction it came from.
+    ``actions.message_target[a]`` is a direction ``0..11`` or ``12`` for all neighbours; a
+    value of 0 sends nothing. The receiver finds the value in the slot of the direction it
+    came from.
     """
+    grid, cell, inbox = state.grid, state.cell, state.inbox
+    target, message = actions.message_target, actions.message_value
     inbox[:] = 0
     for a in range(n_agents):
-        value = msg_value[a]
+        value = message[a]
         if value == 0:
             continue
         c = cell[a]
         for k in range(12):
-            if msg_target[a] != 12 and msg_target[a] != k:
+            if target[a] != 12 and target[a] != k:
                 continue
             receiver = grid[c + dir_delta[k]]
             if receiver >= 0:
@@ -349,38 +360,23 @@ def deliver_messages(grid, cell, n_agents, msg_target, msg_value, dir_delta, opp
 
 
 @kernel
-def execute_moves(
-    grid,
-    cell,
-    n_agents,
-    move,
-    anchored,
-    keep_connected,
-    rng_state,
-    dir_delta,
-    directions,
-    roll_delta,
-    local_delta,
-    local_adjacent,
-    roll_table,
-    movers,
-    moved,
-    mark,
-    stacks,
-    search,
-):
+def execute_moves(state, settings, geometry, move, moved, scratch):
     """Try the requested moves one by one in a fresh random order; set ``moved`` (A,) flags.
 
-    ``move[a]`` is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is checked
-    against the occupancy at the moment it is tried. Returns the number of modules moved.
+    ``move[a]`` (A,) is 0 (stay) or ``k + 1`` to roll towards direction ``k``. Each move is
+    checked against the occupancy at the moment it is tried. Returns the number of modules
+    moved.
     """
+    grid, cell, anchored = state.grid, state.cell, state.anchored
+    dir_delta, roll_delta, roll_table = geometry.dir_delta, geometry.roll_delta, geometry.roll_table
+    movers = scratch.movers
     n_movers = 0
-    for a in range(n_agents):
+    for a in range(settings.n_agents):
         moved[a] = False
         if move[a] > 0 and not anchored[a]:
             movers[n_movers] = a
             n_movers += 1
-    shuffle(movers, n_movers, rng_state)
+    shuffle(movers, n_movers, state.rng_state)
     n_moved = 0
     for i in range(n_movers):
         a = movers[i]
@@ -390,9 +386,7 @@ def execute_moves(
             continue
         if not (legal_directions(grid, c, roll_delta, roll_table) >> k) & 1:
             continue
-        if keep_connected and not detach_keeps_connected(
-            grid, cell, a, dir_delta, directions, local_delta, local_adjacent, mark, stacks, search
-        ):
+        if settings.keep_connected and not detach_keeps_connected(grid, cell, a, geometry, scratch):
             continue
         grid[c] = EMPTY
         grid[c + dir_delta[k]] = a
@@ -467,41 +461,34 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 
 # ---------------------------------------------------------------- observations
 @kernel
-def observe(
-    grid,
-    cell,
-    n_agents,
-    mode,
-    scent,
-    inbox,
-    anchored,
-    is_cut,
-    keep_connected,
-    nb_delta,
-    roll_delta,
-    roll_table,
-    scent_max,
-    neighbour_kind,
-    neighbour_mode,
-    neighbour_scent,
-    own_mode,
-    own_scent,
-    messages,
-    contact,
-    action_mask,
-):
-    """Fill the per-agent observation arrays (first axis: agent) from the world state.
+def observe(state, settings, geometry, is_cut, out):
+    """Fill the per-agent observation arrays of ``out`` (an :class:`~.records.Observation`,
+    first axis: agent) from the world state.
 
-    One pass over each agent's neighbourhood sites (``nb_delta``, the 12 face neighbours
-    first) fills the neighbour fields, the contacts and the face-neighbour bits from which the
-    action mask follows (:func:`legal_rolls`). A module's moves are masked out when it may not
-    leave its site: anchored, or, with ``keep_connected``, a cut module (``is_cut`` from
-    :func:`articulation_points`).
-
-    Shapes: ``neighbour_kind``/``neighbour_mode`` (A, K), ``neighbour_scent`` (A, K, C),
-    ``own_mode`` (A, 1), ``own_scent`` (A, C), ``messages`` (A, 12), ``contact`` (A, 2)
-    (ground, object) and ``action_mask`` (A, 13).
+    One pass over each agent's neighbourhood sites (``geometry.neighbourhood_delta``, the 12
+    face neighbours first) fills the neighbour fields, the contacts and the face-neighbour
+    bits from which the action mask follows (:func:`legal_rolls`). A module's moves are masked
+    out when it may not leave its site: anchored, or, with ``keep_connected``, a cut module
+    (``is_cut`` (N,) from :func:`articulation_points`).
     """
+    grid, cell, mode, scent, inbox, anchored = (
+        state.grid,
+        state.cell,
+        state.mode,
+        state.scent,
+        state.inbox,
+        state.anchored,
+    )
+    n_agents, keep_connected, scent_max = settings.n_agents, settings.keep_connected, settings.scent_max
+    nb_delta, roll_delta, roll_table = geometry.neighbourhood_delta, geometry.roll_delta, geometry.roll_table
+    neighbour_kind, neighbour_mode, neighbour_scent = out.neighbour_kind, out.neighbour_mode, out.neighbour_scent
+    own_mode, own_scent, messages, contact, action_mask = (
+        out.own_mode,
+        out.own_scent,
+        out.messages,
+        out.contact,
+        out.action_mask,
+    )
     n_channels = scent.shape[0]
     n_sites = nb_delta.shape[0]
     for a in range(n_agents):
@@ -554,131 +541,59 @@ def observe(
 
 # ---------------------------------------------------------------- whole cycle, whole observation
 @kernel
-def run_cycle(
-    grid,
-    cell,
-    n_agents,
-    anchored,
-    mode,
-    scent,
-    inbox,
-    rng_state,
-    passive_role,
-    surface,
-    keep_connected,
-    exact,
-    sweeps,
-    scent_max,
-    move,
-    new_mode,
-    role,
-    message_target,
-    message_value,
-    moved,
-    dir_delta,
-    directions,
-    opposite,
-    roll_delta,
-    local_delta,
-    local_adjacent,
-    roll_table,
-    movers,
-    mark,
-    queue,
-    stacks,
-    search,
-    scent_buffer,
-):
-    """One cycle of one world (SPEC section 4); ``role`` is ``(A, C)``. Returns modules moved."""
-    n_modules = len(cell)
-    mode[:n_agents] = new_mode
-    deliver_messages(grid, cell, n_agents, message_target, message_value, dir_delta, opposite, inbox)
-    n_moved = execute_moves(
-        grid,
-        cell,
-        n_agents,
-        move,
-        anchored,
-        keep_connected,
-        rng_state,
-        dir_delta,
-        directions,
-        roll_delta,
-        local_delta,
-        local_adjacent,
-        roll_table,
-        movers,
-        moved,
-        mark,
-        stacks,
-        search,
-    )
+def run_cycle(state, settings, geometry, actions, moved, scratch):
+    """One cycle of one world (SPEC section 4); returns the number of modules moved.
+
+    ``state`` (:class:`~.records.WorldState`), ``settings``, ``geometry``, ``actions`` and
+    ``scratch`` are the records of :mod:`~proteo_env.core.records`, named or plain tuples in
+    field order; ``moved`` (A,) bool is set to who moved.
+    """
+    state, settings, geometry = WorldState(*state), Settings(*settings), Geometry(*geometry)
+    actions, scratch = Actions(*actions), Scratch(*scratch)
+    grid, cell, scent = state.grid, state.cell, state.scent
+    n_agents, n_modules = settings.n_agents, len(cell)
+    state.mode[:n_agents] = actions.mode
+    deliver_messages(state, n_agents, actions, geometry.dir_delta, geometry.opposite)
+    n_moved = execute_moves(state, settings, geometry, actions.move, moved, scratch)
     channel_role = np.empty(n_modules, dtype=np.int8)
     for ch in range(scent.shape[0]):
-        channel_role[:n_agents] = role[:, ch]
-        channel_role[n_agents:] = passive_role[ch]
-        if exact:
-            exact_scent(grid, cell, n_modules, channel_role, surface[ch], scent[ch], queue, scent_max, dir_delta)
+        channel_role[:n_agents] = actions.scent_role[:, ch]
+        channel_role[n_agents:] = settings.passive_role[ch]
+        surface = settings.surface_channels[ch]
+        if settings.exact_scent:
+            exact_scent(
+                grid,
+                cell,
+                n_modules,
+                channel_role,
+                surface,
+                scent[ch],
+                scratch.queue,
+                settings.scent_max,
+                geometry.dir_delta,
+            )
         else:
             relax_scent(
-                grid, cell, n_modules, channel_role, surface[ch], scent[ch], scent_buffer, sweeps, scent_max, dir_delta
+                grid,
+                cell,
+                n_modules,
+                channel_role,
+                surface,
+                scent[ch],
+                scratch.scent_buffer,
+                settings.scent_sweeps,
+                settings.scent_max,
+                geometry.dir_delta,
             )
     return n_moved
 
 
 @kernel
-def observe_world(
-    grid,
-    cell,
-    n_agents,
-    mode,
-    scent,
-    inbox,
-    anchored,
-    keep_connected,
-    nb_delta,
-    dir_delta,
-    roll_delta,
-    roll_table,
-    scent_max,
-    is_cut,
-    adjacency,
-    disc,
-    low,
-    stack_node,
-    stack_k,
-    neighbour_kind,
-    neighbour_mode,
-    neighbour_scent,
-    own_mode,
-    own_scent,
-    messages,
-    contact,
-    action_mask,
-):
-    """Every agent's observation of one world (cut modules found first when connectivity is kept)."""
-    if keep_connected:
-        articulation_points(grid, cell, len(cell), dir_delta, is_cut, adjacency, disc, low, stack_node, stack_k)
-    observe(
-        grid,
-        cell,
-        n_agents,
-        mode,
-        scent,
-        inbox,
-        anchored,
-        is_cut,
-        keep_connected,
-        nb_delta,
-        roll_delta,
-        roll_table,
-        scent_max,
-        neighbour_kind,
-        neighbour_mode,
-        neighbour_scent,
-        own_mode,
-        own_scent,
-        messages,
-        contact,
-        action_mask,
-    )
+def observe_world(state, settings, geometry, scratch, out):
+    """Every agent's observation of one world into ``out`` (an :class:`~.records.Observation`),
+    cut modules found first when connectivity is kept; records as in :func:`run_cycle`."""
+    state, settings, geometry = WorldState(*state), Settings(*settings), Geometry(*geometry)
+    scratch, out = Scratch(*scratch), Observation(*out)
+    if settings.keep_connected:
+        articulation_points(state.grid, state.cell, len(state.cell), geometry.dir_delta, scratch)
+    observe(state, settings, geometry, scratch.is_cut, out)

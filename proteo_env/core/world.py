@@ -1,7 +1,8 @@
 """The lattice world: state arrays and the cycle, behind a small keyword-only API.
 
 This module is the compute core's front door; it imports nothing from gymnasium or
-pettingzoo. A :class:`World` owns plain NumPy arrays:
+pettingzoo. A :class:`World` owns plain NumPy arrays, held in its ``state`` (a
+:class:`~proteo_env.core.records.WorldState`) and readable as attributes (``world.grid``):
 
 ============== ============ ==================================================================
 array          shape        meaning
@@ -29,12 +30,14 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from operator import attrgetter
 
 import numpy as np
 
 from . import kernels
 from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
 from .motion import LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
+from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SCENT_ROLES = ("silent", "relay", "emit")
 """Scent roles in action order: 0 silent, 1 relay, 2 emit."""
@@ -150,38 +153,6 @@ def _local_adjacency_bits() -> np.ndarray:
 LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
 
 
-class Scratch:
-    """Work arrays of one world's kernels (never part of the state), for ``n`` modules on a
-    grid of ``cells`` cells."""
-
-    NAMES = (
-        "mark",
-        "queue",
-        "movers",
-        "stacks",
-        "search",
-        "adjacency",
-        "disc",
-        "low",
-        "stack_node",
-        "stack_k",
-        "scent_buffer",
-        "is_cut",
-    )
-
-    def __init__(self, n: int, cells: int):
-        self.mark = np.full(cells, -1, dtype=np.int32)
-        self.queue = np.zeros(n, dtype=np.int64)
-        self.movers = np.zeros(n, dtype=np.int64)
-        self.stacks = np.zeros((12, n, 4), dtype=np.int32)
-        self.search = np.zeros(13, dtype=np.int64)
-        self.adjacency = np.zeros((n, 13), dtype=np.int32)
-        for name in ("disc", "low", "stack_node", "stack_k"):
-            setattr(self, name, np.zeros(n, dtype=np.int32))
-        self.scent_buffer = np.zeros(n, dtype=np.int32)
-        self.is_cut = np.zeros(n, dtype=np.bool_)
-
-
 class World:
     """Mutable state of one lattice world and the cycle that advances it.
 
@@ -202,8 +173,9 @@ class World:
             :class:`~proteo_env.core.batch.WorldBatch`; default ``size``.
     """
 
-    STATE = ("grid", "cell", "anchored", "mode", "scent", "inbox", "rng_state")
-    """Names of the per-world state arrays (stacked by a batch)."""
+    grid, cell, anchored, mode, scent, inbox, rng_state = (
+        property(attrgetter(f"state.{name}"), doc=f"``state.{name}``") for name in WorldState._fields
+    )
 
     def __init__(
         self,
@@ -244,9 +216,9 @@ class World:
             if passive_role is None
             else np.asarray(passive_role, dtype=np.int8)
         )
-        self.anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.array(anchored, dtype=np.bool_)
+        anchored = np.zeros(n, dtype=np.bool_) if anchored is None else np.array(anchored, dtype=np.bool_)
         for field, value, length in (
-            ("anchored", self.anchored, n),
+            ("anchored", anchored, n),
             ("modes", modes, n),
             ("surface_channels", self.surface_channels, n_channels),
             ("passive_role", self.passive_role, n_channels),
@@ -256,21 +228,41 @@ class World:
         self.solid_sites = _sites(solid)
         self.object_sites = _sites(object_sites)
 
-        self.grid = self._static_grid()
-        self._check_sites(positions)
-        self.cell = self.shape.index(positions)
-        self.grid[self.cell] = np.arange(n, dtype=np.int32)
-        self.mode = np.zeros(n, dtype=np.int32) if modes is None else np.array(modes, dtype=np.int32)
-        self.scent = np.full((n_channels, n), physics.scent_max, dtype=np.int32)
-        self.inbox = np.zeros((n, 12), dtype=np.int32)
-        self.rng_state = np.ones(1, dtype=np.uint64)
+        grid = self._static_grid()
+        self._check_sites(grid, positions)
+        cell = self.shape.index(positions)
+        grid[cell] = np.arange(n, dtype=np.int32)
+        self.state = WorldState(
+            grid=grid,
+            cell=cell,
+            anchored=anchored,
+            mode=np.zeros(n, dtype=np.int32) if modes is None else np.array(modes, dtype=np.int32),
+            scent=np.full((n_channels, n), physics.scent_max, dtype=np.int32),
+            inbox=np.zeros((n, 12), dtype=np.int32),
+            rng_state=np.ones(1, dtype=np.uint64),
+        )
 
-        self.dir_delta = self.shape.deltas(DIRECTIONS)
-        self.neighbourhood_delta = self.shape.deltas(neighbourhood_offsets(obs_radius))
-        self.local_delta = self.shape.deltas(LOCAL_OFFSETS)
-        roll_offsets, self.roll_table = motion_bits(physics.motion_model)
-        self.roll_delta = self.shape.deltas(roll_offsets)
-        self.scratch = Scratch(n, len(self.grid))
+        roll_offsets, roll_table = motion_bits(physics.motion_model)
+        self.geometry = Geometry(
+            directions=DIRECTIONS,
+            opposite=OPPOSITE,
+            dir_delta=self.shape.deltas(DIRECTIONS),
+            neighbourhood_delta=self.shape.deltas(neighbourhood_offsets(obs_radius)),
+            roll_delta=self.shape.deltas(roll_offsets),
+            roll_table=roll_table,
+            local_delta=self.shape.deltas(LOCAL_OFFSETS),
+            local_adjacency=LOCAL_ADJACENCY_BITS,
+        )
+        self.settings = Settings(
+            n_agents=self.n_agents,
+            keep_connected=bool(physics.keep_connected),
+            exact_scent=bool(physics.exact_scent),
+            scent_sweeps=int(physics.scent_sweeps),
+            scent_max=int(physics.scent_max),
+            passive_role=self.passive_role,
+            surface_channels=self.surface_channels,
+        )
+        self.scratch = Scratch.allocate(n, len(self.grid))
 
         if physics.keep_connected and n > 0 and self.n_components() != 1:
             raise LayoutError(
@@ -295,7 +287,7 @@ class World:
             grid[shape.index(sites)] = code
         return grid
 
-    def _check_sites(self, positions: np.ndarray) -> None:
+    def _check_sites(self, grid: np.ndarray, positions: np.ndarray) -> None:
         shape = self.shape
         odd = positions.sum(axis=1) % 2 != 0
         if odd.any():
@@ -310,7 +302,7 @@ class World:
                 f"{shape.size}; allowed: 0 <= site < size"
             )
         index = shape.index(positions)
-        occupied = self.grid[index]
+        occupied = grid[index]
         if (occupied != EMPTY).any():
             p = tuple(positions[occupied != EMPTY][0].tolist())
             what = {SOLID: "a solid site", OBJECT: "an object site"}[int(occupied[occupied != EMPTY][0])]
@@ -321,6 +313,16 @@ class World:
             raise LayoutError(f"two modules at site {p}; allowed: at most one module per site")
 
     # ------------------------------------------------------------------ reading
+    @property
+    def dir_delta(self) -> np.ndarray:
+        """``(12,)`` grid-index offsets of the face neighbours (``geometry.dir_delta``)."""
+        return self.geometry.dir_delta
+
+    @property
+    def neighbourhood_delta(self) -> np.ndarray:
+        """``(K,)`` grid-index offsets of the observed sites (``geometry.neighbourhood_delta``)."""
+        return self.geometry.neighbourhood_delta
+
     @property
     def positions(self) -> np.ndarray:
         """``(N, 3)`` int64 box coordinates of the modules (a fresh array)."""
@@ -341,43 +343,18 @@ class World:
 
     def cut_modules(self) -> np.ndarray:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
-        s = self.scratch
-        kernels.articulation_points(
-            self.grid,
-            self.cell,
-            self.n_modules,
-            self.dir_delta,
-            s.is_cut,
-            s.adjacency,
-            s.disc,
-            s.low,
-            s.stack_node,
-            s.stack_k,
-        )
-        return s.is_cut
+        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, self.scratch)
+        return self.scratch.is_cut
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
-        legal = kernels.legal_directions(self.grid, self.cell[module], self.roll_delta, self.roll_table)
+        g = self.geometry
+        legal = kernels.legal_directions(self.grid, self.cell[module], g.roll_delta, g.roll_table)
         return bool((legal >> direction) & 1)
 
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
-        s = self.scratch
-        return bool(
-            kernels.detach_keeps_connected(
-                self.grid,
-                self.cell,
-                module,
-                self.dir_delta,
-                DIRECTIONS,
-                self.local_delta,
-                LOCAL_ADJACENCY_BITS,
-                s.mark,
-                s.stacks,
-                s.search,
-            )
-        )
+        return bool(kernels.detach_keeps_connected(self.grid, self.cell, module, self.geometry, self.scratch))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -395,75 +372,18 @@ class World:
             message_value: ``(A,)`` value to send, 0 for none.
         """
         moved = np.zeros(self.n_agents, dtype=np.bool_)
-        p, s = self.physics, self.scratch
+        actions = Actions.of(
+            move=move, mode=mode, scent_role=scent_role, message_target=message_target, message_value=message_value
+        )
         kernels.run_cycle(
-            self.grid,
-            self.cell,
-            self.n_agents,
-            self.anchored,
-            self.mode,
-            self.scent,
-            self.inbox,
-            self.rng_state,
-            self.passive_role,
-            self.surface_channels,
-            p.keep_connected,
-            p.exact_scent,
-            p.scent_sweeps,
-            p.scent_max,
-            np.asarray(move, dtype=np.int64),
-            np.asarray(mode, dtype=np.int32),
-            np.asarray(scent_role, dtype=np.int8),
-            np.asarray(message_target, dtype=np.int64),
-            np.asarray(message_value, dtype=np.int32),
-            moved,
-            self.dir_delta,
-            DIRECTIONS,
-            OPPOSITE,
-            self.roll_delta,
-            self.local_delta,
-            LOCAL_ADJACENCY_BITS,
-            self.roll_table,
-            s.movers,
-            s.mark,
-            s.queue,
-            s.stacks,
-            s.search,
-            s.scent_buffer,
+            tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(actions), moved, tuple(self.scratch)
         )
         return moved
 
     def observe(self, out) -> None:
         """Fill an :class:`~proteo_env.spaces.ObservationBuffers`-like ``out`` for all agents."""
-        s = self.scratch
         kernels.observe_world(
-            self.grid,
-            self.cell,
-            self.n_agents,
-            self.mode,
-            self.scent,
-            self.inbox,
-            self.anchored,
-            self.physics.keep_connected,
-            self.neighbourhood_delta,
-            self.dir_delta,
-            self.roll_delta,
-            self.roll_table,
-            self.physics.scent_max,
-            s.is_cut,
-            s.adjacency,
-            s.disc,
-            s.low,
-            s.stack_node,
-            s.stack_k,
-            out.neighbour_kind,
-            out.neighbour_mode,
-            out.neighbour_scent,
-            out.own_mode,
-            out.own_scent,
-            out.messages,
-            out.contact,
-            out.action_mask,
+            tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(self.scratch), Observation.plain(out)
         )
 
     def regrid(self, extent) -> World:

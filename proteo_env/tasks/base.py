@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 from collections.abc import Callable
 from typing import NamedTuple
@@ -25,19 +26,20 @@ class TaskKernels(NamedTuple):
         sense: numba kernel ``sense(state, load)``, called after the engine's observation:
             writes the task's sensor reading into ``load`` (A, 1) float32 (the ``load`` field);
             :func:`no_sensor` for a task without one.
-        settle: numba kernel ``settle(grid, cell, mode, anchored, dir_delta, cycle, state) -> bool``,
-            called after each cycle (``cycle`` counted like ``env.cycle``): the task's
-            bookkeeping, then its success test (what :meth:`Task.success` would say).
+        update_and_test: numba kernel ``update_and_test(grid, cell, mode, anchored, dir_delta,
+            cycle, state) -> bool``, called after each cycle (``cycle`` counted like
+            ``env.cycle``): the task's bookkeeping, then its success test (what
+            :meth:`Task.success` would say).
         state: what the two read and update (numbers, arrays, tuples or NamedTuples of them);
             a copy, so the environment's own bookkeeping never changes.
     """
 
     sense: Callable
-    settle: Callable
+    update_and_test: Callable
     state: object
 
 
-class Task:
+class Task(abc.ABC):
     """Base class of every task (one file per task in this package).
 
     Required class attributes:
@@ -50,29 +52,43 @@ class Task:
     ``surface_channels`` (which channels relay only over the surface), ``passive_role``
     (scent role of passive board modules per channel, default relay), ``n_message_values``
     (default 15), ``default_policy`` (name of the baseline ``proteo demo`` runs),
+    ``demo_settings`` (the settings ``proteo demo`` runs the task with, default none),
     ``plot_groups`` (plot title -> metric names drawn together in one plot; metrics in no group
     are plotted alone; default none), ``mode_roles`` (the scent role of a module on each channel
     in each mode at the ``move+mode`` control level, ``mode_roles[mode][channel]``; default
     relay everywhere; see :mod:`proteo_env.control`).
 
-    Required hook:
-        ``build_layout(rng) -> Layout``: the start layout for an episode.
+    Required hook: :meth:`build_layout`. Optional hooks (each documented below with an
+    example; the defaults do nothing or give zeros): :meth:`initial_modes`, :meth:`reset`,
+    :meth:`after_cycle`, :meth:`regrid`, :meth:`load`, :meth:`hint`, :meth:`reward_terms`,
+    :meth:`metrics`, :meth:`success`, :meth:`kernels`. The environment calls them in this
+    order: at ``reset``, ``build_layout``, ``initial_modes``, then ``reset`` on the new world;
+    after each cycle, ``after_cycle``, then ``success``, ``reward_terms`` and ``metrics``;
+    ``load`` and ``hint`` whenever observations are built.
 
-    Optional hooks (defaults do nothing / give zeros):
-        ``initial_modes(layout) -> (N,) int``: start modes of all modules (world order).
-        ``reset(world, rng)``: per-episode task state.
-        ``after_cycle(world, cycle)``: task-side changes after each cycle (weight schedule).
-        ``regrid(world)``: the running ``world`` moved onto a larger grid (a batch restarting
-        some of its worlds, :meth:`~proteo_env.batched.BatchedEnv.reset_worlds`); recompute
-        what the task keeps as grid cell indices.
-        ``load(world) -> (A,) float32``: weight each agent carries (observation ``load``).
-        ``hint(world) -> (A, 3) float32``: the global hint of each agent (observation ``hint``).
-        ``reward_terms(world, moved) -> dict[str, float]``: named team reward terms; the reward
-        of every agent is their sum.
-        ``metrics(world) -> dict[str, float]``: named metrics reported in ``infos``.
-        ``success(world) -> bool``: sets ``terminated`` for every agent.
-        ``kernels(world) -> TaskKernels | None``: the task's bookkeeping and success test as
-        numba kernels, for compiled rollouts (default ``None``: the task has no compiled form).
+    Example (a complete task: a ball of modules on the ground, achieved when every module
+    touches the ground; ``tests/test_plugin.py`` runs it)::
+
+        from dataclasses import dataclass
+
+        from proteo_env.layouts import Layout, ball_sites, place_in_box
+        from proteo_env.tasks.base import Task
+
+        @dataclass(frozen=True)
+        class FlattenParams:
+            n_modules: int = 13
+
+        class Flatten(Task):
+            name, version, modes, Params = "flatten", 0, ("IDLE",), FlattenParams
+
+            def build_layout(self, rng):
+                sites, size = place_in_box(ball_sites(self.params.n_modules), margin=4, floor=True)
+                return Layout(size=size, modules=sites, floor=True)
+
+            def success(self, world):
+                return bool((world.positions[:, 2] == 0).all())
+
+    ``docs/guides/adding_a_behaviour.md`` walks through a whole behaviour.
     """
 
     name: str = ""
@@ -84,6 +100,7 @@ class Task:
     passive_role: tuple[int, ...] = (1,)
     n_message_values: int = 15
     default_policy: str = "random"
+    demo_settings: dict = {}
     plot_groups: dict[str, list[str]] = {}
     max_cycles: int = 1000
     """The environment's cycle limit, set by the environment on its task instances."""
@@ -116,35 +133,59 @@ class Task:
         return table
 
     # ------------------------------------------------------------------ hooks
+    @abc.abstractmethod
     def build_layout(self, rng: np.random.Generator) -> Layout:
-        raise NotImplementedError
+        """The start layout of an episode, drawn with ``rng`` (the episode's generator).
+
+        Example: ``return place_in_box(blob_sites(self.params.n_modules, rng), margin=4)``.
+        """
 
     def initial_modes(self, layout: Layout) -> np.ndarray:
+        """``(N,)`` int start modes of all modules, in the layout's order (default: mode 0).
+
+        Example (the paper's seed module): ``modes = np.full(n, SLEEP); modes[0] = SEED``.
+        """
         return np.zeros(len(layout.positions), dtype=np.int32)
 
     def reset(self, world: World, rng: np.random.Generator) -> None:
-        pass
+        """Per-episode task state, once ``world`` is built (e.g. a weight schedule drawn from ``rng``)."""
 
     def after_cycle(self, world: World, cycle: int) -> None:
-        pass
+        """Task-side changes after cycle ``cycle`` (e.g. the table's weight shifting)."""
 
     def regrid(self, world: World) -> None:
-        pass
+        """The running ``world`` was moved onto a larger grid (a batch restarting some of its
+        worlds, :meth:`~proteo_env.batched.BatchedEnv.reset_worlds`): recompute what the task
+        keeps as grid cell indices (e.g. ``self.finish = world.shape.index(sites)``)."""
 
     def load(self, world: World) -> np.ndarray:
+        """``(A,)`` float32 weight each agent carries (the ``load`` observation; default zeros)."""
         return np.zeros(world.n_agents, dtype=np.float32)
 
     def hint(self, world: World) -> np.ndarray:
+        """``(A, 3)`` float32 each agent's global hint (the ``hint`` observation; default zeros)."""
         return np.zeros((world.n_agents, 3), dtype=np.float32)
 
     def reward_terms(self, world: World, moved: np.ndarray) -> dict[str, float]:
+        """Named team reward terms of the cycle just run (``moved`` (A,) bool: who moved); every
+        agent's reward is their sum.
+
+        Example: ``return {"progress": float(world.positions[:, 0].mean()) - self.last_x}``.
+        """
         return {}
 
     def metrics(self, world: World) -> dict[str, float]:
+        """Named numbers reported in ``infos`` as ``metric/<name>`` (e.g. ``{"components": 1.0}``)."""
         return {}
 
     def success(self, world: World) -> bool:
+        """The task is achieved: sets ``terminated`` for every agent (default: never)."""
         return False
 
     def kernels(self, world: World) -> TaskKernels | None:
+        """The task's bookkeeping and success test as numba kernels (:class:`TaskKernels`), for
+        compiled rollouts; ``None`` (the default): the task has no compiled form.
+
+        Example: ``return TaskKernels(no_sensor, chain_update_and_test, np.zeros((3, n), np.int64))``.
+        """
         return None

@@ -63,7 +63,7 @@ import numpy as np
 from ..core.kernels import EMIT, RELAY
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
-from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, BranchMode, branch_settle, measure_tree
+from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, BranchMode, branch_update_and_test, measure_tree
 
 REGULAR, NODE_SCENT = 0, 1
 
@@ -117,6 +117,7 @@ class BranchParams:
 
 class Branch(Task):
     name = "branch"
+    demo_settings = {"n_modules": 100, "max_cycles": 400, "motion_model": "minimal"}
     version = 0
     modes = tuple(BranchMode.__members__)
     Params = BranchParams
@@ -229,7 +230,7 @@ class Branch(Task):
         root = self.first_node if self.params.initial_node else -1
         return TaskKernels(
             no_sensor,
-            branch_settle,
+            branch_update_and_test,
             (root, self.params.min_gap, self.params.target_levels, np.zeros((9, world.n_modules), dtype=np.int64)),
         )
 

@@ -1,6 +1,6 @@
 """The branch task's tree measure and success test as numba kernels (:mod:`proteo_env.tasks.branch`
 is the task); the environment measures the tree with :func:`measure_tree` after every cycle, a
-compiled rollout tests success with :func:`branch_settle`."""
+compiled rollout tests success with :func:`branch_update_and_test`."""
 
 from __future__ import annotations
 
@@ -142,8 +142,8 @@ def measure_tree(
 
 
 @kernel
-def branch_settle(grid, cell, mode, anchored, dir_delta, cycle, test):
-    """The branch task's success test as a task's ``settle`` (:class:`~proteo_env.tasks.base.TaskKernels`):
+def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
+    """The branch task's success test as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`):
     the grown piece from the root is a tree with at least ``target_levels`` levels of branching
     (:func:`measure_tree`). ``test`` is ``(first_node, min_gap, target_levels, scratch)``: the
     root is ``first_node``, or when it is -1 the lowest-index NODE or INODE (module 0 when there

@@ -42,7 +42,7 @@ from ..core.structure import StructureProbe
 from ..core.world import gib, grid_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
-from .chain_kernels import SEED, SLEEP, ChainMode, chain_settle
+from .chain_kernels import SEED, SLEEP, ChainMode, chain_update_and_test
 
 
 @dataclass(frozen=True)
@@ -102,6 +102,7 @@ class ChainParams:
 
 class Chain(Task):
     name = "chain"
+    demo_settings = {"n_modules": 40, "max_cycles": 3000}
     version = 0
     modes = tuple(ChainMode.__members__)
     Params = ChainParams
@@ -160,7 +161,7 @@ class Chain(Task):
         return self._last["complete"]
 
     def kernels(self, world):
-        return TaskKernels(no_sensor, chain_settle, np.zeros((3, world.n_modules), dtype=np.int64))
+        return TaskKernels(no_sensor, chain_update_and_test, np.zeros((3, world.n_modules), dtype=np.int64))
 
 
 def fcc_hops(a: np.ndarray, b: np.ndarray) -> int:

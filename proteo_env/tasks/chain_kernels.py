@@ -43,7 +43,7 @@ def is_chain(grid, cell, n_modules, dir_delta, degree, mark, queue):
 
 
 @kernel
-def chain_settle(grid, cell, mode, anchored, dir_delta, cycle, scratch):
-    """:func:`is_chain` as a task's ``settle`` (:class:`~proteo_env.tasks.base.TaskKernels`);
+def chain_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, scratch):
+    """:func:`is_chain` as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`);
     ``scratch`` is ``(3, N)`` int64."""
     return is_chain(grid, cell, cell.shape[0], dir_delta, scratch[0], scratch[1], scratch[2])

@@ -66,7 +66,7 @@ from ..core.kernels import EMIT, RELAY
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
-from .grasp_kernels import SEED, SLEEP, GraspMode, GraspSurface, grasp_hold, grasp_settle
+from .grasp_kernels import SEED, SLEEP, GraspMode, GraspSurface, grasp_hold, grasp_update_and_test
 
 SHAPES = ("sphere", "box", "blob")
 BASES = ("blob", "ball")
@@ -260,6 +260,7 @@ def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seeds: int, spread:
 
 class Grasp(Task):
     name = "grasp"
+    demo_settings = {"n_modules": 120, "object_size": 2.0, "distance": 4, "max_cycles": 1500}
     version = 0
     modes = tuple(GraspMode.__members__)
     Params = GraspParams
@@ -412,7 +413,7 @@ class Grasp(Task):
         }
 
     def kernels(self, world):
-        return TaskKernels(no_sensor, grasp_settle, self.surface)
+        return TaskKernels(no_sensor, grasp_update_and_test, self.surface)
 
     def success(self, world):
         return bool(self._last["success"])

@@ -66,6 +66,6 @@ def grasp_hold(grid, surface):
 
 
 @kernel
-def grasp_settle(grid, cell, mode, anchored, dir_delta, cycle, surface):
-    """:func:`grasp_hold`'s success as a task's ``settle`` (:class:`~proteo_env.tasks.base.TaskKernels`)."""
+def grasp_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, surface):
+    """:func:`grasp_hold`'s success as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`)."""
     return grasp_hold(grid, surface)[3]

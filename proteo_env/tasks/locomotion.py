@@ -52,7 +52,7 @@ from ..core.kernels import EMIT, RELAY
 from ..core.lattice import PAD
 from ..layouts import Layout, blob_sites
 from .base import Task, TaskKernels, no_sensor
-from .locomotion_kernels import LocomotionMode, all_beyond, locomotion_settle
+from .locomotion_kernels import LocomotionMode, all_beyond, locomotion_update_and_test
 
 GOAL = np.array([1.0, 0.0, 0.0], dtype=np.float32)
 """The goal direction, ``+x``."""
@@ -189,4 +189,4 @@ class Locomotion(Task):
         return self._success
 
     def kernels(self, world):
-        return TaskKernels(no_sensor, locomotion_settle, self.finish_cell(world))
+        return TaskKernels(no_sensor, locomotion_update_and_test, self.finish_cell(world))

@@ -30,7 +30,7 @@ def all_beyond(cell, finish_cell):
 
 
 @kernel
-def locomotion_settle(grid, cell, mode, anchored, dir_delta, cycle, finish_cell):
-    """:func:`all_beyond` as a task's ``settle`` (:class:`~proteo_env.tasks.base.TaskKernels`);
+def locomotion_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, finish_cell):
+    """:func:`all_beyond` as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`);
     the state is the finish line's first grid cell (an int)."""
     return all_beyond(cell, finish_cell)

@@ -75,6 +75,7 @@ class SandboxParams:
 
 class Sandbox(Task):
     name = "sandbox"
+    demo_settings = {"n_modules": 40, "max_cycles": 200}
     version = 0
     Params = SandboxParams
 

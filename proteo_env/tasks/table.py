@@ -118,9 +118,9 @@ from .table_kernels import (
     grounded_legs,
     region_loads,
     root_loads,
-    table_after_cycle,
     table_sense,
-    table_settle,
+    table_update,
+    table_update_and_test,
     weight_carried,
 )
 
@@ -258,6 +258,13 @@ def spare_sites(p: TableParams) -> np.ndarray:
 
 class Table(Task):
     name = "table"
+    demo_settings = {
+        "board_size": 18,
+        "depth": 4,
+        "n_spares": 60,
+        "schedule": ((0, 8, 2), (250, 2, 8), (500, 5, 5)),
+        "motion_model": "minimal",
+    }
     version = 0
     modes = MODES
     Params = TableParams
@@ -319,7 +326,7 @@ class Table(Task):
         book.signature[0], book.signature[1] = book.active, book.grounded
 
     def after_cycle(self, world, cycle):
-        table_after_cycle(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
+        table_update(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
 
     def _complete(self) -> bool:
         book = self.ledger
@@ -375,7 +382,7 @@ class Table(Task):
         return out
 
     def kernels(self, world):
-        return TaskKernels(table_sense, table_settle, self.ledger.copy())
+        return TaskKernels(table_sense, table_update_and_test, self.ledger.copy())
 
     def success(self, world):
         return bool(self.ledger.restabilise[-1] >= 0)
@@ -395,7 +402,7 @@ class TableV1(Table):
     - success also asks that the legs carry the weight: the stable configuration must be one
       in which each region's grounded legs carry ``min(W, f_max * R)`` of its weight ``W``
       (``R`` its roots; :func:`weight_carried`), tested with the rest of the stable period in
-      :func:`table_after_cycle` (so the compiled rollout agrees, and a configuration that
+      :func:`table_update` (so the compiled rollout agrees, and a configuration that
       carries the weight only after the stable period was counted is not a success).
 
     Dynamics, observation, actions and the other terms are those of ``table-v0``.

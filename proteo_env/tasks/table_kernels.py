@@ -165,7 +165,7 @@ def grounded_legs(grid, cell, mode, anchored, book):
 
 
 @kernel
-def table_after_cycle(grid, cell, mode, anchored, cycle, book):
+def table_update(grid, cell, mode, anchored, cycle, book):
     """Update :class:`TableLedger` ``book`` after ``cycle``: active roots and grounded legs, leg
     creations and disbands, the signature and the cycle it last changed, ``restabilise`` of the
     schedule entry in force, and the schedule's next shift."""
@@ -208,8 +208,8 @@ def table_sense(book, load):
 
 
 @kernel
-def table_settle(grid, cell, mode, anchored, dir_delta, cycle, book):
-    """:func:`table_after_cycle` as a task's ``settle``: success once the last schedule entry
+def table_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, book):
+    """:func:`table_update` as a task's ``update_and_test``: success once the last schedule entry
     has re-stabilised."""
-    table_after_cycle(grid, cell, mode, anchored, cycle, book)
+    table_update(grid, cell, mode, anchored, cycle, book)
     return book.restabilise[-1] >= 0

@@ -4,7 +4,7 @@ These kernels are the one implementation of those behaviours' decisions:
    :class:`~baselines.chain.ChainPolicy` calls them on
 the observations the environment hands out, and :class:`baselines.compiled.CompiledRollout`
 calls them inside a compiled loop with the engine; the branch rule
-(:mod:`baselines.branch_kernels`) builds on them. Shared primitives: :mod:`baselines.primitives`.
+(:mod:`baselines.branch_rules`) builds on them. Shared primitives: :mod:`baselines.primitives`.
 
 Every kernel reads the observation fields of :mod:`proteo_env.spaces` stacked over agents
 (first axis: agent row) and the module's private memory, and draws from the policy's

@@ -20,7 +20,7 @@ come in this order:
 6. TOUCH rows told to take the role (no draws).
 
 Array shapes (A agents, K neighbourhood sites, C = 2 scent channels, S memory slots,
-L = 6 action fields): the chain's (:mod:`baselines.chain_kernels`), plus ``contact`` (A, 2) int8
+L = 6 action fields): the chain's (:mod:`baselines.chain_rules`), plus ``contact`` (A, 2) int8
 (``contact[:, 1]``: touching the object), ``hint`` (A, 3) float32, and the memory (S,) int64
 ``growth`` (-1 none), ``waited``, ``stuck``, ``age`` (0 none) and ``previous`` (-1 none).
 """

@@ -17,7 +17,7 @@ Draws from the policy's ``numpy.random.Generator``, in row order, then for the c
   instead?" uniform each, then 12 uniforms each (:func:`~baselines.primitives.random_pick`).
 
 Array shapes (A agents, K neighbourhood sites, C = 1 scent channel, S memory slots,
-L = 5 action fields): the chain's (:mod:`baselines.chain_kernels`), plus
+L = 5 action fields): the chain's (:mod:`baselines.chain_rules`), plus
 
 ========== ======= ==================================================
 ``contact`` (A, 2) int8, ``contact[:, 0]``: touching the floor

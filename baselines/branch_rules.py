@@ -1,7 +1,7 @@
-"""The hand-coded branch rule as numba kernels: the chain rule (:mod:`baselines.chain_kernels`)
+"""The hand-coded branch rule as numba kernels: the chain rule (:mod:`baselines.chain_rules`)
 with NODE modules that spawn several seeds (see :class:`~baselines.branch.BranchPolicy`).
 
-Array shapes as in :mod:`baselines.chain_kernels`, plus the branch memory of
+Array shapes as in :mod:`baselines.chain_rules`, plus the branch memory of
 :class:`~baselines.branch.BranchMemory` (``spawned`` .. ``refused``, each (S,)).
 """
 
@@ -17,7 +17,7 @@ from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
 from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
 
-from .chain_kernels import BECOME_SEED, search_actions, seed_blocked
+from .chain_rules import BECOME_SEED, search_actions, seed_blocked
 from .primitives import (
     ALL_BITS,
     HORIZONTAL_BITS,
