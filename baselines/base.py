@@ -168,10 +168,11 @@ class KernelPolicy(Policy):
     - ``rule``: the rule as a numba kernel (a ``staticmethod``),
       ``rule(seen, slots, memory, rules, rng, actions)``: ``seen`` an :class:`Observed` of A
       agent rows, ``slots`` (A,) int64 the memory slot of each row, ``memory`` the tuple
-      :meth:`SlotMemory.arrays` (each (S,)), ``rules`` :attr:`kernel_rules`, ``rng`` the
+      :meth:`SlotMemory.arrays` (each (S,)), ``rules`` the policy's ``rule_params``, ``rng`` the
       policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions;
     - ``memory``: a :class:`SlotMemory` (set in ``__init__``);
-    - :attr:`kernel_rules`: the parameters as ``rule`` reads them (default ``self.rules``).
+    - ``rule_params`` (a property): the rule's parameters as ``rule`` reads them (a
+      NamedTuple such as :class:`~baselines.chain_rules.ChainRules`).
 
     The same kernel runs here (:meth:`act`, :meth:`act_arrays`) and inside the compiled
     rollout (:mod:`baselines.compiled`), which is how a new behaviour gets both. Private
@@ -250,15 +251,10 @@ class KernelPolicy(Policy):
             getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
         return rows
 
-    @property
-    def kernel_rules(self):
-        """The rule's parameters as :attr:`rule` reads them."""
-        return self.rules
-
     def _act(self, slots: np.ndarray, field) -> np.ndarray:
         """``(A, L)`` actions of the agents with memory ``slots`` (A,), in row order; ``field(name)``
         gives an observation field stacked over them."""
         actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
         seen = Observed(*stacked_fields(field, Observed._fields))
-        self.rule(seen, slots, self.memory.arrays(), self.kernel_rules, self.rng, actions)
+        self.rule(seen, slots, self.memory.arrays(), self.rule_params, self.rng, actions)
         return actions

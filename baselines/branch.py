@@ -144,7 +144,7 @@ class BranchPolicy(ChainPolicy):
         """Private memory of every module (see :class:`BranchMemory`)."""
 
     @property
-    def branch_rules(self) -> BranchRules:
+    def branch_params(self) -> BranchRules:
         """The branch's own parameters as the kernels of :mod:`baselines.branch_rules` read them."""
         return BranchRules(
             T=int(self.T),
@@ -164,6 +164,6 @@ class BranchPolicy(ChainPolicy):
         return super().for_env(env, seed=seed, **params)
 
     @property
-    def kernel_rules(self) -> tuple[ChainRules, BranchRules]:
+    def rule_params(self) -> tuple[ChainRules, BranchRules]:
         """The chain's and the branch's parameters, as :func:`~baselines.branch_rules.branch_decide` reads them."""
-        return self.rules, self.branch_rules
+        return super().rule_params, self.branch_params

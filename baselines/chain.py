@@ -178,7 +178,7 @@ class ChainPolicy(KernelPolicy):
         """Private memory of every module (see :class:`ModuleMemory`)."""
 
     @property
-    def rules(self) -> ChainRules:
+    def rule_params(self) -> ChainRules:
         """The parameters as the kernels of :mod:`baselines.chain_rules` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
         return ChainRules(

@@ -10,7 +10,7 @@ loop, cycle for cycle (``tests/test_compiled_rollout.py``).
 A behaviour plugs in through two small protocols and nothing here names one:
 
 - the policy is a :class:`~baselines.base.KernelPolicy`: its ``rule`` kernel, its
-  :attr:`~baselines.base.KernelPolicy.kernel_rules` and its memory
+  ``rule_params`` and its memory
   (:meth:`~baselines.base.SlotMemory.arrays`);
 - the task gives :meth:`~proteo_env.tasks.base.Task.kernels`: a ``sense`` and an ``update_and_test``
   kernel and the state they read (:class:`~proteo_env.tasks.base.TaskKernels`).
@@ -210,7 +210,7 @@ class CompiledRollout:
         self.world = world
         self.loop = rollout_loop(policy.rule, kernels.sense, kernels.update_and_test)
         self.task_state = kernels.state
-        self.rules = policy.kernel_rules
+        self.rule_params = policy.rule_params
         self.rng = copy.deepcopy(policy.rng)
         self.memory = policy.memory_rows(env.possible_agents).arrays()
         self.state = world.state._replace(**{name: getattr(world, name).copy() for name in CHANGED_FIELDS})
@@ -247,7 +247,7 @@ class CompiledRollout:
                 self.seen,
                 np.arange(w.n_agents, dtype=np.int64),
                 self.memory,
-                self.rules,
+                self.rule_params,
                 self.rng,
                 self.task_state,
                 int(self.cycle),

@@ -196,7 +196,7 @@ class GraspPolicy(KernelPolicy):
         """Private memory of every module (see :class:`GraspMemory`)."""
 
     @property
-    def rules(self) -> GraspRules:
+    def rule_params(self) -> GraspRules:
         """The parameters as :func:`~baselines.grasp_rules.grasp_actions` reads them."""
         return GraspRules(
             scent_max=int(self.scent_max),

@@ -96,7 +96,7 @@ class LocomotionPolicy(KernelPolicy):
         """Private memory of every module (see :class:`LocomotionMemory`)."""
 
     @property
-    def rules(self) -> LocomotionRules:
+    def rule_params(self) -> LocomotionRules:
         """The parameters as :func:`~baselines.locomotion_rules.locomotion_actions` reads them."""
         return LocomotionRules(
             scent_max=int(self.scent_max),

@@ -134,7 +134,7 @@ class TablePolicy(KernelPolicy):
         )
 
     @property
-    def rules(self) -> TableRules:
+    def rule_params(self) -> TableRules:
         """The parameters as :func:`~baselines.table_rules.table_actions` reads them."""
         return TableRules(
             scent_max=int(self.scent_max),

@@ -164,7 +164,7 @@ def profile(n: int, cycles: int) -> dict:
         env, policy = fresh(n, cycles, room=cycles + 4)
         w, s = env.engine, env.engine.scratch
         obs = env.observe_arrays()
-        memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rules, np.arange(n)
+        memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rule_params, np.arange(n)
         actions = np.empty((n, env.action_layout.length), dtype=np.int64)
         moved = np.zeros(n, dtype=np.bool_)
         test = [np.zeros(n, dtype=np.int64) for _ in range(3)]
