@@ -56,9 +56,9 @@ modes of the grown tree (SEED, FINAL, NODE, INODE) all count as "the structure":
   modules come to the spot; when a SLEEP module, or a SEARCH module that has heard the
   broadcast and therefore holds still, is at the spot, the node sends it ``BECOME_SEED``:
   the receiver becomes a SEED growing straight away from the node (the message arrived from
-  the opposite side). After ``B`` seeds, or when no site is left, the node goes INODE. In
-  the horizontal plane a node has at most 4 free directions (3 on a branch), so ``B`` above
-  that is capped by the geometry.
+  the opposite side). After ``B`` seeds, or when no site is left, the node goes INODE. A
+  point of a tree has at most 4 neighbours in it (3 new branches on a branch), in the plane
+  and in 3D alike (docs/tasks/branch.md), so ``B`` above that is capped by the geometry.
 - INODE: emits the node scent, relays the regular scent, never moves.
 
 The rules run as the numba kernels of :mod:`baselines.branch_rules` (:func:`~baselines.branch_rules.branch_actions`,
@@ -157,10 +157,12 @@ class BranchPolicy(ChainPolicy):
 
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
-        """Build from the environment's static interface; ``T`` and ``B`` default to the task's."""
+        """Build from the environment's static interface; ``T``, ``B`` and ``horizontal`` (the
+        task's ``planar``) default to the task's."""
         task_params = env.task.params
         params.setdefault("T", getattr(task_params, "T", 12))
         params.setdefault("B", getattr(task_params, "B", 6))
+        params.setdefault("horizontal", getattr(task_params, "planar", True))
         return super().for_env(env, seed=seed, **params)
 
     @property

@@ -22,6 +22,7 @@ from .primitives import (
     ALL_BITS,
     HORIZONTAL_BITS,
     detects_scent,
+    fewest_ruled_out,
     growth_direction,
     legal_bits,
     spot_touches,
@@ -139,8 +140,9 @@ def node_action(
     It keeps the number of seeds spawned (``spawned``, :data:`NO_COUNT`: none yet) and its current growth
     spot (direction, announced last cycle, cycles waited; direction -1: none). A spot that is
     no longer free, or has stayed empty for ``patience`` cycles, is replaced by a uniform
-    choice among the free face sites (horizontal ones with ``horizontal``) it has not been
-    refused (one ``rng.integers`` draw). A SLEEP module at the spot, or a SEARCH one that has
+    choice (one ``rng.integers`` draw) among the free face sites (horizontal ones with
+    ``horizontal``) it has not been refused that rule out the fewest other free sites
+    (:func:`~baselines.primitives.fewest_ruled_out`; in the plane none rules out another). A SLEEP module at the spot, or a SEARCH one that has
     heard the spot announced, gets ``BECOME_SEED``; after ``B`` seeds, or with no free site
     left, the node goes INODE. Otherwise it announces the spot (message ``direction + 1``).
     """
@@ -164,7 +166,7 @@ def node_action(
             _retire(s, spawned, spot_direction, spot_announced, spot_waited, refused)
             write_action(actions, i, 0, INODE, RELAY, EMIT, 0, 0)
             return
-        new = uniform_pick(rng, pool)
+        new = uniform_pick(rng, fewest_ruled_out(pool))
         announced = announced and new == direction
         direction, waited = new, 0
     spawned[s] = count

@@ -88,6 +88,15 @@ def _last_still(what: str):
     return stills
 
 
+def _branch_stills(rec) -> list[Still]:
+    """The grown tree at the end, from above at an angle and from the side (it grows in 3D)."""
+    cycle = int(rec.cycles[-1])
+    return [
+        Still(-1, f"branching: cycle {cycle}", {"elevation": 35.0}),
+        Still(-1, f"from the side: cycle {cycle}", {"elevation": 0.0}),
+    ]
+
+
 def _table_stills(rec) -> list[Still]:
     from proteo_env.render.plots import weight_shifts
 
@@ -122,10 +131,10 @@ FIGURES: tuple[PaperFigure, ...] = (
         "branch",
         "branch",
         "Branching Behavior",
-        "Recursive branching with node-scent threshold T = 12 and branch count B = 6: purple NODE "
-        "modules spawn yellow seeds; white modules have settled.",
+        "Recursive branching in three dimensions with node-scent threshold T = 12 and branch count "
+        "B = 6: purple NODE modules spawn yellow seeds in random directions; white modules have settled.",
         {},
-        _last_still("branching"),
+        _branch_stills,
         params={
             "T": (12, ("T", "threshold", "node_threshold", "node_scent_threshold")),
             "B": (6, ("B", "branches", "branch_count", "max_branches", "n_branches")),

@@ -7,7 +7,7 @@ and the fixed lattice geometry:
 - **writing actions**: :func:`write_action` (move, mode, scent roles, message);
 - **bit sets and picks** over the 12 face slots (bit ``k``: ``DIRECTIONS[k]``):
   :func:`legal_bits`, :func:`module_bits`, :func:`random_pick`, :func:`uniform_pick`,
-  :func:`first_bit`, :func:`fewest_neighbours`;
+  :func:`first_bit`, :func:`fewest_neighbours`, :func:`fewest_ruled_out`;
 - **scents** (the roles' effect as a module sees it): :func:`seen_scent`,
   :func:`detects_scent`, and the gradient climb's step :func:`lowest_rolls` (the rolls whose
   target lies next to the lowest scent);
@@ -194,6 +194,23 @@ def fewest_neighbours(neighbour_kind, i, pool):
         if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] != fewest:
             pool &= ~(1 << k)
     return pool
+
+
+@kernel
+def fewest_ruled_out(pool):
+    """The slots of the bit set ``pool`` next to the fewest other slots of ``pool``
+    (:data:`AROUND_BITS`), as a bit set: where a site may not touch a sibling, choosing one of
+    them rules out the fewest others. Slots of one horizontal plane touch none another, so
+    there ``pool`` comes back unchanged."""
+    fewest = 99
+    for k in range(12):
+        if (pool >> k) & 1:
+            fewest = min(fewest, BIT_COUNT[pool & AROUND_BITS[k]])
+    kept = 0
+    for k in range(12):
+        if (pool >> k) & 1 and BIT_COUNT[pool & AROUND_BITS[k]] == fewest:
+            kept |= 1 << k
+    return kept
 
 
 @kernel

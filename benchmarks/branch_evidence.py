@@ -1,4 +1,5 @@
-"""Evidence for the branch task: the trees the hand-coded branching policy grows, against T and B.
+"""Evidence for the branch task: the trees the hand-coded branching policy grows, against T and B,
+in the plane of the first node and in 3D.
 
 For random connected blobs (the task's start layout, a new blob per seed) it runs the
 hand-coded policy (``baselines.branch.BranchPolicy``, default parameters, ``T`` and ``B`` from
@@ -37,17 +38,29 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-STATS = ("levels", "branch_points", "branches_per_point", "point_distance", "tree", "tree_size", "seeds", "nodes")
+STATS = (
+    "levels",
+    "branch_points",
+    "branches_per_point",
+    "max_branches",
+    "point_distance",
+    "tree",
+    "tree_size",
+    "seeds",
+    "nodes",
+)
 
 
 def run_one(job: dict) -> dict:
-    """One episode of ``job`` (``n``, ``T``, ``B``, ``model``, ``seed``, ``max_cycles``, ``settle``, ``policy``)."""
+    """One episode of ``job`` (``n``, ``T``, ``B``, ``growth``, ``model``, ``seed``, ``max_cycles``,
+    ``settle``, ``policy``) on ``branch-v1`` (``growth`` ``planar``: its ``planar=True``)."""
     import proteo_env
     from baselines.branch import BranchPolicy
-    from proteo_env.tasks.branch_kernels import INODE, NODE
+    from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEED
 
     env = proteo_env.make(
-        "branch",
+        "branch-v1",
+        planar=job["growth"] == "planar",
         n_modules=job["n"],
         T=job["T"],
         B=job["B"],
@@ -71,7 +84,9 @@ def run_one(job: dict) -> dict:
     m = env.task.metrics(env.engine)
     mode = env.engine.mode
     waiting_nodes = int((mode == NODE).sum())
+    grown = (mode == SEED) | (mode == FINAL) | (mode == NODE) | (mode == INODE)
     return {
+        "layers": int(np.unique(env.engine.positions[grown, 2]).size),
         **job,
         **{k: m[k] for k in STATS},
         "two_levels": two_levels,
@@ -106,6 +121,8 @@ def table(rows: list[dict], keys: tuple[str, ...]) -> list[str]:
         ">=2 levels",
         "branch points",
         "branches/point",
+        "most at a point",
+        "layers",
         "point distance",
         "tree",
         "used",
@@ -126,6 +143,8 @@ def table(rows: list[dict], keys: tuple[str, ...]) -> list[str]:
             f"{sum(r['levels'] >= 2 for r in rs)}/{len(rs)}",
             fmt(col("branch_points")),
             fmt(col("branches_per_point"), 2),
+            fmt(col("max_branches"), 0),
+            fmt(col("layers"), 0),
             fmt(col("point_distance")),
             f"{sum(r['tree'] > 0 for r in rs)}/{len(rs)}",
             fmt(np.array(col("tree_size")) / np.array(col("n")), 2),
@@ -144,6 +163,9 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[100])
     parser.add_argument("--Ts", type=int, nargs="+", default=[4, 8, 12])
     parser.add_argument("--Bs", type=int, nargs="+", default=[1, 2, 3, 6])
+    parser.add_argument(
+        "--growths", nargs="+", default=["planar", "3d"], choices=["planar", "3d"], help="growth in the plane or in 3D"
+    )
     parser.add_argument("--models", nargs="+", default=["minimal"], help="motion models of the T x B table")
     parser.add_argument(
         "--paper-models",
@@ -159,11 +181,16 @@ def main(argv=None) -> int:
 
     base = {"max_cycles": args.max_cycles, "settle": args.settle}
     jobs = [
-        {**base, "n": n, "T": t, "B": b, "model": m, "seed": s}
-        for n, t, b, m, s in itertools.product(args.sizes, args.Ts, args.Bs, args.models, range(args.seeds))
+        {**base, "n": n, "T": t, "B": b, "growth": g, "model": m, "seed": s}
+        for n, t, b, g, m, s in itertools.product(
+            args.sizes, args.Ts, args.Bs, args.growths, args.models, range(args.seeds)
+        )
     ]
     paper = [
-        {**base, "n": 100, "T": 12, "B": 6, "model": m, "seed": s} for m in args.paper_models for s in range(args.seeds)
+        {**base, "n": 100, "T": 12, "B": 6, "growth": g, "model": m, "seed": s}
+        for g in args.growths
+        for m in args.paper_models
+        for s in range(args.seeds)
     ]
     started = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
@@ -182,7 +209,8 @@ def main(argv=None) -> int:
         "",
         "Cells are mean (min..max) over the seeds. *levels*: branching levels as the task measures them (real branching points, at least `min_gap` = 3 apart; see `docs/tasks/branch.md`); *>=2 levels*: runs ending with at least 2; "
         "*branches/point*: child branches per branching point (degree, minus the parent branch except at the "
-        "root); *point distance*: mean hops along the tree from a branching point to its parent point; "
+        "root); *most at a point*: the most child branches at one branching point; *layers*: horizontal "
+        "layers the tree spans; *point distance*: mean hops along the tree from a branching point to its parent point; "
         "*tree*: runs whose grown structure has no cycle; *used*: share of the modules in the grown tree; "
         "*tips left*: seeds still waiting for modules when the modules ran out (unfinished branches); "
         "*nodes waiting*: NODEs that had not spawned all their B seeds; *2 levels at*: cycle at which the "
@@ -191,9 +219,9 @@ def main(argv=None) -> int:
         f"## Tree statistics against T and B (motion model {', '.join(args.models)})",
         "",
     ]
-    lines += table(main_rows, ("n", "model", "T", "B"))
+    lines += table(main_rows, ("n", "model", "T", "B", "growth"))
     lines += ["", "## The paper's setting (T = 12, B = 6, N = 100) under each motion model", ""]
-    lines += table(paper_rows, ("n", "T", "B", "model"))
+    lines += table(paper_rows, ("n", "T", "B", "growth", "model"))
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

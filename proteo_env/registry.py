@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from .config import ConfigError, split_overrides
 from .tasks.base import Task
-from .tasks.branch import Branch
+from .tasks.branch import Branch, BranchV1
 from .tasks.chain import Chain, ChainV1
 from .tasks.grasp import Grasp
 from .tasks.locomotion import Locomotion
@@ -12,7 +12,7 @@ from .tasks.sandbox import Sandbox
 from .tasks.table import Table, TableV1
 
 TASKS: dict[str, type[Task]] = {
-    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, Locomotion)
+    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, BranchV1, Locomotion)
 }
 """Registered task classes by id ``<name>-v<version>``."""
 

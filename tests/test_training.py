@@ -351,6 +351,27 @@ def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
     assert runs[0][0].seeds == [7, 8, 9]
 
 
+def test_an_eval_config_pins_a_task_version_or_names_the_allowed_ones(tmp_path):
+    pytest.importorskip("yaml")
+    from proteo_env.config import ConfigError
+    from training.evaluate import evaluate
+
+    config = tmp_path / "eval.yaml"
+    tiny = "    env: {n_modules: 12, T: 3, B: 2, max_cycles: 30}\n"
+    config.write_text("seeds: 1\ntasks:\n  branch:\n    task: branch-v0\n" + tiny)
+    rows = evaluate(config=config, tasks=["branch"], out=tmp_path / "pinned", progress=False, plots=False)
+    assert {r.task for r in rows} == {"branch-v0"}
+    config.write_text("seeds: 1\ntasks:\n  branch:\n" + tiny)
+    rows = evaluate(config=config, tasks=["branch"], out=tmp_path / "newest", progress=False, plots=False)
+    assert {r.task for r in rows} == {proteo_env.registry.task_class("branch").task_id()} != {"branch-v0"}
+    config.write_text("seeds: 1\ntasks:\n  branch:\n    task: chain-v1\n" + tiny)
+    with pytest.raises(
+        ConfigError, match=r"tasks.branch.task = 'chain-v1' is not allowed; allowed: branch-v0, branch-v1"
+    ):
+        evaluate(config=config, out=tmp_path / "bad", progress=False, plots=False)
+    assert not (tmp_path / "bad").exists()
+
+
 def test_eval_covers_every_task_with_a_reward():
     from training.evaluate import EXCLUDED_TASKS
 
@@ -661,7 +682,9 @@ def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
             for path in [item] if isinstance(item, str) else item["runs"]:
                 level = read_meta(path).get("control", "full")
                 env = proteo_env.make(
-                    proteo_env.registry.task_class(name).task_id(), control=level, **(entry.get("env") or {})
+                    proteo_env.registry.task_class(entry.get("task") or name).task_id(),
+                    control=level,
+                    **(entry.get("env") or {}),
                 )
                 assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
 

@@ -19,8 +19,10 @@ Settings per task and the checkpoints to compare come from a YAML file (``config
         checkpoints:
           - checkpoints/chain/sb3_ppo                       # one checkpoint
           - {label: ppo, runs: [runs/ppo_s0, runs/ppo_s1, runs/ppo_s2]}   # one per training seed
+      branch:
+        task: branch-v0      # a version of the task (default: the newest)
 
-A task not named there runs with its defaults and no checkpoints. ``--checkpoint PATH`` adds a
+A task not named there runs with its newest version, its defaults and no checkpoints. ``--checkpoint PATH`` adds a
 checkpoint to the task it was trained on. Each checkpoint runs at the control level it was
 trained at (``control`` in its ``proteo.json``; ``full`` for older ones), and for every level
 other than ``full`` that a checkpoint uses, the random policy runs at that level too (random
@@ -309,8 +311,10 @@ def plot(results: list[PolicyResult], path: Path) -> None:
 
 
 def load_config(path) -> dict:
-    """The eval config as ``{"seeds", "first_seed", "tasks": {name: {"env", "checkpoints"}}}``."""
+    """The eval config as ``{"seeds", "first_seed", "tasks": {name: {"task", "env", "checkpoints"}}}``
+    (``task``: an optional version of the name, such as ``branch-v0``; without it the newest)."""
     from proteo_env.config import ConfigError, load_yaml
+    from proteo_env.registry import TASKS
 
     if path is None:
         return {"seeds": 10, "first_seed": 0, "tasks": {}}
@@ -322,10 +326,17 @@ def load_config(path) -> dict:
         raise ConfigError(f"eval config {str(p)!r}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
     tasks = data.get("tasks") or {}
     for name, entry in tasks.items():
-        bad = sorted(set(entry or {}) - {"env", "checkpoints"})
+        bad = sorted(set(entry or {}) - {"task", "env", "checkpoints"})
         if bad:
             raise ConfigError(
-                f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env"
+                f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env, task"
+            )
+        pinned = (entry or {}).get("task")
+        versions = sorted(tid for tid, cls in TASKS.items() if cls.name == name)
+        if pinned is not None and pinned not in versions:
+            raise ConfigError(
+                f"eval config {str(p)!r}: tasks.{name}.task = {pinned!r} is not allowed; "
+                f"allowed: {', '.join(versions) or 'a version of a registered task'}"
             )
         for k, item in enumerate((entry or {}).get("checkpoints") or []):
             ok = isinstance(item, str) or (
@@ -476,7 +487,8 @@ def evaluate(
 
     Args:
         config: path of the YAML settings (see the module docstring) or ``None``.
-        tasks: task names or ids to evaluate (default: every registered task but ``sandbox``).
+        tasks: task names or ids to evaluate (default: every registered task but ``sandbox``); a
+            bare name is the config's ``task`` for it where one is given, else its newest version.
         seeds: episodes per policy (overrides the config's ``seeds``).
         checkpoints: extra checkpoint paths; each goes to the task it was trained on.
         out: output folder.
@@ -502,10 +514,12 @@ def evaluate(
     if n_seeds < 1:
         raise ConfigError(f"seeds={n_seeds!r} is not allowed; allowed: an integer >= 1")
     seed_list = list(range(cfg["first_seed"], cfg["first_seed"] + n_seeds))
+    pinned = {name: entry["task"] for name, entry in cfg["tasks"].items() if entry and entry.get("task")}
     if tasks:
-        classes = [task_class(t) for t in tasks]
+        classes = [task_class(pinned.get(t, t)) for t in tasks]
     else:
-        classes = [cls for _, cls in sorted(newest_tasks().items()) if cls.name not in EXCLUDED_TASKS]
+        names = sorted(cls.name for cls in newest_tasks().values() if cls.name not in EXCLUDED_TASKS)
+        classes = [task_class(pinned.get(name, name)) for name in names]
     by_task: dict[str, list[tuple[str, str]]] = {c.name: [] for c in classes}
     """(path, training-seed group label or "") of every checkpoint, per task name."""
     for c in classes:

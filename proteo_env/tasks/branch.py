@@ -37,7 +37,8 @@ Metrics (exact, O(N) per cycle)
     real point above it when it is at least ``min_gap`` hops below it, the same level when
     closer; ``levels`` is the largest: a star with long arms is 1 level, a star whose arms
     branch again further out is 2), ``branches_per_point`` (mean number of child branches of a
-    branching point: its degree, minus 1 unless it is the root), ``point_distance`` (mean
+    branching point: its degree, minus 1 unless it is the root), ``max_branches`` (the most
+    child branches at one branching point), ``point_distance`` (mean
     graph distance along the tree from each non-root branching point to the nearest
     branching point on its path to the root; 0 when there is none), ``leaves`` (degree-1
     modules of the piece), ``used_share`` (``G / N``); mode counts as extra information:
@@ -84,10 +85,14 @@ class BranchParams:
             a clump of modules with 3 neighbours is not a tree of many levels).
         initial_node: start with one NODE near the blob's centre; if False every module
             starts in SLEEP and the policy must start growth itself.
-        margin: free sites around the blob (as in the chain task): horizontally the blob
-            gets ``n_modules // 2 + margin`` free sites on each side (a branch of more than
-            half the modules is possible but then the tree has at most one level), vertically
-            ``margin``.
+        planar: the tree grows in the horizontal plane of the first node (the hand-coded rule
+            reads it; ``branch-v0``'s only growth); False: in every direction, as the paper says
+            (``branch-v1``'s default).
+        margin: free sites around the blob (as in the chain task): in the directions the tree
+            may grow (horizontally when ``planar``, else also vertically) the blob gets
+            ``n_modules // 2 + margin`` free sites on each side (a branch of more than half the
+            modules is possible but then the tree has at most one level); vertically, when
+            ``planar``, ``margin``.
         time_penalty: reward lost per cycle.
     """
 
@@ -97,6 +102,7 @@ class BranchParams:
     target_levels: int = 2
     min_gap: int = 3
     initial_node: bool = True
+    planar: bool = True
     margin: int = 6
     time_penalty: float = 0.001
 
@@ -133,7 +139,7 @@ class Branch(Task):
     def build_layout(self, rng):
         p = self.params
         room = p.n_modules // 2 + p.margin
-        sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin))
+        sites, size = place_in_box(blob_sites(p.n_modules, rng), margin=(room, room, p.margin if p.planar else room))
         return Layout(size=size, modules=sites)
 
     def root_of(self, layout) -> int:
@@ -170,7 +176,7 @@ class Branch(Task):
         return int(nodes[0]) if nodes.size else 0
 
     def _measure(self, world):
-        size, edges, points, levels, children, dsum, dcount, leaves = measure_tree(
+        size, edges, points, levels, children, most, dsum, dcount, leaves = measure_tree(
             world.grid,
             world.cell,
             world.mode,
@@ -188,6 +194,7 @@ class Branch(Task):
             "points": int(points),
             "levels": int(levels),
             "branches_per_point": children / points if points else 0.0,
+            "max_branches": int(most),
             "point_distance": dsum / dcount if dcount else 0.0,
             "leaves": int(leaves),
             "nodes": int(((mode == NODE) | (mode == INODE)).sum()),
@@ -217,6 +224,7 @@ class Branch(Task):
             "branch_points": float(m["points"]),
             "levels": float(m["levels"]),
             "branches_per_point": float(m["branches_per_point"]),
+            "max_branches": float(m["max_branches"]),
             "point_distance": float(m["point_distance"]),
             "leaves": float(m["leaves"]),
             "used_share": m["size"] / world.n_modules,
@@ -236,3 +244,26 @@ class Branch(Task):
 
     def success(self, world):
         return self._last["complete"]
+
+
+@dataclass(frozen=True)
+class BranchV1Params(BranchParams):
+    """``branch-v1``'s parameters: those of :class:`BranchParams`, growth in 3D by default."""
+
+    planar: bool = False
+
+
+class BranchV1(Branch):
+    """``branch-v1``: the tree grows in every direction around each node, as the paper says.
+
+    ``branch-v0`` grew in the horizontal plane of the first node, where a site has 4 free
+    neighbours at right angles, so a node had at most 3 child branches (the root 4) and ``B = 6``
+    behaved like ``B = 3`` to ``4`` (docs/evidence/branch.md). Here ``planar`` defaults to False:
+    the hand-coded rule's nodes spawn seeds towards any of the 12 face neighbours and its seeds
+    turn in 3D, and the box has room for a branch in every direction (vertically too). The
+    planar growth stays an option (``planar=True``). Modes, observation, actions, reward,
+    metrics and the success test are those of ``branch-v0``.
+    """
+
+    version = 1
+    Params = BranchV1Params

@@ -53,7 +53,9 @@ def measure_tree(
     least ``min_gap`` modules), ``real_up``/``real_d`` (nearest *real* branching point above
     and its distance), ``any_d`` (distance to the nearest branching point above, 0 if none),
     ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
-    distance_sum, distance_count, leaves)``; see the module docstring for the definitions.
+    most_children, distance_sum, distance_count, leaves)`` (``children``: summed over the
+    branching points, ``most_children``: the largest at one point); see the module docstring
+    for the definitions.
     """
     for n in range(n_modules):
         parent[n] = -2
@@ -63,7 +65,7 @@ def measure_tree(
         level[n] = 0
     m = mode[root]
     if not (m == 2 or m == 3 or m == 4 or m == 5):
-        return 0, 0, 0, 0, 0, 0, 0, 0
+        return 0, 0, 0, 0, 0, 0, 0, 0, 0
     parent[root] = -1
     queue[0] = root
     head, tail = 0, 1
@@ -98,6 +100,7 @@ def measure_tree(
     points = 0
     levels = 0
     children = 0
+    most_children = 0
     dist_sum = 0
     dist_count = 0
     leaves = 0
@@ -126,7 +129,10 @@ def measure_tree(
         if degree[n] < 3:
             continue
         points += 1
-        children += degree[n] if p < 0 else degree[n] - 1
+        here = degree[n] if p < 0 else degree[n] - 1
+        children += here
+        if here > most_children:
+            most_children = here
         if any_d[n] > 0:
             dist_sum += any_d[n]
             dist_count += 1
@@ -138,7 +144,7 @@ def measure_tree(
                 level[n] = level[a] + (1 if real_d[n] >= min_gap else 0)
             if level[n] > levels:
                 levels = level[n]
-    return size, edges // 2, points, levels, children, dist_sum, dist_count, leaves
+    return size, edges // 2, points, levels, children, most_children, dist_sum, dist_count, leaves
 
 
 @kernel
@@ -157,7 +163,7 @@ def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
             if mode[n] == NODE or mode[n] == INODE:
                 root = n
                 break
-    size, edges, _, levels, _, _, _, _ = measure_tree(
+    size, edges, _, levels, _, _, _, _, _ = measure_tree(
         grid,
         cell,
         mode,
