@@ -77,13 +77,17 @@ def rollout_loop(rule, sense, update_and_test):
     ``sense`` and ``update_and_test`` (a task's :class:`~proteo_env.tasks.base.TaskKernels`).
 
     Returns a kernel ``cycles(state, settings, geometry, scratch, seen, slots, memory, rules, rng,
-    task, start_cycle, max_cycles, record_every, recorded_cycles, recorded_cell, recorded_mode) ->
-    (cycles, success, recorded)`` that runs up to ``max_cycles`` cycles of observe, sense, decide,
-    step, update and test: ``state``, ``settings``, ``geometry`` and ``scratch`` are the engine's records
+    task, room, start_cycle, max_cycles, record_every, first, recorded_cycles, recorded_cell,
+    recorded_mode) -> (cycles, success, recorded, out_of_room)`` that runs up to ``max_cycles``
+    cycles of observe, sense, decide, step, update and test, and stops early after a cycle
+    that brought a module near the edge of the grid's window (``room``: the grid's ``strides``
+    and :meth:`~proteo_env.core.lattice.GridShape.guard`; ``out_of_room`` True: regrid, then
+    go on): ``state``, ``settings``, ``geometry`` and ``scratch`` are the engine's records
     (:mod:`proteo_env.core.records`, named or plain tuples), ``seen`` an :class:`~baselines.base.Observed` (``hint``
     filled), ``slots`` (A,) the memory slot of each agent row, ``memory``, ``rules`` and ``rng``
     as the rule reads them, ``task`` the task's kernel state, ``start_cycle`` the env's cycle
-    before the first; ``recorded_*`` (R, ...) are filled in order.
+    before the first; ``recorded_*`` (R, ...) are filled in order, after every cycle whose
+    number counted from ``first`` + 1 is a multiple of ``record_every``.
     """
 
     @generated_kernel
@@ -98,9 +102,11 @@ def rollout_loop(rule, sense, update_and_test):
         rules,
         rng,
         task,
+        room,
         start_cycle,
         max_cycles,
         record_every,
+        first,
         recorded_cycles,
         recorded_cell,
         recorded_mode,
@@ -147,14 +153,16 @@ def rollout_loop(rule, sense, update_and_test):
             success = update_and_test(
                 state.grid, state.cell, state.mode, state.anchored, geometry.dir_delta, start_cycle + cycle, task
             )
-            if record_every > 0 and (cycle % record_every == 0 or success):
+            if record_every > 0 and ((first + cycle) % record_every == 0 or success):
                 recorded_cycles[recorded] = cycle
                 recorded_cell[recorded] = state.cell
                 recorded_mode[recorded] = state.mode
                 recorded += 1
             if success:
-                return cycle, True, recorded
-        return max_cycles, False, recorded
+                return cycle, True, recorded, False
+            if engine.out_of_room(state.cell, room[0], room[1]):
+                return cycle, False, recorded, True
+        return max_cycles, False, recorded, False
 
     return cycles
 
@@ -208,6 +216,7 @@ class CompiledRollout:
         if policy.layout != env.action_layout:
             raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
         self.world = world
+        self.room = task.window_room
         self.loop = rollout_loop(policy.rule, kernels.sense, kernels.update_and_test)
         self.task_state = kernels.state
         self.rule_params = policy.rule_params
@@ -231,15 +240,16 @@ class CompiledRollout:
         for name, value in (("max_cycles", max_cycles), ("record_every", record_every)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 0")
-        w, st = self.world, self.state
-        n = w.n_modules
+        n = self.world.n_modules
         capacity = max_cycles // record_every + 1 if record_every else 0
         recorded_cycles = np.zeros(capacity, dtype=np.int64)
-        recorded_cell = np.zeros((capacity, n), dtype=st.cell.dtype)
-        recorded_mode = np.zeros((capacity, n), dtype=st.mode.dtype)
-        ran, recorded = 0, 0
-        if not self.success:
-            ran, self.success, recorded = self.loop(  # records as plain tuples: see proteo_env.core.records
+        recorded_cell = np.zeros((capacity, n), dtype=self.state.cell.dtype)
+        recorded_positions = np.zeros((capacity, n, 3), dtype=np.int64)
+        recorded_mode = np.zeros((capacity, n), dtype=self.state.mode.dtype)
+        done, recorded = 0, 0
+        while done < max_cycles and not self.success:
+            w, st = self.world, self.state
+            ran, self.success, got, out_of_room = self.loop(  # records as plain tuples: see proteo_env.core.records
                 tuple(st),
                 tuple(w.settings),
                 tuple(w.geometry),
@@ -250,26 +260,42 @@ class CompiledRollout:
                 self.rule_params,
                 self.rng,
                 self.task_state,
+                (w.shape.strides, w.shape.guard()),
                 int(self.cycle),
-                int(max_cycles),
+                int(max_cycles - done),
                 int(record_every),
-                recorded_cycles,
-                recorded_cell,
-                recorded_mode,
+                int(done),
+                recorded_cycles[recorded:],
+                recorded_cell[recorded:],
+                recorded_mode[recorded:],
             )
-        recorded_cycles[:recorded] += self.cycle
-        self.cycle += int(ran)
-        shape = w.shape
+            part = slice(recorded, recorded + got)
+            recorded_cycles[part] += self.cycle
+            recorded_positions[part] = w.shape.point(recorded_cell[part])
+            recorded += got
+            self.cycle += int(ran)
+            done += int(ran)
+            if out_of_room:
+                self._make_room()
         return Rollout(
             cycles=self.cycle,
             success=bool(self.success),
-            positions=shape.point(st.cell),
-            modes=st.mode.copy(),
+            positions=self.world.shape.point(self.state.cell),
+            modes=self.state.mode.copy(),
             recorded_cycles=recorded_cycles[:recorded],
-            recorded_positions=shape.point(recorded_cell[:recorded]),
+            recorded_positions=recorded_positions[:recorded],
             recorded_modes=recorded_mode[:recorded],
             rng=self.rng,
         )
+
+    def _make_room(self) -> None:
+        """Move the rollout's copy of the world onto a grown window of its box
+        (:meth:`~proteo_env.core.world.World.grown_window`); the env's world is not touched."""
+        running = copy.copy(self.world)
+        running.state = self.state
+        low, high = running.grown_window(self.room)
+        self.world = running.regrid(tuple(high - low), tuple(low))
+        self.state, self.scratch = self.world.state, self.world.scratch
 
 
 def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:

@@ -98,6 +98,33 @@ def run_one(job: dict) -> dict:
     }
 
 
+def draw_paper_setting(path: Path, seed: int = 0) -> None:
+    """The paper's setting (T = 12, B = 6, N = 100, minimal) grown in the plane and in 3D, side by
+    side, seen from above at an angle: ``path`` (PNG)."""
+    from PIL import Image
+
+    import proteo_env
+    from baselines.branch import BranchPolicy
+    from proteo_env.render.camera import Camera
+    from proteo_env.render.renderer import Renderer
+    from proteo_env.render.scene import Scene
+
+    panels = []
+    for growth in ("planar", "3d"):
+        env = proteo_env.make("branch-v1", planar=growth == "planar", max_cycles=400, motion_model="minimal")
+        env.reset(seed=seed)
+        policy = BranchPolicy.for_env(env, seed=seed)
+        while True:
+            result = env.step_arrays(policy.act_arrays(env.observe_arrays()))
+            if result.terminated.any() or result.truncated.any():
+                break
+        caption = f"branch-v1, {growth}, seed {seed}: cycle {env.cycle}"
+        renderer = Renderer(Camera.from_options({"width": 800, "height": 600, "follow": True, "elevation": 35.0}))
+        panels.append(renderer.render(Scene.from_world(env.world, caption=caption)))
+        renderer.close()
+    Image.fromarray(np.concatenate(panels, axis=1)).save(path)
+
+
 def fmt(values, digits=1) -> str:
     v = np.asarray(values, dtype=float)
     return f"{v.mean():.{digits}f} ({v.min():.{digits}f}..{v.max():.{digits}f})"
@@ -177,6 +204,9 @@ def main(argv=None) -> int:
     parser.add_argument("--settle", type=int, default=60, help="cycles run after the modules ran out")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--picture", type=Path, default=None, help="also draw the paper's setting in the plane and in 3D (PNG)"
+    )
     args = parser.parse_args(argv)
 
     base = {"max_cycles": args.max_cycles, "settle": args.settle}
@@ -219,6 +249,12 @@ def main(argv=None) -> int:
         f"## Tree statistics against T and B (motion model {', '.join(args.models)})",
         "",
     ]
+    if args.picture:
+        draw_paper_setting(args.picture)
+        lines += [
+            f"![The paper's setting grown in the plane and in 3D]({os.path.relpath(args.picture, args.out.parent if args.out else Path('.'))})",
+            "",
+        ]
     lines += table(main_rows, ("n", "model", "T", "B", "growth"))
     lines += ["", "## The paper's setting (T = 12, B = 6, N = 100) under each motion model", ""]
     lines += table(paper_rows, ("n", "T", "B", "growth", "model"))

@@ -27,7 +27,7 @@ import numpy as np
 from .config import EnvConfig, check_seed
 from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
-from .core.world import World
+from .core.world import World, place_window, shared_windows, window_around
 from .layouts import Layout
 from .spaces import ActionLayout, ObservationBuffers
 from .tasks.base import Task
@@ -95,7 +95,8 @@ class BatchedEnv:
         """The observation of the current cycle, once taken (what the autopilots read)."""
         self.n_sites = 12 if self.config.obs_radius == 1 else 54
         probe = task.build_layout(np.random.default_rng(0))
-        self.build_world(task, probe)  # checks the layout now, not at the first reset
+        extent, (origin,) = shared_windows([self._start_region(probe)], [probe.size])
+        self.build_world(task, probe, extent, origin)  # checks the layout now, not at the first reset
         self.n_agents = probe.n_agents
         self.n_modules = len(probe.positions)
         self.world_batch: WorldBatch | None = None
@@ -103,8 +104,9 @@ class BatchedEnv:
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         self._rngs = [np.random.default_rng() for _ in tasks]
 
-    def build_world(self, task: Task, layout: Layout, extent=None) -> World:
-        """The world of ``layout`` under this env's physics and the task's scent set-up."""
+    def build_world(self, task: Task, layout: Layout, extent=None, origin=None) -> World:
+        """The world of ``layout`` under this env's physics and the task's scent set-up, on a grid
+        over the window ``origin + extent`` of its box (default: the whole box)."""
         return World(
             size=layout.size,
             positions=layout.positions,
@@ -120,6 +122,7 @@ class BatchedEnv:
             physics=self.config.physics,
             obs_radius=self.config.obs_radius,
             extent=extent,
+            origin=origin,
         )
 
     @property
@@ -155,8 +158,12 @@ class BatchedEnv:
         if seed is not None:
             self._rngs = [np.random.default_rng(seed + b) for b in range(self.n_envs)]
         layouts = [self._build_layout(b) for b in range(self.n_envs)]
-        extent = tuple(np.max([layout.size for layout in layouts], axis=0))
-        worlds = [self.build_world(task, layout, extent) for task, layout in zip(self.tasks, layouts)]
+        extent, origins = shared_windows(
+            [self._start_region(layout) for layout in layouts], [lay.size for lay in layouts]
+        )
+        worlds = [
+            self.build_world(task, layout, extent, origin) for task, layout, origin in zip(self.tasks, layouts, origins)
+        ]
         for world, rng in zip(worlds, self._rngs):
             world.seed(int(rng.integers(2**63)))
         self.world_batch = WorldBatch(worlds)
@@ -186,17 +193,24 @@ class BatchedEnv:
                 f"allowed; allowed: 0..{self.n_envs - 1}"
             )
         layouts = {int(b): self._build_layout(int(b)) for b in rows}
+        starts = {b: self._start_region(layout) for b, layout in layouts.items()}
         extent = self.worlds[0].shape.extent
-        needed = tuple(np.max([extent] + [layout.size for layout in layouts.values()], axis=0))
-        observed = None if needed != extent or self._observed is None else self._observed.copy()
-        if needed != extent:
-            self.world_batch = WorldBatch([world.regrid(needed) for world in self.worlds])
-            for task, world in zip(self.tasks, self.worlds):
-                task.regrid(world)
+        if all((high - low <= extent).all() for low, high in starts.values()):  # the others stay where they are
+            origins = [
+                place_window(starts[b][0], layouts[b].size, extent) if b in starts else w.shape.origin
+                for b, w in enumerate(self.worlds)
+            ]
+        else:
+            regions = [starts[b] if b in starts else w.window() for b, w in enumerate(self.worlds)]
+            sizes = [layouts[b].size if b in layouts else w.shape.size for b, w in enumerate(self.worlds)]
+            extent, origins = shared_windows(regions, sizes)
+        starting = {}
         for b, layout in layouts.items():
-            world = self.build_world(self.tasks[b], layout, needed)
-            world.seed(int(self._rngs[b].integers(2**63)))
-            self.world_batch.replace(b, world)
+            starting[b] = self.build_world(self.tasks[b], layout, extent, origins[b])
+            starting[b].seed(int(self._rngs[b].integers(2**63)))
+        moved = self._regrid(extent, origins, starting)
+        observed = None if moved or self._observed is None else self._observed.copy()
+        for b in layouts:
             self._start_episode(b)
         self.cycles[rows] = 0
         self.last_moved[rows] = False
@@ -220,6 +234,49 @@ class BatchedEnv:
                 f"{self.n_modules} at construction; the counts must stay fixed"
             )
         return layout
+
+    def _start_region(self, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+        """The ``(low, high)`` box sites a new world's grid must cover: the whole box, or for a
+        task with a ``window_room`` the start layout and that many sites around it."""
+        room = self.task.window_room
+        if room is None:
+            return np.zeros(3, dtype=np.int64), np.asarray(layout.size, dtype=np.int64)
+        return window_around(layout.positions, layout.size, room)
+
+    def _regrid(self, extent, origins, starting=None) -> bool:
+        """Lay the batch out on grids of ``extent`` at ``origins``: the worlds in ``starting``
+        (row: a new world built on that layout) replace theirs; the running ones not already
+        there move (:meth:`~proteo_env.core.world.World.regrid`; their trajectories do not
+        change). Return whether the layout changed."""
+        starting = starting or {}
+        moving = [
+            b
+            for b, world in enumerate(self.worlds)
+            if b not in starting and (world.shape.extent, world.shape.origin) != (extent, origins[b])
+        ]
+        changed = bool(moving) or self.worlds[0].shape.extent != extent
+        if changed:
+            self.world_batch = WorldBatch(
+                [
+                    starting.get(b) or (world.regrid(extent, origins[b]) if b in moving else world)
+                    for b, world in enumerate(self.worlds)
+                ]
+            )
+            for b in moving:
+                self.tasks[b].regrid(self.worlds[b])
+        else:
+            for b, world in starting.items():
+                self.world_batch.replace(b, world)
+        return changed
+
+    def _make_room(self) -> None:
+        """Grow the windows of the worlds whose modules came near their edge
+        (:meth:`~proteo_env.core.world.World.grown_window`) and lay the batch out again."""
+        out = self.world_batch.out_of_room()
+        if out.any():
+            room = self.task.window_room
+            regions = [w.grown_window(room) if grow else w.window() for w, grow in zip(self.worlds, out)]
+            self._regrid(*shared_windows(regions, [w.shape.size for w in self.worlds]))
 
     def _start_episode(self, b: int) -> None:
         """The task's and the autopilot's episode state of world ``b`` (its world seeded and in place)."""
@@ -293,6 +350,7 @@ class BatchedEnv:
             message_target=actions[..., lay.message_target],
             message_value=actions[..., lay.message_value],
         )
+        self._make_room()
         self.cycles += 1
         self._observed = None
         terms, max_cycles = [], self.config.max_cycles

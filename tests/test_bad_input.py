@@ -418,10 +418,10 @@ def test_a_world_too_large_for_memory_is_refused_before_anything_is_allocated():
 
     with pytest.raises(
         ConfigError,
-        match=r"n_modules=10000000 with room=None needs a box of at least 20000011 x "
-        r"20000011 x 11 sites, .* GiB for its grid; allowed: a grid within the memory available",
+        match=r"n_modules=1000000000 needs about 3.81e\+03 GiB at reset \(4096 bytes per module\); "
+        r"allowed: at most about [\d,]+ modules, what the memory available \(.* GiB\) holds",
     ):
-        proteo_env.make("chain-v1", n_modules=10**7)
+        proteo_env.make("chain-v1", n_modules=10**9)
     with pytest.raises(LayoutError, match=r"a box of 100000 x 100000 x 100 sites needs .* GiB for its grid"):
         World(size=(10**5, 10**5, 100), positions=[[0, 0, 0]], n_agents=1, physics=Physics())
-    proteo_env.make("chain-v1", n_modules=10**5, room=8)  # a small room keeps a large chain's box small
+    proteo_env.make("chain-v1", n_modules=10**5)  # its grid covers the modules, not the box (test_growing_world.py)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
-from .jit import parallel_kernel, prange
+from .jit import kernel, parallel_kernel, prange
 from .records import Actions, Observation, Scratch, WorldState, row
 from .world import World
 
@@ -25,6 +25,13 @@ def _run_cycles(state, settings, geometry, actions, moved, scratch):
     ``scratch`` have a leading ``B`` axis."""
     for b in prange(moved.shape[0]):
         kernels.run_cycle(row(state, b), settings, geometry, row(actions, b), moved[b], row(scratch, b))
+
+
+@kernel
+def _out_of_room(cell, strides, guards, out):
+    """:func:`~.kernels.out_of_room` of every world into ``out`` (B,); ``cell`` (B, N), ``guards`` (B, 6)."""
+    for b in range(cell.shape[0]):
+        out[b] = kernels.out_of_room(cell[b], strides, guards[b])
 
 
 @parallel_kernel
@@ -71,6 +78,8 @@ class WorldBatch:
         self.n_agents = first.n_agents
         self.state = WorldState(*(np.stack(arrays) for arrays in zip(*(w.state for w in worlds))))
         self.scratch = Scratch(*(np.stack(arrays) for arrays in zip(*(w.scratch for w in worlds))))
+        self._guards = np.stack([w.shape.guard() for w in worlds])
+        self._whole = np.array([w.shape.whole for w in worlds])
         self._rehome()
 
     def _rehome(self, rows=None) -> None:
@@ -93,12 +102,23 @@ class WorldBatch:
             for arrays, rows in zip(record, into):
                 rows[b] = arrays
         self.worlds[b] = world
+        self._guards[b] = world.shape.guard()
+        self._whole[b] = world.shape.whole
         self._rehome([b])
 
     def __setstate__(self, state):
         # pickling copies the row views into separate arrays; make them views again
         self.__dict__.update(state)
         self._rehome()
+
+    def out_of_room(self) -> np.ndarray:
+        """``(B,)`` bool: the worlds whose modules came near an edge of their grid's window inside
+        the box (:meth:`~proteo_env.core.world.World.out_of_room`); all False when every grid
+        covers its whole box."""
+        out = np.zeros(self.n_worlds, dtype=np.bool_)
+        if not self._whole.all():
+            _out_of_room(self.state.cell, self.worlds[0].shape.strides, self._guards, out)
+        return out
 
     def step(self, *, move, mode, scent_role, message_target, message_value) -> np.ndarray:
         """One cycle of every world; arguments as :meth:`World.step` with a leading ``B`` axis.

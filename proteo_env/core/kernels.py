@@ -310,6 +310,19 @@ def articulation_points(grid, cell, n_modules, dir_delta, scratch):
 
 
 @kernel
+def out_of_room(cell, strides, guard):
+    """Whether a module's padded-grid coordinates (from its ``cell`` (N,) and the grid's
+    ``strides`` (3,)) leave ``guard`` (6,), ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``: the
+    window must grow before the next cycle (:meth:`~proteo_env.core.lattice.GridShape.guard`)."""
+    for n in range(cell.shape[0]):
+        x, rest = divmod(cell[n], strides[0])
+        y, z = divmod(rest, strides[1])
+        if x < guard[0] or x > guard[1] or y < guard[2] or y > guard[3] or z < guard[4] or z > guard[5]:
+            return True
+    return False
+
+
+@kernel
 def count_components(grid, cell, n_modules, dir_delta, mark, queue):
     """Number of connected components of the module graph (``mark``/``queue`` (N,) scratch)."""
     for n in range(n_modules):

@@ -69,29 +69,50 @@ def neighbourhood_offsets(radius: int) -> np.ndarray:
 
 
 class GridShape:
-    """Box of sites ``0 <= x < size[0]`` (etc.) embedded in a padded flat grid.
+    """Box of sites ``0 <= x < size[0]`` (etc.), or a window of it, embedded in a padded flat grid.
 
-    The grid covers ``extent`` (at least ``size``; larger when worlds of different boxes share
-    one grid layout in a batch) plus :data:`PAD` cells on every side.
-    ``index(p) = ((x + PAD) * sy + (y + PAD)) * sz + (z + PAD)`` with ``(sx, sy, sz)`` the
-    padded extents; :attr:`strides` turns an offset into a flat index delta.
+    The grid covers the *window* ``origin <= p < origin + extent`` of box coordinates plus
+    :data:`PAD` cells on every side: by default the whole box (``origin`` 0, ``extent`` =
+    ``size``); ``extent`` larger than ``size`` when worlds of different boxes share one grid
+    layout in a batch; a window smaller than the box when a world grows with its modules
+    (:meth:`~proteo_env.core.world.World.regrid`). Cells outside the box are walls.
+    ``index(p) = ((x - ox + PAD) * sy + (y - oy + PAD)) * sz + (z - oz + PAD)`` with
+    ``(sx, sy, sz)`` the padded extents and ``(ox, oy, oz)`` the origin; :attr:`strides` turns
+    an offset into a flat index delta.
     """
 
-    def __init__(self, size, extent=None):
+    def __init__(self, size, extent=None, origin=None):
         self.size = tuple(int(s) for s in size)
-        self.extent = self.size if extent is None else tuple(max(int(e), s) for e, s in zip(extent, self.size))
+        self.extent = self.size if extent is None else tuple(int(e) for e in extent)
+        self.origin = (0, 0, 0) if origin is None else tuple(int(o) for o in origin)
         self.padded = tuple(s + 2 * PAD for s in self.extent)
         sx, sy, sz = self.padded
         self.strides = np.array([sy * sz, sz, 1], dtype=np.int64)
         self.n_cells = sx * sy * sz
+
+    @property
+    def whole(self) -> bool:
+        """The window covers the whole box (it never needs to grow)."""
+        return all(o <= 0 and o + e >= s for o, e, s in zip(self.origin, self.extent, self.size))
+
+    def guard(self) -> np.ndarray:
+        """``(6,)`` int64 ``(lo_x, hi_x, lo_y, hi_y, lo_z, hi_z)``: the padded-grid coordinates a
+        module may hold before a cycle so that nothing the cycle reads (up to :data:`PAD` sites
+        from a module that moved one site) falls outside the grid. Where the window ends at
+        the box's wall there is no limit."""
+        bounds = []
+        for o, e, s, p in zip(self.origin, self.extent, self.size, self.padded):
+            bounds.append(PAD + 1 if o > 0 else 0)
+            bounds.append(PAD + e - 2 if o + e < s else p - 1)
+        return np.array(bounds, dtype=np.int64)
 
     def deltas(self, offsets: np.ndarray) -> np.ndarray:
         """Flat index deltas of ``(..., 3)`` offsets."""
         return np.asarray(offsets, dtype=np.int64) @ self.strides
 
     def index(self, points: np.ndarray) -> np.ndarray:
-        """Flat grid indices of ``(..., 3)`` box coordinates."""
-        return (np.asarray(points, dtype=np.int64) + PAD) @ self.strides
+        """Flat grid indices of ``(..., 3)`` box coordinates (inside the window)."""
+        return (np.asarray(points, dtype=np.int64) - np.array(self.origin) + PAD) @ self.strides
 
     def point(self, index: np.ndarray) -> np.ndarray:
         """Box coordinates ``(..., 3)`` of flat grid indices."""
@@ -99,7 +120,12 @@ class GridShape:
         sx, sy, sz = self.padded
         x, rest = np.divmod(index, sy * sz)
         y, z = np.divmod(rest, sz)
-        return np.stack([x, y, z], axis=-1) - PAD
+        return np.stack([x, y, z], axis=-1) - PAD + np.array(self.origin)
+
+    def in_window(self, points: np.ndarray) -> np.ndarray:
+        """``(...,)`` bool: which ``(..., 3)`` points lie inside the window (not its padding)."""
+        points = np.asarray(points) - np.array(self.origin)
+        return ((points >= 0) & (points < np.array(self.extent))).all(axis=-1)
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """``(...,)`` bool: which ``(..., 3)`` points lie inside the box."""

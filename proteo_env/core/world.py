@@ -56,6 +56,17 @@ modules (a 2,036 x 2,026 x 33 box, 1.4e8 cells) peaks at 2.5 GiB (the grid and t
 connectivity search's marks, ``int32`` each, and their copies while the batch stacks them)."""
 
 
+MODULE_BYTES = 4096
+"""Bytes per module a world of a compact start layout holds at reset and in its first cycles
+with a hand-coded rule (its arrays, the grid of its window, the observation and the rule's
+memory), measured with ``chain-v1`` (``benchmarks/world_memory.py``, ``docs/speed/memory.md``)."""
+
+
+def n_modules_memory(n_modules: int) -> int:
+    """Bytes a world of ``n_modules`` in a compact start layout needs (:data:`MODULE_BYTES` each)."""
+    return int(n_modules) * MODULE_BYTES
+
+
 def machine_memory() -> int:
     """Bytes of memory available now (``MemAvailable`` of ``/proc/meminfo``; the physical
     memory where that cannot be read)."""
@@ -169,8 +180,11 @@ class World:
         modes: ``(N,)`` start modes (default 0).
         physics: :class:`Physics`.
         obs_radius: neighbourhood radius of observations (1: 12 sites, 2: 54 sites).
-        extent: grid extent (at least ``size``) so that worlds can share one grid layout in a
-            :class:`~proteo_env.core.batch.WorldBatch`; default ``size``.
+        extent: grid extent so that worlds can share one grid layout in a
+            :class:`~proteo_env.core.batch.WorldBatch` (at least ``size``), or the extent of a
+            window of the box (:class:`~proteo_env.core.lattice.GridShape`); default ``size``.
+        origin: box coordinates of the window's first site (default: the box's, 0); every
+            module must lie inside the window's :meth:`~.lattice.GridShape.guard`.
     """
 
     grid, cell, anchored, mode, scent, inbox, rng_state = (
@@ -194,8 +208,9 @@ class World:
         modes=None,
         obs_radius=1,
         extent=None,
+        origin=None,
     ):
-        self.shape = GridShape(size, extent)
+        self.shape = GridShape(size, extent, origin)
         check_grid_fits(self.shape)
         self.physics = physics
         positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
@@ -272,19 +287,25 @@ class World:
 
     # ------------------------------------------------------------------ building
     def _static_grid(self) -> np.ndarray:
+        """The grid without modules: walls outside the box, the ground (every site with
+        ``z < 0`` when ``floor``), solid and object sites, over the window and its padding."""
         shape = self.shape
+        axes = [np.arange(o - PAD, o + e + PAD) for o, e in zip(shape.origin, shape.extent)]
+        in_box = [(a >= 0) & (a < s) for a, s in zip(axes, shape.size)]
         grid = np.full(shape.padded, WALL, dtype=np.int32)
-        box = tuple(slice(PAD, PAD + s) for s in shape.size)
-        grid[box] = EMPTY
+        grid[np.ix_(*in_box)] = EMPTY
         if self.floor:
-            grid[:, :, :PAD] = SOLID  # the ground is every site with z < 0
+            grid[:, :, axes[2] < 0] = SOLID
         grid = grid.reshape(-1)
+        low = np.array(shape.origin) - PAD
+        high = np.array(shape.origin) + np.array(shape.extent) + PAD
         for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
             inside = shape.inside(sites)
             if not inside.all():
                 bad = tuple(sites[~inside][0].tolist())
                 raise LayoutError(f"{field} site {bad} is outside the box {shape.size}; allowed: 0 <= site < size")
-            grid[shape.index(sites)] = code
+            here = sites[((sites >= low) & (sites < high)).all(axis=1)]
+            grid[shape.index(here)] = code
         return grid
 
     def _check_sites(self, grid: np.ndarray, positions: np.ndarray) -> None:
@@ -301,6 +322,11 @@ class World:
                 f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
                 f"{shape.size}; allowed: 0 <= site < size"
             )
+        if not shape.whole:
+            coordinate = positions - np.array(shape.origin) + PAD
+            guard = shape.guard()
+            if ((coordinate < guard[0::2]) | (coordinate > guard[1::2])).any():
+                raise ValueError(f"a module lies outside the guard of the window {shape.origin} + {shape.extent}")
         index = shape.index(positions)
         occupied = grid[index]
         if (occupied != EMPTY).any():
@@ -386,11 +412,33 @@ class World:
             tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(self.scratch), Observation.plain(out)
         )
 
-    def regrid(self, extent) -> World:
-        """This world, same state, on a grid of a larger ``extent`` (a fresh ``World``).
+    def out_of_room(self) -> bool:
+        """A module has come so near an edge of the window inside the box that the next cycle
+        could read past the grid (:meth:`~.lattice.GridShape.guard`): time to :meth:`regrid`."""
+        if self.shape.whole:
+            return False
+        return bool(kernels.out_of_room(self.cell, self.shape.strides, self.shape.guard()))
+
+    def window(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)`` (3,) each: the box sites the grid's window covers now."""
+        origin, extent = np.asarray(self.shape.origin), np.asarray(self.shape.extent)
+        return np.maximum(origin, 0), np.minimum(origin + extent, np.asarray(self.shape.size))
+
+    def grown_window(self, room: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)``: the window grown to hold the modules and ``room`` sites around them, or
+        half the window's extent where that is more (so that a growing structure regrids about
+        ``log`` of its size times), clipped to the box."""
+        low, high = self.window()
+        room = np.maximum(room, np.asarray(self.shape.extent) // 2)
+        near_low, near_high = window_around(self.positions, self.shape.size, room)
+        return np.minimum(low, near_low), np.maximum(high, near_high)
+
+    def regrid(self, extent, origin=None) -> World:
+        """This world, same state, on another grid: of a larger ``extent`` (to share a batch's
+        layout), or over another window ``origin + extent`` of the box (a fresh ``World``).
 
         The box, the modules' sites, modes, scents, inbox and move-order generator are
-        kept; only the padding (and so every grid cell index) changes, so the trajectory from
+        kept; only the grid (and so every grid cell index) changes, so the trajectory from
         here is the one the world would have followed on its old grid.
         """
         world = World(
@@ -408,6 +456,7 @@ class World:
             modes=self.mode.copy(),
             obs_radius=self.obs_radius,
             extent=extent,
+            origin=origin,
         )
         world.scent[:] = self.scent
         world.inbox[:] = self.inbox
@@ -424,6 +473,31 @@ class World:
             "inbox": self.inbox.copy(),
             "rng_state": self.rng_state.copy(),
         }
+
+
+def window_around(positions, size, room) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` (3,) each: the box sites within ``room`` (an int or (3,)) of the modules'
+    bounding box, clipped to the box ``0 <= p < size``."""
+    positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
+    return (
+        np.maximum(positions.min(axis=0) - room, 0),
+        np.minimum(positions.max(axis=0) + 1 + room, np.asarray(size, dtype=np.int64)),
+    )
+
+
+def shared_windows(regions, sizes) -> tuple[tuple, list[tuple]]:
+    """One grid layout for worlds that must each cover a ``(low, high)`` region of its box of
+    ``size``: ``(extent, origins)``, the common window extent (the largest region) and each
+    world's window origin, placed to cover its region and, where the extent allows, to stay
+    inside its box."""
+    extent = tuple(int(v) for v in np.max([high - low for low, high in regions], axis=0))
+    return extent, [place_window(low, size, extent) for (low, _), size in zip(regions, sizes)]
+
+
+def place_window(low, size, extent) -> tuple:
+    """The origin of a window of ``extent`` that covers a region starting at ``low`` (and no
+    larger than ``extent``) of a box of ``size``: inside the box where the extent allows."""
+    return tuple(int(v) for v in np.maximum(np.minimum(low, np.asarray(size) - np.asarray(extent)), 0))
 
 
 def _sites(sites) -> np.ndarray:

@@ -56,7 +56,12 @@ class Task(abc.ABC):
     ``plot_groups`` (plot title -> metric names drawn together in one plot; metrics in no group
     are plotted alone; default none), ``mode_roles`` (the scent role of a module on each channel
     in each mode at the ``move+mode`` control level, ``mode_roles[mode][channel]``; default
-    relay everywhere; see :mod:`proteo_env.control`).
+    relay everywhere; see :mod:`proteo_env.control`), ``window_room`` (``None``, the default:
+    each world's grid covers its whole box; a number: the grid covers a window of the box
+    around the modules, with that many free sites around them at reset, and grows when a
+    module nears its edge, so that memory follows the modules rather than the box, with the
+    same trajectories; a task that keeps grid cell indices recomputes them in :meth:`regrid`,
+    and its kernels read no further than 2 sites from a module).
 
     Required hook: :meth:`build_layout`. Optional hooks (each documented below with an
     example; the defaults do nothing or give zeros): :meth:`initial_modes`, :meth:`reset`,
@@ -105,6 +110,7 @@ class Task(abc.ABC):
     max_cycles: int = 1000
     """The environment's cycle limit, set by the environment on its task instances."""
     mode_roles: tuple[tuple[int, ...], ...] | None = None
+    window_room: int | None = None
 
     def __init__(self, params=None):
         self.params = params if params is not None else self.Params()
@@ -154,9 +160,10 @@ class Task(abc.ABC):
         """Task-side changes after cycle ``cycle`` (e.g. the table's weight shifting)."""
 
     def regrid(self, world: World) -> None:
-        """The running ``world`` was moved onto a larger grid (a batch restarting some of its
-        worlds, :meth:`~proteo_env.batched.BatchedEnv.reset_worlds`): recompute what the task
-        keeps as grid cell indices (e.g. ``self.finish = world.shape.index(sites)``)."""
+        """The running ``world`` was moved onto another grid (a batch restarting some of its
+        worlds, :meth:`~proteo_env.batched.BatchedEnv.reset_worlds`, or a window that grew with
+        the modules, see ``window_room``): recompute what the task keeps as grid cell indices
+        (e.g. ``self.finish = world.shape.index(sites)``)."""
 
     def load(self, world: World) -> np.ndarray:
         """``(A,)`` float32 weight each agent carries (the ``load`` observation; default zeros)."""

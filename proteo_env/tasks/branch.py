@@ -134,6 +134,8 @@ class Branch(Task):
     default_policy = "branch"
     mode_roles = ((RELAY, RELAY), (RELAY, RELAY), (EMIT, RELAY), (RELAY, RELAY), (EMIT, EMIT), (RELAY, EMIT))
     """``move+mode``: SEED emits the regular scent, NODE both, INODE the node scent; the rest relay."""
+    window_room = 8
+    """The grid covers the modules and 8 sites around them, and grows with them (see :class:`Task`)."""
     plot_groups = {"tree": ["branch_points", "levels", "nodes"]}
 
     def build_layout(self, rng):

@@ -37,9 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.kernels import EMIT, RELAY
-from ..core.lattice import GridShape
 from ..core.structure import StructureProbe
-from ..core.world import gib, grid_memory
+from ..core.world import MODULE_BYTES, gib, machine_memory, n_modules_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .chain_kernels import SEED, SLEEP, ChainMode, chain_update_and_test
@@ -84,14 +83,12 @@ class ChainParams:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if self.room is not None and self.room < 1:
             raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
-        smallest = GridShape((2 * self.side_room + 1, 2 * self.side_room + 1, 2 * self.margin + 1))
-        need, have = grid_memory(smallest)
+        need, have = n_modules_memory(self.n_modules), machine_memory()
         if need > have:
             raise ValueError(
-                f"n_modules={self.n_modules!r} with room={self.room!r} needs a box of at least "
-                f"{' x '.join(map(str, smallest.padded))} sites, {gib(need)} for its grid; allowed: a grid within "
-                f"the memory available ({gib(have)}): a smaller room (walls that many sites from the blob), or "
-                "fewer modules"
+                f"n_modules={self.n_modules!r} needs about {gib(need)} at reset ({MODULE_BYTES} bytes per module); "
+                f"allowed: at most about {have // MODULE_BYTES:,} modules, what the memory available "
+                f"({gib(have)}) holds"
             )
 
     @property
@@ -110,6 +107,8 @@ class Chain(Task):
     default_policy = "chain"
     mode_roles = ((RELAY,), (RELAY,), (EMIT,), (RELAY,))
     """``move+mode``: the SEED emits the scent, every other mode relays it."""
+    window_room = 8
+    """The grid covers the modules and 8 sites around them, and grows with them (see :class:`Task`)."""
 
     def build_layout(self, rng):
         p = self.params

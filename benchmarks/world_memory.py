@@ -1,0 +1,188 @@
+"""Memory of worlds that grow with their modules: ``chain-v1`` at 10^3 to 10^5 modules, and every task at reset.
+
+Part 1, one fresh process per size: the process compiles the chain's rollout on a small world
+first (so compile time and its memory are apart), notes its peak resident memory, then builds
+``chain-v1`` with ``n_modules = N``, resets it (timed) and runs the hand-coded chain rule for
+``--cycles`` cycles inside compiled code (:class:`baselines.compiled.CompiledRollout`, timed).
+It reports the peak resident memory of the process (``ru_maxrss``), the grid window the world
+ended on against the box, and module-cycles per second. Part 2: every task's grid at reset,
+at its default size and a larger one, in cells per module (linear in the modules when the
+ratio does not grow with them).
+
+Usage::
+
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/world_memory.py --out docs/speed/memory.md
+    .venv/bin/python benchmarks/world_memory.py --sizes 1000 --cycles 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+BYTES_PER_CELL = 20  # proteo_env.core.world.GRID_BYTES_PER_CELL
+
+RESET_SIZES = {
+    "chain-v1": ("n_modules", 40, 400),
+    "branch-v1": ("n_modules", 100, 400),
+    "grasp-v0": ("n_modules", 100, 400),
+    "locomotion-v0": ("n_modules", 20, 80),
+    "table-v1": ("board_size", 15, 30),
+}
+"""Task: (the parameter that sets its size, the default-like size, a larger one)."""
+
+
+def peak_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def one(n: int, cycles: int) -> dict:
+    """Part 1 for one size, in this process."""
+    import proteo_env
+    from baselines import make_policy
+    from baselines.compiled import CompiledRollout
+
+    warm = proteo_env.make("chain-v1", n_modules=50, max_cycles=10**6)
+    warm.reset(seed=0)
+    CompiledRollout(warm, make_policy("chain", warm, seed=0)).run(5)
+    compiled = peak_mib()
+    env = proteo_env.make("chain-v1", n_modules=n, max_cycles=10**6)
+    started = time.perf_counter()
+    env.reset(seed=0)
+    reset_s = time.perf_counter() - started
+    at_reset = peak_mib()
+    window_at_reset = env.engine.shape.extent
+    rollout = CompiledRollout(env, make_policy("chain", env, seed=0))
+    started = time.perf_counter()
+    rollout.run(cycles)
+    run_s = time.perf_counter() - started
+    shape = rollout.world.shape
+    box_cells = 1
+    for s in shape.size:
+        box_cells *= s + 4
+    return {
+        "n": n,
+        "cycles": cycles,
+        "compiled_mib": compiled,
+        "reset_mib": at_reset,
+        "peak_mib": peak_mib(),
+        "reset_s": reset_s,
+        "run_s": run_s,
+        "rate": n * cycles / run_s,
+        "box": shape.size,
+        "window_at_reset": window_at_reset,
+        "window": shape.extent,
+        "window_cells": shape.n_cells,
+        "box_gib": box_cells * BYTES_PER_CELL / 2**30,
+    }
+
+
+def at_reset() -> list[dict]:
+    """Part 2: every task's grid cells at reset per module, at two sizes."""
+    import proteo_env
+
+    rows = []
+    for task, (param, small, large) in RESET_SIZES.items():
+        for size in (small, large):
+            env = proteo_env.make(task, **{param: size})
+            env.reset(seed=0)
+            w = env.engine
+            rows.append(
+                {
+                    "task": task,
+                    "setting": f"{param}={size}",
+                    "modules": w.n_modules,
+                    "cells": w.shape.n_cells,
+                    "per_module": w.shape.n_cells / w.n_modules,
+                    "windowed": not w.shape.whole,
+                }
+            )
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
+    parser.add_argument("--cycles", type=int, default=200)
+    parser.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    if args.one is not None:
+        print(json.dumps(one(args.one, args.cycles)))
+        return 0
+
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    runs = []
+    for n in args.sizes:
+        out = subprocess.run(
+            [sys.executable, __file__, "--one", str(n), "--cycles", str(args.cycles)],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        print(runs[-1], flush=True)
+    resets = at_reset()
+    load = os.getloadavg()
+
+    lines = [
+        "# Memory of worlds that grow with their modules",
+        "",
+        f"Generated by `benchmarks/world_memory.py` ({' '.join(sys.argv[1:]) or 'defaults'}) on "
+        f"{platform.machine()}, one thread, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} "
+        "(1 / 5 / 15 minutes) at the end.",
+        "",
+        f"## `chain-v1`: reset and the first {args.cycles} cycles of the hand-coded rule",
+        "",
+        "One fresh process per size; the rollout is compiled on a 50-module world first. *peak*: the "
+        "process's peak resident memory (`ru_maxrss`), after compiling, after the reset and after the "
+        "cycles; *window*: the grid's window of the box at reset and at the end (the box itself, the "
+        "grid every world held before worlds grew, is in the next column with the memory its grid "
+        "would need); *rate*: module-cycles per second of the cycles.",
+        "",
+        "| N | peak after compiling | after reset | after the cycles | reset | window at reset | window at the end | box (its grid) | rate |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in runs:
+        lines.append(
+            f"| {r['n']:,} | {r['compiled_mib']:.0f} MiB | {r['reset_mib']:.0f} MiB | {r['peak_mib']:.0f} MiB | "
+            f"{r['reset_s']:.1f} s | {' x '.join(map(str, r['window_at_reset']))} | "
+            f"{' x '.join(map(str, r['window']))} | {' x '.join(map(str, r['box']))} ({r['box_gib']:.3g} GiB) | "
+            f"{r['rate'] / 1e3:,.0f} k |"
+        )
+    lines += [
+        "",
+        "## Every task's grid at reset",
+        "",
+        "Grid cells (the window and its padding) per module at reset, seed 0, at two sizes: linear in "
+        "the modules where the ratio does not grow with them.",
+        "",
+        "| task | setting | modules | grid cells | cells per module | grid |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in resets:
+        lines.append(
+            f"| {r['task']} | {r['setting']} | {r['modules']:,} | {r['cells']:,} | {r['per_module']:,.0f} | "
+            f"{'a window that grows' if r['windowed'] else 'the whole box'} |"
+        )
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if args.out:
+        args.out.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
