@@ -31,8 +31,6 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-BYTES_PER_CELL = 20  # proteo_env.core.world.GRID_BYTES_PER_CELL
-
 RESET_SIZES = {
     "chain-v1": ("n_modules", 40, 400),
     "branch-v1": ("n_modules", 100, 400),
@@ -52,6 +50,8 @@ def one(n: int, cycles: int) -> dict:
     import proteo_env
     from baselines import make_policy
     from baselines.compiled import CompiledRollout
+    from proteo_env.core.lattice import GridShape
+    from proteo_env.core.world import GRID_BYTES_PER_CELL
 
     warm = proteo_env.make("chain-v1", n_modules=50, max_cycles=10**6)
     warm.reset(seed=0)
@@ -68,9 +68,6 @@ def one(n: int, cycles: int) -> dict:
     rollout.run(cycles)
     run_s = time.perf_counter() - started
     shape = rollout.world.shape
-    box_cells = 1
-    for s in shape.size:
-        box_cells *= s + 4
     return {
         "n": n,
         "cycles": cycles,
@@ -84,7 +81,7 @@ def one(n: int, cycles: int) -> dict:
         "window_at_reset": window_at_reset,
         "window": shape.extent,
         "window_cells": shape.n_cells,
-        "box_gib": box_cells * BYTES_PER_CELL / 2**30,
+        "box_gib": GridShape(shape.size).n_cells * GRID_BYTES_PER_CELL / 2**30,
     }
 
 

@@ -258,7 +258,7 @@ class BatchedEnv:
         if changed:
             self.world_batch = WorldBatch(
                 [
-                    starting.get(b) or (world.regrid(extent, origins[b]) if b in moving else world)
+                    starting[b] if b in starting else world.regrid(extent, origins[b]) if b in moving else world
                     for b, world in enumerate(self.worlds)
                 ]
             )

@@ -122,11 +122,6 @@ class GridShape:
         y, z = np.divmod(rest, sz)
         return np.stack([x, y, z], axis=-1) - PAD + np.array(self.origin)
 
-    def in_window(self, points: np.ndarray) -> np.ndarray:
-        """``(...,)`` bool: which ``(..., 3)`` points lie inside the window (not its padding)."""
-        points = np.asarray(points) - np.array(self.origin)
-        return ((points >= 0) & (points < np.array(self.extent))).all(axis=-1)
-
     def inside(self, points: np.ndarray) -> np.ndarray:
         """``(...,)`` bool: which ``(..., 3)`` points lie inside the box."""
         points = np.asarray(points)

@@ -59,12 +59,8 @@ connectivity search's marks, ``int32`` each, and their copies while the batch st
 MODULE_BYTES = 4096
 """Bytes per module a world of a compact start layout holds at reset and in its first cycles
 with a hand-coded rule (its arrays, the grid of its window, the observation and the rule's
-memory), measured with ``chain-v1`` (``benchmarks/world_memory.py``, ``docs/speed/memory.md``)."""
-
-
-def n_modules_memory(n_modules: int) -> int:
-    """Bytes a world of ``n_modules`` in a compact start layout needs (:data:`MODULE_BYTES` each)."""
-    return int(n_modules) * MODULE_BYTES
+memory), with a margin over the 2.3 KiB measured with ``chain-v1`` at 100,000 modules
+(``benchmarks/world_memory.py``, ``docs/speed/memory.md``)."""
 
 
 def machine_memory() -> int:
@@ -322,12 +318,9 @@ class World:
                 f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
                 f"{shape.size}; allowed: 0 <= site < size"
             )
-        if not shape.whole:
-            coordinate = positions - np.array(shape.origin) + PAD
-            guard = shape.guard()
-            if ((coordinate < guard[0::2]) | (coordinate > guard[1::2])).any():
-                raise ValueError(f"a module lies outside the guard of the window {shape.origin} + {shape.extent}")
         index = shape.index(positions)
+        if not shape.whole and kernels.out_of_room(index, shape.strides, shape.guard()):
+            raise ValueError(f"a module lies outside the guard of the window {shape.origin} + {shape.extent}")
         occupied = grid[index]
         if (occupied != EMPTY).any():
             p = tuple(positions[occupied != EMPTY][0].tolist())
@@ -411,13 +404,6 @@ class World:
         kernels.observe_world(
             tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(self.scratch), Observation.plain(out)
         )
-
-    def out_of_room(self) -> bool:
-        """A module has come so near an edge of the window inside the box that the next cycle
-        could read past the grid (:meth:`~.lattice.GridShape.guard`): time to :meth:`regrid`."""
-        if self.shape.whole:
-            return False
-        return bool(kernels.out_of_room(self.cell, self.shape.strides, self.shape.guard()))
 
     def window(self) -> tuple[np.ndarray, np.ndarray]:
         """``(low, high)`` (3,) each: the box sites the grid's window covers now."""

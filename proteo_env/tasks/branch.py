@@ -258,13 +258,12 @@ class BranchV1Params(BranchParams):
 class BranchV1(Branch):
     """``branch-v1``: the tree grows in every direction around each node, as the paper says.
 
-    ``branch-v0`` grew in the horizontal plane of the first node, where a site has 4 free
-    neighbours at right angles, so a node had at most 3 child branches (the root 4) and ``B = 6``
-    behaved like ``B = 3`` to ``4`` (docs/evidence/branch.md). Here ``planar`` defaults to False:
+    ``branch-v0`` grew in the horizontal plane of the first node. Here ``planar`` defaults to False:
     the hand-coded rule's nodes spawn seeds towards any of the 12 face neighbours and its seeds
     turn in 3D, and the box has room for a branch in every direction (vertically too). The
-    planar growth stays an option (``planar=True``). Modes, observation, actions, reward,
-    metrics and the success test are those of ``branch-v0``.
+    planar growth stays an option (``planar=True``). A point of a tree has at most 4 branches in
+    3D as in the plane (docs/tasks/branch.md); 3D changes where they go. Modes, observation,
+    actions, reward, metrics and the success test are those of ``branch-v0``.
     """
 
     version = 1

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..core.kernels import EMIT, RELAY
 from ..core.structure import StructureProbe
-from ..core.world import MODULE_BYTES, gib, machine_memory, n_modules_memory
+from ..core.world import MODULE_BYTES, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .chain_kernels import SEED, SLEEP, ChainMode, chain_update_and_test
@@ -83,7 +83,7 @@ class ChainParams:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if self.room is not None and self.room < 1:
             raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
-        need, have = n_modules_memory(self.n_modules), machine_memory()
+        need, have = self.n_modules * MODULE_BYTES, machine_memory()
         if need > have:
             raise ValueError(
                 f"n_modules={self.n_modules!r} needs about {gib(need)} at reset ({MODULE_BYTES} bytes per module); "
