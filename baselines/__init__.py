@@ -11,10 +11,20 @@ from .chain import ChainPolicy
 from .grasp import GraspPolicy
 from .locomotion import LocomotionPolicy
 from .random_policy import RandomPolicy
+from .snake import SnakePolicy
 from .table import TablePolicy
 
 POLICIES: dict[str, type[Policy]] = {
-    cls.name: cls for cls in (RandomPolicy, ChainPolicy, GraspPolicy, TablePolicy, BranchPolicy, LocomotionPolicy)
+    cls.name: cls
+    for cls in (
+        RandomPolicy,
+        ChainPolicy,
+        GraspPolicy,
+        TablePolicy,
+        BranchPolicy,
+        LocomotionPolicy,
+        SnakePolicy,
+    )
 }
 
 

@@ -9,10 +9,11 @@ from .tasks.chain import Chain, ChainV1
 from .tasks.grasp import Grasp
 from .tasks.locomotion import Locomotion
 from .tasks.sandbox import Sandbox
+from .tasks.snake import Snake
 from .tasks.table import Table, TableV1
 
 TASKS: dict[str, type[Task]] = {
-    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, BranchV1, Locomotion)
+    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, BranchV1, Locomotion, Snake)
 }
 """Registered task classes by id ``<name>-v<version>``."""
 

@@ -230,7 +230,8 @@ def test_unknown_level_is_one_clear_error():
 
 def test_move_level_without_rules_names_the_tasks_that_have_them():
     with pytest.raises(
-        ConfigError, match=r"task 'sandbox'.*allowed: tasks with rules \(branch, chain, grasp, locomotion, table\)"
+        ConfigError,
+        match=r"task 'sandbox'.*allowed: tasks with rules \(branch, chain, grasp, locomotion, snake, table\)",
     ):
         proteo_env.make("sandbox-v0", control="move")
 

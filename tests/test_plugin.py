@@ -30,44 +30,44 @@ from proteo_env.tasks.chain import Chain
 
 
 @proteo_env.register
-class Snake(Chain):
-    name = "snake"
+class Worm(Chain):
+    name = "worm"
     version = 0
-    default_policy = "snake"
+    default_policy = "worm"
 
 
 @register_policy
-class SnakePolicy(ChainPolicy):
-    name = "snake"
+class WormPolicy(ChainPolicy):
+    name = "worm"
 '''
 
 SMALL = {"n_modules": 10, "motion_model": "sphere", "max_cycles": 300}
 
 
 @pytest.fixture
-def snake(tmp_path, monkeypatch):
-    (tmp_path / "my_snake.py").write_text(MODULE)
+def worm(tmp_path, monkeypatch):
+    (tmp_path / "my_worm.py").write_text(MODULE)
     monkeypatch.syspath_prepend(str(tmp_path))
-    module = importlib.import_module("my_snake")
+    module = importlib.import_module("my_worm")
     yield module
-    proteo_env.TASKS.pop("snake-v0", None)
-    POLICIES.pop("snake", None)
-    control._autopilots.pop("snake", None)
-    sys.modules.pop("my_snake", None)
+    proteo_env.TASKS.pop("worm-v0", None)
+    POLICIES.pop("worm", None)
+    control._autopilots.pop("worm", None)
+    sys.modules.pop("my_worm", None)
 
 
-def test_a_behaviour_from_outside_the_package_runs_everywhere(snake, tmp_path):
-    env = proteo_env.make("snake", **SMALL)
-    assert env.task.task_id() == "snake-v0" and type(env.task) is snake.Snake
-    policy = make_policy("snake", env, seed=0)
+def test_a_behaviour_from_outside_the_package_runs_everywhere(worm, tmp_path):
+    env = proteo_env.make("worm", **SMALL)
+    assert env.task.task_id() == "worm-v0" and type(env.task) is worm.Worm
+    policy = make_policy("worm", env, seed=0)
     result = run_episode(env, policy, seed=0)
     assert result.success and result.metrics["chain_length"] == 10
 
     env.reset(seed=0)  # the compiled rollout runs the same episode
-    rollout = compiled_rollout(env, make_policy("snake", env, seed=0))
+    rollout = compiled_rollout(env, make_policy("worm", env, seed=0))
     assert rollout.success and rollout.cycles == result.cycles
 
-    moving = proteo_env.make("snake", control="move", **SMALL)  # the autopilot: the rules, found by name
+    moving = proteo_env.make("worm", control="move", **SMALL)  # the autopilot: the rules, found by name
     buffers = moving.batch.reset(seed=0)
     rng = np.random.default_rng(0)
     for _ in range(5):
@@ -79,24 +79,24 @@ def test_a_behaviour_from_outside_the_package_runs_everywhere(snake, tmp_path):
     from training.evaluate import evaluate
 
     config = tmp_path / "eval.yaml"
-    config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 0, "tasks": {"snake": {"env": SMALL}}}))
-    rows = evaluate(config=config, tasks=["snake"], out=tmp_path / "eval", progress=False, plots=False)
+    config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 0, "tasks": {"worm": {"env": SMALL}}}))
+    rows = evaluate(config=config, tasks=["worm"], out=tmp_path / "eval", progress=False, plots=False)
     rules = [r.summary() for r in rows if r.kind == "hand-coded"]
-    assert rules and rules[0]["policy"] == "snake" and rules[0]["successes"] == 2
+    assert rules and rules[0]["policy"] == "worm" and rules[0]["successes"] == 2
 
 
-def test_registering_a_taken_name_or_a_non_task_is_refused(snake):
+def test_registering_a_taken_name_or_a_non_task_is_refused(worm):
     from baselines import register_policy
 
-    class Other(snake.Snake):
+    class Other(worm.Worm):
         pass
 
-    with pytest.raises(ConfigError, match=r"task id 'snake-v0' is taken by Snake"):
+    with pytest.raises(ConfigError, match=r"task id 'worm-v0' is taken by Worm"):
         proteo_env.register(Other)
     with pytest.raises(ConfigError, match=r"allowed: a subclass of proteo_env.tasks.base.Task"):
         proteo_env.register(dict)
-    with pytest.raises(ValueError, match=r"policy name 'snake' is taken by SnakePolicy"):
-        register_policy(type("Twin", (snake.SnakePolicy,), {}))
+    with pytest.raises(ValueError, match=r"policy name 'worm' is taken by WormPolicy"):
+        register_policy(type("Twin", (worm.WormPolicy,), {}))
 
 
 def test_the_task_base_class_example_is_a_working_task():

@@ -29,7 +29,15 @@ TABLE = {
 def test_versions_are_registered_and_bare_names_mean_the_newest():
     assert {"chain-v0", "chain-v1", "table-v0", "table-v1"} <= set(proteo_env.TASKS)
     assert task_class("chain").task_id() == "chain-v1" and task_class("table").task_id() == "table-v1"
-    assert set(newest_tasks()) == {"sandbox-v0", "chain-v1", "branch-v1", "table-v1", "grasp-v0", "locomotion-v0"}
+    assert set(newest_tasks()) == {
+        "sandbox-v0",
+        "chain-v1",
+        "branch-v1",
+        "table-v1",
+        "grasp-v0",
+        "locomotion-v0",
+        "snake-v0",
+    }
 
 
 def test_fcc_hops():

@@ -7,8 +7,11 @@ Description
     lies an obstacle across the whole width of the box: a *step*, solid ground ``step_height``
     sites high from its face on to the far end of the box, and, as an option, a *tunnel*: a
     solid roof ``tunnel_height`` free layers above the ground (or the step) over
-    ``tunnel_length`` sites. The *finish line* is the step's face, or the tunnel's exit; with
-    neither (``step_height=0``, ``tunnel_height=0``) it lies where the face would be. The
+    ``tunnel_length`` sites (with ``closed_above``, the roof rises as a wall to the top of the
+    box, so the tunnel is a hole in a wall), or a *slot*: a wall as high as the box over ``tunnel_length``
+    sites with an opening ``slot_width`` sites wide across the goal direction. The *finish
+    line* is the step's face, or the tunnel's or the slot's exit; with none of them
+    (``step_height=0``, ``tunnel_height=0``, ``slot_width=0``) it lies where the face would be. The
     robot must get every module beyond it, rolling its modules over each other: a roll needs
     a module to pivot on (never the ground), so a lone module cannot move and the robot
     travels like a tread, its modules climbing over the others to the front.
@@ -68,7 +71,11 @@ class LocomotionParams:
         distance: empty sites between the robot's foremost module and the step's face.
         tunnel_height: free layers under the tunnel's roof (above the ground or the step); 0:
             no tunnel.
-        tunnel_length: the roof's extent along ``+x`` from the step's face.
+        tunnel_length: the roof's (or the slot's) extent along ``+x`` from the step's face.
+        closed_above: the tunnel's roof rises as a wall to the top of the box, so the tunnel is
+            a hole in a wall and the only way on (False: a slab that a robot may also climb).
+        slot_width: free sites across the goal direction in a wall over ``tunnel_length``
+            sites, at the middle of the box's width (the wall spans every height); 0: no slot.
         margin: free sites on each side of the robot across the goal direction and above the
             highest of the robot, the step and the roof.
         room: free sites beyond the finish line (None: ``n_modules // 2 + margin``).
@@ -80,6 +87,8 @@ class LocomotionParams:
     distance: int = 3
     tunnel_height: int = 0
     tunnel_length: int = 6
+    closed_above: bool = False
+    slot_width: int = 0
     margin: int = 3
     room: int | None = None
     time_penalty: float = 0.001
@@ -95,6 +104,7 @@ class LocomotionParams:
             ("distance", 1),
             ("tunnel_height", 0),
             ("tunnel_length", 1),
+            ("slot_width", 0),
             ("margin", 1),
         ):
             value = getattr(self, name)
@@ -102,6 +112,8 @@ class LocomotionParams:
                 bad(name, f"an integer >= {low}")
         if self.tunnel_height == 1:
             bad("tunnel_height", "0 (no tunnel) or an integer >= 2 (one free layer leaves no module a pivot)")
+        if not isinstance(self.closed_above, bool):
+            bad("closed_above", "True or False")
         if self.room is not None and (isinstance(self.room, bool) or not isinstance(self.room, int) or self.room < 1):
             bad("room", "None or an integer >= 1")
         if self.time_penalty < 0:
@@ -124,16 +136,19 @@ class Locomotion(Task):
         if blob.sum(axis=1)[0] % 2:
             blob[:, 0] += 1
         face = int(blob[:, 0].max()) + 1 + p.distance
-        finish = face + (p.tunnel_length if p.tunnel_height else 0)
+        finish = face + (p.tunnel_length if p.tunnel_height or p.slot_width else 0)
         room = p.n_modules // 2 + p.margin if p.room is None else p.room
         roof = p.step_height + p.tunnel_height
         top = max(int(blob[:, 2].max()), p.step_height, roof if p.tunnel_height else 0)
-        size = (finish + room, int(blob[:, 1].max()) + 1 + p.margin, top + 1 + p.margin)
+        size = (finish + room, max(int(blob[:, 1].max()) + 1, p.slot_width + 2) + p.margin, top + 1 + p.margin)
         grid = np.mgrid[face : size[0], 0 : size[1], 0 : size[2]].reshape(3, -1).T
         grid = grid[grid.sum(axis=1) % 2 == 0]
+        over = grid[:, 0] < face + p.tunnel_length
+        opening = (size[1] - p.slot_width) // 2
         solid = grid[
             (grid[:, 2] < p.step_height)
-            | (bool(p.tunnel_height) & (grid[:, 2] == roof) & (grid[:, 0] < face + p.tunnel_length))
+            | (bool(p.tunnel_height) & ((grid[:, 2] == roof) | (p.closed_above & (grid[:, 2] > roof))) & over)
+            | (bool(p.slot_width) & over & ((grid[:, 1] < opening) | (grid[:, 1] >= opening + p.slot_width)))
         ]
         self._finish = finish
         return Layout(size=size, modules=blob, solid=solid, floor=True)

@@ -1,0 +1,287 @@
+"""The crawl rule (a chain travelling head first) as a numba kernel over stacked observation fields.
+
+:func:`crawl_actions` is the one implementation of the crawl's decisions; the rules are
+listed in :mod:`baselines.crawl`. Modes are the crawl's own (:class:`~proteo_env.tasks.snake_kernels.CrawlMode`:
+0 CRAWL, 1 HEAD, 2 BODY); a composition (:mod:`baselines.compose`) shows it the modes of
+other behaviours as these.
+
+Draws from the policy's ``numpy.random.Generator``, row after row: a HEAD choosing its growth
+one ``rng.integers`` (:func:`~baselines.primitives.uniform_pick`); a CRAWL module its roll (12
+uniforms, :func:`~baselines.primitives.random_pick`, or next to the HEAD what
+:func:`~baselines.primitives.approach_spot` draws), then one "random legal roll instead?"
+uniform, and 12 more when it takes one.
+
+Array shapes (A agents, K neighbourhood sites, C = 1 scent channel, S memory slots, L = 5
+action fields): ``own_mode`` (A, 1) int32, ``messages`` (A, 12) int32, ``neighbour_kind``
+(A, K) int8, ``neighbour_mode`` (A, K) int32 and ``neighbour_scent`` (A, K, C) int32 (only
+the first 12 sites are read), ``own_scent`` (A, C) int32, ``action_mask`` (A, 13) int8,
+``hint`` (A, 3) float32 (the direction to travel), ``slots`` (A,) int64, the memory
+``growth`` and ``idle`` (S,) int64 (a HEAD's ``idle``: cycles it has waited for a crawler at
+its growth spot), ``actions`` (A, L) int64.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from proteo_env.core.jit import kernel
+from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
+from proteo_env.core.world import MESSAGE_TO_ALL
+from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
+from proteo_env.tasks.snake_kernels import BODY, CRAWL, HEAD
+
+from .primitives import (
+    BIT_COUNT,
+    SPOT_FACE,
+    approach_spot,
+    legal_bits,
+    lowest_rolls,
+    module_bits,
+    random_pick,
+    seen_scent,
+    spot_touches,
+    uniform_pick,
+    write_action,
+)
+
+BECOME_HEAD = 14
+"""Message value asking the receiver (a CRAWL module at the HEAD's growth spot) to become the HEAD."""
+PREFER_NONE, PREFER_AHEAD, PREFER_DOWNHILL = range(3)
+"""``CrawlRules.prefer``: how a crawler picks among the rolls that keep its lowest neighbour."""
+CHAIN_BITS = (1 << HEAD) | (1 << BODY)
+"""The chain's modes as a bit set: a growth spot next to one of these (but the HEAD) would make the chain two thick."""
+
+
+class CrawlRules(NamedTuple):
+    """The crawl rule's parameters as the kernel reads them (see :class:`~baselines.crawl.CrawlPolicy`)."""
+
+    scent_max: int
+    p_random: float
+    patience: int
+    head_patience: int
+    greedy_approach: bool
+    prefer: int
+
+
+@kernel
+def _direction_bits(hint, i):
+    """``(ahead, level)`` bit sets of row ``i``: the face directions with a positive and a zero
+    dot product with its hint."""
+    ahead, level = 0, 0
+    for k in range(12):
+        dot = DIRECTIONS[k, 0] * hint[i, 0] + DIRECTIONS[k, 1] * hint[i, 1] + DIRECTIONS[k, 2] * hint[i, 2]
+        if dot > 1e-6:
+            ahead |= 1 << k
+        elif dot > -1e-6:
+            level |= 1 << k
+    return ahead, level
+
+
+@kernel
+def _extreme_height(pool, lowest):
+    """The slots of the bit set ``pool`` whose direction points lowest (``lowest``) or highest."""
+    best = 2 if lowest else -2
+    for k in range(12):
+        if (pool >> k) & 1:
+            best = min(best, DIRECTIONS[k, 2]) if lowest else max(best, DIRECTIONS[k, 2])
+    out = 0
+    for k in range(12):
+        if (pool >> k) & 1 and DIRECTIONS[k, 2] == best:
+            out |= 1 << k
+    return out
+
+
+@kernel
+def head_growth(neighbour_kind, neighbour_mode, hint, i, rng, avoid):
+    """The growth direction of the HEAD at row ``i``, following the ground; -1 when it has none.
+
+    Candidates are the empty neighbour sites next to no chain module (so the chain stays one
+    module thick), but ``avoid`` (a slot, -1 none) when there are others. Among them: ahead (a
+    positive dot product with the hint), the lowest first; else level with the hint, the
+    highest first (up a step's face); else any. One uniform pick.
+    """
+    free = 0
+    for k in range(12):
+        if neighbour_kind[i, k] == KIND_EMPTY and spot_touches(neighbour_mode, i, k, CHAIN_BITS) == 0:
+            free |= 1 << k
+    if avoid >= 0 and free & ~(1 << avoid):
+        free &= ~(1 << avoid)
+    ahead, level = _direction_bits(hint, i)
+    if free & ahead:
+        pool = _extreme_height(free & ahead, True)
+    elif free & level:
+        pool = _extreme_height(free & level, False)
+    else:
+        pool = free
+    return uniform_pick(rng, pool)
+
+
+@kernel
+def _blocked(neighbour_kind, neighbour_mode, i, growth):
+    """Can the chain not grow into ``DIRECTIONS[growth]`` from row ``i`` any more? (solid, a
+    wall, a chain module there, or a chain module seen next to the spot)"""
+    kind = neighbour_kind[i, growth]
+    if kind == KIND_MODULE:
+        if neighbour_mode[i, growth] != CRAWL:
+            return True
+    elif kind != KIND_EMPTY:
+        return True
+    return spot_touches(neighbour_mode, i, growth, CHAIN_BITS) > 0
+
+
+@kernel
+def _head_action(neighbour_kind, neighbour_mode, hint, i, growth, fresh, waited, patience, rng, actions):
+    """Write the action of the HEAD at row ``i`` (growth ``growth``, -1 none; ``waited`` cycles
+    without a crawler at its spot) into ``actions[i]``; return the growth it keeps (-1: none, or
+    it handed the head on). A growth spot that no crawler reached in ``patience`` cycles
+    (walls and the ground can leave no roll into it) is given up for another."""
+    if growth < 0 or _blocked(neighbour_kind, neighbour_mode, i, growth) or waited > patience:
+        growth = head_growth(neighbour_kind, neighbour_mode, hint, i, rng, growth)
+        fresh = True
+    if growth < 0:
+        write_action(actions, i, 0, HEAD, EMIT, EMIT, 0, 0)
+        return -1
+    if not fresh and neighbour_kind[i, growth] == KIND_MODULE:  # a CRAWL module at the spot
+        write_action(actions, i, 0, BODY, RELAY, RELAY, growth, BECOME_HEAD)
+        return -1
+    write_action(actions, i, 0, HEAD, EMIT, EMIT, MESSAGE_TO_ALL, growth + 1)
+    return growth
+
+
+@kernel
+def _crawl_move(neighbour_kind, neighbour_mode, neighbour_scent, messages, action_mask, hint, i, rules, rng):
+    """``(move, asked)`` of the CRAWL module at row ``i``: ``asked`` says whether the rule had a
+    roll to ask for (a random legal roll may still follow, by the caller)."""
+    legal = legal_bits(action_mask, i)
+    for k in range(12):  # next to the HEAD: to its growth spot, then hold there
+        if neighbour_mode[i, k] == HEAD:
+            v = messages[i, k]
+            if not 1 <= v <= 12:  # the growth is not heard yet (or the head is being handed on)
+                return 0, True
+            g = v - 1
+            face = SPOT_FACE[k, g]
+            if g == OPPOSITE[k] or (face >= 0 and neighbour_kind[i, face] == KIND_MODULE):
+                return 0, True  # at the spot, or another module holds it
+            move = approach_spot(action_mask, i, k, g, rules.greedy_approach, rng)
+            return move, move > 0
+    smax = rules.scent_max
+    key = np.empty(12, dtype=np.int64)
+    here = np.iinfo(np.int64).max
+    for k in range(12):  # climb the scent: a chain module counts lower than a crawler of equal scent
+        raw = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
+        key[k] = 2 * raw + (1 if neighbour_mode[i, k] == CRAWL else 0) if raw < smax else 2 * smax
+        here = min(here, key[k])
+    if here >= 2 * smax:
+        return 0, False
+    pool, low = lowest_rolls(key, legal)
+    if pool == 0 or low > here:
+        return 0, False
+    if rules.prefer == PREFER_AHEAD:
+        ahead, level = _direction_bits(hint, i)
+        if pool & ahead:
+            pool &= ahead
+        elif pool & level:
+            pool &= level
+    elif rules.prefer == PREFER_DOWNHILL and low == here:
+        downhill = _downhill_bits(neighbour_kind, neighbour_scent, i, smax)
+        if pool & downhill:
+            pool &= downhill
+    return random_pick(rng, pool) + 1, True
+
+
+@kernel
+def _downhill_bits(neighbour_kind, neighbour_scent, i, smax):
+    """The face directions with a positive dot product with row ``i``'s downhill estimate (the
+    sum of its scented neighbours' directions, each weighted by how far its scent lies below
+    their mean); 0 with fewer than 2 scented neighbours."""
+    raw = np.empty(12, dtype=np.int64)
+    n, total = 0, 0
+    for k in range(12):
+        raw[k] = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
+        if raw[k] < smax:
+            n += 1
+            total += raw[k]
+    if n < 2:
+        return 0
+    mean = total / n
+    bias = np.zeros(3)
+    for k in range(12):
+        if raw[k] < smax:
+            for axis in range(3):
+                bias[axis] += (mean - raw[k]) * DIRECTIONS[k, axis]
+    out = 0
+    for k in range(12):
+        if bias[0] * DIRECTIONS[k, 0] + bias[1] * DIRECTIONS[k, 1] + bias[2] * DIRECTIONS[k, 2] > 0:
+            out |= 1 << k
+    return out
+
+
+@kernel
+def crawl_actions(
+    own_mode,
+    messages,
+    neighbour_kind,
+    neighbour_mode,
+    neighbour_scent,
+    action_mask,
+    hint,
+    slots,
+    growth,
+    idle,
+    rules,
+    rng,
+    actions,
+):
+    """Write every row's crawl action into ``actions`` (A, 5) and update its memory (shapes and
+    draws: module docstring; ``rules``: :class:`CrawlRules`)."""
+    for i in range(own_mode.shape[0]):
+        own = own_mode[i, 0]
+        s = slots[i]
+        promoted = False
+        for k in range(12):
+            if messages[i, k] == BECOME_HEAD:
+                promoted = True
+        if own == HEAD or (own == CRAWL and promoted):
+            old = growth[s] if own == HEAD else -1
+            growth[s] = _head_action(
+                neighbour_kind, neighbour_mode, hint, i, old, own != HEAD, idle[s], rules.head_patience, rng, actions
+            )
+            idle[s] = idle[s] + 1 if growth[s] == old else 0
+        elif own == BODY:
+            growth[s] = -1
+            tail = BIT_COUNT[module_bits(neighbour_kind, i)] == 1
+            write_action(actions, i, 0, CRAWL if tail else BODY, RELAY, RELAY, 0, 0)
+        else:
+            growth[s] = -1
+            move, asked = _crawl_move(
+                neighbour_kind, neighbour_mode, neighbour_scent, messages, action_mask, hint, i, rules, rng
+            )
+            idle[s] = 0 if asked else idle[s] + 1
+            if rng.random() < rules.p_random or idle[s] > rules.patience:
+                move = random_pick(rng, legal_bits(action_mask, i)) + 1
+                idle[s] = 0
+            write_action(actions, i, move, CRAWL, RELAY, RELAY, 0, 0)
+
+
+@kernel
+def crawl_decide(seen, slots, memory, rules, rng, actions):
+    """:func:`crawl_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
+    ``memory`` is ``(growth, idle)``, ``rules`` a :class:`CrawlRules`."""
+    growth, idle = memory
+    crawl_actions(
+        seen.own_mode,
+        seen.messages,
+        seen.neighbour_kind,
+        seen.neighbour_mode,
+        seen.neighbour_scent,
+        seen.action_mask,
+        seen.hint,
+        slots,
+        growth,
+        idle,
+        rules,
+        rng,
+        actions,
+    )
