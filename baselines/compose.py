@@ -7,8 +7,7 @@ the rule of its own stage. A module of the first stage moves on to the second wh
 *handover*, a numba kernel reading only that module's observation, says so: a local
 condition, such as "I am the chain's tail and see no module still looking for the chain".
 It then acts under the second stage's rule from that very cycle, in the mode the handover
-names, with fresh memory. There is no way back (compose again for more stages: a composed
-policy is a stage like any other).
+names, with fresh memory. There is no way back.
 
 Each stage's rule is written for its own behaviour and never sees a mode it does not know:
 the composition shows it its own modes in its own numbering, and every mode of the other
@@ -91,7 +90,7 @@ def composed_rule(first_rule, then_rule, handover):
         for i in range(n):
             mode[i] = seen.own_mode[i, 0]
             if mode[i] < n_first:
-                handed = handover(seen, i)
+                handed = handover(seen, i, first_params)
                 if handed >= 0:
                     mode[i] = handed
             if mode[i] >= n_first:
@@ -167,10 +166,11 @@ def compose(name: str, first: Stage, then: Stage, handover, *, doc: str = "") ->
         name: the composed policy's name (the composed task's name, for the autopilot, the
             compiled rollout and ``proteo eval`` to find it).
         first, then: the two stages (:class:`Stage`).
-        handover: numba kernel ``handover(seen, i) -> int``: the composed mode that the module
-            at row ``i`` of ``seen`` (an :class:`~baselines.base.Observed` with modes as
+        handover: numba kernel ``handover(seen, i, rules) -> int``: the composed mode that the
+            module at row ``i`` of ``seen`` (an :class:`~baselines.base.Observed` with modes as
             composed), now in ``first``'s stage, hands over into (one of ``then``'s modes,
-            numbered from ``len(first.modes)``), or -1 to stay.
+            numbered from ``len(first.modes)``), or -1 to stay; ``rules`` is ``first``'s
+            ``rule_params`` (its ``scent_max``, say).
         doc: the class docstring.
 
     The class takes the composed task's modes (``first.modes + then.modes``; anything else is

@@ -12,7 +12,9 @@ Rules (modes CRAWL, HEAD, BODY, numbered 0-2 within the crawl), in the paper's s
   become the HEAD (message ``BECOME_HEAD``) and becomes BODY; a fresh HEAD first lets the
   crawlers hear its growth. A growth spot that gets blocked is chosen again.
 - BODY: relays scent and never moves; the chain's tail (a BODY with exactly one module
-  neighbour, so no crawler is holding on to it) becomes a CRAWL module.
+  neighbour, so no crawler is holding on to it) becomes a CRAWL module. (A chain whose end
+  came round to touch itself has no such module and stops; other tests of the tail lost more
+  than they saved, docs/evidence/snake.md.)
 - CRAWL: relays scent. Next to the HEAD it rolls over the HEAD's faces to the growth spot it
   heard (:func:`~baselines.primitives.approach_spot`) and holds still there; elsewhere it
   climbs the scent gradient along the chain (:func:`~baselines.primitives.lowest_rolls`; a

@@ -119,6 +119,13 @@ def head_growth(neighbour_kind, neighbour_mode, hint, i, rng, avoid):
 
 
 @kernel
+def is_tail(neighbour_kind, i):
+    """Is the chain module at row ``i`` the chain's tail? It touches exactly one module (so no
+    crawler is holding on to it either)."""
+    return BIT_COUNT[module_bits(neighbour_kind, i)] == 1
+
+
+@kernel
 def _blocked(neighbour_kind, neighbour_mode, i, growth):
     """Can the chain not grow into ``DIRECTIONS[growth]`` from row ``i`` any more? (solid, a
     wall, a chain module there, or a chain module seen next to the spot)"""
@@ -225,6 +232,7 @@ def crawl_actions(
     neighbour_kind,
     neighbour_mode,
     neighbour_scent,
+    own_scent,
     action_mask,
     hint,
     slots,
@@ -251,7 +259,7 @@ def crawl_actions(
             idle[s] = idle[s] + 1 if growth[s] == old else 0
         elif own == BODY:
             growth[s] = -1
-            tail = BIT_COUNT[module_bits(neighbour_kind, i)] == 1
+            tail = is_tail(neighbour_kind, i)
             write_action(actions, i, 0, CRAWL if tail else BODY, RELAY, RELAY, 0, 0)
         else:
             growth[s] = -1
@@ -276,6 +284,7 @@ def crawl_decide(seen, slots, memory, rules, rng, actions):
         seen.neighbour_kind,
         seen.neighbour_mode,
         seen.neighbour_scent,
+        seen.own_scent,
         seen.action_mask,
         seen.hint,
         slots,

@@ -28,25 +28,25 @@ from proteo_env.tasks.snake_kernels import CrawlMode, SnakeMode
 from .chain import ChainPolicy
 from .compose import Stage, compose
 from .crawl import CrawlPolicy
-from .crawl_rules import BECOME_HEAD
+from .crawl_rules import BECOME_HEAD, is_tail
 
 SLEEP, SEARCH, SEED, FINAL = (int(SnakeMode[m]) for m in ("SLEEP", "SEARCH", "SEED", "FINAL"))
 CRAWL, HEAD = int(SnakeMode.CRAWL), int(SnakeMode.HEAD)
 
 
 @kernel
-def chain_handover(seen, i):
+def chain_handover(seen, i, rules):
     """The snake's handover from the chain to the crawl (module docstring): the composed mode
-    the chain module at row ``i`` of ``seen`` moves on to, or -1."""
+    the chain module at row ``i`` of ``seen`` moves on to, or -1 (``rules``: the chain's
+    :class:`~baselines.chain_rules.ChainRules`)."""
     own = seen.own_mode[i, 0]
-    modules, looking, crawl = 0, False, False
+    looking, crawl = False, False
     for k in range(12):
         if seen.neighbour_kind[i, k] == KIND_MODULE:
-            modules += 1
             m = seen.neighbour_mode[i, k]
             looking |= m == SLEEP or m == SEARCH
             crawl |= m >= CRAWL
-    if own == FINAL and modules == 1 and not looking:
+    if own == FINAL and not looking and is_tail(seen.neighbour_kind, i):
         return CRAWL
     if own == SEED and crawl:
         return HEAD

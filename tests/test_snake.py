@@ -143,7 +143,7 @@ def test_the_handover_reads_only_local_conditions(own, neighbours, message, hand
     messages = np.zeros((1, 12))
     messages[0, 0] = message
     seen = one_row(own_mode=np.array([[own]]), messages=messages, **around(neighbours))
-    assert chain_handover(seen, 0) == handed
+    assert chain_handover(seen, 0, SnakePolicy.for_env(proteo_env.make("snake-v0")).rule_params[0]) == handed
 
 
 def test_each_stage_reads_the_other_stage_s_modes_as_its_own():
