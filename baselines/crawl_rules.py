@@ -36,6 +36,7 @@ from .primitives import (
     BIT_COUNT,
     SPOT_FACE,
     approach_spot,
+    hint_bits,
     legal_bits,
     lowest_rolls,
     module_bits,
@@ -63,20 +64,6 @@ class CrawlRules(NamedTuple):
     head_patience: int
     greedy_approach: bool
     prefer: int
-
-
-@kernel
-def _direction_bits(hint, i):
-    """``(ahead, level)`` bit sets of row ``i``: the face directions with a positive and a zero
-    dot product with its hint."""
-    ahead, level = 0, 0
-    for k in range(12):
-        dot = DIRECTIONS[k, 0] * hint[i, 0] + DIRECTIONS[k, 1] * hint[i, 1] + DIRECTIONS[k, 2] * hint[i, 2]
-        if dot > 1e-6:
-            ahead |= 1 << k
-        elif dot > -1e-6:
-            level |= 1 << k
-    return ahead, level
 
 
 @kernel
@@ -108,7 +95,7 @@ def head_growth(neighbour_kind, neighbour_mode, hint, i, rng, avoid):
             free |= 1 << k
     if avoid >= 0 and free & ~(1 << avoid):
         free &= ~(1 << avoid)
-    ahead, level = _direction_bits(hint, i)
+    ahead, level = hint_bits(hint, i)
     if free & ahead:
         pool = _extreme_height(free & ahead, True)
     elif free & level:
@@ -186,7 +173,7 @@ def _crawl_move(neighbour_kind, neighbour_mode, neighbour_scent, messages, actio
     if pool == 0 or low > here:
         return 0, False
     if rules.prefer == PREFER_AHEAD:
-        ahead, level = _direction_bits(hint, i)
+        ahead, level = hint_bits(hint, i)
         if pool & ahead:
             pool &= ahead
         elif pool & level:

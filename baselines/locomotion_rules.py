@@ -22,14 +22,15 @@ from typing import NamedTuple
 import numpy as np
 
 from proteo_env.core.jit import kernel
-from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
 from proteo_env.tasks.locomotion_kernels import SEARCH, SEED
 
 from .primitives import (
     AROUND_BITS,
     BIT_COUNT,
+    UP_BITS,
     detects_scent,
+    hint_bits,
     kind_bits,
     legal_bits,
     lowest_rolls,
@@ -53,22 +54,6 @@ class LocomotionRules(NamedTuple):
 
 
 @kernel
-def _direction_bits(hint, i):
-    """``(ahead, level, up)`` bit sets of row ``i``: the face directions with a positive and a
-    zero dot product with its hint, and those pointing up (``z > 0``)."""
-    ahead, level, up = 0, 0, 0
-    for k in range(12):
-        dot = DIRECTIONS[k, 0] * hint[i, 0] + DIRECTIONS[k, 1] * hint[i, 1] + DIRECTIONS[k, 2] * hint[i, 2]
-        if dot > 1e-6:
-            ahead |= 1 << k
-        elif dot > -1e-6:
-            level |= 1 << k
-        if DIRECTIONS[k, 2] > 0:
-            up |= 1 << k
-    return ahead, level, up
-
-
-@kernel
 def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, hint, slots, idle, rules, rng, actions):
     """Write every row's locomotion action into ``actions`` (A, 5) and update its ``idle`` count.
 
@@ -76,7 +61,8 @@ def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, 
     """
     scent = np.empty(12, dtype=np.int64)
     for i in range(own_scent.shape[0]):
-        ahead, level, up = _direction_bits(hint, i)
+        ahead, level = hint_bits(hint, i)
+        up = UP_BITS
         modules = module_bits(neighbour_kind, i)
         legal = legal_bits(action_mask, i)
         seed = (modules & ahead) == 0 and (rules.seed_on_top == 0 or (modules & up) == 0)

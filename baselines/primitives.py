@@ -6,7 +6,7 @@ and the fixed lattice geometry:
 
 - **writing actions**: :func:`write_action` (move, mode, scent roles, message);
 - **bit sets and picks** over the 12 face slots (bit ``k``: ``DIRECTIONS[k]``):
-  :func:`legal_bits`, :func:`module_bits`, :func:`random_pick`, :func:`uniform_pick`,
+  :func:`legal_bits`, :func:`module_bits`, :func:`hint_bits`, :func:`random_pick`, :func:`uniform_pick`,
   :func:`first_bit`, :func:`fewest_neighbours`, :func:`fewest_ruled_out`;
 - **scents** (the roles' effect as a module sees it): :func:`seen_scent`,
   :func:`detects_scent`, and the gradient climb's step :func:`lowest_rolls` (the rolls whose
@@ -23,7 +23,7 @@ set wins), also when the set has one member or none; :func:`uniform_pick` draws 
 
 The behaviours' rules (:mod:`baselines.chain_rules`, :mod:`baselines.branch_rules`,
 :mod:`baselines.table_rules`, :mod:`baselines.grasp_rules`,
-:mod:`baselines.locomotion_rules`) are written with these.
+:mod:`baselines.locomotion_rules`, :mod:`baselines.crawl_rules`) are written with these.
 """
 
 from __future__ import annotations
@@ -63,6 +63,8 @@ BIT_COUNT = np.array([bin(v).count("1") for v in range(1 << 12)], dtype=np.int64
 """``BIT_COUNT[bits]``: the number of set bits of a 12-bit set."""
 HORIZONTAL_BITS = sum(1 << k for k in range(12) if DIRECTIONS[k, 2] == 0)
 """The 4 face directions in the horizontal plane, as a bit set."""
+UP_BITS = sum(1 << k for k in range(12) if DIRECTIONS[k, 2] > 0)
+"""The 4 face directions pointing up (``z > 0``), as a bit set."""
 DOT = DIRECTIONS @ DIRECTIONS.T
 """``(12, 12)`` dot products of the face directions (2 same, 1 at 60, 0 at 90, -1 at 120, -2 opposite)."""
 ALL_BITS = (1 << 12) - 1
@@ -168,6 +170,20 @@ def kind_bits(neighbour_kind, i, kind):
 def module_bits(neighbour_kind, i):
     """Bit set of the face slots of row ``i`` that hold a module."""
     return kind_bits(neighbour_kind, i, KIND_MODULE)
+
+
+@kernel
+def hint_bits(hint, i):
+    """``(ahead, level)`` bit sets of row ``i``: the face directions with a positive and a zero
+    dot product with its ``hint`` (A, 3)."""
+    ahead, level = 0, 0
+    for k in range(12):
+        dot = DIRECTIONS[k, 0] * hint[i, 0] + DIRECTIONS[k, 1] * hint[i, 1] + DIRECTIONS[k, 2] * hint[i, 2]
+        if dot > 1e-6:
+            ahead |= 1 << k
+        elif dot > -1e-6:
+            level |= 1 << k
+    return ahead, level
 
 
 @kernel

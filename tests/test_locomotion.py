@@ -51,13 +51,11 @@ def test_most_robots_cross_the_step():
     assert wins > 6, wins
 
 
-@pytest.mark.parametrize("overrides", [{}, {"step_height": 2}, {"tunnel_height": 2}])
-def test_moves_are_legal_and_the_robot_stays_connected(overrides):
-    env = proteo_env.make("locomotion-v0", **{**SMALL, **overrides})
-    env.reset(seed=1)
-    policy = LocomotionPolicy.for_env(env, seed=1)
+def assert_legal_connected_cycles(env, policy, cycles):
+    """Run ``cycles`` cycles of ``policy``: every requested move is in the action mask, every move
+    is one face step, the robot stays one piece, and no module enters a solid site."""
     solid = {tuple(s) for s in env.engine.solid_sites}
-    for _ in range(120):
+    for _ in range(cycles):
         buffers = env.observe_arrays()
         actions = policy.act_arrays(buffers)
         moves = actions[:, 0]
@@ -70,6 +68,13 @@ def test_moves_are_legal_and_the_robot_stays_connected(overrides):
         assert ((steps[moved].sum(axis=1) == 2) & (steps[moved].max(axis=1) == 1)).all()  # one face step
         assert env.engine.n_components() == 1
         assert (after[:, 2] >= 0).all() and not solid & {tuple(p) for p in after}
+
+
+@pytest.mark.parametrize("overrides", [{}, {"step_height": 2}, {"tunnel_height": 2}])
+def test_moves_are_legal_and_the_robot_stays_connected(overrides):
+    env = proteo_env.make("locomotion-v0", **{**SMALL, **overrides})
+    env.reset(seed=1)
+    assert_legal_connected_cycles(env, LocomotionPolicy.for_env(env, seed=1), 120)
 
 
 @pytest.mark.parametrize("overrides", [{}, {"step_height": 2}])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_compiled_rollout import assert_same_trajectory, drive
+from test_locomotion import assert_legal_connected_cycles
 
 import proteo_env
 from baselines import make_policy
@@ -68,21 +69,7 @@ def test_the_chain_forms_first_then_the_crawl_takes_over_and_crosses():
 def test_moves_are_legal_and_the_robot_stays_connected(overrides):
     env = proteo_env.make("snake-v0", **{**SMALL, **overrides})
     env.reset(seed=3)
-    policy = SnakePolicy.for_env(env, seed=3)
-    solid = {tuple(s) for s in env.engine.solid_sites}
-    for _ in range(150):
-        buffers = env.observe_arrays()
-        actions = policy.act_arrays(buffers)
-        moves = actions[:, 0]
-        assert buffers.action_mask[np.arange(len(moves)), moves].all()
-        before = env.world.positions
-        env.step_arrays(actions)
-        after = env.world.positions
-        steps = np.abs(after - before)
-        moved = steps.any(axis=1)
-        assert ((steps[moved].sum(axis=1) == 2) & (steps[moved].max(axis=1) == 1)).all()  # one face step
-        assert env.engine.n_components() == 1
-        assert not solid & {tuple(p) for p in after}
+    assert_legal_connected_cycles(env, SnakePolicy.for_env(env, seed=3), 150)
 
 
 @pytest.mark.parametrize("use_dicts", [False, True])
