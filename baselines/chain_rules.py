@@ -55,6 +55,7 @@ from .primitives import (
     SPOT_FACE,
     approach_rows,
     detects_scent,
+    downhill_bias,
     fewest_neighbours,
     first_bit,
     growth_direction,
@@ -170,14 +171,9 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
         if lg == 0:  # no legal roll: the pool is empty whatever the scents
             continue
         here = FAR
-        n_scented = 0
-        total = 0
         for k in range(12):
             raw[k] = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
             s = raw[k]
-            if raw[k] < smax:
-                n_scented += 1
-                total += raw[k]
             if rules.prefer_chain:  # equal scents: a chain module counts as slightly lower
                 m = neighbour_mode[i, k]
                 s = 2 * raw[k] + (1 if m == SEARCH or m == SLEEP else 0) if raw[k] < smax else 2 * smax
@@ -201,14 +197,8 @@ def _climb(rng, rows, group, count, neighbour_kind, neighbour_mode, neighbour_sc
         if several and (rules.directed or rules.momentum > 0):
             # the sums run in the order of a (Q, 12) @ (12, 3) product, term by term
             bias[:] = 0.0
-            if rules.directed and n_scented >= 2:
-                mean = total / n_scented
-                for axis in range(3):
-                    acc = 0.0
-                    for k in range(12):
-                        weight = mean - raw[k] if raw[k] < smax else 0.0
-                        acc += weight * DIRECTIONS[k, axis]
-                    bias[axis] = acc
+            if rules.directed:
+                downhill_bias(raw, smax, bias)
             if rules.momentum > 0 and heading_dir[r] >= 0:
                 for axis in range(3):
                     bias[axis] = bias[axis] + rules.momentum * DIRECTIONS[heading_dir[r], axis]

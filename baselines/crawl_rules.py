@@ -14,7 +14,7 @@ uniform, and 12 more when it takes one.
 Array shapes (A agents, K neighbourhood sites, C = 1 scent channel, S memory slots, L = 5
 action fields): ``own_mode`` (A, 1) int32, ``messages`` (A, 12) int32, ``neighbour_kind``
 (A, K) int8, ``neighbour_mode`` (A, K) int32 and ``neighbour_scent`` (A, K, C) int32 (only
-the first 12 sites are read), ``own_scent`` (A, C) int32, ``action_mask`` (A, 13) int8,
+the first 12 sites are read), ``action_mask`` (A, 13) int8,
 ``hint`` (A, 3) float32 (the direction to travel), ``slots`` (A,) int64, the memory
 ``growth`` and ``idle`` (S,) int64 (a HEAD's ``idle``: cycles it has waited for a crawler at
 its growth spot), ``actions`` (A, L) int64.
@@ -36,6 +36,7 @@ from .primitives import (
     BIT_COUNT,
     SPOT_FACE,
     approach_spot,
+    downhill_bias,
     hint_bits,
     legal_bits,
     lowest_rolls,
@@ -187,24 +188,13 @@ def _crawl_move(neighbour_kind, neighbour_mode, neighbour_scent, messages, actio
 
 @kernel
 def _downhill_bits(neighbour_kind, neighbour_scent, i, smax):
-    """The face directions with a positive dot product with row ``i``'s downhill estimate (the
-    sum of its scented neighbours' directions, each weighted by how far its scent lies below
-    their mean); 0 with fewer than 2 scented neighbours."""
+    """The face directions with a positive dot product with row ``i``'s downhill estimate
+    (:func:`~baselines.primitives.downhill_bias`); 0 with fewer than 2 scented neighbours."""
     raw = np.empty(12, dtype=np.int64)
-    n, total = 0, 0
     for k in range(12):
         raw[k] = seen_scent(neighbour_kind, neighbour_scent, i, k, smax)
-        if raw[k] < smax:
-            n += 1
-            total += raw[k]
-    if n < 2:
-        return 0
-    mean = total / n
     bias = np.zeros(3)
-    for k in range(12):
-        if raw[k] < smax:
-            for axis in range(3):
-                bias[axis] += (mean - raw[k]) * DIRECTIONS[k, axis]
+    downhill_bias(raw, smax, bias)
     out = 0
     for k in range(12):
         if bias[0] * DIRECTIONS[k, 0] + bias[1] * DIRECTIONS[k, 1] + bias[2] * DIRECTIONS[k, 2] > 0:
@@ -219,7 +209,6 @@ def crawl_actions(
     neighbour_kind,
     neighbour_mode,
     neighbour_scent,
-    own_scent,
     action_mask,
     hint,
     slots,
@@ -271,7 +260,6 @@ def crawl_decide(seen, slots, memory, rules, rng, actions):
         seen.neighbour_kind,
         seen.neighbour_mode,
         seen.neighbour_scent,
-        seen.own_scent,
         seen.action_mask,
         seen.hint,
         slots,

@@ -9,8 +9,8 @@ and the fixed lattice geometry:
   :func:`legal_bits`, :func:`module_bits`, :func:`hint_bits`, :func:`random_pick`, :func:`uniform_pick`,
   :func:`first_bit`, :func:`fewest_neighbours`, :func:`fewest_ruled_out`;
 - **scents** (the roles' effect as a module sees it): :func:`seen_scent`,
-  :func:`detects_scent`, and the gradient climb's step :func:`lowest_rolls` (the rolls whose
-  target lies next to the lowest scent);
+  :func:`detects_scent`, the gradient climb's step :func:`lowest_rolls` (the rolls whose
+  target lies next to the lowest scent) and its direction :func:`downhill_bias`;
 - **seeding**: :func:`growth_direction` (where a seed grows), :func:`spot_touches`;
 - **directed random moves**: :func:`approach_spot` (roll over a seed's faces to its growth
   spot), :func:`approach` and :func:`approach_rows` (a group rolling towards target sites over
@@ -235,6 +235,28 @@ def seen_scent(neighbour_kind, neighbour_scent, i, k, scent_max):
     if neighbour_kind[i, k] == KIND_MODULE:
         return np.int64(neighbour_scent[i, k, 0])
     return np.int64(scent_max)
+
+
+@kernel
+def downhill_bias(raw, scent_max, bias):
+    """Add to ``bias`` (3,) float the downhill direction estimated from the scents ``raw`` (12,)
+    seen in the face slots (``scent_max``: none): each scented slot's direction weighted by how far
+    its scent lies below their mean, summed slot by slot per axis. Nothing with fewer than 2
+    scented slots."""
+    n, total = 0, 0
+    for k in range(12):
+        if raw[k] < scent_max:
+            n += 1
+            total += raw[k]
+    if n < 2:
+        return
+    mean = total / n
+    for axis in range(3):
+        acc = 0.0
+        for k in range(12):
+            weight = mean - raw[k] if raw[k] < scent_max else 0.0
+            acc += weight * DIRECTIONS[k, axis]
+        bias[axis] += acc
 
 
 @kernel
