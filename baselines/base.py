@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
+from proteo_env.core.jit import generated_kernel, kernel
 from proteo_env.spaces import ActionLayout
 
 
@@ -137,11 +140,14 @@ class SlotMemory:
     FIELDS: dict = {}
 
     def __init__(self):
+        self.version = 0
+        """Counts the times the arrays were replaced (:meth:`clear`, :meth:`reserve`)."""
         self.clear()
 
     def clear(self) -> None:
         for name, (dtype, _) in self.FIELDS.items():
             setattr(self, name, np.empty(0, dtype=dtype))
+        self.version += 1
 
     def reserve(self, n_slots: int) -> None:
         """Make room for slots ``0 .. n_slots - 1``; new slots start empty."""
@@ -150,6 +156,7 @@ class SlotMemory:
         for name, (dtype, empty) in self.FIELDS.items():
             values = getattr(self, name)
             setattr(self, name, np.concatenate([values, np.full(n_slots - len(values), empty, dtype=dtype)]))
+        self.version += 1
 
     @property
     def n_slots(self) -> int:
@@ -251,6 +258,12 @@ class KernelPolicy(Policy):
             getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
         return rows
 
+    @classmethod
+    def batch(cls, policies) -> PolicyBatch:
+        """The :class:`PolicyBatch` of ``policies`` (one per world, this class and its
+        parameters): their actions for every world's rows in one kernel call."""
+        return PolicyBatch(policies)
+
     def _act(self, slots: np.ndarray, field) -> np.ndarray:
         """``(A, L)`` actions of the agents with memory ``slots`` (A,), in row order; ``field(name)``
         gives an observation field stacked over them."""
@@ -258,3 +271,134 @@ class KernelPolicy(Policy):
         seen = Observed(*stacked_fields(field, Observed._fields))
         self.rule(seen, slots, self.memory.arrays(), self.rule_params, self.rng, actions)
         return actions
+
+
+@functools.cache
+def worlds_rule(rule):
+    """The kernel that runs ``rule`` (a :attr:`KernelPolicy.rule`) once per world:
+    ``act_worlds(seen, n_agents, slots, memories, rules, rngs, actions)``, where ``seen`` is an
+    :class:`Observed` of ``B * A`` rows (world-major, ``A = n_agents``), ``slots`` (A,) the
+    memory slot of each of a world's rows, ``memories`` and ``rngs`` ``B`` memory tuples and
+    generators (numba typed lists), ``rules`` the rule's parameters and ``actions`` ``(B * A, L)``.
+    World ``b`` gets exactly the call its own policy's :meth:`KernelPolicy.act_arrays` would make."""
+
+    @generated_kernel
+    def act_worlds(seen, n_agents, slots, memories, rules, rngs, actions):
+        for b in range(len(rngs)):
+            lo, hi = b * n_agents, (b + 1) * n_agents
+            world = Observed(
+                seen.own_mode[lo:hi],
+                seen.messages[lo:hi],
+                seen.neighbour_kind[lo:hi],
+                seen.neighbour_mode[lo:hi],
+                seen.neighbour_scent[lo:hi],
+                seen.own_scent[lo:hi],
+                seen.action_mask[lo:hi],
+                seen.contact[lo:hi],
+                seen.load[lo:hi],
+                seen.hint[lo:hi],
+            )
+            rule(world, slots, memories[b], rules, rngs[b], actions[lo:hi])
+
+    return act_worlds
+
+
+def _equal(a, b) -> bool:
+    """Whether two rule parameters (nested tuples of numbers and arrays) are equal."""
+    if isinstance(a, tuple):
+        return isinstance(b, tuple) and len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b))
+    return bool(np.array_equal(a, b))
+
+
+@kernel
+def _typed_list(first):
+    """A numba typed list holding ``first`` (compiled here and cached on disk, unlike
+    ``numba.typed.List``'s own constructors, which compile on every run)."""
+    items = numba.typed.List()
+    items.append(first)
+    return items
+
+
+@kernel
+def _put(items, i, item):
+    """``items[i] = item``, or append it when ``i == len(items)``."""
+    if i == len(items):
+        items.append(item)
+    else:
+        items[i] = item
+
+
+def _kernel_list(items):
+    """``items`` (a non-empty sequence of one numba type) as a numba typed list."""
+    items = list(items)
+    out = _typed_list(items[0])
+    for i, item in enumerate(items[1:], 1):
+        _put(out, i, item)
+    return out
+
+
+class PolicyBatch:
+    """``B`` kernel policies of one class and rule parameters, one per world, acting on all the
+    worlds' rows in one kernel call (:func:`worlds_rule`).
+
+    The policies stay the owners of their state: each keeps its memory (keyed by row, as in
+    :meth:`KernelPolicy.act_arrays`) and its generator, and :meth:`KernelPolicy.reset` resets
+    one world's policy as before. :meth:`act_arrays` gives exactly what concatenating
+    ``policies[b].act_arrays(rows of world b)`` gives, draw for draw, without the per-world
+    Python of that loop.
+
+    Args:
+        policies: ``B >= 1`` :class:`KernelPolicy` of the same class with equal ``rule_params``.
+    """
+
+    def __init__(self, policies):
+        self.policies = list(policies)
+        if not self.policies:
+            raise ValueError("policies=[] is not allowed; allowed: one policy per world, at least one")
+        first = self.policies[0]
+        for p in self.policies:
+            if type(p) is not type(first) or not _equal(p.rule_params, first.rule_params):
+                raise ValueError(
+                    f"policy {type(p).__name__} with {p.rule_params} is not allowed in a batch of "
+                    f"{type(first).__name__} with {first.rule_params}; allowed: one class and one set of rule parameters"
+                )
+        self.rules = first.rule_params
+        self.kernel = worlds_rule(first.rule)
+        self._rngs = self._memories = None
+        self._synced: list[tuple] = []
+        """Per world: the generator, memory and memory version that the typed lists hold."""
+
+    def act_arrays(self, buffers) -> np.ndarray:
+        """``(B * A, L)`` actions from ``buffers``, an :class:`~proteo_env.spaces.ObservationBuffers`
+        of ``B * A`` rows, world-major (what a batched env's ``observe_arrays`` returns)."""
+        n_worlds = len(self.policies)
+        n_agents = buffers.own_mode.shape[0] // n_worlds
+        if n_agents * n_worlds != buffers.own_mode.shape[0]:
+            raise ValueError(
+                f"{buffers.own_mode.shape[0]} observation rows are not allowed for {n_worlds} worlds; "
+                "allowed: a multiple of the number of worlds"
+            )
+        slots = np.arange(n_agents, dtype=np.int64)
+        self._sync(n_agents)
+        actions = np.empty((len(slots) * n_worlds, self.policies[0].layout.length), dtype=np.int64)
+        seen = Observed(*stacked_fields(lambda f: getattr(buffers, f), Observed._fields))
+        self.kernel(seen, n_agents, slots, self._memories, self.rules, self._rngs, actions)
+        return actions
+
+    def _sync(self, n_agents: int) -> None:
+        """Every policy's memory keyed by row with ``n_agents`` slots, and the typed lists holding
+        each world's current generator and memory arrays (both are replaced at a reset)."""
+        for p in self.policies:
+            if p._keyed_by != "row" or p.memory.n_slots < n_agents:
+                p._memory_slots("row", range(n_agents))
+        if self._rngs is None:
+            self._rngs = _kernel_list(p.rng for p in self.policies)
+            self._memories = _kernel_list(p.memory.arrays() for p in self.policies)
+            self._synced = [(p.rng, p.memory, p.memory.version) for p in self.policies]
+            return
+        for b, p in enumerate(self.policies):
+            rng, memory, version = self._synced[b]
+            if p.rng is not rng or p.memory is not memory or p.memory.version != version:
+                _put(self._rngs, b, p.rng)
+                _put(self._memories, b, p.memory.arrays())
+                self._synced[b] = (p.rng, p.memory, p.memory.version)

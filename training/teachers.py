@@ -25,6 +25,7 @@ import numpy as np
 
 from baselines import POLICIES
 from baselines.autopilot import hand_coded_rules
+from baselines.base import PolicyBatch
 from proteo_env.config import ConfigError
 
 DEFAULT_TEACHER = "rules"
@@ -79,6 +80,8 @@ class Teachers:
             return
         check_teacher(name, env.task.name)
         self.policies = [hand_coded_rules(env) for _ in range(n_envs)]
+        self._batches: dict[int, PolicyBatch] = {}
+        """The teachers of each group of worlds, by its first world."""
         for b in range(n_envs):
             self._reset(b)
 
@@ -102,8 +105,16 @@ class Teachers:
             features = np.concatenate([encoder.encode_buffers(buffers) for buffers in groups])
             mask = np.concatenate([buffers.action_mask for buffers in groups]).astype(bool)
             return self.checkpoint.act_arrays(features, mask)[:, : self.n_fields]
-        rows = [buffers.rows(b * a, (b + 1) * a) for buffers in groups for b in range(len(buffers.own_mode) // a)]
-        return np.concatenate([p.act_arrays(r)[:, : self.n_fields] for p, r in zip(self.policies, rows, strict=True)])
+        labels, first = [], 0
+        for buffers in groups:
+            n = len(buffers.own_mode) // a
+            if first not in self._batches:
+                self._batches[first] = PolicyBatch(self.policies[first : first + n])
+            labels.append(self._batches[first].act_arrays(buffers)[:, : self.n_fields])
+            first += n
+        if first != len(self.policies):
+            raise ValueError(f"observations of {first} worlds are not allowed; allowed: {len(self.policies)} worlds")
+        return np.concatenate(labels)
 
     def restart(self, worlds) -> None:
         """New episodes for the teachers of ``worlds`` (indices or ``(n_envs,)`` bool)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .jit import kernel
@@ -47,11 +49,40 @@ def largest_thin_piece(grid, cell, n_modules, dir_delta, degree, mark, queue):
     return best
 
 
+@kernel
+def graph_shape(grid, cell, n_modules, dir_delta, degree, mark, queue):
+    """``(edges, thin_piece, thin, max_degree)``: the number of face contacts between modules,
+    the size of the largest one-module-thick piece (:func:`largest_thin_piece`), the number of
+    modules with at most 2 neighbours and the largest number of neighbours; fills ``degree`` (N,)
+    as :func:`module_degrees` does."""
+    module_degrees(grid, cell, n_modules, dir_delta, degree)
+    edges, thin, max_degree = 0, 0, 0
+    for n in range(n_modules):
+        edges += degree[n]
+        thin += degree[n] <= 2
+        max_degree = max(max_degree, degree[n])
+    thin_piece = largest_thin_piece(grid, cell, n_modules, dir_delta, degree, mark, queue)
+    return edges // 2, thin_piece, thin, max_degree
+
+
+class GraphShape(NamedTuple):
+    """The shape of a world's module graph (:meth:`StructureProbe.measure`)."""
+
+    edges: int
+    """Face contacts between modules."""
+    thin_piece: int
+    """Modules in the largest one-module-thick piece (a chain or ring)."""
+    thin: int
+    """Modules with at most 2 module neighbours."""
+    max_degree: int
+    """The most module neighbours of any module."""
+
+
 class StructureProbe:
     """Reusable scratch for measuring a world's module graph.
 
-    ``measure(world)`` returns ``degree (N,)``, the number of edges, and the size of the
-    largest one-module-thick piece.
+    ``measure(world)`` returns its :class:`GraphShape`; ``degree`` (N,) then holds each
+    module's number of module neighbours.
     """
 
     def __init__(self, n_modules: int):
@@ -59,10 +90,8 @@ class StructureProbe:
         self.mark = np.zeros(n_modules, dtype=np.int64)
         self.queue = np.zeros(n_modules, dtype=np.int64)
 
-    def measure(self, world):
-        module_degrees(world.grid, world.cell, world.n_modules, world.dir_delta, self.degree)
-        edges = int(self.degree.sum()) // 2
-        thin = largest_thin_piece(
+    def measure(self, world) -> GraphShape:
+        shape = graph_shape(
             world.grid, world.cell, world.n_modules, world.dir_delta, self.degree, self.mark, self.queue
         )
-        return self.degree, edges, int(thin)
+        return GraphShape(*map(int, shape))

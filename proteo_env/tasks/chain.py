@@ -129,11 +129,14 @@ class Chain(Task):
         self._previous = self._last
 
     def _measure(self, world):
-        degree, edges, thin_piece = self._probe.measure(world)
-        n = world.n_modules
-        thin = int((degree <= 2).sum())
-        complete = edges == n - 1 and thin == n and thin_piece == n
-        return {"thin": thin, "max_degree": int(degree.max()), "chain_length": thin_piece, "complete": complete}
+        shape, n = self._probe.measure(world), world.n_modules
+        complete = shape.edges == n - 1 and shape.thin == n and shape.thin_piece == n
+        return {
+            "thin": shape.thin,
+            "max_degree": shape.max_degree,
+            "chain_length": shape.thin_piece,
+            "complete": complete,
+        }
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
