@@ -70,3 +70,13 @@ def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
     assert clone["algorithm"] == "imitation" and kicked["algorithm"] == "ppo"
     assert kicked["args"]["init"] == str(keep / "chain" / "imitation_move" / "seed_0")
     assert (docs / "curves_imitation_chain_move.png").is_file() and (docs / "curves_kickstart_chain_move.png").is_file()
+
+
+def test_the_long_ppo_recipe_trains_the_ppo_config_for_its_own_steps(tmp_path):
+    args = study.Args(tasks=("table",), recipes=("ppo48",), minutes=0.0)
+    cmd = study._command(args, "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("--config") + 1] == "configs/train/ppo_table_move.yaml"
+    assert cmd[cmd.index("--total-steps") + 1] == "48000000"
+    cmd = study._command(study.Args(total_steps=1000), "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("--total-steps") + 1] == "1000", "an explicit budget still wins"
+    assert "--total-steps" not in study._command(args, "ppo", "table", 1, tmp_path / "run", tmp_path / "clone")

@@ -11,6 +11,7 @@ Recipes (``recipes``), each a script and a config per task and level:
 recipe         script                   config
 ============== ======================== ====================================================
 ``ppo``        ``training/ppo.py``      ``configs/train/ppo_<task>_<level>.yaml``
+``ppo48``      ``training/ppo.py``      the same, for 48 M agent-steps
 ``imitation``  ``training/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
 ``kickstart``  ``training/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
                                         ``--init`` the kept clone of the same task and seed
@@ -47,12 +48,14 @@ from pathlib import Path
 from training.common import parse_args
 
 RECIPES = {
-    "ppo": ("training.ppo", "ppo"),
-    "imitation": ("training.imitate", "bc"),
-    "kickstart": ("training.ppo", "kickstart"),
-    "curriculum": ("training.ppo", "curriculum"),
+    "ppo": ("training.ppo", "ppo", 0),
+    "ppo48": ("training.ppo", "ppo", 48_000_000),
+    "imitation": ("training.imitate", "bc", 0),
+    "kickstart": ("training.ppo", "kickstart", 0),
+    "curriculum": ("training.ppo", "curriculum", 0),
 }
-"""Recipe name: (script module, prefix of its configs in configs/train)."""
+"""Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
+unless ``total_steps`` says otherwise; 0: the config's)."""
 
 
 @dataclass(frozen=True)
@@ -108,7 +111,8 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
     ]
     if module == "training.ppo":
         cmd += ["--time-limit-minutes", str(args.minutes)]
-        cmd += ["--total-steps", str(args.total_steps)] if args.total_steps else []
+        steps = args.total_steps or RECIPES[recipe][2]
+        cmd += ["--total-steps", str(steps)] if steps else []
     if recipe == "kickstart":
         cmd += ["--init", str(clone)]
     return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
