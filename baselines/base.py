@@ -378,18 +378,19 @@ class PolicyBatch:
                 f"{buffers.own_mode.shape[0]} observation rows are not allowed for {n_worlds} worlds; "
                 "allowed: a multiple of the number of worlds"
             )
-        slots = np.arange(n_agents, dtype=np.int64)
         self._sync(n_agents)
-        actions = np.empty((len(slots) * n_worlds, self.policies[0].layout.length), dtype=np.int64)
+        first = self.policies[0]
+        actions = np.empty((n_agents * n_worlds, first.layout.length), dtype=np.int64)
         seen = Observed(*stacked_fields(lambda f: getattr(buffers, f), Observed._fields))
-        self.kernel(seen, n_agents, slots, self._memories, self.rules, self._rngs, actions)
+        # every world's rows are slots 0 .. A-1 of its own memory: the slots act_arrays keeps
+        self.kernel(seen, n_agents, first._row_slots, self._memories, self.rules, self._rngs, actions)
         return actions
 
     def _sync(self, n_agents: int) -> None:
         """Every policy's memory keyed by row with ``n_agents`` slots, and the typed lists holding
         each world's current generator and memory arrays (both are replaced at a reset)."""
         for p in self.policies:
-            if p._keyed_by != "row" or p.memory.n_slots < n_agents:
+            if p._keyed_by != "row" or len(p._row_slots) != n_agents:
                 p._memory_slots("row", range(n_agents))
         if self._rngs is None:
             self._rngs = _kernel_list(p.rng for p in self.policies)

@@ -137,9 +137,8 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
     from training import ppo
     from training.common import parse_args
 
-    batched.ONE_CALL_AFTER = (
-        0  # a long run's steady state: the rules of every world in one call (compiled in the warm-up)
-    )
+    # a long run's steady state: the rules of every world in one call (compiled in the warm-up)
+    batched.ONE_CALL_AFTER = 0
     base = parse_args(ppo.Args, ["--config", config]) if Path(config).is_file() else ppo.Args()
     with tempfile.TemporaryDirectory() as tmp:
         args = dataclasses.replace(

@@ -97,9 +97,12 @@ class BatchedEnv:
         self._has_load, self._has_hint = type(task).load is not Task.load, type(task).hint is not Task.hint
         """Whether the task has a load or hint sensor (else those observation fields stay zero)."""
         self._autopilots, self._autopilot_batch, self._autopilot_calls = [], None, 0
+        self._batch_autopilots = None
+        """The autopilots' ``batch`` (:mod:`~proteo_env.control`), when their class has one."""
         if self.level.name == "move":
             factory = autopilot_factory(task.name)
             self._autopilots = [factory(self, None) for _ in tasks]
+            self._batch_autopilots = getattr(type(self._autopilots[0]), "batch", None)
         self._observed: ObservationBuffers | None = None
         """The observation of the current cycle, once taken (what the autopilots read)."""
         self.n_sites = 12 if self.config.obs_radius == 1 else 54
@@ -328,9 +331,8 @@ class BatchedEnv:
             return full
         observed = self.last_observation()
         a = self.n_agents
-        batch = getattr(type(self._autopilots[0]), "batch", None)
-        if self._autopilot_batch is None and batch is not None and self._autopilot_calls >= ONE_CALL_AFTER:
-            self._autopilot_batch = batch(self._autopilots)
+        if self._autopilot_batch is None and self._batch_autopilots and self._autopilot_calls >= ONE_CALL_AFTER:
+            self._autopilot_batch = self._batch_autopilots(self._autopilots)
         self._autopilot_calls += self.n_envs
         if self._autopilot_batch is not None:
             full = self._autopilot_batch.act_arrays(observed).reshape(actions.shape[:2] + (lay.length,))
@@ -393,6 +395,8 @@ class BatchedEnv:
     def _sense(self, b: int, buffers: ObservationBuffers) -> None:
         """The task's sensors of world ``b`` (load, hint) into its rows of ``buffers`` (every
         world's rows; a sensor the task does not have stays zero)."""
+        if not (self._has_load or self._has_hint):
+            return
         rows = slice(b * self.n_agents, (b + 1) * self.n_agents)
         task = self.tasks[b]
         if self._has_load:

@@ -20,9 +20,9 @@ N_WORLDS = 3
 def test_one_call_gives_what_one_call_per_world_gives(task_id):
     env = proteo_env.make_batched(task_id, N_WORLDS, **small_overrides(task_id))
     name = env.task.name
-    batched = [make_policy(name, env, seed=10 + b) for b in range(N_WORLDS)]
+    together = [make_policy(name, env, seed=10 + b) for b in range(N_WORLDS)]
     alone = [make_policy(name, env, seed=10 + b) for b in range(N_WORLDS)]
-    batch = type(batched[0]).batch(batched)
+    batch = type(together[0]).batch(together)
     assert isinstance(batch, PolicyBatch)
     buffers, a = env.reset(seed=4), env.n_agents
     for cycle in range(40):
@@ -32,10 +32,10 @@ def test_one_call_gives_what_one_call_per_world_gives(task_id):
         result = env.step_arrays(actions.reshape(N_WORLDS, a, -1))
         restart = result.done | (np.arange(N_WORLDS) == cycle % N_WORLDS if cycle % 9 == 8 else False)
         for b in np.flatnonzero(restart):  # a new episode: each world's policy reset on its own
-            batched[b].reset(seed=100 + cycle)
+            together[b].reset(seed=100 + cycle)
             alone[b].reset(seed=100 + cycle)
         buffers = env.reset_worlds(restart) if restart.any() else env.observe_arrays()
-    assert any(p.memory.version > 2 for p in batched), "some world's policy was reset on its own"
+    assert any(p.memory.version > 2 for p in together), "some world's policy was reset on its own"
 
 
 def _move_level_trace(task_id, one_call_after, monkeypatch):

@@ -105,15 +105,17 @@ class Teachers:
             features = np.concatenate([encoder.encode_buffers(buffers) for buffers in groups])
             mask = np.concatenate([buffers.action_mask for buffers in groups]).astype(bool)
             return self.checkpoint.act_arrays(features, mask)[:, : self.n_fields]
+        sizes = [len(buffers.own_mode) // a for buffers in groups]
+        if sum(sizes) != len(self.policies):
+            raise ValueError(
+                f"observations of {sum(sizes)} worlds are not allowed; allowed: {len(self.policies)} worlds"
+            )
         labels, first = [], 0
-        for buffers in groups:
-            n = len(buffers.own_mode) // a
+        for buffers, n in zip(groups, sizes):
             if first not in self._batches:
                 self._batches[first] = PolicyBatch(self.policies[first : first + n])
             labels.append(self._batches[first].act_arrays(buffers)[:, : self.n_fields])
             first += n
-        if first != len(self.policies):
-            raise ValueError(f"observations of {first} worlds are not allowed; allowed: {len(self.policies)} worlds")
         return np.concatenate(labels)
 
     def restart(self, worlds) -> None:
