@@ -117,6 +117,24 @@ def test_bad_arguments_are_refused(tmp_path):
         tiny_run(tmp_path / "b", "--n-groups", "3")
 
 
+def test_learning_rate_and_entropy_coefficient_fall_linearly_to_their_final_values(tmp_path):
+    final = tiny_run(tmp_path / "run", "--learning-rate-final", "0", "--ent-coef-final", "0.002", steps=3000)
+    with (final.parent / "progress.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    steps = [float(r["agent_steps"]) for r in rows]
+    rates = [float(r["loss/learning_rate"]) for r in rows]
+    coefs = [float(r["loss/ent_coef"]) for r in rows]
+    assert rates[0] == 1e-3 and coefs[0] == 0.01  # the first update runs at the start values
+    assert all(b < a for a, b in zip(rates, rates[1:])) and all(b < a for a, b in zip(coefs, coefs[1:]))
+    for s, rate, coef in zip(steps[1:], rates[1:], coefs[1:]):  # each update uses the values at its start
+        done = min(1.0, steps[steps.index(s) - 1] / 3000)
+        assert math.isclose(rate, 1e-3 * (1 - done)) and math.isclose(coef, 0.01 + (0.002 - 0.01) * done)
+    constant = ppo.Args(total_steps=1000)
+    assert constant.annealed("learning_rate", 900) == 1e-3 and constant.annealed("ent_coef", 900) == 0.01
+    with pytest.raises(ValueError, match=r"ent_coef_final=-0.1 is not allowed; allowed: a number >= 0.0"):
+        ppo.Args(ent_coef_final=-0.1)
+
+
 def test_lattice_actor_is_one_encoder_shared_by_the_directions():
     env = proteo_env.make("chain-v0", control="move+mode", **SMALL_ENV)
     from proteo_env.adapters.flatten import ObservationEncoder

@@ -42,6 +42,10 @@ the first ``distill_steps`` agent-steps (0: it stays); at zero the teacher is no
 consulted and the learner is free to leave it behind, while a small ``distill_final`` keeps
 it near the teacher.
 
+Schedules. ``learning_rate_final`` and ``ent_coef_final`` make the learning rate and the entropy
+coefficient fall (or rise) linearly from their start values to these by ``total_steps``;
+unset, they stay constant.
+
 Memory. ``memory`` feeds each module's previous action back as inputs
 (:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
 state ``(R,)`` each module carries from cycle to cycle and that restarts at zero with its
@@ -126,10 +130,14 @@ class Args:
     minibatch_size: int = 8192
     n_epochs: int = 2
     learning_rate: float = 1e-3
+    learning_rate_final: float | None = None
+    """The learning rate at ``total_steps``, reached linearly from ``learning_rate`` (None: it stays)."""
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip_range: float = 0.2
     ent_coef: float = 0.01
+    ent_coef_final: float | None = None
+    """The entropy coefficient at ``total_steps``, reached linearly from ``ent_coef`` (None: it stays)."""
     vf_coef: float = 0.5
     value_norm: bool = False
     """Train the critic on returns scaled by their running mean and standard deviation
@@ -204,15 +212,28 @@ class Args:
             ("gae_lambda", 0.0, 1.0),
             ("clip_range", 0.0, None),
             ("ent_coef", 0.0, None),
+            ("learning_rate_final", 0.0, None),
+            ("ent_coef_final", 0.0, None),
             ("vf_coef", 0.0, None),
             ("max_grad_norm", 0.0, None),
             ("distill_coef", 0.0, None),
             ("time_limit_minutes", 0.0, None),
         ):
             value = getattr(self, name)
+            if value is None and name.endswith("_final"):
+                continue
             if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
                 allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
                 raise ConfigError(f"{name}={value!r} is not allowed; allowed: {allowed}")
+
+    def annealed(self, name: str, agent_steps: int) -> float:
+        """``learning_rate`` or ``ent_coef`` after ``agent_steps`` agent-steps: linear to its ``_final`` value
+        at ``total_steps`` when that is set, else constant."""
+        start, final = getattr(self, name), getattr(self, name + "_final")
+        if final is None or self.total_steps <= 0:
+            return start
+        done = min(1.0, agent_steps / self.total_steps)
+        return start + (final - start) * done
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps."""
@@ -642,6 +663,9 @@ def train(args: Args) -> Path:
         started = time.perf_counter()
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
         distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
+        ent_coef = args.annealed("ent_coef", agent_steps)
+        for group in optimiser.param_groups:
+            group["lr"] = args.annealed("learning_rate", agent_steps)
         # ---- rollout: t_steps cycles of every world
         first_state = state
         with torch.no_grad():
@@ -716,7 +740,7 @@ def train(args: Args) -> Path:
             policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
             value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
             ent = entropy(log_probs).mean()
-            loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
+            loss = policy_loss + args.vf_coef * value_loss - ent_coef * ent
             if distill > 0:
                 distill_loss = teacher_cross_entropy(log_probs, labels, m)
                 loss = loss + distill * distill_loss
@@ -747,6 +771,12 @@ def train(args: Args) -> Path:
                 **episode_stats(finished),
                 **{k: float(np.mean(x)) for k, x in stats.items() if x},
                 "loss/distill_weight": distill,
+                **(
+                    {"loss/learning_rate": optimiser.param_groups[0]["lr"]}
+                    if args.learning_rate_final is not None
+                    else {}
+                ),
+                **({"loss/ent_coef": ent_coef} if args.ent_coef_final is not None else {}),
                 **({"curriculum/stage": curriculum.stage} if curriculum else {}),
                 "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
                 "time/env_seconds": env_time,
