@@ -229,18 +229,21 @@ class Args:
     def annealed(self, name: str, agent_steps: int) -> float:
         """``learning_rate`` or ``ent_coef`` after ``agent_steps`` agent-steps: linear to its ``_final`` value
         at ``total_steps`` when that is set, else constant."""
-        start, final = getattr(self, name), getattr(self, name + "_final")
-        if final is None or self.total_steps <= 0:
-            return start
-        done = min(1.0, agent_steps / self.total_steps)
-        return start + (final - start) * done
+        final = getattr(self, name + "_final")
+        if final is None:
+            return getattr(self, name)
+        return linear(getattr(self, name), final, agent_steps, self.total_steps)
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps."""
-        if self.distill_steps <= 0:
-            return self.distill_coef
-        left = max(0.0, 1.0 - agent_steps / self.distill_steps)
-        return self.distill_final + (self.distill_coef - self.distill_final) * left
+        return linear(self.distill_coef, self.distill_final, agent_steps, self.distill_steps)
+
+
+def linear(start: float, final: float, agent_steps: int, over: int) -> float:
+    """``start`` moved linearly to ``final`` over the first ``over`` agent-steps, then ``final`` (``over`` 0: ``start``)."""
+    if over <= 0:
+        return start
+    return final + (start - final) * max(0.0, 1.0 - agent_steps / over)
 
 
 # ---------------------------------------------------------------------- actions
@@ -663,9 +666,9 @@ def train(args: Args) -> Path:
         started = time.perf_counter()
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
         distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
-        ent_coef = args.annealed("ent_coef", agent_steps)
+        ent_coef, learning_rate = args.annealed("ent_coef", agent_steps), args.annealed("learning_rate", agent_steps)
         for group in optimiser.param_groups:
-            group["lr"] = args.annealed("learning_rate", agent_steps)
+            group["lr"] = learning_rate
         # ---- rollout: t_steps cycles of every world
         first_state = state
         with torch.no_grad():
@@ -771,11 +774,7 @@ def train(args: Args) -> Path:
                 **episode_stats(finished),
                 **{k: float(np.mean(x)) for k, x in stats.items() if x},
                 "loss/distill_weight": distill,
-                **(
-                    {"loss/learning_rate": optimiser.param_groups[0]["lr"]}
-                    if args.learning_rate_final is not None
-                    else {}
-                ),
+                **({"loss/learning_rate": learning_rate} if args.learning_rate_final is not None else {}),
                 **({"loss/ent_coef": ent_coef} if args.ent_coef_final is not None else {}),
                 **({"curriculum/stage": curriculum.stage} if curriculum else {}),
                 "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
