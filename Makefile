@@ -50,6 +50,8 @@ learning-results: install
 		--publish docs/guides/learning.md --publish README.md
 	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \
 		--publish docs/guides/learning.md
+	$(BIN)/proteo eval --config configs/eval_study_larger_curriculum.yaml --tasks chain,table,grasp,locomotion \
+		--out docs/eval/study_larger_curriculum --pictures --publish docs/guides/learning.md
 
 # One task of the study, every recipe (make learning-task TASK=grasp, about 15 minutes; table's 48 M-step
 # curriculum adds half an hour): its checkpoints and curves are replaced; the evaluation goes to
