@@ -108,7 +108,8 @@ class Args:
     hidden: tuple[int, ...] = (128, 128)
     memory: str = "none"
     """What the network remembers between cycles: none, last_move (the move the module played last
-    cycle) or last_action (every field it played last cycle); training/policies.py MEMORIES."""
+    cycle) or last_action (every field it played last cycle), each optionally with +clock (the
+    cycles the module has been in its mode), or clock alone; training/policies.py MEMORIES."""
     sampled: str = "move"
     """Which fields the clone samples when it acts (the others take their arg-max), in the DAgger
     rounds and, through the checkpoint, in ``proteo eval``: move (the rules' random moves; their

@@ -46,8 +46,8 @@ Schedules. ``learning_rate_final`` and ``ent_coef_final`` make the learning rate
 coefficient fall (or rise) linearly from their start values to these by ``total_steps``;
 unset, they stay constant.
 
-Memory. ``memory`` feeds each module's previous action back as inputs
-(:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
+Memory. ``memory`` feeds each module's previous action, and with ``clock`` the cycles it has
+been in its mode, back as inputs (:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
 state ``(R,)`` each module carries from cycle to cycle and that restarts at zero with its
 world's episode (:class:`~training.networks.ActorCritic`). The rollout keeps every module's
 state; the update replays each minibatch of modules through the rollout's ``n_steps`` cycles
@@ -104,7 +104,7 @@ from training.common import (
     write_checkpoint_meta,
 )
 from training.networks import ARCHS, ActorCritic
-from training.policies import check_memory, with_memory
+from training.policies import check_memory, clock_step, with_memory
 
 ALGORITHM = "ppo"
 
@@ -151,7 +151,8 @@ class Args:
     hidden: tuple[int, ...] = (64, 64)
     """Hidden sizes of the MLPs (actor at arch=mlp, critic always; lattice: embedding, head)."""
     memory: str = "none"
-    """What the network remembers between cycles: none, last_move or last_action (training/policies.py MEMORIES)."""
+    """What the network remembers between cycles: none, last_move or last_action, each optionally
+    with +clock (the cycles in its mode), or clock alone (training/policies.py MEMORIES)."""
     recurrent: int = 0
     """The state size of a GRU each module carries from cycle to cycle (arch=shared only); 0: feed-forward."""
     checkpoint_every: int = 1_000_000
@@ -328,6 +329,10 @@ class TrainingEnvs:
         self.previous_actions = np.zeros((self.n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
         """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
         self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
+        self.clock_mode = self._own_modes()
+        """``(N,)``: each module's observed mode, the ``clock`` memory's reference."""
+        self.clock = np.zeros(len(self.clock_mode), dtype=np.int64)
+        """``(N,)``: each module's cycles in that mode (:func:`training.policies.clock_step`)."""
         self.episode_return = np.zeros(self.n_envs)
         self.final_rows = np.zeros(0, dtype=np.int64)
         """Sample rows of the worlds truncated in the last :meth:`step` (their episodes hit ``max_cycles``)."""
@@ -346,9 +351,15 @@ class TrainingEnvs:
             fields = {
                 name: np.concatenate([getattr(b, name) for b in self.buffers]) for name in ObservationBuffers.FIELDS
             }
-        features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
+        features[:] = with_memory(
+            self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec, self.clock
+        )
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
+
+    def _own_modes(self) -> np.ndarray:
+        """``(N,)``: every module's own mode in the current observations."""
+        return np.concatenate([np.asarray(b.own_mode).reshape(-1) for b in self.buffers]).astype(np.int64)
 
     def step(self, actions: np.ndarray, finished: list[dict]):
         """One cycle of every world from ``(n_envs, A, F)`` actions.
@@ -376,22 +387,29 @@ class TrainingEnvs:
         for w in np.flatnonzero(ended):
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
         self.episode_return[ended] = 0.0
+        self.buffers = [group.observe_arrays() for group in self.groups]
+        modes = self._own_modes()
+        self.clock = clock_step(self.clock_mode, self.clock, modes)
         rows, features = [], []
         for k, group in enumerate(self.groups):
             restart = ended[k * self.b : (k + 1) * self.b]
-            self.buffers[k] = group.observe_arrays()
             for j in np.flatnonzero(truncated[k * self.b : (k + 1) * self.b]):
-                rows.append(np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a))
+                world = np.arange((k * self.b + j) * a, (k * self.b + j + 1) * a)
+                rows.append(world)
                 features.append(
                     with_memory(
                         self.encoder.encode_buffers(self.buffers[k].rows(j * a, (j + 1) * a)),
                         actions[k * self.b + j],
                         self.memory,
                         self.nvec,
+                        self.clock[world],
                     )
                 )
             if restart.any():
                 self.buffers[k] = group.reset_worlds(restart)
+        restarted = np.repeat(ended, a)
+        self.clock_mode = np.where(restarted, self._own_modes(), modes)
+        self.clock[restarted] = 0
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
         self.final_features = np.concatenate(features) if features else self.final_features[:0]
         self.env_seconds += time.perf_counter() - started
