@@ -23,7 +23,9 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the
    critic on scaled returns), with ``recurrent=64`` (a GRU state per module, the update
    back-propagating through each rollout's cycles), and at ``full`` with ``memory=last_action`` (the whole previous
-   action as inputs), in the same run.
+   action as inputs) and ``memory=last_action+clock`` (and the cycles in the module's mode), in
+   the same run. The machine's description (CPU model, torch's vector instruction set, load
+   average) is written beside the figures.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -44,6 +46,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine_info import describe
 
 
 def raw_env(task: str, overrides: dict, cycles: int) -> float:
@@ -216,7 +219,6 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
 
-    import sb3_contrib
     import torch
     import yaml
 
@@ -234,16 +236,15 @@ def main(argv=None) -> int:
     limit_threads(1)
     torch.manual_seed(0)
     result = {
-        "machine": {
-            "cpu_count": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "torch": torch.__version__,
-            "sb3_contrib": sb3_contrib.__version__,
-            "numpy": np.__version__,
-            "numba_num_threads": os.environ.get("NUMBA_NUM_THREADS"),
-            "load_average_before": os.getloadavg(),
-        },
+        "machine": describe(
+            "torch",
+            "sb3_contrib",
+            "numpy",
+            platform=platform.platform(),
+            torch_cpu_capability=torch.backends.cpu.get_cpu_capability(),
+            numba_num_threads=os.environ.get("NUMBA_NUM_THREADS"),
+            load_average_before=os.getloadavg(),
+        ),
         "task": args.task,
         "env": overrides,
         "modules": overrides.get("n_modules"),
@@ -275,6 +276,7 @@ def main(argv=None) -> int:
             ("move, value_norm", {"value_norm": True}),
             ("move, recurrent=64 (GRU)", {"recurrent": 64}),
             ("full, memory=last_action", {"memory": "last_action"}),
+            ("full, memory=last_action+clock", {"memory": "last_action+clock"}),
         ):
             result["ppo"][name] = ppo_training(
                 *task, args.ppo_steps, control=name.split(",")[0], config=ppo_config, variant=variant
