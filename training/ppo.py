@@ -47,12 +47,12 @@ coefficient fall (or rise) linearly from their start values to these by ``total_
 unset, they stay constant.
 
 Memory. ``memory`` feeds each module's previous action, and with ``clock`` the cycles it has
-been in its mode, back as inputs (:data:`training.policies.MEMORIES`); ``recurrent: R`` (at ``arch: shared``) adds a GRU whose
-state ``(R,)`` each module carries from cycle to cycle and that restarts at zero with its
-world's episode (:class:`~training.networks.ActorCritic`). The rollout keeps every module's
-state; the update replays each minibatch of modules through the rollout's ``n_steps`` cycles
-from their state at its start (back-propagation through those cycles), so a minibatch is
-``minibatch_size // n_steps`` modules' whole sequences. ``--init`` from a feed-forward
+been in its mode, back as inputs (:data:`training.policies.MEMORIES`); ``recurrent: R`` (at
+``arch: shared``) adds a GRU whose state ``(R,)`` each module carries from cycle to cycle and
+that restarts at zero with its world's episode (:class:`~training.networks.ActorCritic`). The
+rollout keeps every module's state; the update replays each minibatch of modules through the
+rollout's ``n_steps`` cycles from their state at its start (back-propagation through those
+cycles), so a minibatch is ``minibatch_size // n_steps`` modules' whole sequences. ``--init`` from a feed-forward
 checkpoint of the same shape starts the GRU fresh and its heads at zero: the network first
 acts exactly as the checkpoint.
 
