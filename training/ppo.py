@@ -52,9 +52,9 @@ been in its mode, back as inputs (:data:`training.policies.MEMORIES`); ``recurre
 that restarts at zero with its world's episode (:class:`~training.networks.ActorCritic`). The
 rollout keeps every module's state; the update replays each minibatch of modules through the
 rollout's ``n_steps`` cycles from their state at its start (back-propagation through those
-cycles), so a minibatch is ``minibatch_size // n_steps`` modules' whole sequences. ``--init`` from a feed-forward
-checkpoint of the same shape starts the GRU fresh and its heads at zero: the network first
-acts exactly as the checkpoint.
+cycles), so a minibatch is ``minibatch_size // n_steps`` modules' whole sequences. ``--init``
+from a feed-forward checkpoint of the same shape starts the GRU fresh and its heads at zero:
+the network first acts exactly as the checkpoint.
 
 Curricula. ``curriculum: {stages: [...], promote_at, window}`` trains on stages of env
 overrides in turn, each promoted when the success rate of its last ``window`` episodes reaches
@@ -329,6 +329,8 @@ class TrainingEnvs:
         self.previous_actions = np.zeros((self.n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
         """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
         self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
+        self.clocked = self.memory.endswith("clock")
+        """Whether the memory has a clock (only then are the modes followed, cycle by cycle)."""
         self.clock_mode = self._own_modes()
         """``(N,)``: each module's observed mode, the ``clock`` memory's reference."""
         self.clock = np.zeros(len(self.clock_mode), dtype=np.int64)
@@ -388,8 +390,9 @@ class TrainingEnvs:
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
         self.episode_return[ended] = 0.0
         self.buffers = [group.observe_arrays() for group in self.groups]
-        modes = self._own_modes()
-        self.clock = clock_step(self.clock_mode, self.clock, modes)
+        if self.clocked:
+            modes = self._own_modes()
+            self.clock = clock_step(self.clock_mode, self.clock, modes)
         rows, features = [], []
         for k, group in enumerate(self.groups):
             restart = ended[k * self.b : (k + 1) * self.b]
@@ -407,9 +410,10 @@ class TrainingEnvs:
                 )
             if restart.any():
                 self.buffers[k] = group.reset_worlds(restart)
-        restarted = np.repeat(ended, a)
-        self.clock_mode = np.where(restarted, self._own_modes(), modes)
-        self.clock[restarted] = 0
+        if self.clocked:
+            restarted = np.repeat(ended, a)
+            self.clock_mode = np.where(restarted, self._own_modes(), modes)
+            self.clock[restarted] = 0
         self.final_rows = np.concatenate(rows) if rows else self.final_rows[:0]
         self.final_features = np.concatenate(features) if features else self.final_features[:0]
         self.env_seconds += time.perf_counter() - started
