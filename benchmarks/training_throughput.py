@@ -19,13 +19,16 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    ``--former-network`` also at ``move`` with the networks the configs used before (separate
    MLP actor and critic, two epochs, messages one-hot per direction); with ``--variants`` also
    at ``move`` with the distillation term of kickstarting on (``distill_coef=1``: the rules
-   label every module every cycle; their time counts as forward passes) and with
-   ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the
-   critic on scaled returns), with ``recurrent=64`` (a GRU state per module, the update
-   back-propagating through each rollout's cycles), and at ``full`` with ``memory=last_action`` (the whole previous
+   label every module every cycle; their time counts as forward passes), with
+   ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the critic
+   on scaled returns), with ``recurrent=64`` (a GRU state per module, the update
+   back-propagating through each rollout's cycles) and with ``n_envs=256`` (four times the
+   worlds per forward pass), and at ``full`` with ``memory=last_action`` (the whole previous
    action as inputs) and ``memory=last_action+clock`` (and the cycles in the module's mode), in
-   the same run. The machine's description (CPU model, torch's vector instruction set, load
-   average) is written beside the figures.
+   the same run. With ``--devices cpu cuda`` each of these runs on every device in turn (the
+   environment stays on the CPU; the networks, their forward passes and updates move). The machine's description
+   (CPU model, torch's vector instruction set, the GPU's name, load average) is written beside
+   the figures.
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
@@ -129,9 +132,12 @@ def sb3_training(task: str, overrides: dict, steps: int, n_copies: int, *, profi
     return steps / seconds, {k: {"seconds": round(v, 2), "share": round(v / total, 3)} for k, v in parts.items()}
 
 
-def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config: str, variant=None) -> dict:
-    """Agent-steps/s of ``training/ppo.py`` and the share of its time in each part (after two warm-up
-    updates); ``variant``: arguments that replace the config's (for example ``{"arch": "shared"}``)."""
+def ppo_training(
+    task: str, overrides: dict, steps: int, *, control: str, config: str, variant=None, device: str = "cpu"
+) -> dict:
+    """Agent-steps/s of ``training/ppo.py`` on ``device`` and the share of its time in each part (after
+    two warm-up updates); ``variant``: arguments that replace the config's (for example
+    ``{"arch": "shared"}``)."""
     import csv
     import dataclasses
     import tempfile
@@ -155,6 +161,7 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
             time_limit_minutes=0.0,
             tensorboard=False,
             progress_bar=False,
+            device=device,
             **(variant or {}),
         )
         ppo.train(args)
@@ -169,6 +176,7 @@ def ppo_training(task: str, overrides: dict, steps: int, *, control: str, config
     }
     return {
         "control": control,
+        "device": device,
         "config": config,
         "arch": args.arch,
         "hidden": list(args.hidden),
@@ -201,9 +209,17 @@ def main(argv=None) -> int:
     )
     parser.add_argument(
         "--only",
-        choices=("all", "training"),
+        choices=("all", "training", "native"),
         default="all",
-        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates",
+        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates; "
+        "native: only training/ppo.py",
+    )
+    parser.add_argument(
+        "--devices",
+        nargs="+",
+        default=["cpu"],
+        help="devices that time training/ppo.py, each with every level and variant (cpu, cuda, cuda:N); "
+        "figures on a device other than cpu are keyed '<name>, device=<device>'",
     )
     parser.add_argument(
         "--former-network",
@@ -214,7 +230,8 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--variants",
         action="store_true",
-        help="also time training/ppo.py at move with the distillation term and with memory=last_move (same run)",
+        help="also time training/ppo.py with the distillation term, the memories, value_norm, a GRU and 256 worlds "
+        "(same run)",
     )
     parser.add_argument("--out", default="docs/learning/throughput.json")
     args = parser.parse_args(argv)
@@ -222,8 +239,9 @@ def main(argv=None) -> int:
     import torch
     import yaml
 
+    from proteo_env import ConfigError
     from proteo_env.registry import task_name
-    from training.common import limit_threads
+    from training.common import limit_threads, torch_device
 
     overrides = yaml.safe_load(args.env) or {}
     if not isinstance(overrides, dict):
@@ -235,11 +253,19 @@ def main(argv=None) -> int:
 
     limit_threads(1)
     torch.manual_seed(0)
+    try:
+        devices = {d: torch_device(d) for d in args.devices}
+    except ConfigError as error:
+        parser.error(f"--devices: {error}")
+    gpus = {d: torch.cuda.get_device_name(device) for d, device in devices.items() if device.type == "cuda"}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     result = {
         "machine": describe(
             "torch",
-            "sb3_contrib",
+            *(() if args.only == "native" else ("sb3_contrib",)),
             "numpy",
+            **({"gpus": gpus, "cuda": torch.version.cuda} if gpus else {}),
             platform=platform.platform(),
             torch_cpu_capability=torch.backends.cpu.get_cpu_capability(),
             numba_num_threads=os.environ.get("NUMBA_NUM_THREADS"),
@@ -255,43 +281,51 @@ def main(argv=None) -> int:
         result["raw_env_agent_steps_per_s"] = raw_env(*task, args.cycles)
         result["sb3_adapter_agent_steps_per_s"] = sb3_adapter(*task, args.cycles // args.copies, args.copies)
         result["torchrl_env_agent_steps_per_s"] = torchrl_env(*task, args.cycles // args.copies, args.copies)
-    result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
-    result["ppo"] = {
-        level: ppo_training(*task, args.ppo_steps, control=level, config=ppo_config) for level in ("full", "move")
-    }
+    if args.only != "native":
+        result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
+    runs = [("full", {}), ("move", {})]
     if args.former_network:
-        former = "move, arch=mlp, n_epochs=2, per-direction messages"
-        result["ppo"][former] = ppo_training(
-            *task,
-            args.ppo_steps,
-            control="move",
-            config=ppo_config,
-            variant={"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"},
+        runs.append(
+            (
+                "move, arch=mlp, n_epochs=2, per-direction messages",
+                {"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"},
+            )
         )
-        result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
     if args.variants:
-        for name, variant in (
+        runs += [
             ("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
             ("move, memory=last_move", {"memory": "last_move"}),
             ("move, value_norm", {"value_norm": True}),
             ("move, recurrent=64 (GRU)", {"recurrent": 64}),
+            ("move, n_envs=256", {"n_envs": 256}),
             ("full, memory=last_action", {"memory": "last_action"}),
             ("full, memory=last_action+clock", {"memory": "last_action+clock"}),
-        ):
-            result["ppo"][name] = ppo_training(
-                *task, args.ppo_steps, control=name.split(",")[0], config=ppo_config, variant=variant
+        ]
+    result["ppo"] = {}
+    for name, variant in runs:  # the devices alternate, so that each pair shares the machine's state
+        for device in args.devices:
+            key = name if device == "cpu" else f"{name}, device={device}"
+            result["ppo"][key] = ppo_training(
+                *task, args.ppo_steps, control=name.split(",")[0], config=ppo_config, variant=variant, device=device
             )
-    result["ppo_full_agent_steps_per_s"] = result["ppo"]["full"]["agent_steps_per_s"]
-    result["ppo_move_agent_steps_per_s"] = result["ppo"]["move"]["agent_steps_per_s"]
-    result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
+            out.write_text(json.dumps(result, indent=2))  # what is done so far, should a later run fail
+    for device in args.devices:
+        suffix = "" if device == "cpu" else f"_{device}"
+        for level in ("full", "move"):
+            key = level if device == "cpu" else f"{level}, device={device}"
+            result[f"ppo_{level}_agent_steps_per_s{suffix}"] = result["ppo"][key]["agent_steps_per_s"]
+    if args.former_network and "cpu" in args.devices:
+        former = runs[2][0]
+        result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
+    if "sb3_training_agent_steps_per_s" in result and "cpu" in args.devices:
+        result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
     if args.only == "all":
         result["sb3_training_profiled_agent_steps_per_s"], result["sb3_profile"] = sb3_training(
             *task, args.steps, args.copies, profile=True
         )
         result["raw_env_agent_steps_per_s_after"] = raw_env(*task, args.cycles)
     result["machine"]["load_average_after"] = os.getloadavg()
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2))
+    out.write_text(json.dumps(result, indent=2))
     for k, v in result.items():
         if k.endswith("per_s") or k.endswith("over_sb3"):
             print(f"{k:45s} {v:10.2f}")
