@@ -705,6 +705,18 @@ def test_a_device_that_is_not_one_or_not_here_is_refused_before_anything_is_writ
     assert not run_dir.exists()
 
 
+def test_the_throughput_benchmark_refuses_a_device_before_it_measures_or_writes(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("torch")
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    benchmark = importlib.import_module("training_throughput")
+    out = tmp_path / "results" / "throughput.json"
+    with pytest.raises(SystemExit) as exit_info:
+        benchmark.main(["--only", "native", "--devices", "cpu", "tpu", "--out", str(out)])
+    assert exit_info.value.code == 2
+    assert "--devices: device='tpu' is not a device" in capsys.readouterr().err
+    assert not out.parent.exists()
+
+
 @pytest.mark.parametrize("module", ["training.ppo", "training.imitate", "training.cma_es"])
 def test_malformed_yaml_in_a_config_file_or_a_flag_is_one_error_with_its_line_and_column(module, tmp_path, capsys):
     from training.common import run_script
