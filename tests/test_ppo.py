@@ -243,3 +243,27 @@ def test_shared_trunk_feeds_both_heads_and_its_checkpoint_loads(tmp_path):
     assert net.trunk[0].weight.grad.abs().sum() > 0 and net.actor.weight.grad is None
     final = tiny_run(tmp_path / "s", "--arch", "shared")
     assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name
+
+
+def test_sampled_move_draws_the_move_alone_and_the_checkpoint_acts_so(tmp_path):
+    from training.policies import LogitsPolicy
+
+    log_probs = [torch.log_softmax(torch.randn(200, n), dim=1) for n in (13, 4, 6)]
+    torch.manual_seed(7)
+    every, every_logp = ppo.sample(log_probs, "all")
+    torch.manual_seed(7)
+    move_only, move_logp = ppo.sample(log_probs, "move")
+    assert torch.equal(move_only[:, 0], every[:, 0])  # the same draw of the move
+    for k in (1, 2):  # the other fields take their arg-max, and differ from a draw somewhere
+        assert torch.equal(move_only[:, k], log_probs[k].argmax(dim=1))
+        assert not torch.equal(every[:, k], move_only[:, k])
+    assert torch.allclose(move_logp, log_probs[0].gather(1, move_only[:, :1])[:, 0])
+    assert torch.allclose(every_logp, sum(lp.gather(1, every[:, k : k + 1])[:, 0] for k, lp in enumerate(log_probs)))
+
+    final = tiny_run(tmp_path / "run", "--control", "full", "--sampled", "move", "--arch", "shared")
+    assert read_meta(final)["sampled"] == "move"
+    policy = load_policy(final, proteo_env.make("chain-v0", control="full", **SMALL_ENV), seed=0)
+    assert isinstance(policy, LogitsPolicy) and policy.sampled == "move"
+    with pytest.raises(ppo.ConfigError, match=r"sampled='some' is not allowed; allowed: 'all', 'move'"):
+        tiny_run(tmp_path / "bad", "--sampled", "some")
+    assert not (tmp_path / "bad").exists()

@@ -104,7 +104,7 @@ from training.common import (
     write_checkpoint_meta,
 )
 from training.networks import ARCHS, ActorCritic
-from training.policies import check_memory, clock_step, with_memory
+from training.policies import check_memory, check_sampled, clock_step, with_memory
 
 ALGORITHM = "ppo"
 
@@ -155,6 +155,10 @@ class Args:
     with +clock (the cycles in its mode), or clock alone (training/policies.py MEMORIES)."""
     recurrent: int = 0
     """The state size of a GRU each module carries from cycle to cycle (arch=shared only); 0: feed-forward."""
+    sampled: str = "all"
+    """Which fields the rollouts draw at random: all, or move (mode, roles and messages take their arg-max,
+    as a clone of training/imitate.py acts; the policy gradient and the entropy bonus then see the move
+    alone, and the other fields learn from the distillation term only). Saved with the checkpoint."""
     checkpoint_every: int = 1_000_000
     run_dir: str | None = None
     resume: str | None = None
@@ -197,6 +201,7 @@ class Args:
                 "recurrent": 0,
             },
         )
+        check_sampled(self.sampled)
         if not 0.0 <= self.distill_final <= self.distill_coef:
             raise ConfigError(
                 f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
@@ -261,9 +266,10 @@ def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[i
 
 
 def sample(log_probs: list[torch.Tensor], sampled: str = "all") -> tuple[torch.Tensor, torch.Tensor]:
-    """Actions ``(N, F)`` (Gumbel-max, torch's generator) and their joint log-probability ``(N,)``.
-    ``sampled="move"`` (:data:`training.policies.SAMPLED`): the fields after the move take their
-    arg-max; the generator is drawn from the same either way."""
+    """Actions ``(N, F)`` (Gumbel-max, torch's generator) and the joint log-probability ``(N,)`` of
+    the fields drawn at random. ``sampled="move"`` (:data:`training.policies.SAMPLED`): the fields
+    after the move take their arg-max and the log-probability is the move's; the generator is
+    drawn from the same either way."""
     noisy = [lp - torch.log(-torch.log(torch.rand_like(lp))) for lp in log_probs]
     actions = torch.stack(
         [
@@ -272,7 +278,13 @@ def sample(log_probs: list[torch.Tensor], sampled: str = "all") -> tuple[torch.T
         ],
         1,
     )
-    return actions, joint_log_prob(log_probs, actions)
+    return actions, joint_log_prob(sampled_fields(log_probs, sampled), actions)
+
+
+def sampled_fields(log_probs: list[torch.Tensor], sampled: str) -> list[torch.Tensor]:
+    """The fields that :func:`sample` draws at random (every field, or the move alone): the ones the
+    policy gradient and the entropy bonus act on."""
+    return log_probs if sampled == "all" else log_probs[:1]
 
 
 def joint_log_prob(log_probs: list[torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
@@ -671,6 +683,7 @@ def train(args: Args) -> Path:
                 "hidden": list(args.hidden),
                 "memory": args.memory,
                 "recurrent": args.recurrent,
+                "sampled": args.sampled,
                 "run_dir": str(run_dir),
                 "args": asdict(args),
                 **({"curriculum_stage": curriculum.stage} if curriculum else {}),
@@ -699,7 +712,7 @@ def train(args: Args) -> Path:
                 if distill > 0:
                     labels_t[t] = torch.from_numpy(teachers.labels(worlds.buffers))
                 logits, values, state = net(obs_t[t].to(device), state)
-                actions, logp = sample(masked_log_probs(logits, mask_t[t].to(device), nvec))
+                actions, logp = sample(masked_log_probs(logits, mask_t[t].to(device), nvec), args.sampled)
                 actions_t[t], logp_t[t], values_t[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
                 reward, terminal, truncated = worlds.step(actions_t[t].numpy().reshape(args.n_envs, a, -1), finished)
                 rewards_w[t], terminal_w[t], truncated_w[t] = reward, terminal, truncated
@@ -761,10 +774,11 @@ def train(args: Args) -> Path:
                 )
                 logits, values = logits.reshape(len(mb), -1), values.reshape(-1)
             log_probs = masked_log_probs(logits, m, nvec)
-            ratio = torch.exp(joint_log_prob(log_probs, act) - old_logp)
+            drawn = sampled_fields(log_probs, args.sampled)
+            ratio = torch.exp(joint_log_prob(drawn, act) - old_logp)
             policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
             value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
-            ent = entropy(log_probs).mean()
+            ent = entropy(drawn).mean()
             loss = policy_loss + args.vf_coef * value_loss - ent_coef * ent
             if distill > 0:
                 distill_loss = teacher_cross_entropy(log_probs, labels, m)
