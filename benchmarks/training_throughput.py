@@ -193,6 +193,14 @@ def ppo_training(
     }
 
 
+FORMER_NETWORK = "move, arch=mlp, n_epochs=2, per-direction messages"
+
+
+def run_key(name: str, device: str) -> str:
+    """The key of a run of ``training/ppo.py`` in the results: its name, with the device unless it is the CPU."""
+    return name if device == "cpu" else f"{name}, device={device}"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="chain-v0")
@@ -285,12 +293,7 @@ def main(argv=None) -> int:
         result["sb3_training_agent_steps_per_s"], _ = sb3_training(*task, args.steps, args.copies, profile=False)
     runs = [("full", {}), ("move", {})]
     if args.former_network:
-        runs.append(
-            (
-                "move, arch=mlp, n_epochs=2, per-direction messages",
-                {"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"},
-            )
-        )
+        runs.append((FORMER_NETWORK, {"arch": "mlp", "n_epochs": 2, "message_encoding": "per_direction"}))
     if args.variants:
         runs += [
             ("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
@@ -304,19 +307,18 @@ def main(argv=None) -> int:
     result["ppo"] = {}
     for name, variant in runs:  # the devices alternate, so that each pair shares the machine's state
         for device in args.devices:
-            key = name if device == "cpu" else f"{name}, device={device}"
-            result["ppo"][key] = ppo_training(
+            result["ppo"][run_key(name, device)] = ppo_training(
                 *task, args.ppo_steps, control=name.split(",")[0], config=ppo_config, variant=variant, device=device
             )
             out.write_text(json.dumps(result, indent=2))  # what is done so far, should a later run fail
     for device in args.devices:
         suffix = "" if device == "cpu" else f"_{device}"
         for level in ("full", "move"):
-            key = level if device == "cpu" else f"{level}, device={device}"
-            result[f"ppo_{level}_agent_steps_per_s{suffix}"] = result["ppo"][key]["agent_steps_per_s"]
+            result[f"ppo_{level}_agent_steps_per_s{suffix}"] = result["ppo"][run_key(level, device)][
+                "agent_steps_per_s"
+            ]
     if args.former_network and "cpu" in args.devices:
-        former = runs[2][0]
-        result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][former]["agent_steps_per_s"]
+        result["ppo_move_former_network_agent_steps_per_s"] = result["ppo"][FORMER_NETWORK]["agent_steps_per_s"]
     if "sb3_training_agent_steps_per_s" in result and "cpu" in args.devices:
         result["ppo_full_over_sb3"] = result["ppo_full_agent_steps_per_s"] / result["sb3_training_agent_steps_per_s"]
     if args.only == "all":
