@@ -9,6 +9,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from proteo_env.config import CONTROL_LEVELS
 from proteo_env.core.jit import generated_kernel, kernel
 from proteo_env.spaces import ActionLayout
 
@@ -187,8 +188,22 @@ class KernelPolicy(Policy):
     :meth:`act_arrays`; use one of the two between resets (the other raises ``RuntimeError``).
     """
 
+    levels = CONTROL_LEVELS
+    """Every control level: below ``full`` the policy gives the leading fields of its full action
+    (its moves at ``move``), and the level's autopilot, another instance of the task's rules with
+    its own random draws, chooses the rest."""
     memory: SlotMemory
     rule = None
+    n_fields: int | None = None
+    """How many leading fields of the full action :meth:`act` and :meth:`act_arrays` give (the
+    env's control level, set by :meth:`for_env`; ``None``: all)."""
+
+    @classmethod
+    def for_env(cls, env, *, seed: int | None = None, **params):
+        """Build the policy from an environment's static interface; it acts at the env's control level."""
+        policy = super().for_env(env, seed=seed, **params)
+        policy.n_fields = len(getattr(env, "control_fields", env.action_layout.field_names))
+        return policy
 
     def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
@@ -210,10 +225,11 @@ class KernelPolicy(Policy):
             return {}
         obs = [observations[a] for a in names]
         actions = self._act(self._memory_slots("name", names), lambda f: np.stack([o[f] for o in obs]))
-        return {a: actions[i] for i, a in enumerate(names)}
+        return {a: actions[i, : self.n_fields] for i, a in enumerate(names)}
 
     def act_arrays(self, buffers) -> np.ndarray:
-        """``(A, L)`` actions for all agents from stacked observations.
+        """``(A, F)`` actions for all agents from stacked observations (``F`` fields of the
+        control level the policy was built for; ``L``, the full action, by default).
 
         ``buffers`` is an :class:`~proteo_env.spaces.ObservationBuffers` (what
         ``env.observe_arrays()`` returns): the same per-agent observations as :meth:`act`
@@ -223,7 +239,7 @@ class KernelPolicy(Policy):
         ``RuntimeError``).
         """
         n = buffers.own_mode.shape[0]
-        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))
+        return self._act(self._memory_slots("row", range(n)), lambda f: getattr(buffers, f))[:, : self.n_fields]
 
     def _memory_slots(self, keyed_by: str, keys) -> np.ndarray:
         """``(A,)`` memory slot of each key: the row itself (``keyed_by="row"``) or a slot
@@ -369,7 +385,7 @@ class PolicyBatch:
         """Per world: the generator, memory and memory version that the typed lists hold."""
 
     def act_arrays(self, buffers) -> np.ndarray:
-        """``(B * A, L)`` actions from ``buffers``, an :class:`~proteo_env.spaces.ObservationBuffers`
+        """``(B * A, F)`` actions (``F`` as :meth:`KernelPolicy.act_arrays` gives) from ``buffers``, an :class:`~proteo_env.spaces.ObservationBuffers`
         of ``B * A`` rows, world-major (what a batched env's ``observe_arrays`` returns)."""
         n_worlds = len(self.policies)
         n_agents = buffers.own_mode.shape[0] // n_worlds
@@ -384,7 +400,7 @@ class PolicyBatch:
         seen = Observed(*stacked_fields(lambda f: getattr(buffers, f), Observed._fields))
         # every world's rows are slots 0 .. A-1 of its own memory: the slots act_arrays keeps
         self.kernel(seen, n_agents, first._row_slots, self._memories, self.rules, self._rngs, actions)
-        return actions
+        return actions[:, : first.n_fields]
 
     def _sync(self, n_agents: int) -> None:
         """Every policy's memory keyed by row with ``n_agents`` slots, and the typed lists holding

@@ -75,7 +75,7 @@ import numpy as np
 
 from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
 
-from .base import KernelPolicy, SlotMemory, check_level
+from .base import KernelPolicy, SlotMemory
 from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
@@ -126,12 +126,9 @@ class TablePolicy(KernelPolicy):
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
         """Build from the env's static interface; rule parameters default to the task's."""
-        check_level(cls, env)
         task_params = env.task.params
         rules = {k: getattr(task_params, k) for k in RULE_PARAMS if hasattr(task_params, k)}
-        return cls(
-            env.action_layout, env.task.modes, scent_max=env.config.physics.scent_max, seed=seed, **{**rules, **params}
-        )
+        return super().for_env(env, seed=seed, **{**rules, **params})
 
     @property
     def rule_params(self) -> TableRules:

@@ -260,14 +260,41 @@ def test_actions_that_do_not_fit_the_level_change_nothing():
 
 
 def test_policies_refuse_a_level_they_do_not_act_at():
+    from baselines.base import Policy
+
+    class FullOnly(Policy):
+        name = "full-only"
+
     env = _make("chain-v0", "move")
     with pytest.raises(
         ValueError,
-        match=r"policy 'chain' gives actions at control level full, not at the env's "
+        match=r"policy 'full-only' gives actions at control level full, not at the env's "
         r"control='move'",
     ):
-        make_policy("chain", env)
+        FullOnly.for_env(env)
     random = make_policy("random", env, seed=0)  # random moves under the rules
     obs, _ = env.reset(seed=0)
     obs, *_ = env.step(random.act(obs))
     assert env.cycle == 1
+
+
+@pytest.mark.parametrize("level", ["move", "move+mode"])
+def test_the_rules_act_below_full_with_the_leading_fields_of_their_action(level):
+    """Below ``full`` the hand-coded policy gives the leading fields of the action it would take
+    at ``full`` (the same draw for the same seed and observation). At ``move`` its moves still
+    build the chain under the level's autopilot (at ``move+mode`` they need not: its modes and the
+    autopilot's messages come from two instances of the rules)."""
+    from proteo_env.rollout import run_episode
+
+    full, low = _make("chain-v0", "full"), _make("chain-v0", level)
+    n_fields = len(low.control_fields)
+    at_full, at_low = make_policy("chain", full, seed=3), make_policy("chain", low, seed=3)
+    obs_full, _ = full.reset(seed=0)
+    obs_low, _ = low.reset(seed=0)
+    actions_full, actions_low = at_full.act(obs_full), at_low.act(obs_low)
+    for agent in full.agents:
+        np.testing.assert_array_equal(actions_low[agent], actions_full[agent][:n_fields])
+    at_low.reset(3)
+    assert at_low.act_arrays(low.observe_arrays()).shape == (len(low.agents), n_fields)
+    if level == "move":
+        assert run_episode(low, make_policy("chain", low), seed=0).success

@@ -591,9 +591,9 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     results = evaluate(
         config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
     )
-    random_levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
-    assert [(r.kind, r.level) for r in results] == [("hand-coded", "full")] + [
-        ("random", lv) for lv in random_levels
+    levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
+    assert [(r.kind, r.level) for r in results] == [("hand-coded", lv) for lv in levels] + [
+        ("random", lv) for lv in levels
     ] + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
         from training.checkpoints import load_policy

@@ -577,7 +577,9 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
         levels = {path: read_meta(path).get("control", "full") for path, _ in by_task[cls.name]}
         for level in dict.fromkeys(levels.values()):
             envs.setdefault(level, proteo_env.make(cls.task_id(), **{**overrides, "control": level}))
-        entries = [("hand-coded", envs["full"].task.default_policy, None, "full", "")]
+        # the rules at every level a checkpoint acts at: below full, their own moves (and fields)
+        # under the level's autopilot, the reference a learned controller of that level is held to
+        entries = [("hand-coded", envs["full"].task.default_policy, None, level, "") for level in envs]
         entries += [("random", "random", None, level, "") for level in envs]
         entries += [(None, None, path, levels[path], group) for path, group in by_task[cls.name]]
         first_task_row = len(results)
@@ -713,7 +715,7 @@ PUBLISH_END = "<!-- end of proteo eval table -->"
 
 def summary_table(results: list) -> str:
     """The results as one row per task and one column per policy (the random floor left out;
-    the hand-coded policy is the column ``rules``): successes over episodes and the mean cycles
+    the hand-coded policy is the column ``rules``, and ``rules-move`` at the ``move`` level): successes over episodes and the mean cycles
     to success, e.g. ``28/30, 47``."""
     columns: dict[str, None] = {}
     cells: dict[str, dict[str, str]] = {}
@@ -721,7 +723,7 @@ def summary_table(results: list) -> str:
         s = r.summary()
         if s["kind"] == "random":
             continue
-        column = "rules" if s["kind"] == "hand-coded" else s["policy"]
+        column = s["policy"] if s["kind"] != "hand-coded" else "rules" if r.level == "full" else f"rules-{r.level}"
         columns.setdefault(column)
         cycles = f", {_fmt(s['cycles_to_success'], 0)}" if s["successes"] else ""
         cells.setdefault(s["task"], {})[column] = f"{s['successes']}/{s['episodes']}{cycles}"

@@ -1,0 +1,108 @@
+"""How often do the hand-coded rules succeed, and how much does it depend on their random draws?
+The same worlds, the rules with three random streams.
+
+    python benchmarks/rules_random_streams.py --task branch-v0 --env "{n_modules: 40, T: 4, B: 3, max_cycles: 200}" --seeds 50
+    python benchmarks/rules_random_streams.py --task grasp-v0 --env "{n_modules: 100, distance: 3, max_cycles: 300}" --seeds 30
+
+For every world seed ``s`` of ``--first-seed .. --first-seed + --seeds - 1`` (the study's
+held-out seeds by default), three episodes of the task's rules:
+
+- ``full, as proteo eval seeds them``: the rules at control level ``full``, their generator
+  seeded with ``s``, the seed the world's own generator gets (what ``proteo eval`` does for
+  every policy: ``run_episode`` resets env and policy with the episode's seed);
+- ``full, independent stream``: the same, the rules' generator seeded from
+  ``SeedSequence([s, 1])``, a stream unrelated to the world's;
+- ``move, the rules' own moves``: control level ``move``, an instance of the rules (seeded as
+  the line above) chooses every module's move and the level's autopilot (another instance,
+  seeded from the world's generator) the rest: what a perfect clone of the rules' moves
+  would do, the reference for learned ``move`` controllers.
+
+Prints a table (successes, median cycles to success) and, with ``--out``, writes it as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+import proteo_env
+from baselines.autopilot import hand_coded_rules
+
+VARIANTS = ("full, as proteo eval seeds them", "full, independent stream", "move, the rules' own moves")
+
+
+def independent_seed(seed: int) -> int:
+    """A seed for the rules' generator unrelated to the stream ``default_rng(seed)`` gives the world."""
+    return int(np.random.SeedSequence([seed, 1]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def episode(env, rules, world_seed: int, rules_seed: int) -> tuple[bool, int]:
+    """One episode of world ``world_seed`` with ``rules`` (their generator seeded with
+    ``rules_seed``) choosing the fields of ``env``'s control level: ``(success, cycles)``."""
+    env.reset(seed=world_seed)
+    rules.reset(rules_seed)
+    n_fields = len(env.control_fields)
+    while True:
+        result = env.step_arrays(rules.act_arrays(env.observe_arrays())[:, :n_fields])
+        if result.terminated[0] or result.truncated[0]:
+            return bool(result.terminated[0]), env.cycle
+
+
+def measure(task: str, overrides: dict, seeds: list[int]) -> dict:
+    """``{variant: {"success": [bool per seed], "cycles": [int per seed]}}`` for :data:`VARIANTS`."""
+    full = proteo_env.make(task, **overrides)
+    move = proteo_env.make(task, **overrides, control="move")
+    rules = hand_coded_rules(full)
+    out = {name: {"success": [], "cycles": []} for name in VARIANTS}
+    for seed in seeds:
+        runs = (
+            episode(full, rules, seed, seed),
+            episode(full, rules, seed, independent_seed(seed)),
+            episode(move, rules, seed, independent_seed(seed)),
+        )
+        for name, (success, cycles) in zip(VARIANTS, runs):
+            out[name]["success"].append(success)
+            out[name]["cycles"].append(cycles)
+    return out
+
+
+def table(results: dict, n: int) -> str:
+    """The markdown table of :func:`measure`'s results over ``n`` seeds."""
+    lines = ["| rules | success | median cycles to success |", "|---|---|---|"]
+    for name, r in results.items():
+        cycles = [c for c, s in zip(r["cycles"], r["success"]) if s]
+        median = f"{np.median(cycles):.0f}" if cycles else "–"
+        lines.append(f"| {name} | {sum(r['success'])}/{n} | {median} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="branch-v0")
+    parser.add_argument("--env", default="{n_modules: 40, T: 4, B: 3, max_cycles: 200}", help="overrides, as YAML")
+    parser.add_argument("--first-seed", type=int, default=1000)
+    parser.add_argument("--seeds", type=int, default=50)
+    parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
+    args = parser.parse_args(argv)
+    overrides = yaml.safe_load(args.env) or {}
+    if not isinstance(overrides, dict):
+        parser.error(f"--env={args.env!r} is not allowed; allowed: a YAML mapping of env overrides")
+    if args.seeds < 1:
+        parser.error(f"--seeds={args.seeds} is not allowed; allowed: an integer >= 1")
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    results = measure(args.task, overrides, seeds)
+    print(table(results, len(seeds)))
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        record = {"task": args.task, "env": overrides, "seeds": seeds, "results": results}
+        args.out.write_text(json.dumps(record, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
