@@ -32,6 +32,7 @@ import yaml
 
 import proteo_env
 from baselines.autopilot import hand_coded_rules
+from proteo_env.config import ConfigError
 
 VARIANTS = ("full, as proteo eval seeds them", "full, independent stream", "move, the rules' own moves")
 
@@ -89,11 +90,18 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=50)
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
     args = parser.parse_args(argv)
-    overrides = yaml.safe_load(args.env) or {}
+    try:
+        overrides = yaml.safe_load(args.env) or {}
+    except yaml.YAMLError:
+        overrides = None
     if not isinstance(overrides, dict):
         parser.error(f"--env={args.env!r} is not allowed; allowed: a YAML mapping of env overrides")
     if args.seeds < 1:
         parser.error(f"--seeds={args.seeds} is not allowed; allowed: an integer >= 1")
+    try:
+        proteo_env.make(args.task, **overrides, control="move")
+    except (ConfigError, ValueError) as error:
+        parser.error(f"--task/--env: {error}")
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     results = measure(args.task, overrides, seeds)
     print(table(results, len(seeds)))

@@ -298,3 +298,41 @@ def test_the_rules_act_below_full_with_the_leading_fields_of_their_action(level)
     assert at_low.act_arrays(low.observe_arrays()).shape == (len(low.agents), n_fields)
     if level == "move":
         assert run_episode(low, make_policy("chain", low), seed=0).success
+
+
+def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path, capsys, monkeypatch):
+    """``benchmarks/rules_random_streams.py``: its first variant is the episode ``proteo eval``
+    runs (the rules seeded with the episode's seed), its rows count what it ran, and bad input
+    is one error before anything is written."""
+    import importlib
+    import json
+    from pathlib import Path
+
+    from proteo_env.rollout import run_episode
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    benchmark = importlib.import_module("rules_random_streams")
+    overrides = small_overrides("chain-v0")
+    out = tmp_path / "results" / "streams.json"
+    args = ["--task", "chain-v0", "--env", json.dumps(overrides), "--first-seed", "4", "--seeds", "2"]
+    assert benchmark.main([*args, "--out", str(out)]) == 0
+    results = json.loads(out.read_text())["results"]
+    assert list(results) == list(benchmark.VARIANTS)
+    env = proteo_env.make("chain-v0", **overrides)
+    for i, seed in enumerate((4, 5)):
+        episode = run_episode(env, make_policy("chain", env), seed=seed)
+        as_eval = results[benchmark.VARIANTS[0]]
+        assert (as_eval["success"][i], as_eval["cycles"][i]) == (episode.success, episode.cycles)
+    assert all(len(r["success"]) == 2 for r in results.values())
+    assert f"| {benchmark.VARIANTS[2]} | " in capsys.readouterr().out
+    bad = tmp_path / "bad" / "streams.json"
+    for flags, message in (
+        (["--env", "{n_modules: 6"], "--env='{n_modules: 6' is not allowed; allowed: a YAML mapping"),
+        (["--env", "{n_modules: -3}"], "--task/--env: "),
+        (["--seeds", "0"], "--seeds=0 is not allowed; allowed: an integer >= 1"),
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            benchmark.main(["--task", "chain-v0", *flags, "--out", str(bad)])
+        assert exit_info.value.code == 2
+        assert message in capsys.readouterr().err
+    assert not bad.parent.exists()
