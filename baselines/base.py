@@ -385,8 +385,9 @@ class PolicyBatch:
         """Per world: the generator, memory and memory version that the typed lists hold."""
 
     def act_arrays(self, buffers) -> np.ndarray:
-        """``(B * A, F)`` actions (``F`` as :meth:`KernelPolicy.act_arrays` gives) from ``buffers``, an :class:`~proteo_env.spaces.ObservationBuffers`
-        of ``B * A`` rows, world-major (what a batched env's ``observe_arrays`` returns)."""
+        """``(B * A, F)`` actions (``F`` as :meth:`KernelPolicy.act_arrays` gives) from ``buffers``,
+        an :class:`~proteo_env.spaces.ObservationBuffers` of ``B * A`` rows, world-major (what a
+        batched env's ``observe_arrays`` returns)."""
         n_worlds = len(self.policies)
         n_agents = buffers.own_mode.shape[0] // n_worlds
         if n_agents * n_worlds != buffers.own_mode.shape[0]:
