@@ -72,29 +72,30 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
 def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
     from training.evaluate import PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
 
-    def result(task, policy, kind, successes, cycles):
+    def result(task, policy, kind, successes, cycles, level="move"):
         return PolicyResult(
             task=task,
             policy=policy,
             kind=kind,
             source="",
-            level="move",
+            level=level,
             returns=[1.0] * len(cycles),
             successes=successes,
             cycles=cycles,
         )
 
     results = [
-        result("chain-v1", "chain", "hand-coded", [True, True], [80, 90]),
+        result("chain-v1", "chain", "hand-coded", [True, True], [80, 90], level="full"),
+        result("chain-v1", "chain", "hand-coded", [True, False], [70, 300]),
         result("chain-v1", "random", "random", [False, False], [300, 300]),
         result("chain-v1", "ppo-move", "learned", [True, False], [40, 300]),
-        result("grasp-v0", "grasp", "hand-coded", [False, True], [300, 100]),
+        result("grasp-v0", "grasp", "hand-coded", [False, True], [300, 100], level="full"),
     ]
-    assert summary_table(results).splitlines() == [
-        "| task | rules | ppo-move |",
-        "|---|---|---|",
-        "| chain-v1 | 2/2, 85 | 1/2, 40 |",
-        "| grasp-v0 | 1/2, 100 | – |",
+    assert summary_table(results).splitlines() == [  # the rules at move are their own column
+        "| task | rules | rules-move | ppo-move |",
+        "|---|---|---|---|",
+        "| chain-v1 | 2/2, 85 | 1/2, 70 | 1/2, 40 |",
+        "| grasp-v0 | 1/2, 100 | – | – |",
     ]
     page = tmp_path / "page.md"
     page.write_text(
