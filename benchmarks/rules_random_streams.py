@@ -5,17 +5,21 @@ The same worlds, the rules with three random streams.
     python benchmarks/rules_random_streams.py --task grasp-v0 --env "{n_modules: 100, distance: 3, max_cycles: 300}" --seeds 30
 
 For every world seed ``s`` of ``--first-seed .. --first-seed + --seeds - 1`` (the study's
-held-out seeds by default), three episodes of the task's rules:
+held-out seeds by default), four episodes of the task's rules:
 
 - ``full, as proteo eval seeds them``: the rules at control level ``full``, their generator
   seeded with ``s``, the seed the world's own generator gets (what ``proteo eval`` does for
   every policy: ``run_episode`` resets env and policy with the episode's seed);
 - ``full, independent stream``: the same, the rules' generator seeded from
   ``SeedSequence([s, 1])``, a stream unrelated to the world's;
+- ``full, the autopilot's stream``: the same, the rules' generator the one that world ``s``'s
+  autopilot gets at level ``move`` (the autopilot itself, copied at the episode's start, acting
+  at ``full``);
 - ``move, the rules' own moves``: control level ``move``, an instance of the rules (seeded as
-  the line above) chooses every module's move and the level's autopilot (another instance,
+  the second line) chooses every module's move and the level's autopilot (another instance,
   seeded from the world's generator) the rest: what a perfect clone of the rules' moves
-  would do, the reference for learned ``move`` controllers.
+  would do, the reference for learned ``move`` controllers. Where it matches the line above
+  world for world, the autopilot's draws decide the world and the moves do not.
 
 Prints a table (successes, median cycles to success) and, with ``--out``, writes it as JSON.
 """
@@ -23,6 +27,7 @@ Prints a table (successes, median cycles to success) and, with ``--out``, writes
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import sys
 from pathlib import Path
@@ -31,10 +36,15 @@ import numpy as np
 import yaml
 
 import proteo_env
-from baselines.autopilot import hand_coded_rules
+from baselines import make_policy
 from proteo_env.config import ConfigError
 
-VARIANTS = ("full, as proteo eval seeds them", "full, independent stream", "move, the rules' own moves")
+VARIANTS = (
+    "full, as proteo eval seeds them",
+    "full, independent stream",
+    "full, the autopilot's stream",
+    "move, the rules' own moves",
+)
 
 
 def independent_seed(seed: int) -> int:
@@ -42,14 +52,20 @@ def independent_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 1]).generate_state(1, np.uint64)[0] >> 1)
 
 
-def episode(env, rules, world_seed: int, rules_seed: int) -> tuple[bool, int]:
-    """One episode of world ``world_seed`` with ``rules`` (their generator seeded with
-    ``rules_seed``) choosing the fields of ``env``'s control level: ``(success, cycles)``."""
+def autopilot_of(move, seed: int):
+    """A copy of the autopilot that world ``seed`` gets in ``move`` (an env at level ``move``), as
+    it stands at the episode's start: the rules with the generator seeded from the world's."""
+    move.reset(seed=seed)
+    return copy.deepcopy(move.batch.autopilots[0])
+
+
+def episode(env, policy, world_seed: int, policy_seed: int | None = None) -> tuple[bool, int]:
+    """One episode of world ``world_seed`` with ``policy`` choosing the fields of ``env``'s control
+    level (its generator seeded with ``policy_seed``; ``None``: the one it has): ``(success, cycles)``."""
     env.reset(seed=world_seed)
-    rules.reset(rules_seed)
-    n_fields = len(env.control_fields)
+    policy.reset(policy_seed)
     while True:
-        result = env.step_arrays(rules.act_arrays(env.observe_arrays())[:, :n_fields])
+        result = env.step_arrays(policy.act_arrays(env.observe_arrays()))
         if result.terminated[0] or result.truncated[0]:
             return bool(result.terminated[0]), env.cycle
 
@@ -58,13 +74,14 @@ def measure(task: str, overrides: dict, seeds: list[int]) -> dict:
     """``{variant: {"success": [bool per seed], "cycles": [int per seed]}}`` for :data:`VARIANTS`."""
     full = proteo_env.make(task, **overrides)
     move = proteo_env.make(task, **overrides, control="move")
-    rules = hand_coded_rules(full)
+    at_full, at_move = make_policy(full.task.name, full), make_policy(move.task.name, move)
     out = {name: {"success": [], "cycles": []} for name in VARIANTS}
     for seed in seeds:
         runs = (
-            episode(full, rules, seed, seed),
-            episode(full, rules, seed, independent_seed(seed)),
-            episode(move, rules, seed, independent_seed(seed)),
+            episode(full, at_full, seed, seed),
+            episode(full, at_full, seed, independent_seed(seed)),
+            episode(full, autopilot_of(move, seed), seed),
+            episode(move, at_move, seed, independent_seed(seed)),
         )
         for name, (success, cycles) in zip(VARIANTS, runs):
             out[name]["success"].append(success)

@@ -147,6 +147,12 @@ class BatchedEnv:
         return self.tasks[0]
 
     @property
+    def autopilots(self) -> tuple:
+        """Each world's autopilot at control level ``move`` (:mod:`~proteo_env.control`), in world
+        order; empty at the other levels. Read it, do not step it: the env calls it every cycle."""
+        return tuple(self._autopilots)
+
+    @property
     def control(self) -> str:
         return self.level.name
 

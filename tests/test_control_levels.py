@@ -324,7 +324,21 @@ def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path
         as_eval = results[benchmark.VARIANTS[0]]
         assert (as_eval["success"][i], as_eval["cycles"][i]) == (episode.success, episode.cycles)
     assert all(len(r["success"]) == 2 for r in results.values())
-    assert f"| {benchmark.VARIANTS[2]} | " in capsys.readouterr().out
+    assert f"| {benchmark.VARIANTS[3]} | " in capsys.readouterr().out
+    # "full, the autopilot's stream" is the episode at move in which the moves are the
+    # autopilot's own: a copy of it, taken at the episode's start, also chooses the moves
+    move = proteo_env.make("chain-v0", **overrides, control="move")
+    assert proteo_env.make("chain-v0", **overrides).batch.autopilots == ()
+    for i, seed in enumerate((4, 5)):
+        mover = benchmark.autopilot_of(move, seed)
+        assert len(move.batch.autopilots) == 1 and move.batch.autopilots[0] is not mover
+        move.reset(seed=seed)
+        while True:
+            result = move.step_arrays(mover.act_arrays(move.observe_arrays())[:, :1])
+            if result.terminated[0] or result.truncated[0]:
+                break
+        as_autopilot = results[benchmark.VARIANTS[2]]
+        assert (as_autopilot["success"][i], as_autopilot["cycles"][i]) == (bool(result.terminated[0]), move.cycle)
     bad = tmp_path / "bad" / "streams.json"
     for flags, message in (
         (["--env", "{n_modules: 6"], "--env='{n_modules: 6' is not allowed; allowed: a YAML mapping"),
