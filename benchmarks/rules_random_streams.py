@@ -1,8 +1,8 @@
 """How often do the hand-coded rules succeed, and how much does it depend on their random draws?
-The same worlds, the rules with three random streams.
+The same worlds, the rules with several random streams.
 
     python benchmarks/rules_random_streams.py --task branch-v0 --env "{n_modules: 40, T: 4, B: 3, max_cycles: 200}" --seeds 50
-    python benchmarks/rules_random_streams.py --task grasp-v0 --env "{n_modules: 100, distance: 3, max_cycles: 300}" --seeds 30
+    python benchmarks/rules_random_streams.py --task grasp-v0 --env "{n_modules: 100, distance: 3, max_cycles: 300}" --seeds 50
 
 For every world seed ``s`` of ``--first-seed .. --first-seed + --seeds - 1`` (the study's
 held-out seeds by default), four episodes of the task's rules:
@@ -22,6 +22,14 @@ held-out seeds by default), four episodes of the task's rules:
   world for world, the autopilot's draws decide the world and the moves do not.
 
 Prints a table (successes, median cycles to success) and, with ``--out``, writes it as JSON.
+
+``--split RESULTS`` (the ``results.json`` of a ``proteo eval`` run of the same task, settings
+and seeds) also splits every ``move`` row of that evaluation by the third variant's verdict:
+its successes on the worlds where the rules succeed with the autopilot's generator and on the
+worlds where they fail, and on how many worlds it agrees with them.
+
+    proteo eval --config my_eval.yaml --tasks branch --out out/branch   # seeds: 50, first_seed: 1000
+    python benchmarks/rules_random_streams.py --seeds 50 --split out/branch/results.json
 """
 
 from __future__ import annotations
@@ -99,6 +107,63 @@ def table(results: dict, n: int) -> str:
     return "\n".join(lines)
 
 
+def load_evaluation(path: Path, task: str, overrides: dict) -> list[dict]:
+    """The rows of ``proteo eval``'s ``results.json`` at ``path`` that run ``task`` at level
+    ``move`` (random moves left out), checked against ``overrides``; raises ``ValueError``."""
+    try:
+        evaluation = json.loads(path.read_text())
+        settings, rows = evaluation["settings"], evaluation["results"]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ValueError(
+            f"--split={str(path)!r} is not allowed ({error}); allowed: a results.json of proteo eval"
+        ) from None
+    if overrides not in settings.values():
+        raise ValueError(
+            f"--split={str(path)!r} evaluated other settings ({settings}); allowed: an evaluation with --env {overrides}"
+        )
+    rows = [r for r in rows if r["task"] == task and r["level"] == "move" and r["kind"] != "random"]
+    if not rows:
+        raise ValueError(f"--split={str(path)!r} has no row of {task} at control level move; allowed: one that has")
+    return rows
+
+
+def split(results: dict, seeds: list[int], rows: list[dict]) -> list[dict]:
+    """Each row's successes split by the verdict of ``full, the autopilot's stream`` on the
+    worlds both ran: ``{"policy", "where_rules_succeed": [successes, worlds], "where_rules_fail":
+    [successes, worlds], "agree": [worlds agreeing, worlds]}``."""
+    verdict = dict(zip(seeds, results[VARIANTS[2]]["success"]))
+    out = []
+    for row in rows:
+        pairs = [(verdict[s], ok) for s, ok in zip(row["seeds"], row["successes"]) if s in verdict]
+        succeed = [ok for v, ok in pairs if v]
+        fail = [ok for v, ok in pairs if not v]
+        agree = [v == ok for v, ok in pairs]
+        out.append(
+            {
+                "policy": row["source"],
+                "where_rules_succeed": [sum(succeed), len(succeed)],
+                "where_rules_fail": [sum(fail), len(fail)],
+                "agree": [sum(agree), len(agree)],
+            }
+        )
+    return out
+
+
+def split_table(rows: list[dict]) -> str:
+    """The markdown table of :func:`split`'s rows."""
+    lines = [
+        "| policy at `move` | successes where the autopilot's rules succeed | where they fail | worlds agreeing |",
+        "|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['policy']} | {'/'.join(map(str, r['where_rules_succeed']))} "
+            f"| {'/'.join(map(str, r['where_rules_fail']))} "
+            f"| {'/'.join(map(str, r['agree']))} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="branch-v0")
@@ -106,6 +171,7 @@ def main(argv=None) -> int:
     parser.add_argument("--first-seed", type=int, default=1000)
     parser.add_argument("--seeds", type=int, default=50)
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
+    parser.add_argument("--split", type=Path, default=None, help="a results.json of proteo eval to split")
     args = parser.parse_args(argv)
     try:
         overrides = yaml.safe_load(args.env) or {}
@@ -119,12 +185,22 @@ def main(argv=None) -> int:
         proteo_env.make(args.task, **overrides, control="move")
     except (ConfigError, ValueError) as error:
         parser.error(f"--task/--env: {error}")
+    rows = None
+    if args.split is not None:
+        try:
+            rows = load_evaluation(args.split, args.task, overrides)
+        except ValueError as error:
+            parser.error(str(error))
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     results = measure(args.task, overrides, seeds)
     print(table(results, len(seeds)))
+    record = {"task": args.task, "env": overrides, "seeds": seeds, "results": results}
+    if rows is not None:
+        record["split"] = split(results, seeds, rows)
+        print()
+        print(split_table(record["split"]))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        record = {"task": args.task, "env": overrides, "seeds": seeds, "results": results}
         args.out.write_text(json.dumps(record, indent=1) + "\n")
     return 0
 

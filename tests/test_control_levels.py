@@ -302,7 +302,8 @@ def test_the_rules_act_below_full_with_the_leading_fields_of_their_action(level)
 
 def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path, capsys, monkeypatch):
     """``benchmarks/rules_random_streams.py``: its first variant is the episode ``proteo eval``
-    runs (the rules seeded with the episode's seed), its rows count what it ran, and bad input
+    runs (the rules seeded with the episode's seed), its rows count what it ran, ``--split``
+    splits an evaluation's ``move`` rows by the verdict of the autopilot's rules, and bad input
     is one error before anything is written."""
     import importlib
     import json
@@ -339,11 +340,37 @@ def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path
                 break
         as_autopilot = results[benchmark.VARIANTS[2]]
         assert (as_autopilot["success"][i], as_autopilot["cycles"][i]) == (bool(result.terminated[0]), move.cycle)
+    # --split: proteo eval's rows at move, split by the autopilot's rules' verdict per world
+    verdict = results[benchmark.VARIANTS[2]]["success"]
+    row = {"task": "chain-v0", "level": "move", "kind": "learned", "source": "checkpoints/x"}
+    evaluation = {
+        "settings": {"chain": overrides},
+        "results": [
+            {**row, "seeds": [5, 4, 99], "successes": [not verdict[1], verdict[0], True]},
+            {**row, "level": "full", "seeds": [4], "successes": [True]},
+        ],
+    }
+    evaluated = tmp_path / "eval" / "results.json"
+    evaluated.parent.mkdir()
+    evaluated.write_text(json.dumps(evaluation))
+    assert benchmark.main([*args, "--out", str(out), "--split", str(evaluated)]) == 0
+    (split,) = json.loads(out.read_text())["split"]  # the full row and the unrun seed 99 left out
+    succeed = [v for v in verdict if v]
+    assert split["where_rules_succeed"][1] == len(succeed) and split["where_rules_fail"][1] == 2 - len(succeed)
+    assert split["agree"] == [1, 2] and split["policy"] == "checkpoints/x"
+    assert "| checkpoints/x | " in capsys.readouterr().out
     bad = tmp_path / "bad" / "streams.json"
+    other, full_only = tmp_path / "eval" / "other.json", tmp_path / "eval" / "full_only.json"
+    other.write_text(json.dumps({**evaluation, "settings": {"chain": {**overrides, "max_cycles": 7}}}))
+    full_only.write_text(json.dumps({**evaluation, "results": evaluation["results"][1:]}))
+    env = ["--env", json.dumps(overrides)]
     for flags, message in (
         (["--env", "{n_modules: 6"], "--env='{n_modules: 6' is not allowed; allowed: a YAML mapping"),
         (["--env", "{n_modules: -3}"], "--task/--env: "),
         (["--seeds", "0"], "--seeds=0 is not allowed; allowed: an integer >= 1"),
+        ([*env, "--split", str(tmp_path / "none.json")], "none.json' is not allowed ("),
+        ([*env, "--split", str(other)], "other.json' evaluated other settings"),
+        ([*env, "--split", str(full_only)], "has no row of chain-v0 at control level move"),
     ):
         with pytest.raises(SystemExit) as exit_info:
             benchmark.main(["--task", "chain-v0", *flags, "--out", str(bad)])
