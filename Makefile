@@ -46,6 +46,7 @@ learning-results: install
 	$(BIN)/python -m training.study --recipes "[imitation]" --level full --tasks "[chain, grasp]" --seeds "[0]" --parallel 2
 	$(BIN)/python -m training.study --recipes "[ppo48]" --tasks "[table]" --minutes 0 --parallel 2
 	$(BIN)/python -m training.study --recipes "[curriculum]" --tasks "[chain, table, grasp, locomotion]" --minutes 0 --parallel 2
+	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" --minutes 0 --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
 		--publish docs/guides/learning.md --publish README.md
 	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \

@@ -267,3 +267,37 @@ def test_sampled_move_draws_the_move_alone_and_the_checkpoint_acts_so(tmp_path):
     with pytest.raises(ppo.ConfigError, match=r"sampled='some' is not allowed; allowed: 'all', 'move'"):
         tiny_run(tmp_path / "bad", "--sampled", "some")
     assert not (tmp_path / "bad").exists()
+
+
+def test_module_credit_marks_the_modules_that_joined_the_structure():
+    """``joined`` is True exactly for the modules whose own mode left SLEEP or SEARCH in the last
+    cycle (at move the autopilot makes that change when a module reaches the chain's growth spot)."""
+    args = ppo.Args(task="chain-v1", control="move", env={"n_modules": 8, "max_cycles": 400}, n_envs=4, join_bonus=1.0)
+    worlds = ppo.TrainingEnvs(args, env_seed=5)
+    rng, joins = np.random.default_rng(0), 0
+    for _ in range(120):
+        before = worlds._own_modes()
+        mask = np.concatenate([b.action_mask for b in worlds.buffers]).astype(bool)
+        moves = np.argmax(mask * rng.random(mask.shape), axis=1).reshape(4, worlds.n_agents, 1)
+        _, terminal, truncated = worlds.step(moves, [])
+        going = ~np.repeat(terminal | truncated, worlds.n_agents)  # an ended world shows its next episode
+        expected = (before <= 1) & (worlds._own_modes() >= 2)  # chain: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL
+        np.testing.assert_array_equal(worlds.joined[going], expected[going])
+        joins += int(worlds.joined.sum())
+    assert joins >= 4
+
+
+def test_module_credit_enters_the_update_and_zero_leaves_it_unchanged(tmp_path):
+    plain = torch.load(tiny_run(tmp_path / "plain", steps=1) / "policy.pt")
+    zero = torch.load(tiny_run(tmp_path / "zero", "--join-bonus", "0", steps=1) / "policy.pt")
+    credited = torch.load(tiny_run(tmp_path / "credit", "--join-bonus", "5", steps=1) / "policy.pt")
+    assert all(torch.equal(plain[k], zero[k]) for k in plain)
+    assert not all(torch.equal(plain[k], credited[k]) for k in plain)
+
+
+def test_module_credit_refuses_modes_the_task_does_not_have(tmp_path):
+    with pytest.raises(ValueError, match=r"join_from=\['SLEEP', 'WAIT'\].*'WAIT'.*allowed: names from SLEEP, SEARCH"):
+        tiny_run(tmp_path / "a", "--join-bonus", "1", "--join-from", "[SLEEP, WAIT]")
+    with pytest.raises(ValueError, match=r"join_bonus=-1.*allowed: a number >= 0"):
+        tiny_run(tmp_path / "b", "--join-bonus", "-1")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -80,3 +80,15 @@ def test_the_long_ppo_recipe_trains_the_ppo_config_for_its_own_steps(tmp_path):
     cmd = study._command(study.Args(total_steps=1000), "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--total-steps") + 1] == "1000", "an explicit budget still wins"
     assert "--total-steps" not in study._command(args, "ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+
+
+def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
+    args = study.Args(tasks=("grasp",), recipes=("credit",), minutes=0.0)
+    cmd = study._command(args, "credit", "grasp", 2, tmp_path / "run", tmp_path / "clone")
+    config = cmd[cmd.index("--config") + 1]
+    assert config == "configs/train/credit_grasp_move.yaml"
+    assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
+    from training.common import parse_args
+    from training.ppo import Args
+
+    assert parse_args(Args, ["--config", config]).join_bonus > 0

@@ -428,6 +428,11 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
 
 # ---------------------------------------------------------------------- every training config, every task
 TRAIN_CONFIGS = sorted(p.name for p in Path("configs/train").glob("*.yaml"))
+PPO_TINY = [
+    *("--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2"),
+    *("--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"),
+]
+"""The flags that shrink a training/ppo.py run (every recipe of it) to seconds."""
 TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
     "sb3_ppo": (
         "sb3_ppo",
@@ -465,60 +470,19 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
     ),
     "ppo_": (
         "ppo",
-        [
-            "--total-steps",
-            "64",
-            "--n-steps",
-            "4",
-            "--n-envs",
-            "2",
-            "--n-groups",
-            "2",
-            "--minibatch-size",
-            "32",
-            "--n-epochs",
-            "1",
-            "--checkpoint-every",
-            "32",
-        ],
+        PPO_TINY,
     ),
     "kickstart_": (
         "ppo",
-        [
-            "--total-steps",
-            "64",
-            "--n-steps",
-            "4",
-            "--n-envs",
-            "2",
-            "--n-groups",
-            "2",
-            "--minibatch-size",
-            "32",
-            "--n-epochs",
-            "1",
-            "--checkpoint-every",
-            "32",
-        ],
+        PPO_TINY,
     ),
     "curriculum_": (
         "ppo",
-        [
-            "--total-steps",
-            "64",
-            "--n-steps",
-            "4",
-            "--n-envs",
-            "2",
-            "--n-groups",
-            "2",
-            "--minibatch-size",
-            "32",
-            "--n-epochs",
-            "1",
-            "--checkpoint-every",
-            "32",
-        ],
+        PPO_TINY,
+    ),
+    "credit_": (
+        "ppo",
+        PPO_TINY,
     ),
     "bc_": (
         "imitate",

@@ -42,6 +42,12 @@ the first ``distill_steps`` agent-steps (0: it stays); at zero the teacher is no
 consulted and the learner is free to leave it behind, while a small ``distill_final`` keeps
 it near the teacher.
 
+Module credit. Every module earns the team reward, so one module's move gets little signal of
+its own. ``join_bonus > 0`` adds, to the reward of each module alone, ``join_bonus`` on the cycle
+its own mode leaves the ``join_from`` modes (SLEEP and SEARCH by default) for another: the cycle it
+joined the structure (at ``move`` the autopilot makes that change when the module reaches a spot
+the structure offers). :attr:`TrainingEnvs.joined` holds those modules.
+
 Schedules. ``learning_rate_final`` and ``ent_coef_final`` make the learning rate and the entropy
 coefficient fall (or rise) linearly from their start values to these by ``total_steps``;
 unset, they stay constant.
@@ -185,6 +191,11 @@ class Args:
     """The distillation weight after distill_steps (0: the teacher is let go; at most distill_coef)."""
     curriculum: dict = field(default_factory=dict)
     """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
+    join_bonus: float = 0.0
+    """Module credit: what a module earns, on top of the team reward, on the cycle its own mode leaves the
+    ``join_from`` modes for another (it joined the structure); 0: off, every module earns the team reward alone."""
+    join_from: tuple[str, ...] = ("SLEEP", "SEARCH")
+    """The task's modes of a module not yet in the structure (names from the task's ``modes``)."""
 
     def __post_init__(self):
         check_integers(
@@ -224,6 +235,7 @@ class Args:
             ("max_grad_norm", 0.0, None),
             ("distill_coef", 0.0, None),
             ("time_limit_minutes", 0.0, None),
+            ("join_bonus", 0.0, None),
         ):
             value = getattr(self, name)
             if value is None and name.endswith("_final"):
@@ -304,6 +316,17 @@ def entropy(log_probs: list[torch.Tensor]) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------- environment side
+def join_modes(task, names) -> np.ndarray:
+    """The mode numbers of ``names`` (``join_from``) in ``task``'s modes, refused unless each is one."""
+    for name in names:
+        if name not in task.modes:
+            raise ConfigError(
+                f"join_from={list(names)!r} is not allowed for {task.task_id()}: {name!r} is not one of its modes; "
+                f"allowed: names from {', '.join(task.modes)}"
+            )
+    return np.array([task.modes.index(name) for name in names], dtype=np.int64)
+
+
 class TrainingEnvs:
     """``n_envs`` worlds as ``n_groups`` BatchedEnvs, each world restarted as soon as its episode ends.
 
@@ -347,6 +370,11 @@ class TrainingEnvs:
         """``(N,)``: each module's observed mode, the ``clock`` memory's reference."""
         self.clock = np.zeros(len(self.clock_mode), dtype=np.int64)
         """``(N,)``: each module's cycles in that mode (:func:`training.policies.clock_step`)."""
+        self.join_bonus = args.join_bonus
+        self.outside = join_modes(first.task, args.join_from) if self.join_bonus else np.zeros(0, dtype=np.int64)
+        """Mode numbers of a module not yet in the structure (module credit; empty when off)."""
+        self.joined = np.zeros(self.n_envs * self.n_agents, dtype=bool)
+        """``(N,)``: which modules joined the structure in the last :meth:`step` (module credit only)."""
         self.episode_return = np.zeros(self.n_envs)
         self.final_rows = np.zeros(0, dtype=np.int64)
         """Sample rows of the worlds truncated in the last :meth:`step` (their episodes hit ``max_cycles``)."""
@@ -385,6 +413,7 @@ class TrainingEnvs:
         """
         started = time.perf_counter()
         a = self.n_agents
+        outside = np.isin(self._own_modes(), self.outside) if self.join_bonus else None
         reward = np.zeros(self.n_envs)
         terminal = np.zeros(self.n_envs, dtype=bool)
         truncated = np.zeros(self.n_envs, dtype=bool)
@@ -402,6 +431,8 @@ class TrainingEnvs:
             finished.append({"r": self.episode_return[w], "success": bool(terminal[w]), "l": int(cycles[w])})
         self.episode_return[ended] = 0.0
         self.buffers = [group.observe_arrays() for group in self.groups]
+        if self.join_bonus:
+            self.joined = outside & ~np.isin(self._own_modes(), self.outside)
         if self.clocked:
             modes = self._own_modes()
             self.clock = clock_step(self.clock_mode, self.clock, modes)
@@ -646,10 +677,10 @@ def train(args: Args) -> Path:
             torch.from_numpy(features),
             torch.from_numpy(move_mask),
             *(torch.zeros((t_steps, n, len(nvec)), dtype=torch.int64) for _ in range(2)),
-            *(torch.zeros((t_steps, n)) for _ in range(3)),
+            *(torch.zeros((t_steps, n)) for _ in range(4)),
         )
 
-    n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
+    n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t, joined_t = allocate()
     state = net.initial_state(n)
     """Every module's recurrent state ``(n, R)`` before the next cycle (``None`` when feed-forward)."""
     rewards_w, terminal_w, truncated_w = (np.zeros((t_steps, args.n_envs), dtype=d) for d in (np.float32, bool, bool))
@@ -716,6 +747,8 @@ def train(args: Args) -> Path:
                 actions_t[t], logp_t[t], values_t[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
                 reward, terminal, truncated = worlds.step(actions_t[t].numpy().reshape(args.n_envs, a, -1), finished)
                 rewards_w[t], terminal_w[t], truncated_w[t] = reward, terminal, truncated
+                if args.join_bonus:
+                    joined_t[t] = torch.from_numpy(worlds.joined.astype(np.float32))
                 if distill > 0:
                     teachers.restart(terminal | truncated)
                 if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
@@ -733,6 +766,8 @@ def train(args: Args) -> Path:
         terminal, truncated, rewards = (
             torch.from_numpy(np.repeat(w, a, axis=1)) for w in (terminal_w, truncated_w, rewards_w)
         )
+        if args.join_bonus:
+            rewards = rewards + args.join_bonus * joined_t
         next_values = torch.where(truncated, bootstrap_t, torch.cat([values_t[1:], last_value[None]]))
         advantages = gae(
             rewards,
@@ -824,7 +859,9 @@ def train(args: Args) -> Path:
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
             worlds = TrainingEnvs(stage_args(), env_seed=args.seed + agent_steps)
             a, teachers = worlds.n_agents, make_teachers()
-            n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t = allocate()
+            n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t, joined_t = (
+                allocate()
+            )
             state = net.initial_state(n)
         finished = []
         if agent_steps >= next_checkpoint:

@@ -17,6 +17,8 @@ recipe         script                   config
                                         ``--init`` the kept clone of the same task and seed
 ``curriculum`` ``training/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
                                         of env overrides, no demonstrations)
+``credit``     ``training/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
+                                        with module credit (``join_bonus``), from the same clone
 ============== ======================== ====================================================
 
 For each recipe, task and seed it trains the config with ``--seed S`` (PPO recipes for
@@ -53,9 +55,12 @@ RECIPES = {
     "imitation": ("training.imitate", "bc", 0),
     "kickstart": ("training.ppo", "kickstart", 0),
     "curriculum": ("training.ppo", "curriculum", 0),
+    "credit": ("training.ppo", "credit", 0),
 }
 """Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
 unless ``total_steps`` says otherwise; 0: the config's)."""
+FROM_CLONE = ("kickstart", "credit")
+"""Recipes whose runs start from the kept clone of the same task and seed (``--init``)."""
 
 
 @dataclass(frozen=True)
@@ -64,7 +69,7 @@ class Args:
 
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     recipes: tuple[str, ...] = ("ppo",)
-    """Training recipes (ppo, imitation, kickstart, curriculum); see the module docstring."""
+    """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
@@ -113,7 +118,7 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
         cmd += ["--time-limit-minutes", str(args.minutes)]
         steps = args.total_steps or RECIPES[recipe][2]
         cmd += ["--total-steps", str(steps)] if steps else []
-    if recipe == "kickstart":
+    if recipe in FROM_CLONE:
         cmd += ["--init", str(clone)]
     return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
 
@@ -140,7 +145,7 @@ def main(argv=None) -> int:
             if len(running) >= args.parallel:
                 break
             recipe, task, seed = job
-            if recipe == "kickstart" and (task, seed) in waiting:  # its clone is still to be trained
+            if recipe in FROM_CLONE and (task, seed) in waiting:  # its clone is still to be trained
                 continue
             pending.remove(job)
             run_dir = Path(args.runs_dir) / f"{recipe}_{task}_{level}_s{seed}"
