@@ -370,7 +370,7 @@ class TrainingEnvs:
         """``(N,)``: each module's observed mode, the ``clock`` memory's reference."""
         self.clock = np.zeros(len(self.clock_mode), dtype=np.int64)
         """``(N,)``: each module's cycles in that mode (:func:`training.policies.clock_step`)."""
-        self.join_bonus = args.join_bonus
+        self.join_bonus = getattr(args, "join_bonus", 0.0)
         self.outside = join_modes(first.task, args.join_from) if self.join_bonus else np.zeros(0, dtype=np.int64)
         """Mode numbers of a module not yet in the structure (module credit; empty when off)."""
         self.joined = np.zeros(self.n_envs * self.n_agents, dtype=bool)
