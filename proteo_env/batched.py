@@ -7,8 +7,12 @@ metrics per world. The worlds run in parallel threads (``NUMBA_NUM_THREADS``).
 :class:`~proteo_env.env.ProteoEnv` is a view of a ``BatchedEnv`` with ``B = 1`` that adds
 PettingZoo's per-agent dicts.
 
-Seeding: ``reset(seed=s)`` seeds world ``b`` with ``s + b``, so world ``b`` follows exactly the
-trajectory of a single ``ProteoEnv`` reset with seed ``s + b`` and fed the same actions.
+Seeding: ``reset(seed=s)`` gives world ``b`` child ``b`` of ``numpy.random.SeedSequence(s)``
+(:func:`~proteo_env.config.world_seeds`), so no two worlds of a batch, and no two worlds of
+batches reset with different seeds, share a stream; world ``b`` follows exactly the trajectory
+of a single ``ProteoEnv`` reset with that child (``reset(seed=world_seeds(s, B)[b])``) and fed
+the same actions. ``reset(world_seeds=[s_0, ..., s_{B-1}])`` instead gives world ``b`` the
+stream of a single env reset with seed ``s_b`` (what an evaluation over listed seeds uses).
 :meth:`BatchedEnv.reset_worlds` starts a new episode in some worlds while the others run on
 (what a trainer does when an episode ends); world ``b``'s next episode is then the one a single
 env gets from ``reset()`` without a seed, from the same generator.
@@ -24,7 +28,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .config import EnvConfig, check_seed
+from .config import ConfigError, EnvConfig, check_seed
+from .config import world_seeds as spawn_worlds
 from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
 from .core.world import World, place_window, shared_windows, window_around
@@ -169,12 +174,29 @@ class BatchedEnv:
         """`` at control level '<name>'`` for error messages, empty at ``full`` (the default)."""
         return "" if self.control == "full" else f" at control level {self.control!r}"
 
-    def reset(self, seed: int | None = None) -> ObservationBuffers:
-        """New start layouts for every world; world ``b`` is seeded with ``seed + b`` (``None``
-        or an integer >= 0; anything else is a :class:`~proteo_env.config.ConfigError`)."""
-        seed = check_seed(seed)
-        if seed is not None:
-            self._rngs = [np.random.default_rng(seed + b) for b in range(self.n_envs)]
+    def reset(self, seed=None, *, world_seeds=None) -> ObservationBuffers:
+        """New start layouts for every world.
+
+        ``seed``: ``None`` (each world continues its generator), an integer >= 0 or a
+        :class:`numpy.random.SeedSequence`; world ``b`` is seeded with child ``b`` of it
+        (:func:`~proteo_env.config.world_seeds`). ``world_seeds``: instead, one seed per world
+        (``B`` integers >= 0 or seed sequences), world ``b`` seeded exactly as a single env reset
+        with ``world_seeds[b]``. Anything else is a :class:`~proteo_env.config.ConfigError`.
+        """
+        if world_seeds is not None:
+            if seed is not None:
+                raise ConfigError(f"seed={seed!r} is not allowed with world_seeds; allowed: one of the two")
+            if (
+                not hasattr(world_seeds, "__len__")
+                or isinstance(world_seeds, (str, bytes))
+                or len(world_seeds) != self.n_envs
+            ):
+                raise ConfigError(
+                    f"world_seeds={world_seeds!r} is not allowed; allowed: a list of {self.n_envs} seeds (one per world)"
+                )
+            self._rngs = [np.random.default_rng(check_seed(s, f"world_seeds[{b}]")) for b, s in enumerate(world_seeds)]
+        elif seed is not None:
+            self._rngs = [np.random.default_rng(child) for child in spawn_worlds(seed, self.n_envs)]
         layouts = [self._build_layout(b) for b in range(self.n_envs)]
         extent, origins = shared_windows(
             [self._start_region(layout) for layout in layouts], [lay.size for lay in layouts]

@@ -30,13 +30,28 @@ class ConfigError(ValueError):
 
 
 def check_seed(seed, name: str = "seed"):
-    """``seed`` as a Python int (``None`` passes through); a :class:`ConfigError` naming ``name``
-    and the value unless it is ``None`` or an integer >= 0 (NumPy integers included, bools not)."""
-    if seed is None:
-        return None
+    """``seed`` as a Python int or a :class:`numpy.random.SeedSequence` (``None`` passes
+    through); a :class:`ConfigError` naming ``name`` and the value unless it is ``None``, an
+    integer >= 0 (NumPy integers included, bools not) or a ``SeedSequence``."""
+    if seed is None or isinstance(seed, np.random.SeedSequence):
+        return seed
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ConfigError(f"{name}={seed!r} is not allowed; allowed: None or an integer >= 0")
+        raise ConfigError(
+            f"{name}={seed!r} is not allowed; allowed: None or an integer >= 0, or a numpy.random.SeedSequence"
+        )
     return int(seed)
+
+
+def world_seeds(seed, n_worlds: int) -> list[np.random.SeedSequence]:
+    """The seed sequences of ``n_worlds`` worlds started from one ``seed`` (an integer >= 0 or a
+    :class:`numpy.random.SeedSequence`): world ``b`` gets child ``b`` of ``SeedSequence(seed)``,
+    as NumPy's ``spawn`` makes it. Children of different seeds, and different children of one
+    seed, are independent streams; the first ``k`` children do not depend on ``n_worlds``, and
+    none is the stream of a plain integer seed (``reset(seed=s)`` of a single env)."""
+    root = check_seed(seed)
+    if not isinstance(root, np.random.SeedSequence):
+        root = np.random.SeedSequence(root)
+    return [np.random.SeedSequence(root.entropy, spawn_key=(*root.spawn_key, b)) for b in range(n_worlds)]
 
 
 @dataclasses.dataclass(frozen=True)

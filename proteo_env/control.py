@@ -37,8 +37,8 @@ An autopilot factory is called as ``factory(env, seed)`` with an environment-lik
 ``reset(seed)`` and ``act_arrays(buffers) -> (A, L)`` full actions (a
 :class:`baselines.base.KernelPolicy` is one). Each world has its own autopilot, seeded from
 the world's generator, so world ``b`` of a batch follows the trajectory of a single
-environment reset with seed ``s + b``. When the autopilot's class also has
-``batch(autopilots)``, a batched env that has run :data:`~proteo_env.batched.ONE_CALL_AFTER`
+environment reset with the world's own seed (:func:`~proteo_env.config.world_seeds`). When
+the autopilot's class also has ``batch(autopilots)``, a batched env that has run :data:`~proteo_env.batched.ONE_CALL_AFTER`
 world-cycles calls it once with the ``B`` worlds' autopilots and from then on takes every
 world's actions from one ``act_arrays(buffers) -> (B * A, L)`` over all the worlds' rows
 (world-major), which must give what the per-world calls give (a

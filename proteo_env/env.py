@@ -9,7 +9,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from .batched import BatchedEnv, StepResult
-from .config import EnvConfig
+from .config import EnvConfig, check_seed
 from .core.world import World
 from .spaces import ModuleActionSpace, ObservationBuffers, observation_space
 from .tasks.base import Task
@@ -170,7 +170,8 @@ class ProteoEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ episode
     def reset(self, seed=None, options=None):
-        buffers = self.batch.reset(seed)
+        seed = check_seed(seed)
+        buffers = self.batch.reset(world_seeds=None if seed is None else [seed])
         self.agents = list(self.possible_agents)
         # the same keys as every step's info (TorchRL builds its info spec from the reset's)
         world = self.batch.worlds[0]

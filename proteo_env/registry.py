@@ -92,7 +92,8 @@ def make_batched(task_id: str, n_envs: int, **overrides):
 
     Same arguments as :func:`make` (no ``render_mode``). Returns a
     :class:`~proteo_env.batched.BatchedEnv`; world ``b`` of ``reset(seed=s)`` follows the
-    trajectory of ``make(task_id, **overrides)`` reset with seed ``s + b``.
+    trajectory of ``make(task_id, **overrides)`` reset with seed ``world_seeds(s, n_envs)[b]``
+    (child ``b`` of ``numpy.random.SeedSequence(s)``, :func:`~proteo_env.config.world_seeds`).
     """
     from .batched import BatchedEnv
 

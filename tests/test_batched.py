@@ -9,6 +9,7 @@ import pytest
 from conftest import SMALL_OVERRIDES
 
 import proteo_env
+from proteo_env.config import world_seeds
 from proteo_env.spaces import ObservationBuffers
 
 N_ENVS = 3
@@ -31,7 +32,7 @@ def test_batch_matches_single_envs(task_id, motion_model):
     singles = [proteo_env.make(task_id, **overrides) for _ in range(N_ENVS)]
     obs = batched.reset(seed=7)
     for b, env in enumerate(singles):
-        env.reset(seed=7 + b)
+        env.reset(seed=world_seeds(7, N_ENVS)[b])
     a, lay, rng = batched.n_agents, batched.action_layout, np.random.default_rng(0)
     for _ in range(60):
         actions = _random_actions(lay, obs.action_mask, rng).reshape(N_ENVS, a, lay.length)
@@ -67,7 +68,7 @@ RESET_EVERY = (5, 8, 13)
 )
 def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
     """reset_worlds restarts some worlds while the others run on; world b's episodes are those
-    of a single env reset with seed 7 + b and then reset() without a seed, also across a move
+    of a single env reset with child b of SeedSequence(7) and then reset() without a seed, also across a move
     of every world onto a larger grid (start layouts of chain, branch and grasp vary in size;
     sandbox has no hand-coded rules, so no move level)."""
     name = proteo_env.TASKS[task_id].name
@@ -76,7 +77,7 @@ def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):
     singles = [proteo_env.make(task_id, **overrides) for _ in range(N_ENVS)]
     obs = batched.reset(seed=7)
     for b, env in enumerate(singles):
-        env.reset(seed=7 + b)
+        env.reset(seed=world_seeds(7, N_ENVS)[b])
     extent = batched.worlds[0].shape.extent
     a, lay, rng = batched.n_agents, batched.action_layout, np.random.default_rng(0)
     for cycle in range(1, 61):

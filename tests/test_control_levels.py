@@ -16,7 +16,7 @@ import proteo_env
 from baselines import make_policy
 from baselines.autopilot import hand_coded_rules
 from proteo_env import control
-from proteo_env.config import ConfigError
+from proteo_env.config import ConfigError, world_seeds
 from proteo_env.core.kernels import EMIT, RELAY
 
 RULE_TASKS = sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox")
@@ -99,7 +99,7 @@ def test_batched_world_follows_the_single_env_at_move_level(task_id):
     buffers = batch.reset(seed=10)
     singles = [proteo_env.make(task_id, **overrides) for _ in range(3)]
     for b, env in enumerate(singles):
-        env.reset(seed=10 + b)
+        env.reset(seed=world_seeds(10, 3)[b])
     rng = np.random.default_rng(0)
     a = batch.n_agents
     for _ in range(30):

@@ -13,6 +13,7 @@ import yaml
 torch = pytest.importorskip("torch")
 
 import proteo_env  # noqa: E402
+from proteo_env.config import world_seeds  # noqa: E402
 from training import ppo  # noqa: E402
 from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
 from training.evaluate import evaluate  # noqa: E402
@@ -196,7 +197,8 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
 
 
 def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episode():
-    """Every world of the trainer's batch is a single env seeded env_seed + w; an ended episode
+    """Every world of the trainer's batch is a single env seeded with child w of
+    SeedSequence(env_seed); an ended episode
     restarts its world at once (reset() without a seed), and the features of its last
     observation are kept for the value bootstrap."""
     env = {"n_modules": 8, "max_cycles": 5}
@@ -204,7 +206,7 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
     worlds = ppo.TrainingEnvs(args, env_seed=11)
     singles = [proteo_env.make("chain-v1", control="move", **env) for _ in range(3)]
     for w, single in enumerate(singles):
-        single.reset(seed=11 + w)
+        single.reset(seed=world_seeds(11, 3)[w])
     a, enc, rng = worlds.n_agents, worlds.encoder, np.random.default_rng(0)
     n_truncated = 0
     for _ in range(1, 8):

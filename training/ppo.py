@@ -94,7 +94,7 @@ from tqdm import tqdm
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
-from proteo_env.config import ConfigError
+from proteo_env.config import ConfigError, world_seeds
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES, ObservationBuffers
 from training.common import (
@@ -327,12 +327,21 @@ def join_modes(task, names) -> np.ndarray:
     return np.array([task.modes.index(name) for name in names], dtype=np.int64)
 
 
+def training_worlds_seed(seed: int, agent_steps: int) -> np.random.SeedSequence:
+    """The seed of a run's worlds built after ``agent_steps`` (a resumed run or a curriculum's next
+    stage does not replay its first episodes): ``SeedSequence([seed, agent_steps])``, which at
+    ``agent_steps = 0`` is ``SeedSequence(seed)`` and never another training seed's."""
+    return np.random.SeedSequence([seed, agent_steps])
+
+
 class TrainingEnvs:
     """``n_envs`` worlds as ``n_groups`` BatchedEnvs, each world restarted as soon as its episode ends.
 
     Rows are world-major across groups: sample ``w * A + i`` is module ``i`` of world ``w``,
     world ``w`` is world ``w % b`` of group ``w // b`` (``b = n_envs // n_groups``). World ``w``
-    is seeded with ``env_seed + w``; its later episodes continue its own generator
+    is seeded with child ``w`` of ``SeedSequence(env_seed)`` (:func:`proteo_env.config.world_seeds`;
+    ``env_seed`` an integer or a seed sequence), so no two worlds of a run, or of runs with other
+    seeds, share a stream; its later episodes continue its own generator
     (:meth:`~proteo_env.batched.BatchedEnv.reset_worlds`).
     """
 
@@ -363,7 +372,8 @@ class TrainingEnvs:
         """Features per sample: the encoding, then the memory's inputs."""
         self.previous_actions = np.zeros((self.n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
         """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
-        self.buffers = [g.reset(seed=env_seed + k * self.b) for k, g in enumerate(self.groups)]
+        seeds = world_seeds(env_seed, self.n_envs)
+        self.buffers = [g.reset(world_seeds=seeds[k * self.b : (k + 1) * self.b]) for k, g in enumerate(self.groups)]
         self.clocked = self.memory.endswith("clock")
         """Whether the memory has a clock (only then are the modes followed, cycle by cycle)."""
         self.clock_mode = self._own_modes()
@@ -628,9 +638,7 @@ def train(args: Args) -> Path:
     def stage_args() -> Args:
         return args if curriculum is None else dataclasses.replace(args, env=curriculum.overrides(args.env))
 
-    worlds = TrainingEnvs(
-        stage_args(), env_seed=args.seed + agent_steps
-    )  # a resumed run does not replay its first episodes
+    worlds = TrainingEnvs(stage_args(), env_seed=training_worlds_seed(args.seed, agent_steps))
     enc, a, nvec = worlds.encoder, worlds.n_agents, [int(n) for n in worlds.nvec]
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory, args.recurrent)
     if args.init and resume_meta is None:
@@ -857,7 +865,7 @@ def train(args: Args) -> Path:
             },
         )
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
-            worlds = TrainingEnvs(stage_args(), env_seed=args.seed + agent_steps)
+            worlds = TrainingEnvs(stage_args(), env_seed=training_worlds_seed(args.seed, agent_steps))
             a, teachers = worlds.n_agents, make_teachers()
             n, features, move_mask, obs_t, mask_t, actions_t, labels_t, logp_t, values_t, bootstrap_t, joined_t = (
                 allocate()

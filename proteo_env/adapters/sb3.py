@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
+from ..config import world_seeds
 from ..registry import make
 from .flatten import ObservationEncoder, flat_action_mask
 
@@ -46,7 +47,8 @@ class ProteoVecEnv(VecEnv):
     Args:
         task_id: a registered task id (``"chain-v0"``).
         n_copies: independent copies of the environment stepped one after another.
-        seed: seed of copy ``c`` is ``seed + c`` at the first reset (``None``: random).
+        seed: copy ``c`` is seeded with child ``c`` of ``SeedSequence(seed)``
+            (:func:`proteo_env.config.world_seeds`) at the first reset (``None``: random).
         **overrides: passed to :func:`proteo_env.make` (``n_modules``, ``max_cycles``, ...).
 
     Spaces:
@@ -87,7 +89,16 @@ class ProteoVecEnv(VecEnv):
         self._obs[rows] = self.encoder.encode_buffers(buffers)
         self._masks[rows] = flat_action_mask(buffers.action_mask, self.nvec)
 
-    def _reset_copy(self, copy: int, seed: int | None) -> None:
+    def seed(self, seed: int | None = None) -> list:
+        """Seed copy ``c`` with child ``c`` of ``SeedSequence(seed)`` at the next reset (SB3's own
+        ``seed + row`` would let the copies of seeds ``s`` and ``s + A`` share streams)."""
+        if seed is None:
+            seed = int(np.random.default_rng().integers(2**31))
+        children = world_seeds(int(seed), self.n_copies)
+        self._seeds = [children[row // self.n_agents] for row in range(self.num_envs)]
+        return self._seeds
+
+    def _reset_copy(self, copy: int, seed) -> None:
         self.envs[copy].reset(seed=seed)
         self._returns[copy] = 0.0
         self._started[copy] = time.perf_counter()
@@ -97,7 +108,7 @@ class ProteoVecEnv(VecEnv):
     def reset(self):
         for c in range(self.n_copies):
             seed = self._seeds[c * self.n_agents]
-            self._reset_copy(c, None if seed is None else int(seed))
+            self._reset_copy(c, seed)
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = [{} for _ in range(self.num_envs)]

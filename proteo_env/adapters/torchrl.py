@@ -19,8 +19,9 @@ key                                  shape                 meaning
 ==================================== ===================== ===============================================
 
 A partial reset (``"_reset"`` in the reset tensordict, as TorchRL's collectors send when
-some copies are done) resets only those copies. ``set_seed(s)`` seeds copy ``c`` with ``s + c``
-at its next reset.
+some copies are done) resets only those copies. ``set_seed(s)`` seeds copy ``c`` with child
+``c`` of ``numpy.random.SeedSequence(s)`` (:func:`proteo_env.config.world_seeds`) at its next
+reset, so no two copies and no two seeds share a stream.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Categorical, Composite, MultiCategorical, Unbounded
 from torchrl.envs import EnvBase
 
+from ..config import world_seeds
 from ..registry import make
 from .flatten import ObservationEncoder, flat_action_mask
 
@@ -41,7 +43,7 @@ class ProteoTorchRLEnv(EnvBase):
     Args:
         task_id: a registered task id (``"chain-v0"``).
         n_copies: copies stepped one after another (the batch dimension).
-        seed: seed of copy ``c`` is ``seed + c`` at the first reset (``None``: random).
+        seed: copy ``c`` is seeded with child ``c`` of ``SeedSequence(seed)`` at the first reset (``None``: random).
         **overrides: passed to :func:`proteo_env.make`.
     """
 
@@ -56,7 +58,7 @@ class ProteoTorchRLEnv(EnvBase):
         self.n_copies = n_copies
         self.encoder = ObservationEncoder.for_env(first)
         self.nvec = first.action_layout.nvec
-        self._seeds: list[int | None] = [None] * n_copies
+        self._seeds: list = [None] * n_copies
         if seed is not None:
             self._set_seed(seed)
         b, a, d, n = n_copies, self.n_agents, self.encoder.size, int(self.nvec.sum())
@@ -157,4 +159,4 @@ class ProteoTorchRLEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         if seed is None:
             seed = int(np.random.default_rng().integers(2**31))
-        self._seeds = [int(seed) + c for c in range(self.n_copies)]
+        self._seeds = world_seeds(int(seed), self.n_copies)
