@@ -50,6 +50,11 @@ class WorldView:
     cycle: int
 
 
+def env_name(task_id: str) -> str:
+    """The PettingZoo name (``metadata["name"]``) of a task's env: ``"chain-v1"`` -> ``"proteo_chain_v1"``."""
+    return "proteo_" + task_id.replace("-", "_")
+
+
 def _read_only(a: np.ndarray) -> np.ndarray:
     a = np.array(a, copy=True)
     a.setflags(write=False)
@@ -91,7 +96,7 @@ class ProteoEnv(ParallelEnv):
     """
 
     metadata = {
-        "name": "proteo_v0",
+        "name": "proteo",  # each env's own: proteo_<task>_v<version> (e.g. proteo_chain_v1)
         "render_modes": ["ansi", "rgb_array", "human"],
         "render_fps": 10,
         "is_parallelizable": True,
@@ -104,6 +109,7 @@ class ProteoEnv(ParallelEnv):
                 f"{', '.join(self.metadata['render_modes'])}"
             )
         self.task = task
+        self.metadata = {**type(self).metadata, "name": env_name(task.task_id())}
         self.config = config or EnvConfig()
         self.render_mode = render_mode
         self.camera = camera
@@ -185,6 +191,7 @@ class ProteoEnv(ParallelEnv):
         return buffers.per_agent(self.agents), {a: info for a in self.agents}
 
     def step(self, actions):
+        self._need_world()
         if not self.agents:
             raise RuntimeError("step() called after the episode ended; call reset() first")
         batch = self._action_batch(actions)
@@ -263,15 +270,21 @@ class ProteoEnv(ParallelEnv):
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh :class:`~proteo_env.spaces.ObservationBuffers` with every agent's observation."""
+        self._need_world()
         return self.batch.observe_arrays()
 
     # ------------------------------------------------------------------ views
-    @property
-    def world(self) -> WorldView:
-        """A read-only :class:`WorldView` of the current world (after :meth:`reset`)."""
+    def _need_world(self) -> World:
+        """The current world; a ``RuntimeError`` saying to call :meth:`reset` when there is none yet."""
         w = self.engine
         if w is None:
             raise RuntimeError("no world yet; call reset() first")
+        return w
+
+    @property
+    def world(self) -> WorldView:
+        """A read-only :class:`WorldView` of the current world (after :meth:`reset`)."""
+        w = self._need_world()
         p = w.physics
         return WorldView(
             positions=_read_only(w.positions),
@@ -292,7 +305,7 @@ class ProteoEnv(ParallelEnv):
 
     def state(self) -> np.ndarray:
         """Global state: per module ``x, y, z, mode, scent_0 .. scent_{C-1}``, flattened (int32)."""
-        w = self.engine
+        w = self._need_world()
         per_module = np.concatenate([w.positions, w.mode[:, None], w.scent.T], axis=1)
         return per_module.astype(np.int32).reshape(-1)
 
@@ -300,8 +313,7 @@ class ProteoEnv(ParallelEnv):
         """The picture of the current world in ``render_mode`` (see :mod:`proteo_env.render`)."""
         if self.render_mode is None:
             return None
-        if self.engine is None:
-            raise RuntimeError("no world yet; call reset() first")
+        self._need_world()
         if self.render_mode != "ansi":
             if self._viewer is None:
                 from .render.viewer import Viewer
