@@ -10,7 +10,8 @@ Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
     final/             the checkpoint at the end
 
 Checkpoint folder: ``proteo.json`` (format, algorithm, task, env overrides, observation
-encoding, action ``nvec``, steps, seed) beside the algorithm's own files. Any checkpoint loads
+encoding, action ``nvec``, steps, seed, and the ``proteo_version`` and git ``commit`` that
+wrote it) beside the algorithm's own files. Any checkpoint loads
 by path with :func:`training.checkpoints.load_policy`.
 """
 
@@ -314,12 +315,57 @@ def write_checkpoint_meta(
         "agent_steps": int(agent_steps),
         "seed": seed,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        **provenance(),
         **(extra or {}),
     }
     folder.mkdir(parents=True, exist_ok=True)
     tmp = folder / (META_FILE + ".tmp")
     tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
     os.replace(tmp, folder / META_FILE)
+
+
+def provenance() -> dict:
+    """What wrote a checkpoint: ``{"proteo_version": ..., "commit": ...}``.
+
+    ``proteo_version`` is the installed ``proteo-env`` distribution's version (the package's own
+    ``__version__`` when it is not installed); ``commit`` is ``git rev-parse HEAD`` of the
+    repository holding the working directory, or ``None`` when there is none or git is missing
+    (never an error). Every trainer's ``proteo.json`` has both (through
+    :func:`write_checkpoint_meta`); checkpoints written before lack them and load all the same.
+    """
+    return {"proteo_version": package_version(), "commit": git_commit()}
+
+
+def package_version() -> str:
+    """The version of the installed ``proteo-env`` distribution (``proteo --version``)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("proteo-env")
+    except metadata.PackageNotFoundError:  # run from a source tree that is not installed
+        from proteo_env import __version__
+
+        return __version__
+
+
+def git_commit(cwd=None) -> str | None:
+    """``git rev-parse HEAD`` in ``cwd`` (default: the working directory); ``None`` outside a
+    repository, without git, or on any failure."""
+    import subprocess
+
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    commit = done.stdout.strip()
+    return commit if done.returncode == 0 and len(commit) >= 40 else None
 
 
 def _json_default(value):
