@@ -4,5 +4,20 @@ One script per algorithm, each readable end to end: :mod:`training.sb3_ppo` (Mas
 Stable-Baselines3), :mod:`training.torchrl_ppo` (IPPO/MAPPO, TorchRL) and :mod:`training.cma_es`
 (CMA-ES over the hand-coded rules' parameters or a small neural controller). Checkpoints load
 by path as ordinary policies with :func:`training.checkpoints.load_policy`;
+:func:`load_controller` gives the environment and the policy of a checkpoint (or of the rules
+or the random policy of a task, ``"rules:chain-v1"``) in one call;
 :mod:`training.evaluate` is ``proteo eval``. Needs the ``train`` extra (``pip install -e ".[train]"``).
 """
+
+from __future__ import annotations
+
+__all__ = ["load_controller"]
+
+
+def __getattr__(name: str):
+    # loaded on first use, so that importing a training module does not load the checkpoint code
+    if name == "load_controller":
+        from .checkpoints import load_controller
+
+        return load_controller
+    raise AttributeError(f"module 'training' has no attribute {name!r}")

@@ -16,19 +16,27 @@ and the algorithm's files:
 ==================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
-``final/`` checkpoint is used). Anything wrong (no such path, not a checkpoint, a damaged
+``final/`` checkpoint is used). :func:`load_controller` builds the environment too, from the
+checkpoint's own settings, or names the hand-coded rules or the random policy of a task
+(``"rules:chain-v1"``, ``"random:grasp-v0"``)::
+
+    env, policy = load_controller("checkpoints/chain/ppo_move/seed_0")
+    result = run_episode(env, policy, seed=0)   # proteo_env.rollout.run_episode
+ Anything wrong (no such path, not a checkpoint, a damaged
 file, a checkpoint of another task, control level or observation encoding) raises :class:`CheckpointError`,
 one message naming the path, what was found and what is allowed.
 """
 
 from __future__ import annotations
 
+import os
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 
 from .common import CheckpointError, read_meta
@@ -118,6 +126,66 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         sampled=meta.get("sampled", "all"),
         state_size=state_size,
     )
+
+
+RULES = "rules"
+"""The policy name in ``"rules:<task>"``: the task's own hand-coded policy (its ``default_policy``)."""
+
+
+def controller_names() -> list[str]:
+    """The policy names :func:`load_controller` accepts before ``:<task>``: ``rules`` and every
+    registered policy (``random`` among them)."""
+    from baselines import POLICIES
+
+    return [RULES, *sorted(POLICIES)]
+
+
+def load_controller(source, *, seed: int | None = 0, **env_overrides):
+    """An environment and the policy that controls it, from one name: ``(env, policy)``.
+
+    Args:
+        source: a checkpoint (its folder, a file in it, or a run folder with ``final/``; the env
+            is built from its ``proteo.json``: task, settings and control level, then the policy
+            with :func:`load_policy`), or ``"<policy>:<task>"``: ``"rules:chain-v1"`` (the task's
+            hand-coded policy), ``"random:grasp-v0"`` or any other registered policy name.
+        seed: the policy's seed (episodes are seeded by ``env.reset(seed=...)`` or
+            :func:`~proteo_env.rollout.run_episode`).
+        **env_overrides: settings over the checkpoint's (or the task's defaults), as for
+            :func:`proteo_env.make`, e.g. ``max_cycles=1000``.
+
+    Raises:
+        ConfigError: ``source`` is neither an existing path nor ``<policy>:<task>`` with a known
+            policy and task (the message names the value and what is allowed).
+        CheckpointError: the path is not a loadable checkpoint, or the overrides make an env
+            the checkpoint cannot control (another control level or observation encoding).
+    """
+    import proteo_env
+
+    allowed = controller_names()
+    what = (
+        "allowed: a checkpoint folder (with proteo.json), a file in one or a run folder with final/, "
+        f"or '<policy>:<task>' with policy one of {', '.join(allowed)} (e.g. 'rules:chain-v1')"
+    )
+    if not isinstance(source, str | os.PathLike):
+        raise ConfigError(f"controller {source!r} is not allowed; {what}")
+    if Path(source).exists():
+        meta = read_meta(source)
+        overrides = {**meta.get("env", {}), "control": meta.get("control", "full"), **env_overrides}
+        env = proteo_env.make(meta["task"], **overrides)
+        return env, load_policy(meta["dir"], env, seed=seed)
+    name, sep, task_id = str(source).partition(":")
+    if isinstance(source, os.PathLike) or not sep or name not in allowed or not task_id:
+        raise ConfigError(
+            f"controller {str(source)!r} is neither an existing checkpoint path nor '<policy>:<task>' "
+            f"with a known policy; {what}"
+        )
+    from baselines import make_policy
+
+    try:
+        env = proteo_env.make(task_id, **env_overrides)
+    except ConfigError as err:
+        raise ConfigError(f"controller {source!r}: {err}") from None
+    return env, make_policy(env.task.default_policy if name == RULES else name, env, seed=seed)
 
 
 def _need(file: Path) -> Path:
