@@ -3,8 +3,9 @@
 ``proteo demo`` (the main job), ``proteo run TASK|CONFIG`` (run, record, render, plot),
 ``proteo replay FILE`` (movie, still or plots of a recorded episode), ``proteo view FILE`` (an
 interactive 3D page of a recorded episode), ``proteo figures`` (the paper's figures into
-``docs/figures``), ``proteo eval`` (the comparison table) and ``proteo sweep CONFIG`` (a grid
-of settings, policies and seeds).
+``docs/figures``), ``proteo eval`` (the comparison table), ``proteo sweep CONFIG`` (a grid
+of settings, policies and seeds) and ``proteo train TRAINER [flags]`` (a trainer of
+``training/``, the flags passed on unchanged). ``proteo --version`` prints the version.
 """
 
 from __future__ import annotations
@@ -366,6 +367,48 @@ def sweep(args) -> int:
     return sweep_main(args)
 
 
+TRAINERS = {
+    "ppo": "native PPO over the array API (training/ppo.py)",
+    "imitate": "clone the rules: behaviour cloning + DAgger (training/imitate.py)",
+    "cma_es": "CMA-ES on the rules' parameters or a small network (training/cma_es.py)",
+    "sb3_ppo": "MaskablePPO, Stable-Baselines3 (training/sb3_ppo.py)",
+    "torchrl_ppo": "IPPO / MAPPO, TorchRL (training/torchrl_ppo.py)",
+    "rllib_ppo": "RLlib's PPO (training/rllib_ppo.py; the distributed extra)",
+    "study": "recipes x tasks x seeds, kept in checkpoints/ (training/study.py)",
+}
+"""The trainers ``proteo train`` runs: the ``training.<name>`` modules with a ``main(argv)``."""
+
+
+def train(args) -> int:
+    """``proteo train NAME FLAGS...``: ``python -m training.NAME FLAGS...`` (the flags unchanged)."""
+    import importlib
+
+    name = args.trainer.replace("-", "_")
+    if name not in TRAINERS:
+        raise ValueError(f"trainer {args.trainer!r} is not allowed; allowed: {', '.join(TRAINERS)}")
+    flags = list(args.flags)
+    if flags[:1] == ["--"]:
+        flags = flags[1:]
+    module = importlib.import_module(f"training.{name}")
+    program = sys.argv[0]
+    sys.argv[0] = f"proteo train {name}"  # the trainer's usage and messages name the command that ran it
+    try:
+        result = module.main(flags)
+    finally:
+        sys.argv[0] = program
+    if isinstance(result, int):
+        return result
+    if result is not None:
+        print(f"checkpoint: {result}")
+    return 0
+
+
+def version() -> str:
+    from training.common import package_version
+
+    return package_version()
+
+
 def figures(args) -> int:
     from baselines.figures import make_figures
 
@@ -405,6 +448,7 @@ def main(argv=None) -> int:
     from training.distributed import add_ray_flags
 
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
+    parser.add_argument("--version", action="version", version=f"proteo {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="run every registered task with its default policy")
     p.add_argument("--seed", type=int, default=0)
@@ -499,6 +543,17 @@ def main(argv=None) -> int:
     )
     add_ray_flags(p)
     p.set_defaults(func=sweep)
+
+    p = sub.add_parser(
+        "train",
+        help="train a controller: proteo train TRAINER [flags] runs python -m training.TRAINER [flags]",
+        description="Run a trainer of training/ with the flags that follow, unchanged "
+        "(see docs/guides/training.md; 'proteo train ppo --help' lists ppo's). Trainers: "
+        + "; ".join(f"{name}: {what}" for name, what in TRAINERS.items()),
+    )
+    p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(TRAINERS)}")
+    p.add_argument("flags", nargs=argparse.REMAINDER, help="the trainer's flags, e.g. --config FILE.yaml")
+    p.set_defaults(func=train)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
