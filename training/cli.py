@@ -526,6 +526,12 @@ def main(argv=None) -> int:
     p.add_argument(
         "--fresh", action="store_true", help="discard the episodes of an interrupted run in --out (default: resume it)"
     )
+    p.add_argument(
+        "--from-results",
+        default=None,
+        metavar="RESULTS.json",
+        help="run no episode: write the tables of this results.json into --out again (and --publish them)",
+    )
     add_ray_flags(p)
     p.set_defaults(func=evaluate)
 
