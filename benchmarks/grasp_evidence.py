@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import math
 import os
 import platform
 import sys
@@ -90,24 +89,27 @@ def run_one(job: dict) -> dict:
 
 
 def _mean_ci(values) -> str:
-    v = np.asarray([x for x in values if x is not None], dtype=float)
-    if v.size == 0:
+    """Mean ± the half-width of its 95 % Student t interval (:func:`training.statistics.mean_ci`)."""
+    from training.statistics import mean_ci
+
+    v = [x for x in values if x is not None]
+    if not v:
         return "n/a"
-    if v.size == 1:
-        return f"{v[0]:.0f}" if v[0] >= 10 else f"{v[0]:.2f}"
-    half = 1.96 * v.std(ddof=1) / math.sqrt(v.size)
-    fmt = "{:.0f} ± {:.0f}" if abs(v.mean()) >= 10 else "{:.2f} ± {:.2f}"
-    return fmt.format(v.mean(), half)
+    mean, half = mean_ci(v)
+    if len(v) == 1:
+        return f"{mean:.0f}" if mean >= 10 else f"{mean:.2f}"
+    fmt = "{:.0f} ± {:.0f}" if abs(mean) >= 10 else "{:.2f} ± {:.2f}"
+    return fmt.format(mean, half)
 
 
 def _wilson(k: int, n: int) -> str:
+    """Successes over episodes and the 95 % Wilson interval (:func:`training.statistics.wilson`)."""
+    from training.statistics import wilson
+
     if n == 0:
         return "n/a"
-    z = 1.96
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return f"{k}/{n} [{max(0.0, centre - half):.2f}, {min(1.0, centre + half):.2f}]"
+    lo, hi = wilson(k, n)
+    return f"{k}/{n} [{lo:.2f}, {hi:.2f}]"
 
 
 def table(rows: list[dict]) -> str:

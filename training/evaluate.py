@@ -3,11 +3,29 @@
 For each registered task with a reward (every task but ``sandbox``), the task's hand-coded
 policy (``default_policy``), the random policy and every checkpoint given for that task run
 one episode per seed (the same seeds for every policy: ``env.reset(seed=s)`` and
-``policy.reset(s)``). Reported per policy:
+``policy.reset(s)``). Reported per policy, each with a 95 % interval (the interval code is
+:mod:`training.statistics`):
 
-- mean episode return with a 95 % confidence interval (Student t over seeds);
-- success rate (episodes ending in task success) with a 95 % Wilson interval;
-- cycles to success: mean over the successful episodes, with a 95 % t interval.
+- mean episode return (one run: Student t over its episodes);
+- success rate, episodes ending in task success (one run: Wilson);
+- cycles to success: the mean over the successful episodes (one run: Student t, its lower end
+  cut at 0).
+
+A ``runs`` group (one configuration trained with several seeds) is one row whose measures are
+pooled over every episode of every training seed (successes over episodes, the mean return,
+the mean cycles over the successful episodes), each with the percentile interval of a
+stratified bootstrap (:func:`training.statistics.group_bootstrap`: training seeds drawn with
+replacement, then each drawn seed's episodes with replacement; 2,000 resamples, generator seed
+0, so a table is reproduced exactly). The success interval is widened to at least the pooled
+Wilson interval, because a percentile bootstrap collapses to a point where every episode agrees
+(30/30 would read 1.00–1.00). Each run's own row is in a second table.
+
+Every table prints a measure as ``value (low–high)``, its 95 % interval (``low to high`` where
+``low`` is negative; the value alone where the interval is undefined, such as cycles to success
+from one successful episode): success as ``24/30 (0.63–0.93)``, cycles to success as
+``120 (100–142)``, ``–`` without a success. The compact summary (:func:`summary_table`, what
+``--publish`` writes into README.md) has one cell per task and policy:
+``24/30 (0.63–0.93), 120 (100–142)``. :data:`INTERVALS` says this under every table.
 
 Settings per task and the checkpoints to compare come from a YAML file (``configs/eval.yaml``)::
 
@@ -22,15 +40,20 @@ Settings per task and the checkpoints to compare come from a YAML file (``config
       branch:
         task: branch-v0      # a version of the task (default: the newest)
 
-A task not named there runs with its newest version, its defaults and no checkpoints. ``--checkpoint PATH`` adds a
-checkpoint to the task it was trained on. Each checkpoint runs at the control level it was
-trained at (``control`` in its ``proteo.json``; ``full`` for older ones), and for every level
-other than ``full`` that a checkpoint uses, the random policy runs at that level too (random
-moves under the task's rules at ``move``). A ``runs`` group is one row: the mean over its
-training seeds of each run's mean return, success rate and cycles to success, with a 95 % t
-interval *across training seeds* (the spread a new training seed would see), and the pooled
-success count; each run's own row is in a second table. Writes ``results.md`` (the tables),
-``results.json`` (every episode) and ``eval.png`` (the three measures per task) into ``--out``.
+A task not named there runs with its newest version, its defaults and no checkpoints; a name,
+key or value that is not allowed is one :class:`~proteo_env.config.ConfigError` before anything
+runs (:func:`load_config`). ``--checkpoint PATH`` adds a checkpoint to the task it was trained
+on. Each checkpoint runs at the control level it was trained at (``control`` in its
+``proteo.json``; ``full`` for older ones), and for every level other than ``full`` that a
+checkpoint uses, the random policy runs at that level too (random moves under the task's rules
+at ``move``). Writes ``results.md`` (the tables), ``results.json`` (every episode) and
+``eval.png`` (the three measures per task) into ``--out``; ``--publish PAGE.md`` also puts the
+tables into a page between its markers (:func:`publish`). ``--from-results RESULTS.json`` runs
+no episode: it writes the tables of an earlier ``results.json`` again, in the current format,
+into ``--out`` and the ``--publish`` pages (:func:`rerender`), e.g.::
+
+    proteo eval --from-results docs/eval/study/results.json --out docs/eval/study \\
+        --publish README.md --publish docs/guides/learning.md
 
 Each episode is one job (:class:`EpisodeJob`): ``--ray`` runs them as Ray tasks, on a local
 Ray instance (``--workers N`` CPUs) or a cluster (``--address``), with results identical to
@@ -43,7 +66,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,6 +73,7 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.registry import task_name
+from training.statistics import group_bootstrap, mean_ci, wilson
 
 DEFAULT_CONFIG = "configs/eval.yaml"
 """The config ``proteo eval`` reads when run from the repository root without ``--config``."""
@@ -58,63 +81,14 @@ DEFAULT_CONFIG = "configs/eval.yaml"
 EXCLUDED_TASKS = ("sandbox",)
 """Task names left out of the evaluation (no reward, no success)."""
 
-_T_975 = {
-    1: 12.706,
-    2: 4.303,
-    3: 3.182,
-    4: 2.776,
-    5: 2.571,
-    6: 2.447,
-    7: 2.365,
-    8: 2.306,
-    9: 2.262,
-    10: 2.228,
-    11: 2.201,
-    12: 2.179,
-    13: 2.160,
-    14: 2.145,
-    15: 2.131,
-    16: 2.120,
-    17: 2.110,
-    18: 2.101,
-    19: 2.093,
-    20: 2.086,
-    25: 2.060,
-    30: 2.042,
-    40: 2.021,
-    60: 2.000,
-    120: 1.980,
-}
-
-
-def t_critical(df: int) -> float:
-    """Two-sided 95 % Student t quantile for ``df`` degrees of freedom (table, 1.96 beyond 120)."""
-    if df < 1:
-        return float("nan")
-    for k in sorted(_T_975):
-        if df <= k:
-            return _T_975[k]
-    return 1.96
-
-
-def mean_ci(values) -> tuple[float, float]:
-    """Mean and the half-width of its 95 % t interval (``nan`` half-width for fewer than 2 values)."""
-    v = np.asarray(values, dtype=float)
-    if v.size == 0:
-        return float("nan"), float("nan")
-    if v.size == 1:
-        return float(v[0]), float("nan")
-    return float(v.mean()), float(t_critical(v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-
-
-def wilson(successes: int, n: int) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion."""
-    if n == 0:
-        return float("nan"), float("nan")
-    z, p = 1.96, successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
+INTERVALS = (
+    "95 % intervals. One run: Wilson for success, Student t over episodes for return and cycles "
+    "to success (its lower end cut at 0). A group of training seeds: a stratified bootstrap "
+    "(training seeds, then each seed's episodes, drawn with replacement; 2,000 resamples, "
+    "generator seed 0), the percentile interval of the pooled measure; the success interval is "
+    "at least the pooled Wilson interval."
+)
+"""What the intervals of every table are (written under the tables and in published pages)."""
 
 
 @dataclass
@@ -142,6 +116,9 @@ class PolicyResult:
         return len(self.returns)
 
     def summary(self) -> dict:
+        """The measures over this run's episodes, with 95 % intervals: Wilson for the success
+        rate, Student t for the mean return and the mean cycles to success (over the successful
+        episodes; the interval's lower end cut at 0). ``*_ci`` are the t half-widths."""
         mean, half = mean_ci(self.returns)
         k = int(sum(self.successes))
         lo, hi = wilson(k, self.n)
@@ -154,14 +131,19 @@ class PolicyResult:
             "level": self.level,
             "training_seeds": 1 if self.kind in ("learned", "evolved") else 0,
             "episodes": self.n,
+            "interval": "wilson, t",
             "return_mean": mean,
             "return_ci": half,
+            "return_lo": mean - half,
+            "return_hi": mean + half,
             "successes": k,
             "success_rate": k / self.n if self.n else 0.0,
             "success_lo": lo,
             "success_hi": hi,
             "cycles_to_success": c_mean,
             "cycles_ci": c_half,
+            "cycles_lo": float(np.maximum(0.0, c_mean - c_half)),
+            "cycles_hi": c_mean + c_half,
             "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"),
             "seconds": self.seconds,
         }
@@ -184,33 +166,49 @@ class GroupResult:
         return self.runs[0].kind
 
     @property
+    def level(self) -> str:
+        return self.runs[0].level
+
+    @property
     def n(self) -> int:
         return sum(r.n for r in self.runs)
 
     def summary(self) -> dict:
+        """The measures pooled over every episode of every training seed, with the intervals of
+        a stratified bootstrap (:func:`training.statistics.group_bootstrap`: training seeds, then
+        their episodes, drawn with replacement): success rate (successes over episodes; the
+        interval widened to at least the pooled Wilson interval, as a percentile bootstrap
+        collapses to a point where every episode agrees), mean return and mean cycles to success
+        (over the successful episodes). A group of one run is summarised as that run."""
         per_run = [r.summary() for r in self.runs]
-        mean, half = mean_ci([s["return_mean"] for s in per_run])
-        rate, rate_half = mean_ci([s["success_rate"] for s in per_run])
-        c_mean, c_half = mean_ci([s["cycles_to_success"] for s in per_run if s["successes"]])
+        if len(self.runs) == 1:
+            return {**per_run[0], "policy": self.label}
+        boot = group_bootstrap(
+            [r.successes for r in self.runs], [r.cycles for r in self.runs], [r.returns for r in self.runs]
+        )
         k = sum(s["successes"] for s in per_run)
         lo, hi = wilson(k, self.n)
         return {
             "task": self.task,
             "policy": self.label,
             "kind": self.kind,
-            "level": self.runs[0].level,
+            "level": self.level,
             "training_seeds": len(self.runs),
             "episodes": self.n,
-            "return_mean": mean,
-            "return_ci": half,
+            "interval": "stratified bootstrap",
+            "return_mean": boot["return_mean"],
+            "return_ci": float("nan"),
+            "return_lo": boot["return_lo"],
+            "return_hi": boot["return_hi"],
             "successes": k,
-            "success_rate": rate,
-            "success_rate_ci": rate_half,
-            "success_lo": max(0.0, rate - rate_half) if len(self.runs) > 1 else lo,
-            "success_hi": min(1.0, rate + rate_half) if len(self.runs) > 1 else hi,
-            "cycles_to_success": c_mean,
-            "cycles_ci": c_half,
-            "mean_cycles": float(np.mean([s["mean_cycles"] for s in per_run])),
+            "success_rate": boot["success_rate"],
+            "success_lo": min(lo, boot["success_lo"]),
+            "success_hi": max(hi, boot["success_hi"]),
+            "cycles_to_success": boot["cycles_to_success"],
+            "cycles_ci": float("nan"),
+            "cycles_lo": boot["cycles_lo"],
+            "cycles_hi": boot["cycles_hi"],
+            "mean_cycles": float(np.mean([c for r in self.runs for c in r.cycles])),
             "seconds": sum(s["seconds"] for s in per_run),
         }
 
@@ -234,12 +232,38 @@ def _fmt(x: float, digits: int = 3) -> str:
     return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
 
 
+def _finite(*xs) -> bool:
+    return all(x is not None and np.isfinite(x) for x in xs)
+
+
+def interval(value: float, lo: float, hi: float, digits: int = 3) -> str:
+    """``value (lo–hi)``, e.g. ``120 (95–150)``; ``lo to hi`` where ``lo`` is negative; the value
+    alone without a finite interval; ``–`` without a value."""
+    if not _finite(value):
+        return "–"
+    if not _finite(lo, hi):
+        return _fmt(value, digits)
+    a, b = _fmt(lo, digits), _fmt(hi, digits)
+    return f"{_fmt(value, digits)} ({a}{' to ' if a.startswith('-') else '–'}{b})"
+
+
+def success_cell(s: dict) -> str:
+    """Successes over episodes and the 95 % interval of the rate: ``24/30 (0.63–0.90)``."""
+    return f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
+
+
+def cycles_cell(s: dict) -> str:
+    """Mean cycles to success and its 95 % interval (``–`` without a success): ``120 (95–150)``."""
+    return "–" if not s["successes"] else interval(s["cycles_to_success"], s["cycles_lo"], s["cycles_hi"], 0)
+
+
 def markdown_table(results: list) -> str:
     """The results as one markdown table (one row per task and policy or training-seed group).
 
-    A group's intervals are across its training seeds: return and cycles to success are the
-    mean of the runs' means ± a 95 % t half-width, success is the mean rate ± its half-width
-    with the pooled count in brackets.
+    Every measure is ``value (low–high)``, its 95 % interval (see :data:`INTERVALS`): return and
+    cycles to success are means, success is successes over episodes then the interval of the rate.
+    A group's values are pooled over its training seeds and its intervals come from the
+    stratified bootstrap.
     """
     head = [
         "task",
@@ -256,15 +280,10 @@ def markdown_table(results: list) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in results:
         s = r.summary()
-        ret = f"{_fmt(s['return_mean'])} ± {_fmt(s['return_ci'])}"
-        if s["training_seeds"] > 1:
-            succ = f"{_fmt(s['success_rate'], 2)} ± {_fmt(s['success_rate_ci'], 2)} ({s['successes']}/{s['episodes']})"
-        else:
-            succ = f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
-        cyc = "–" if not s["successes"] else f"{_fmt(s['cycles_to_success'], 0)} ± {_fmt(s['cycles_ci'], 0)}"
+        ret = interval(s["return_mean"], s["return_lo"], s["return_hi"], 3)
         lines.append(
             f"| {s['task']} | {s['policy']} | {s['kind']} | {s['level']} | {s['training_seeds'] or '–'} | "
-            f"{s['episodes']} | {ret} | {succ} | {cyc} | {s['seconds']:.1f} |"
+            f"{s['episodes']} | {ret} | {success_cell(s)} | {cycles_cell(s)} | {s['seconds']:.1f} |"
         )
     return "\n".join(lines)
 
@@ -275,6 +294,15 @@ def plot(results: list[PolicyResult], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    def errors(values, summaries, lo, hi):
+        """Asymmetric error bars (0 where an interval is undefined)."""
+        return np.array(
+            [
+                [v - s[lo] if _finite(v, s[lo]) else 0.0, s[hi] - v if _finite(v, s[hi]) else 0.0]
+                for v, s in zip(values, summaries)
+            ]
+        ).T
 
     tasks = list(dict.fromkeys(r.task for r in results))
     fig, axes = plt.subplots(len(tasks), 3, figsize=(13, 2.8 * len(tasks) + 0.6), squeeze=False)
@@ -289,16 +317,15 @@ def plot(results: list[PolicyResult], path: Path) -> None:
             for s in rs
         ]
         ret = [s["return_mean"] for s in rs]
-        row[0].barh(y, ret, xerr=[0 if not np.isfinite(s["return_ci"]) else s["return_ci"] for s in rs], color=colours)
+        row[0].barh(y, ret, xerr=errors(ret, rs, "return_lo", "return_hi"), color=colours)
         row[0].set_title(f"{task}: mean return")
-        rate = np.array([s["success_rate"] for s in rs])
-        err = np.array([[r - s["success_lo"], s["success_hi"] - r] for r, s in zip(rate, rs)]).T
-        row[1].barh(y, rate, xerr=err, color=colours)
+        rate = [s["success_rate"] for s in rs]
+        row[1].barh(y, rate, xerr=errors(rate, rs, "success_lo", "success_hi"), color=colours)
         row[1].set_xlim(0, 1.05)
         row[1].set_title(f"{task}: success rate")
         cyc = [s["cycles_to_success"] if s["successes"] else 0.0 for s in rs]
-        half = [s["cycles_ci"] if s["successes"] > 1 else 0.0 for s in rs]
-        row[2].barh(y, cyc, xerr=[[min(h, c) for h, c in zip(half, cyc)], half], color=colours)  # no bar below 0
+        err = errors(cyc, rs, "cycles_lo", "cycles_hi") * np.array([[s["successes"] > 0 for s in rs]])
+        row[2].barh(y, cyc, xerr=err, color=colours)
         row[2].set_title(f"{task}: cycles to success (0: none)")
         for ax in row:
             ax.set_yticks(y, names if ax is row[0] else [""] * len(y))
@@ -310,38 +337,86 @@ def plot(results: list[PolicyResult], path: Path) -> None:
     plt.close(fig)
 
 
+CONFIG_KEYS = ("first_seed", "seeds", "tasks")
+"""The keys of an eval config."""
+TASK_KEYS = ("checkpoints", "env", "task")
+"""The keys of a task's entry under ``tasks``."""
+GROUP_KEYS = ("label", "runs")
+"""The keys of a training-seed group under a task's ``checkpoints``."""
+
+
 def load_config(path) -> dict:
     """The eval config as ``{"seeds", "first_seed", "tasks": {name: {"task", "env", "checkpoints"}}}``
-    (``task``: an optional version of the name, such as ``branch-v0``; without it the newest)."""
+    (``task``: an optional version of the name, such as ``branch-v0``; without it the newest).
+
+    Bad input is one :class:`ConfigError` naming the field, the value and what is allowed, raised
+    before anything runs or is written: an unknown key at the top (:data:`CONFIG_KEYS`), a name
+    under ``tasks`` that is not an evaluated task, an unknown key in a task's entry
+    (:data:`TASK_KEYS`) or in a training-seed group (:data:`GROUP_KEYS`), and values of the
+    wrong kind."""
+    import difflib
+
     from proteo_env.config import ConfigError, load_yaml
     from proteo_env.registry import TASKS
 
     if path is None:
         return {"seeds": 10, "first_seed": 0, "tasks": {}}
     p = Path(path)
-    data = load_yaml(p, "eval config", "a YAML file such as configs/eval.yaml") or {}
-    allowed = {"seeds", "first_seed", "tasks"}
-    unknown = sorted(set(data) - allowed) if isinstance(data, dict) else ["<not a mapping>"]
-    if unknown:
-        raise ConfigError(f"eval config {str(p)!r}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}")
-    tasks = data.get("tasks") or {}
-    for name, entry in tasks.items():
-        bad = sorted(set(entry or {}) - {"task", "env", "checkpoints"})
+    where = f"eval config {str(p)!r}"
+    data = load_yaml(p, "eval config", "a YAML file such as configs/eval.yaml")
+    data = {} if data is None else data
+
+    def unknown(field: str, keys, allowed, what: str = "key") -> None:
+        bad = [k for k in keys if k not in allowed]
         if bad:
+            close = difflib.get_close_matches(str(bad[0]), list(allowed), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ConfigError(f"{where}: {field}: unknown {what} {bad[0]!r}{hint}; allowed: {', '.join(allowed)}")
+
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: {data!r} is not allowed; allowed: a mapping with keys {', '.join(CONFIG_KEYS)}")
+    unknown("top level", data, CONFIG_KEYS)
+    numbers = {}
+    for key, default, least in (("seeds", 10, 1), ("first_seed", 0, 0)):
+        value = data.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ConfigError(f"{where}: {key} = {value!r} is not allowed; allowed: an integer >= {least}")
+        numbers[key] = value
+    tasks = data.get("tasks") or {}
+    if not isinstance(tasks, dict):
+        raise ConfigError(f"{where}: tasks = {tasks!r} is not allowed; allowed: a mapping of task names to settings")
+    names = sorted({cls.name for cls in TASKS.values()} - set(EXCLUDED_TASKS))
+    unknown("tasks", tasks, names, "task")
+    for name, entry in tasks.items():
+        entry = {} if entry is None else entry
+        if not isinstance(entry, dict):
             raise ConfigError(
-                f"eval config {str(p)!r}: tasks.{name}: unknown key {bad[0]!r}; allowed: checkpoints, env, task"
+                f"{where}: tasks.{name} = {entry!r} is not allowed; allowed: a mapping with keys {', '.join(TASK_KEYS)}"
             )
-        pinned = (entry or {}).get("task")
+        unknown(f"tasks.{name}", entry, TASK_KEYS)
+        pinned = entry.get("task")
         versions = sorted(tid for tid, cls in TASKS.items() if cls.name == name)
         if pinned is not None and pinned not in versions:
             raise ConfigError(
-                f"eval config {str(p)!r}: tasks.{name}.task = {pinned!r} is not allowed; "
+                f"{where}: tasks.{name}.task = {pinned!r} is not allowed; "
                 f"allowed: {', '.join(versions) or 'a version of a registered task'}"
             )
-        for k, item in enumerate((entry or {}).get("checkpoints") or []):
+        if not isinstance(entry.get("env") or {}, dict):
+            raise ConfigError(
+                f"{where}: tasks.{name}.env = {entry['env']!r} is not allowed; "
+                "allowed: a mapping of proteo_env.make settings"
+            )
+        items = entry.get("checkpoints") or []
+        if not isinstance(items, list):
+            raise ConfigError(
+                f"{where}: tasks.{name}.checkpoints = {items!r} is not allowed; allowed: a list of checkpoints"
+            )
+        for k, item in enumerate(items):
+            if isinstance(item, dict):
+                unknown(f"tasks.{name}.checkpoints[{k}]", item, GROUP_KEYS)
             ok = isinstance(item, str) or (
                 isinstance(item, dict)
-                and set(item) == {"label", "runs"}
+                and set(item) == set(GROUP_KEYS)
                 and isinstance(item["label"], str)
                 and isinstance(item["runs"], list)
                 and item["runs"]
@@ -349,11 +424,11 @@ def load_config(path) -> dict:
             )
             if not ok:
                 raise ConfigError(
-                    f"eval config {str(p)!r}: tasks.{name}.checkpoints[{k}] = {item!r} is not allowed; "
+                    f"{where}: tasks.{name}.checkpoints[{k}] = {item!r} is not allowed; "
                     "allowed: a checkpoint path, or {label: NAME, runs: [PATH, ...]} (one path per "
                     "training seed)"
                 )
-    return {"seeds": int(data.get("seeds", 10)), "first_seed": int(data.get("first_seed", 0)), "tasks": tasks}
+    return {"seeds": numbers["seeds"], "first_seed": numbers["first_seed"], "tasks": tasks}
 
 
 def _name_apart(results: list[PolicyResult]) -> None:
@@ -682,7 +757,8 @@ def write_results(
         )
     )
     (out_dir / "results.md").write_text(
-        f"{table}{per_run}\n\nSeeds {seed_list[0]}..{seed_list[-1]}; settings per task: {json.dumps(settings)}\n"
+        f"{table}{per_run}\n\n{INTERVALS}\n\n"
+        f"Seeds {seed_list[0]}..{seed_list[-1]}; settings per task: {json.dumps(settings)}\n"
     )
     (out_dir / "results.json").write_text(
         json.dumps(
@@ -706,6 +782,53 @@ def write_results(
     return rows
 
 
+def load_results(path) -> tuple[list[PolicyResult], dict]:
+    """The episodes of a ``results.json`` that :func:`write_results` wrote:
+    ``(results, {"seed_list", "settings", "deterministic"})``, one :class:`PolicyResult` per row
+    (its ``summary`` left out: it is computed again). Files from before control levels and
+    training-seed groups read with ``level="full"`` and no group. A file that is not such a
+    ``results.json`` is a :class:`ConfigError` naming it."""
+    from proteo_env.config import ConfigError
+
+    p = Path(path)
+    fields = {f.name for f in dataclasses.fields(PolicyResult)}
+    try:
+        data = json.loads(p.read_text())
+        results = [PolicyResult(**{k: v for k, v in row.items() if k in fields}) for row in data["results"]]
+        context = {
+            "seed_list": list(data["seeds"]),
+            "settings": data["settings"],
+            "deterministic": data["deterministic"],
+        }
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ConfigError(
+            f"--from-results={str(p)!r} is not allowed ({type(error).__name__}: {error}); "
+            "allowed: a results.json written by proteo eval"
+        ) from None
+    for r in results:
+        lengths = {len(r.returns), len(r.successes), len(r.cycles)}
+        if len(lengths) != 1 or not r.returns:
+            raise ConfigError(
+                f"--from-results={str(p)!r}: the row {r.task} / {r.policy} has returns, successes and cycles of "
+                f"lengths {len(r.returns)}, {len(r.successes)}, {len(r.cycles)}; allowed: one of each per episode"
+            )
+    return results, context
+
+
+def rerender(path, out, *, plots: bool = True, pages=()) -> list:
+    """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out`` from the
+    episodes of the ``results.json`` at ``path`` (:func:`load_results`), without running an
+    episode, and publish the tables into ``pages`` (:func:`publish`): the tables of an earlier
+    evaluation in the current format. Every page is checked before anything is written.
+    Returns the rows."""
+    results, context = load_results(path)
+    texts = published(grouped(results), out, pages)
+    rows = write_results(results, Path(out), plots=plots, **context)
+    for f, text in texts.items():
+        f.write_text(text)
+    return rows
+
+
 PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"
 """Where the whole table goes (:func:`markdown_table`)."""
 PUBLISH_SUMMARY_BEGIN = "<!-- proteo eval --out {out} --summary -->"
@@ -715,8 +838,10 @@ PUBLISH_END = "<!-- end of proteo eval table -->"
 
 def summary_table(results: list) -> str:
     """The results as one row per task and one column per policy (the random floor left out;
-    the hand-coded policy is the column ``rules``, and ``rules-move`` at the ``move`` level): successes over episodes and the mean cycles
-    to success, e.g. ``28/30, 47``."""
+    the hand-coded policy is the column ``rules``, and ``rules-move`` at the ``move`` level).
+    A cell is successes over episodes with the 95 % interval of the success rate, then the mean
+    cycles to success with its 95 % interval (where there is a success), e.g.
+    ``24/30 (0.63–0.93), 120 (100–142)``; the intervals are those of :func:`markdown_table`."""
     columns: dict[str, None] = {}
     cells: dict[str, dict[str, str]] = {}
     for r in results:
@@ -725,8 +850,8 @@ def summary_table(results: list) -> str:
             continue
         column = s["policy"] if s["kind"] != "hand-coded" else "rules" if r.level == "full" else f"rules-{r.level}"
         columns.setdefault(column)
-        cycles = f", {_fmt(s['cycles_to_success'], 0)}" if s["successes"] else ""
-        cells.setdefault(s["task"], {})[column] = f"{s['successes']}/{s['episodes']}{cycles}"
+        cycles = f", {cycles_cell(s)}" if s["successes"] else ""
+        cells.setdefault(s["task"], {})[column] = f"{success_cell(s)}{cycles}"
     head = ["task", *columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join([task, *(row.get(c, "–") for c in columns)]) + " |" for task, row in cells.items()]
@@ -738,10 +863,18 @@ def publish(results: list, out, files) -> None:
     the whole table (:func:`markdown_table`) between :data:`PUBLISH_BEGIN` and
     :data:`PUBLISH_END`, the summary (:func:`summary_table`) between
     :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever a page has those markers
-    (naming ``OUT``). A page with neither is an error that says what to add, and nothing is written."""
+    (naming ``OUT``), each followed by :data:`INTERVALS`. A page with neither is an error that
+    says what to add, and nothing is written."""
+    for f, text in published(results, out, files).items():
+        f.write_text(text)
+
+
+def published(results: list, out, files) -> dict:
+    """``{path: new text}``: what :func:`publish` writes, without writing it (``ValueError``
+    for a page without markers)."""
     tables = {
-        PUBLISH_BEGIN.format(out=Path(out).as_posix()): markdown_table(results),
-        PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): summary_table(results),
+        PUBLISH_BEGIN.format(out=Path(out).as_posix()): f"{markdown_table(results)}\n\n{INTERVALS}",
+        PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): f"{summary_table(results)}\n\n{INTERVALS}",
     }
     texts = {}
     for f in map(Path, files):
@@ -756,12 +889,33 @@ def publish(results: list, out, files) -> None:
                 "allowed: a markdown file that has them where the table goes"
             )
         texts[f] = text
-    for f, text in texts.items():
-        f.write_text(text)
+    return texts
 
 
 def main(args) -> int:
     """Entry point of ``proteo eval`` (arguments parsed in :mod:`training.cli`)."""
+    if getattr(args, "from_results", None):
+        from proteo_env.config import ConfigError
+
+        running = {
+            "--config": args.config,
+            "--tasks": args.tasks,
+            "--seeds": args.seeds is not None,
+            "--checkpoint": args.checkpoint,
+            "--deterministic": args.deterministic,
+            "--pictures": args.pictures,
+            "--fresh": args.fresh,
+        }
+        given = [flag for flag, value in running.items() if value]
+        if given:
+            raise ConfigError(
+                f"--from-results with {given[0]} is not allowed (no episode runs); allowed with --from-results: "
+                "--out, --publish, --no-plots"
+            )
+        results = rerender(args.from_results, args.out, plots=not args.no_plots, pages=args.publish or ())
+        print(markdown_table(results))
+        print(f"\nre-rendered {args.from_results} into {Path(args.out).resolve()}")
+        return 0
     config = args.config
     if config is None and Path(DEFAULT_CONFIG).is_file():
         config = DEFAULT_CONFIG
