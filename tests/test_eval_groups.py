@@ -103,7 +103,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
         result("grasp-v0", "grasp", "hand-coded", [False, True], [300, 100], level="full"),
     ]
     assert summary_table(results).splitlines() == [  # the rules at move are their own column
-        "| task | rules | rules-move | ppo-move |",
+        "| task (95 % CI) | rules | rules-move | ppo-move |",
         "|---|---|---|---|",
         "| chain-v1 | 2/2 (0.34–1.00), 85 (21–149) | 1/2 (0.09–0.91), 70 | 1/2 (0.09–0.91), 40 |",
         "| grasp-v0 | 1/2 (0.09–0.91), 100 | – | – |",
@@ -118,7 +118,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
     )
     publish(results, "docs/eval/x", [page])
     assert page.read_text() == (
-        f"intro\n<!-- proteo eval --out docs/eval/x --summary -->\n{summary_table(results)}\n\n{INTERVALS}\n"
+        f"intro\n<!-- proteo eval --out docs/eval/x --summary -->\n{summary_table(results)}\n"
         f"{PUBLISH_END}\nmiddle\n<!-- proteo eval --out docs/eval/x -->\n{markdown_table(results)}\n\n"
         f"{INTERVALS}\n{PUBLISH_END}\nrest\n"
     )
@@ -213,7 +213,7 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     assert written == json.loads((again / "results.json").read_text())  # every episode kept, summaries anew
     rows = ev.grouped(results)
     assert page.read_text() == f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\n" + (
-        f"{ev.summary_table(rows)}\n\n{ev.INTERVALS}\n{ev.PUBLISH_END}\nb\n"
+        f"{ev.summary_table(rows)}\n{ev.PUBLISH_END}\nb\n"
     )
     # a page without markers: nothing written, not even results.md
     (first / "results.md").write_text("kept\n")

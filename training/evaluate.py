@@ -25,7 +25,8 @@ Every table prints a measure as ``value (low–high)``, its 95 % interval (``low
 from one successful episode): success as ``24/30 (0.63–0.93)``, cycles to success as
 ``120 (100–142)``, ``–`` without a success. The compact summary (:func:`summary_table`, what
 ``--publish`` writes into README.md) has one cell per task and policy:
-``24/30 (0.63–0.93), 120 (100–142)``. :data:`INTERVALS` says this under every table.
+``24/30 (0.63–0.93), 120 (100–142)``. :data:`INTERVALS` says this under every table but the
+summary, whose first column's head is ``task (95 % CI)``.
 
 Settings per task and the checkpoints to compare come from a YAML file (``configs/eval.yaml``)::
 
@@ -841,7 +842,9 @@ def summary_table(results: list) -> str:
     the hand-coded policy is the column ``rules``, and ``rules-move`` at the ``move`` level).
     A cell is successes over episodes with the 95 % interval of the success rate, then the mean
     cycles to success with its 95 % interval (where there is a success), e.g.
-    ``24/30 (0.63–0.93), 120 (100–142)``; the intervals are those of :func:`markdown_table`."""
+    ``24/30 (0.63–0.93), 120 (100–142)``; the intervals are those of :func:`markdown_table`
+    (the first column's head says so: the summary goes into pages that have no room for
+    :data:`INTERVALS`)."""
     columns: dict[str, None] = {}
     cells: dict[str, dict[str, str]] = {}
     for r in results:
@@ -852,7 +855,7 @@ def summary_table(results: list) -> str:
         columns.setdefault(column)
         cycles = f", {cycles_cell(s)}" if s["successes"] else ""
         cells.setdefault(s["task"], {})[column] = f"{success_cell(s)}{cycles}"
-    head = ["task", *columns]
+    head = ["task (95 % CI)", *columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join([task, *(row.get(c, "–") for c in columns)]) + " |" for task, row in cells.items()]
     return "\n".join(lines)
@@ -863,8 +866,8 @@ def publish(results: list, out, files) -> None:
     the whole table (:func:`markdown_table`) between :data:`PUBLISH_BEGIN` and
     :data:`PUBLISH_END`, the summary (:func:`summary_table`) between
     :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever a page has those markers
-    (naming ``OUT``), each followed by :data:`INTERVALS`. A page with neither is an error that
-    says what to add, and nothing is written."""
+    (naming ``OUT``); the whole table is followed by :data:`INTERVALS`. A page with neither is an
+    error that says what to add, and nothing is written."""
     for f, text in published(results, out, files).items():
         f.write_text(text)
 
@@ -874,7 +877,7 @@ def published(results: list, out, files) -> dict:
     for a page without markers)."""
     tables = {
         PUBLISH_BEGIN.format(out=Path(out).as_posix()): f"{markdown_table(results)}\n\n{INTERVALS}",
-        PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): f"{summary_table(results)}\n\n{INTERVALS}",
+        PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): summary_table(results),
     }
     texts = {}
     for f in map(Path, files):
