@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test lint bench eval learning-results learning-task
+.PHONY: install install-distributed demo test test-all lint bench eval learning-results learning-task
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -19,8 +19,13 @@ install-distributed: install
 demo: install
 	$(BIN)/proteo demo
 
+# The fast tier (tests not marked slow) over both cores; test-all adds the slow tier (Ray, the
+# browser, every training config, multi-seed evidence, no-JIT runs, every task id): CI runs it.
 test: install-distributed
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 -m "not slow"
+
+test-all: install-distributed
+	$(BIN)/python -m pytest -n 2
 
 # Format, lint and import order (configured in pyproject.toml); CI runs it before the tests.
 lint: install

@@ -26,6 +26,18 @@ SMALL_OVERRIDES: dict[str, dict] = {
 }
 
 
+REPRESENTATIVE_TASKS = ("sandbox-v0", "chain-v1", "grasp-v0", "table-v1")
+"""The task ids whose cases run in the fast tier (``make test``): the bare engine, a growing
+structure, an object and a board. Every other id runs in the slow tier (``make test-all``)."""
+
+
+def task_params(task_ids=None) -> list:
+    """``task_ids`` (default: every registered id) as pytest params for ``parametrize``: the
+    :data:`REPRESENTATIVE_TASKS` in the fast tier, every other id marked ``slow``."""
+    ids = sorted(proteo_env.TASKS) if task_ids is None else task_ids
+    return [pytest.param(t, marks=() if t in REPRESENTATIVE_TASKS else pytest.mark.slow, id=t) for t in ids]
+
+
 def small_overrides(task_id: str, **extra) -> dict:
     """The small overrides of ``task_id`` (by its task name) updated with ``extra``."""
     name = proteo_env.TASKS[task_id].name

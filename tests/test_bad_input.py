@@ -12,6 +12,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import task_params
 
 import proteo_env
 from proteo_env import ConfigError, LayoutError
@@ -19,7 +20,7 @@ from proteo_env.config import ENV_KEYS, PHYSICS_KEYS, load_run_config
 from proteo_env.core.world import Physics, World
 from proteo_env.layouts import parse_layout
 
-TASK_IDS = sorted(proteo_env.TASKS)
+TASK_IDS = task_params()
 
 
 # ---------------------------------------------------------------------- helpers

@@ -6,7 +6,7 @@ import pickle
 
 import numpy as np
 import pytest
-from conftest import SMALL_OVERRIDES
+from conftest import SMALL_OVERRIDES, task_params
 
 import proteo_env
 from proteo_env.config import world_seeds
@@ -24,7 +24,7 @@ def _random_actions(layout, masks: np.ndarray, rng) -> np.ndarray:
     return actions
 
 
-@pytest.mark.parametrize("task_id", sorted(proteo_env.TASKS))
+@pytest.mark.parametrize("task_id", task_params())
 @pytest.mark.parametrize("motion_model", ["sphere", "minimal"])
 def test_batch_matches_single_envs(task_id, motion_model):
     overrides = {**SMALL_OVERRIDES.get(proteo_env.TASKS[task_id].name, {}), "motion_model": motion_model}
@@ -60,10 +60,10 @@ RESET_EVERY = (5, 8, 13)
 @pytest.mark.parametrize(
     "task_id,control",
     [
-        (t, c)
-        for t in sorted(proteo_env.TASKS)
+        pytest.param(t.values[0], c, marks=t.marks, id=f"{t.values[0]}-{c}")
+        for t in task_params()
         for c in ("full", "move")
-        if c == "full" or proteo_env.TASKS[t].name != "sandbox"
+        if c == "full" or proteo_env.TASKS[t.values[0]].name != "sandbox"
     ],
 )
 def test_worlds_reset_one_at_a_time_match_single_envs(task_id, control):

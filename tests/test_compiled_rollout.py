@@ -311,6 +311,7 @@ def nojit_child() -> None:
     print("FINGERPRINT", fingerprint())
 
 
+@pytest.mark.slow
 def test_kernels_as_plain_python_give_the_same_rollout():
     result = run_without_jit("test_compiled_rollout", "nojit_child")
     assert result.returncode == 0, result.stdout + result.stderr

@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import small_overrides
+from conftest import small_overrides, task_params
 from gymnasium import spaces
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 from pettingzoo.utils import parallel_to_aec
@@ -19,7 +19,7 @@ from proteo_env import control
 from proteo_env.config import ConfigError, world_seeds
 from proteo_env.core.kernels import EMIT, RELAY
 
-RULE_TASKS = sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox")
+RULE_TASKS = task_params(sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox"))
 LEVELS = ("move", "move+mode")  # "full" is every other test file's level
 
 

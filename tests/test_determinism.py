@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import task_params
 
 import proteo_env
 
-TASK_IDS = sorted(proteo_env.TASKS)
+TASK_IDS = task_params()
 MOTION_MODELS = list(proteo_env.MOTION_MODELS)
 N_CYCLES = 200
 

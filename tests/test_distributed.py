@@ -14,6 +14,7 @@ import pytest
 from proteo_env.config import ConfigError
 
 ray = pytest.importorskip("ray")
+pytestmark = pytest.mark.slow  # Ray: make test-all
 
 EVAL_CONFIG = {
     "seeds": 3,

@@ -18,6 +18,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import task_params
 from gymnasium import spaces
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, state_test
 from pettingzoo.utils import parallel_to_aec
@@ -25,7 +26,7 @@ from pettingzoo.utils import parallel_to_aec
 import proteo_env
 from proteo_env.spaces import N_MOVES, ModuleActionSpace
 
-TASK_IDS = sorted(proteo_env.TASKS)
+TASK_IDS = task_params()
 MOTION_MODELS = list(proteo_env.MOTION_MODELS)
 
 # Warnings PettingZoo's tests raise for a Dict observation with a MultiDiscrete action; anything

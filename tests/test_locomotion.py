@@ -40,6 +40,7 @@ def test_the_robot_advances_more_than_the_random_policy():
     assert np.mean(hand) > np.mean(rand) + 2.0, (hand, rand)
 
 
+@pytest.mark.slow
 def test_most_robots_cross_the_step():
     """The default task (20 modules, a step 2 high, ``minimal``): 8 of 12 robots (seeds 200..211)
     cross in 3,000 cycles; without the no-strands preference (``contacts=0``) 5 of 12."""

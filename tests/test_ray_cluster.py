@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 ray = pytest.importorskip("ray")
+pytestmark = pytest.mark.slow  # Ray: make test-all
 
 SWEEP = (
     "task: chain-v1\nenv: {max_cycles: 400}\ngrid:\n  n_modules: [12, 16]\n  motion_model: [minimal, sphere]\n"

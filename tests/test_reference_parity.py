@@ -282,6 +282,7 @@ def nojit_child() -> None:
     print("NOJIT-PARITY-OK")
 
 
+@pytest.mark.slow
 def test_parity_without_jit():
     result = run_without_jit("test_reference_parity", "nojit_child")
     assert result.returncode == 0 and "NOJIT-PARITY-OK" in result.stdout, result.stdout + result.stderr

@@ -27,6 +27,7 @@ from proteo_env.tasks.snake_kernels import SnakeMode
 SMALL = dict(n_modules=12, tunnel_length=4, max_cycles=400)
 
 
+@pytest.mark.slow
 def test_most_robots_snake_through_the_tunnel_where_the_tread_does_not():
     """The task's default course (20 modules, a tunnel 2 free layers high and 6 long): the
     composed rule gets 16 of 16 robots of seeds 100..115 through (docs/evidence/snake.md);

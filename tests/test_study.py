@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from training import study
 from training.checkpoints import read_meta
 
 
+@pytest.mark.slow  # several training seeds
 def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path):
     keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
     study.main(
@@ -38,6 +41,7 @@ def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path)
     assert (docs / "curves_ppo_chain_move.png").stat().st_size > 0
 
 
+@pytest.mark.slow  # several training seeds
 def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
     keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
     tiny = ["--n-envs", "4", "--env", "{n_modules: 6, max_cycles: 40}"]

@@ -512,6 +512,7 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", [c for c in TRAIN_CONFIGS if not c.endswith("_chain.yaml")])
 def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_path):
     """Every config in configs/train/ (chain's are run by the ``checkpoints`` fixture) with a tiny budget."""

@@ -218,6 +218,7 @@ def colour_pixels(browser) -> dict[str, int]:
     return counts
 
 
+@pytest.mark.slow  # the browser
 def test_the_first_and_last_cycles_are_drawn_in_mode_colours(browser, page, recording):
     browser.open(page)
     assert browser.evaluate("document.body.dataset.frame") == "0"
@@ -237,6 +238,7 @@ def test_the_first_and_last_cycles_are_drawn_in_mode_colours(browser, page, reco
     assert browser.errors() == [] and browser.evaluate("document.body.dataset.errors") == "0"
 
 
+@pytest.mark.slow  # the browser
 def test_positions_follow_the_recording_when_stepping_and_seeking(browser, page, recording):
     browser.open(str(page.resolve().as_uri()) + "#cycle=7")
     inspected = 0
@@ -260,6 +262,7 @@ def test_positions_follow_the_recording_when_stepping_and_seeking(browser, page,
     assert inspected >= 10 and browser.errors() == []
 
 
+@pytest.mark.slow  # the browser
 def test_play_toggles_and_cut_away(browser, page):
     browser.open(page)
     browser.evaluate("document.getElementById('speed').value = '20'")
