@@ -356,8 +356,12 @@ def view(args) -> int:
 
 
 def evaluate(args) -> int:
+    from training import benchmark
     from training.evaluate import main as evaluate_main
 
+    if args.benchmark:
+        return benchmark.main(args)
+    benchmark.check_flags(args)
     return evaluate_main(args)
 
 
@@ -531,6 +535,23 @@ def main(argv=None) -> int:
         default=None,
         metavar="RESULTS.json",
         help="run no episode: write the tables of this results.json into --out again (and --publish them)",
+    )
+    b = p.add_argument_group("benchmark protocol (docs/guides/benchmark.md)")
+    b.add_argument(
+        "--benchmark",
+        default=None,
+        metavar="VERSION",
+        help="judge --checkpoint (one recipe's training seeds) or --policy on every split of "
+        "configs/benchmark/VERSION.yaml; writes OUT/benchmark.json and benchmark.md",
+    )
+    b.add_argument("--policy", default=None, help="with --benchmark: rules or random (every task, or --tasks)")
+    b.add_argument("--level", default=None, help="with --benchmark --policy: only this control level")
+    b.add_argument(
+        "--worlds-cap",
+        type=int,
+        default=None,
+        metavar="N",
+        help="with --benchmark: at most N worlds per split (quick checks only; the result is marked incomplete)",
     )
     add_ray_flags(p)
     p.set_defaults(func=evaluate)

@@ -1,0 +1,731 @@
+"""``proteo eval --benchmark VERSION``: judge a controller on every split of a versioned protocol.
+
+A protocol is one YAML file per version, ``configs/benchmark/<version>.yaml`` (``v1.yaml`` is
+the first; a published version is never changed, a new one is a new file). It fixes, for each
+task of the study: the task version judged (``task``) and the versions whose checkpoints are
+judged on it (``trained_on``), the control levels judged (``levels``: ``learned``, ``rules``,
+``random``), the training settings (``env``), the training recipes (``recipes``: a config in
+``configs/train`` and a budget in agent-steps) and the evaluation splits (``splits``: each its
+settings over ``env``; ``heldout``, the training size, and ``larger``, about twice the size, in
+every task, then the out-of-distribution variants the task has parameters for). ``worlds``
+fixes how many worlds a policy is judged on per split: the rules and random on ``reference``
+worlds, a learned or evolved recipe on ``per_training_seed`` worlds for each of at least
+``training_seeds`` training seeds; every policy takes the world seeds ``first_seed``,
+``first_seed + 1``, ... (one judged on fewer worlds takes the first ones). :func:`load_protocol`
+reads and checks a file; any bad input (a version that does not exist, an unknown key anywhere,
+a value of the wrong kind, fewer worlds or training seeds than the protocol's statistics need)
+is one :class:`~proteo_env.config.ConfigError` naming the field, the value and what is allowed.
+
+:func:`judge` runs the episodes with the machinery of ``proteo eval``
+(:class:`training.evaluate.EpisodeJob`, :func:`training.evaluate.run_episodes`: serially or as
+Ray tasks, recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
+``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
+protocol, the checkpoints' task and control level, the flags) before anything is written::
+
+    proteo eval --benchmark v1 --checkpoint checkpoints/grasp/kickstart_move/seed_0 --out out/bench
+    proteo eval --benchmark v1 --checkpoint runs/s0 --checkpoint runs/s1 ...   # one recipe, its training seeds
+    proteo eval --benchmark v1 --policy rules --tasks chain --level full --out docs/benchmark/v1/chain/rules_full
+
+``benchmark.json`` (schema ``proteo-benchmark-results``, ``schema_version`` 1)::
+
+    {
+      "schema": "proteo-benchmark-results", "schema_version": 1,
+      "protocol": "v1",                        # the protocol version
+      "protocol_file": "configs/benchmark/v1.yaml", "protocol_sha256": "...",  # the file judged by
+      "proteo_version": "0.9.0", "commit": "abc123..." or null,   # what ran (training.common.provenance)
+      "created": "2026-01-01T12:00:00",
+      "worlds_cap": null,                      # --worlds-cap (quick checks only; a published run has null)
+      "complete": true,                        # every row judged as the protocol asks (else see "notes")
+      "notes": ["..."],                        # why a row is not complete (fewer training seeds, a cap)
+      "rows": [                                # one per task, split and policy
+        {
+          "task": "grasp-v0", "task_name": "grasp", "split": "heldout", "about": "...",
+          "env": {...},                        # the proteo_env.make settings of the split
+          "policy": "kickstart_move",          # rules, rules-move, random, or the recipe's label
+          "kind": "learned",                   # hand-coded, random, learned, evolved
+          "level": "move", "recipe": "kickstart-move" or null,
+          "world_seeds": [1000, ..., 1019],    # the worlds every training seed was judged on
+          "complete": true,
+          "runs": [                            # one per training seed (one for the rules and random)
+            {"source": "checkpoints/grasp/kickstart_move/seed_0", "training_seed": 0,
+             "agent_steps": 6041600,           # null for the rules and random
+             "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
+             "seconds": 3.1}
+          ],
+          "summary": {...}                     # training.evaluate.PolicyResult.summary (one run:
+                                               # Wilson, Student t) or GroupResult.summary (several
+                                               # training seeds: the stratified bootstrap
+                                               # training.statistics.group_bootstrap)
+        }
+      ]
+    }
+
+``summary`` holds ``episodes``, ``successes``, ``success_rate``, ``success_lo``/``success_hi``
+(the 95 % interval), ``cycles_to_success`` with ``cycles_lo``/``cycles_hi`` (over the successful
+episodes), ``return_mean`` with ``return_lo``/``return_hi``, ``training_seeds`` and ``interval``
+(which interval). ``benchmark.md`` is the table of those rows with the intervals. See
+docs/guides/benchmark.md.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from proteo_env.config import CONTROL_LEVELS, ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+"""The repository: protocol files and recipe configs are read relative to it."""
+PROTOCOL_DIR = "configs/benchmark"
+"""Where the protocol files are: ``<version>.yaml``."""
+
+SCHEMA = "proteo-benchmark-results"
+SCHEMA_VERSION = 1
+
+MIN_REFERENCE_WORLDS = 100
+"""The rules and random are judged on at least this many worlds per split (a success rate then
+known to about +-0.05 or better: the widest 95 % Wilson interval at 100 worlds, at 50/100, is
+0.40-0.60, +-0.10 wide in all, +-0.05 ... +-0.10 from the middle; within +-0.05 from 90/100 on)."""
+MIN_WORLDS_PER_TRAINING_SEED = 20
+"""A learned or evolved recipe is judged on at least this many worlds per training seed and split."""
+MIN_TRAINING_SEEDS = 5
+"""A learned or evolved recipe is judged with at least this many training seeds."""
+
+PROTOCOL_KEYS = ("version", "worlds", "tasks")
+WORLDS_KEYS = ("first_seed", "reference", "per_training_seed", "training_seeds")
+TASK_KEYS = ("task", "trained_on", "levels", "env", "recipes", "splits")
+LEVEL_KEYS = ("learned", "rules", "random")
+RECIPE_KEYS = ("config", "agent_steps", "init")
+SPLIT_KEYS = ("about", "env")
+REQUIRED_SPLITS = ("heldout", "larger")
+POLICIES = ("rules", "random")
+"""The names ``--policy`` takes: the task's hand-coded rules, and the random policy."""
+
+
+@dataclass(frozen=True)
+class Split:
+    """One evaluation split of a task: its name and the ``proteo_env.make`` settings of its worlds."""
+
+    name: str
+    about: str
+    env: dict
+
+
+@dataclass(frozen=True)
+class TaskProtocol:
+    """What a protocol fixes for one task."""
+
+    name: str
+    task_id: str
+    trained_on: tuple
+    levels: dict
+    """``{"learned": [...], "rules": [...], "random": [...]}``: the control levels judged."""
+    env: dict
+    recipes: dict
+    splits: tuple
+    """The :class:`Split` s, in the file's order."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """A benchmark protocol version (:func:`load_protocol`)."""
+
+    version: str
+    path: Path
+    sha256: str
+    first_seed: int
+    reference: int
+    per_training_seed: int
+    training_seeds: int
+    tasks: dict
+    """``{task name: TaskProtocol}``."""
+
+    def world_seeds(self, n: int) -> list[int]:
+        """The first ``n`` world seeds: every policy judged on ``n`` worlds gets these."""
+        return list(range(self.first_seed, self.first_seed + n))
+
+    def worlds(self, kind: str, cap: int | None = None) -> int:
+        """Worlds per split (per training seed for a learned or evolved policy) for ``kind``,
+        at most ``cap`` (quick checks only)."""
+        n = self.reference if kind in ("hand-coded", "random") else self.per_training_seed
+        return n if cap is None else min(n, cap)
+
+
+def versions(root=None) -> list[str]:
+    """The protocol versions present: the names of ``configs/benchmark/*.yaml``."""
+    folder = Path(root or ROOT) / PROTOCOL_DIR
+    return sorted(p.stem for p in folder.glob("*.yaml"))
+
+
+def _unknown(where: str, keys, allowed) -> None:
+    bad = [k for k in keys if k not in allowed]
+    if bad:
+        close = difflib.get_close_matches(str(bad[0]), [str(a) for a in allowed], n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(
+            f"{where}: unknown key {bad[0]!r}{hint} = {keys[bad[0]]!r} is not allowed; allowed keys: {', '.join(allowed)}"
+        )
+
+
+def _mapping(where: str, field_path: str, value, allowed) -> dict:
+    value = {} if value is None else value
+    if not isinstance(value, dict):
+        raise ConfigError(
+            f"{where}: {field_path} = {value!r} is not allowed; allowed: a mapping with keys {', '.join(allowed)}"
+        )
+    return value
+
+
+def _integer(where: str, field_path: str, value, least: int, why: str = "") -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise ConfigError(
+            f"{where}: {field_path} = {value!r} is not allowed; allowed: an integer >= {least}{f' ({why})' if why else ''}"
+        )
+    return value
+
+
+def _settings(where: str, at: str, field_path: str, value, cls) -> dict:
+    """``value`` checked as ``proteo_env.make`` settings of task class ``cls`` (no ``control``)."""
+    from proteo_env.config import split_overrides
+
+    value = _mapping(where, field_path, value, ["proteo_env.make settings"])
+    try:
+        split_overrides(value, cls.Params, task_name=cls.task_id())
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{where}: {field_path} = {value!r} is not allowed: {err}") from None
+    if "control" in value:
+        raise ConfigError(
+            f"{where}: {field_path}.control = {value['control']!r} is not allowed; allowed: the levels "
+            f"under {at}.levels (settings without control)"
+        )
+    return dict(value)
+
+
+def load_protocol(version: str, root=None) -> Protocol:
+    """The protocol ``configs/benchmark/<version>.yaml``, checked.
+
+    Bad input is one :class:`ConfigError` naming the field (its path in the file), the value and
+    what is allowed: a version with no file (the message lists the versions present), a file
+    whose ``version`` is not its name, an unknown key anywhere, a task name that is not
+    registered, a task version that is not one of the name's, a control level that does not
+    exist, settings a task does not have or does not allow, a recipe config that does not exist,
+    a protocol without a ``heldout`` or ``larger`` split, and fewer worlds or training seeds than
+    :data:`MIN_REFERENCE_WORLDS`, :data:`MIN_WORLDS_PER_TRAINING_SEED` and
+    :data:`MIN_TRAINING_SEEDS`.
+    """
+    from proteo_env.config import load_yaml
+    from proteo_env.registry import TASKS
+
+    root = Path(root or ROOT)
+    present = versions(root)
+    if not isinstance(version, str) or version not in present:
+        raise ConfigError(
+            f"--benchmark {version!r} is not allowed: no protocol file {PROTOCOL_DIR}/{version}.yaml; "
+            f"allowed: {', '.join(present) or 'none present'}"
+        )
+    path = root / PROTOCOL_DIR / f"{version}.yaml"
+    where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"
+    raw = path.read_bytes()
+    data = load_yaml(path, "benchmark protocol", f"one of {', '.join(present)}")
+    data = _mapping(where, "top level", data, PROTOCOL_KEYS)
+    _unknown(f"{where}: top level", data, PROTOCOL_KEYS)
+    if data.get("version") != version:
+        raise ConfigError(
+            f"{where}: version = {data.get('version')!r} is not allowed; allowed: {version!r} (the file's name)"
+        )
+    worlds = _mapping(where, "worlds", data.get("worlds"), WORLDS_KEYS)
+    _unknown(f"{where}: worlds", worlds, WORLDS_KEYS)
+    least = {
+        "first_seed": (0, ""),
+        "reference": (MIN_REFERENCE_WORLDS, "the rules and random: a success rate known to about +-0.05"),
+        "per_training_seed": (MIN_WORLDS_PER_TRAINING_SEED, "worlds per training seed of a learned recipe"),
+        "training_seeds": (MIN_TRAINING_SEEDS, "training seeds of a learned recipe"),
+    }
+    counts = {}
+    for key in WORLDS_KEYS:
+        if key not in worlds:
+            raise ConfigError(f"{where}: worlds.{key} is missing; allowed: an integer >= {least[key][0]}")
+        counts[key] = _integer(where, f"worlds.{key}", worlds[key], *least[key])
+
+    tasks_raw = data.get("tasks")
+    names = sorted({cls.name for cls in TASKS.values()} - {"sandbox"})
+    tasks_raw = _mapping(where, "tasks", tasks_raw, names)
+    if not tasks_raw:
+        raise ConfigError(
+            f"{where}: tasks = {tasks_raw!r} is not allowed; allowed: a mapping of task names ({', '.join(names)})"
+        )
+    _unknown(f"{where}: tasks", tasks_raw, names)
+    tasks = {}
+    for name, entry in tasks_raw.items():
+        at = f"tasks.{name}"
+        entry = _mapping(where, at, entry, TASK_KEYS)
+        _unknown(f"{where}: {at}", entry, TASK_KEYS)
+        ids = sorted(tid for tid, cls in TASKS.items() if cls.name == name)
+        task_id = entry.get("task")
+        if task_id not in ids:
+            raise ConfigError(f"{where}: {at}.task = {task_id!r} is not allowed; allowed: {', '.join(ids)}")
+        trained_on = entry.get("trained_on", [task_id])
+        if not isinstance(trained_on, list) or task_id not in trained_on or any(t not in ids for t in trained_on):
+            raise ConfigError(
+                f"{where}: {at}.trained_on = {trained_on!r} is not allowed; allowed: a list of versions of "
+                f"{name} ({', '.join(ids)}) that holds {task_id!r}"
+            )
+        levels = _mapping(where, f"{at}.levels", entry.get("levels"), LEVEL_KEYS)
+        _unknown(f"{where}: {at}.levels", levels, LEVEL_KEYS)
+        for key in LEVEL_KEYS:
+            value = levels.get(key)
+            if not isinstance(value, list) or not value or any(v not in CONTROL_LEVELS for v in value):
+                raise ConfigError(
+                    f"{where}: {at}.levels.{key} = {value!r} is not allowed; allowed: a list of control levels "
+                    f"({', '.join(CONTROL_LEVELS)})"
+                )
+        cls = TASKS[task_id]
+
+        env = _settings(where, at, f"{at}.env", entry.get("env"), cls)
+        recipes_raw = _mapping(where, f"{at}.recipes", entry.get("recipes"), RECIPE_KEYS)
+        recipes = {}
+        for label, recipe in recipes_raw.items():
+            rat = f"{at}.recipes.{label}"
+            recipe = _mapping(where, rat, recipe, RECIPE_KEYS)
+            _unknown(f"{where}: {rat}", recipe, RECIPE_KEYS)
+            config = recipe.get("config")
+            if not isinstance(config, str) or not (root / config).is_file():
+                raise ConfigError(
+                    f"{where}: {rat}.config = {config!r} is not allowed; allowed: a file in configs/train"
+                )
+            steps = recipe.get("agent_steps")
+            if steps is not None:
+                _integer(where, f"{rat}.agent_steps", steps, 1, "or null: the config's own budget")
+            init = recipe.get("init")
+            if init is not None and init not in recipes_raw:
+                raise ConfigError(
+                    f"{where}: {rat}.init = {init!r} is not allowed; allowed: one of {', '.join(recipes_raw)}"
+                )
+            recipes[str(label)] = {"config": config, "agent_steps": steps, "init": init}
+        splits_raw = _mapping(where, f"{at}.splits", entry.get("splits"), SPLIT_KEYS)
+        for required in REQUIRED_SPLITS:
+            if required not in splits_raw:
+                raise ConfigError(
+                    f"{where}: {at}.splits = {sorted(splits_raw)!r} is not allowed; allowed: splits that include "
+                    f"{', '.join(REQUIRED_SPLITS)}"
+                )
+        splits = []
+        for split, spec in splits_raw.items():
+            sat = f"{at}.splits.{split}"
+            spec = _mapping(where, sat, spec, SPLIT_KEYS)
+            _unknown(f"{where}: {sat}", spec, SPLIT_KEYS)
+            about = spec.get("about", "")
+            if not isinstance(about, str):
+                raise ConfigError(f"{where}: {sat}.about = {about!r} is not allowed; allowed: a string")
+            merged = _settings(where, at, f"{sat}.env", {**env, **(spec.get("env") or {})}, cls)
+            splits.append(Split(name=str(split), about=about, env=merged))
+        tasks[name] = TaskProtocol(
+            name=name,
+            task_id=task_id,
+            trained_on=tuple(trained_on),
+            levels={k: list(levels[k]) for k in LEVEL_KEYS},
+            env=env,
+            recipes=recipes,
+            splits=tuple(splits),
+        )
+    return Protocol(
+        version=version,
+        path=path,
+        sha256=hashlib.sha256(raw).hexdigest(),
+        first_seed=counts["first_seed"],
+        reference=counts["reference"],
+        per_training_seed=counts["per_training_seed"],
+        training_seeds=counts["training_seeds"],
+        tasks=tasks,
+    )
+
+
+@dataclass
+class Entrant:
+    """One policy judged on one task: the rules or random at one level, or a recipe's checkpoints."""
+
+    task: TaskProtocol
+    label: str
+    kind: str
+    level: str
+    policy: str
+    """The registered policy name (the rules, random), or "" for checkpoints."""
+    checkpoints: list = field(default_factory=list)
+    """``[(path, meta)]``: one per training seed."""
+    recipe: str | None = None
+
+
+def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
+    """The :class:`Entrant` of ``paths`` (the training seeds of one recipe), checked."""
+    from training.checkpoints import read_meta
+
+    metas = []
+    for path in paths:
+        try:
+            metas.append(read_meta(path))
+        except (OSError, ValueError) as err:
+            raise ConfigError(f"--checkpoint {str(path)!r} is not allowed: {err}") from None
+    held = {tid: name for name, t in protocol.tasks.items() for tid in t.trained_on}
+    for path, meta in zip(paths, metas):
+        if meta["task"] not in held:
+            raise ConfigError(
+                f"--checkpoint {str(path)!r}: task = {meta['task']!r} is not allowed; allowed: checkpoints of the "
+                f"tasks benchmark {protocol.version} holds ({', '.join(sorted(held))})"
+            )
+    names = {held[m["task"]] for m in metas}
+    if len(names) > 1:
+        raise ConfigError(
+            f"--checkpoint: checkpoints of tasks {', '.join(sorted(names))} are not allowed together; allowed: the "
+            "training seeds of one recipe on one task (run the benchmark once per recipe)"
+        )
+    task = protocol.tasks[names.pop()]
+    if tasks and task.name not in tasks:
+        raise ConfigError(
+            f"--tasks {','.join(tasks)!r} is not allowed with a checkpoint of {task.name}; allowed: --tasks {task.name} or none"
+        )
+    levels = {m.get("control", "full") for m in metas}
+    for path, meta in zip(paths, metas):
+        level = meta.get("control", "full")
+        if level not in task.levels["learned"]:
+            raise ConfigError(
+                f"--checkpoint {str(path)!r}: control level = {level!r} is not allowed; allowed: the levels "
+                f"benchmark {protocol.version} judges learned and evolved {task.name} controllers at "
+                f"({', '.join(task.levels['learned'])})"
+            )
+    if len(levels) > 1:
+        raise ConfigError(
+            f"--checkpoint: control levels {', '.join(sorted(levels))} are not allowed together; allowed: the "
+            "training seeds of one recipe (one level)"
+        )
+    resolved = [str(Path(p)) for p in paths]
+    if len(set(resolved)) != len(resolved):
+        raise ConfigError(f"--checkpoint {resolved!r} is not allowed: a checkpoint given twice; allowed: each once")
+    seeds = [m.get("seed") for m in metas]
+    if len(paths) > 1 and len(set(seeds)) != len(seeds):
+        raise ConfigError(
+            f"--checkpoint: training seeds {seeds!r} are not allowed; allowed: checkpoints of distinct training seeds"
+        )
+    kinds = {"evolved" if str(m["algorithm"]).startswith("cma") else "learned" for m in metas}
+    parents = {Path(p).resolve().parent.name for p in paths}
+    folder = parents.pop() if len(parents) == 1 and len(paths) > 1 else Path(paths[0]).resolve().name
+    if folder.startswith("seed_"):
+        folder = Path(paths[0]).resolve().parent.name
+    recipe = folder.replace("_", "-") if folder.replace("_", "-") in task.recipes else None
+    return Entrant(
+        task=task,
+        label=recipe or folder,
+        kind=kinds.pop() if len(kinds) == 1 else "learned",
+        level=levels.pop(),
+        policy="",
+        checkpoints=list(zip([str(p) for p in paths], metas)),
+        recipe=recipe,
+    )
+
+
+def entrants(protocol: Protocol, *, checkpoints=(), policy=None, level=None, tasks=None) -> list[Entrant]:
+    """The policies to judge, per task: the training seeds of one recipe (``checkpoints``), or
+    the rules or random (``policy``) on every task of the protocol (or of ``tasks``) at every
+    level the protocol judges them at (or at ``level``). Bad input: a :class:`ConfigError`."""
+    if tasks is not None:
+        tasks = list(tasks)
+        for t in tasks:
+            if t not in protocol.tasks:
+                raise ConfigError(
+                    f"--tasks {t!r} is not allowed; allowed: tasks of benchmark {protocol.version} "
+                    f"({', '.join(protocol.tasks)})"
+                )
+    if bool(checkpoints) == (policy is not None):
+        raise ConfigError(
+            f"--benchmark {protocol.version} with {'both --checkpoint and --policy' if checkpoints else 'neither --checkpoint nor --policy'} "
+            "is not allowed; allowed: --checkpoint PATH (repeatable: one recipe's training seeds) or --policy rules|random"
+        )
+    if checkpoints:
+        if level is not None:
+            raise ConfigError(f"--level {level!r} is not allowed with --checkpoint; allowed: --level with --policy")
+        return [_checkpoint_entrant(protocol, list(checkpoints), tasks)]
+    if policy not in POLICIES:
+        raise ConfigError(f"--policy {policy!r} is not allowed; allowed: {', '.join(POLICIES)}")
+    out = []
+    for name, task in protocol.tasks.items():
+        if tasks is not None and name not in tasks:
+            continue
+        levels = task.levels[policy]
+        if level is not None and level not in levels:
+            raise ConfigError(
+                f"--level {level!r} is not allowed for --policy {policy} on {name}; allowed: {', '.join(levels)} "
+                f"(the levels benchmark {protocol.version} judges it at)"
+            )
+        for lv in [level] if level is not None else levels:
+            import proteo_env
+
+            registered = proteo_env.make(task.task_id, **task.env).task.default_policy if policy == "rules" else policy
+            out.append(
+                Entrant(
+                    task=task,
+                    label=policy if lv == levels[0] else f"{policy}-{lv}",
+                    kind="hand-coded" if policy == "rules" else "random",
+                    level=lv,
+                    policy=registered,
+                )
+            )
+    return out
+
+
+def judge(
+    version: str = "v1",
+    *,
+    checkpoints=(),
+    policy: str | None = None,
+    level: str | None = None,
+    tasks=None,
+    out="out/benchmark",
+    ray: dict | None = None,
+    worlds_cap: int | None = None,
+    fresh: bool = False,
+    progress: bool = True,
+    root=None,
+) -> dict:
+    """Judge a controller on every split of its task(s) under protocol ``version``; write
+    ``out/benchmark.json`` (the schema is in the module docstring) and ``out/benchmark.md``;
+    return the ``benchmark.json`` document.
+
+    Args:
+        checkpoints: the training seeds of one recipe (checkpoint folders), or
+        policy: ``"rules"`` or ``"random"`` (every task of the protocol, or ``tasks``), at every
+            level the protocol judges it at, or at ``level``.
+        ray: ``None`` (serial) or ``{"address", "workers"}``.
+        worlds_cap: judge on at most this many worlds per split and training seed (the first
+            ones). For quick checks only: the file records it and is not ``complete``.
+        fresh: discard the episodes of an interrupted run in ``out`` instead of resuming it.
+
+    Everything is checked before anything is written (a :class:`ConfigError` otherwise).
+    """
+    from proteo_env.registry import task_name
+    from training.checkpoints import load_policy
+    from training.common import provenance
+    from training.distributed import Journal
+    from training.evaluate import EpisodeJob, PolicyResult, run_episodes
+
+    protocol = load_protocol(version, root)
+    if worlds_cap is not None:
+        _integer("--worlds-cap", "--worlds-cap", worlds_cap, 1, "worlds per split: a success rate needs one")
+    judged = entrants(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks)
+
+    # every checkpoint loads on its task's worlds before anything is written
+    import proteo_env
+
+    for e in judged:
+        for path, _ in e.checkpoints:
+            env = proteo_env.make(e.task.task_id, **e.task.splits[0].env, control=e.level)
+            try:
+                load_policy(path, env, seed=protocol.first_seed)
+            finally:
+                env.close()
+
+    results: list[PolicyResult] = []
+    jobs = []
+    rows = []
+    for e in judged:
+        n = protocol.worlds(e.kind, worlds_cap)
+        seeds = protocol.world_seeds(n)
+        for split in e.task.splits:
+            overrides = json.dumps(split.env, sort_keys=True)
+            sources = e.checkpoints or [(f"baselines.{e.policy}", None)]
+            first = len(results)
+            for source, meta in sources:
+                results.append(
+                    PolicyResult(
+                        task=e.task.task_id,
+                        policy=e.label,
+                        kind=e.kind,
+                        source=source,
+                        level=e.level,
+                        group=e.label if len(sources) > 1 else "",
+                    )
+                )
+                for seed in seeds:
+                    jobs.append(
+                        (
+                            len(results) - 1,
+                            EpisodeJob(
+                                task_id=e.task.task_id,
+                                overrides=overrides,
+                                level=e.level,
+                                policy=source if meta is not None else e.policy,
+                                checkpoint=meta is not None,
+                                seed=seed,
+                                policy_seed=protocol.first_seed,
+                            ),
+                        )
+                    )
+            rows.append((e, split, seeds, list(range(first, len(results)))))
+
+    complete_counts = worlds_cap is None
+    notes = []
+    if worlds_cap is not None:
+        notes.append(
+            f"--worlds-cap {worlds_cap}: judged on at most {worlds_cap} worlds per split and training seed, "
+            "fewer than the protocol asks (a quick check, not a benchmark result)"
+        )
+    for e in judged:
+        if e.checkpoints and len(e.checkpoints) < protocol.training_seeds:
+            notes.append(
+                f"{e.task.name} / {e.label}: {len(e.checkpoints)} training seed(s); protocol {protocol.version} "
+                f"asks for at least {protocol.training_seeds} (the rows are not complete)"
+            )
+
+    out_dir = Path(out)
+    fingerprint = {
+        "protocol": protocol.version,
+        "sha256": protocol.sha256,
+        "worlds_cap": worlds_cap,
+        "jobs": [j.key for _, j in jobs],
+    }
+    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="benchmark run")
+    started = time.perf_counter()
+    run_episodes(results, jobs, out_dir, ray=ray, journal=journal, progress=progress)
+    seconds = time.perf_counter() - started
+
+    from training.evaluate import GroupResult
+
+    doc_rows = []
+    for e, split, seeds, indices in rows:
+        runs = [results[i] for i in indices]
+        summary = (GroupResult(runs=runs, label=e.label) if len(runs) > 1 else runs[0]).summary()
+        summary["policy"] = e.label
+        row_complete = complete_counts and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds)
+        doc_rows.append(
+            {
+                "task": e.task.task_id,
+                "task_name": task_name(e.task.task_id),
+                "split": split.name,
+                "about": split.about,
+                "env": split.env,
+                "policy": e.label,
+                "kind": e.kind,
+                "level": e.level,
+                "recipe": e.recipe,
+                "world_seeds": seeds,
+                "complete": row_complete,
+                "runs": [
+                    {
+                        "source": r.source,
+                        "training_seed": meta.get("seed") if meta else None,
+                        "agent_steps": meta.get("agent_steps") if meta else None,
+                        "successes": [bool(s) for s in r.successes],
+                        "cycles": [int(c) for c in r.cycles],
+                        "returns": [float(x) for x in r.returns],
+                        "seconds": r.seconds,
+                    }
+                    for r, (_, meta) in zip(runs, e.checkpoints or [(None, None)])
+                ],
+                "summary": summary,
+            }
+        )
+    document = {
+        "schema": SCHEMA,
+        "schema_version": SCHEMA_VERSION,
+        "protocol": protocol.version,
+        "protocol_file": f"{PROTOCOL_DIR}/{protocol.version}.yaml",
+        "protocol_sha256": protocol.sha256,
+        **provenance(),
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "worlds_cap": worlds_cap,
+        "complete": all(r["complete"] for r in doc_rows),
+        "notes": notes,
+        "wall_seconds": seconds,
+        "rows": doc_rows,
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "benchmark.json").write_text(json.dumps(document, indent=1, default=float) + "\n")
+    (out_dir / "benchmark.md").write_text(markdown(document))
+    journal.complete()
+    return document
+
+
+def markdown(document: dict) -> str:
+    """The rows of a ``benchmark.json`` document as a markdown table with 95 % intervals."""
+    from training.evaluate import INTERVALS, cycles_cell, interval, success_cell
+
+    head = [
+        "task",
+        "split",
+        "policy",
+        "kind",
+        "level",
+        "training seeds",
+        "worlds",
+        "success (95 % CI)",
+        "cycles to success (95 % CI)",
+        "return (95 % CI)",
+    ]
+    lines = [
+        f"Benchmark {document['protocol']} ({document['protocol_file']}, sha256 {document['protocol_sha256'][:12]}); "
+        f"proteo {document['proteo_version']}, commit {(document['commit'] or 'unknown')[:12]}; "
+        f"{'complete' if document['complete'] else 'NOT complete (see the notes)'}.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for row in document["rows"]:
+        s = row["summary"]
+        seeds = row["world_seeds"]
+        worlds = f"{len(seeds)} ({seeds[0]}..{seeds[-1]})" if seeds else "0"
+        lines.append(
+            f"| {row['task']} | {row['split']} | {row['policy']} | {row['kind']} | {row['level']} | "
+            f"{len(row['runs']) if row['kind'] in ('learned', 'evolved') else '–'} | {worlds} | {success_cell(s)} | "
+            f"{cycles_cell(s)} | {interval(s['return_mean'], s['return_lo'], s['return_hi'], 3)} |"
+        )
+    lines += ["", INTERVALS]
+    if document["notes"]:
+        lines += ["", "Notes:", "", *[f"- {n}" for n in document["notes"]]]
+    return "\n".join(lines) + "\n"
+
+
+def main(args) -> int:
+    """``proteo eval --benchmark VERSION ...`` (arguments parsed in :mod:`training.cli`)."""
+    from training.distributed import ray_options
+
+    conflicting = {
+        "--config": args.config,
+        "--seeds": args.seeds is not None,
+        "--deterministic": args.deterministic,
+        "--publish": args.publish,
+        "--pictures": args.pictures,
+        "--from-results": args.from_results,
+    }
+    given = [flag for flag, value in conflicting.items() if value]
+    if given:
+        raise ConfigError(
+            f"--benchmark with {given[0]} is not allowed (the protocol fixes the worlds and settings); allowed with "
+            "--benchmark: --checkpoint, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, "
+            "--address, --no-plots"
+        )
+    document = judge(
+        args.benchmark,
+        checkpoints=args.checkpoint or (),
+        policy=args.policy,
+        level=args.level,
+        tasks=args.tasks.split(",") if args.tasks else None,
+        out=args.out,
+        ray=ray_options(args),
+        worlds_cap=args.worlds_cap,
+        fresh=args.fresh,
+    )
+    print(markdown(document))
+    print(f"benchmark {document['protocol']}: {Path(args.out).resolve()}/benchmark.json, benchmark.md")
+    return 0
+
+
+def check_flags(args) -> None:
+    """``--policy``, ``--level`` and ``--worlds-cap`` belong to ``--benchmark``: without it, a
+    :class:`ConfigError` (so that a flag is never silently ignored)."""
+    for flag, value in (("--policy", args.policy), ("--level", args.level), ("--worlds-cap", args.worlds_cap)):
+        if value is not None:
+            raise ConfigError(
+                f"{flag} {value!r} without --benchmark is not allowed; allowed: --benchmark VERSION {flag} ..."
+            )
