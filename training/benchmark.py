@@ -512,7 +512,11 @@ def judge(
 
     protocol = load_protocol(version, root)
     if worlds_cap is not None:
-        _integer("--worlds-cap", "--worlds-cap", worlds_cap, 1, "worlds per split: a success rate needs one")
+        if isinstance(worlds_cap, bool) or not isinstance(worlds_cap, int) or worlds_cap < 1:
+            raise ConfigError(
+                f"--worlds-cap = {worlds_cap!r} is not allowed; allowed: an integer >= 1 (worlds per split and "
+                "training seed: a success rate needs at least one)"
+            )
     judged = entrants(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks)
 
     # every checkpoint loads on its task's worlds before anything is written

@@ -1,0 +1,224 @@
+"""The benchmark protocol (training/benchmark.py, configs/benchmark/v1.yaml, proteo eval --benchmark):
+the v1 file loads and is checked, bad input is one ConfigError before anything is written, every
+policy is judged on the same first world seeds, and a tiny end-to-end run (--worlds-cap) writes
+benchmark.json with the documented schema and the episodes a direct re-run gives."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from proteo_env.config import ConfigError
+from training import benchmark
+from training.benchmark import load_protocol
+
+ROOT = Path(__file__).resolve().parents[1]
+CHAIN_CHECKPOINT = "checkpoints/chain/kickstart_move/seed_0"
+STUDY_TASKS = {
+    "chain": "chain-v1",
+    "branch": "branch-v0",
+    "table": "table-v1",
+    "grasp": "grasp-v0",
+    "locomotion": "locomotion-v0",
+}
+
+
+def test_v1_loads_and_fixes_the_study():
+    import proteo_env
+
+    p = load_protocol("v1")
+    assert p.version == "v1" and "v1" in benchmark.versions()
+    assert {name: t.task_id for name, t in p.tasks.items()} == STUDY_TASKS
+    assert p.reference >= 100 and p.per_training_seed >= 20 and p.training_seeds >= 5
+    assert p.first_seed == 1000
+    for name, t in p.tasks.items():
+        splits = [s.name for s in t.splits]
+        assert splits[:2] == ["heldout", "larger"], name
+        assert t.levels == {"learned": ["move"], "rules": ["full", "move"], "random": ["move"]}
+        assert t.splits[0].env == t.env  # heldout: the training size
+        for recipe in t.recipes.values():
+            assert (ROOT / recipe["config"]).is_file()
+        for s in t.splits:
+            proteo_env.make(t.task_id, **s.env).close()  # every split's settings make an env
+    assert len(p.tasks["grasp"].splits) == 5 and len(p.tasks["chain"].splits) == 2
+
+
+def test_every_policy_takes_the_same_first_world_seeds():
+    p = load_protocol("v1")
+    rules, learned = p.worlds("hand-coded"), p.worlds("learned")
+    assert rules == 100 and learned == 20
+    assert p.world_seeds(learned) == p.world_seeds(rules)[:learned] == list(range(1000, 1020))
+    assert p.worlds("random", cap=3) == 3 and p.worlds("learned", cap=50) == 20
+
+
+def _protocol_copy(tmp_path: Path, edit) -> Path:
+    """A repository root holding configs/benchmark/v1.yaml changed by ``edit(data)``."""
+    data = yaml.safe_load((ROOT / "configs/benchmark/v1.yaml").read_text())
+    edit(data)
+    (tmp_path / "configs/benchmark").mkdir(parents=True)
+    (tmp_path / "configs/train").symlink_to(ROOT / "configs/train")
+    (tmp_path / "configs/benchmark/v1.yaml").write_text(yaml.safe_dump(data))
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    "edit, names",
+    [
+        (lambda d: d.update(extra=1), ["top level", "'extra'", "version, worlds, tasks"]),
+        (lambda d: d["worlds"].update(world=5), ["worlds", "'world'", "first_seed"]),
+        (lambda d: d["tasks"]["chain"].update(budget=1), ["tasks.chain", "'budget'", "recipes"]),
+        (lambda d: d["tasks"]["grasp"]["levels"].update(evolved=["move"]), ["tasks.grasp.levels", "'evolved'"]),
+        (
+            lambda d: d["tasks"]["table"]["recipes"]["ppo-move"].update(steps=3),
+            ["tasks.table.recipes.ppo-move", "'steps'", "agent_steps"],
+        ),
+        (lambda d: d["tasks"]["branch"]["splits"]["larger"].update(seeds=3), ["tasks.branch.splits.larger", "'seeds'"]),
+        (
+            lambda d: d["tasks"]["locomotion"]["splits"]["step1"]["env"].update(stair=1),
+            ["tasks.locomotion.splits.step1.env", "'stair'", "step_height"],
+        ),
+        (lambda d: d["tasks"].update(chian={}), ["tasks", "'chian'", "did you mean 'chain'"]),
+        (lambda d: d["tasks"]["chain"].update(task="chain-v7"), ["tasks.chain.task", "'chain-v7'", "chain-v1"]),
+        (lambda d: d["tasks"]["chain"]["levels"].update(rules=["fast"]), ["tasks.chain.levels.rules", "'fast'"]),
+        (lambda d: d["worlds"].update(reference=50), ["worlds.reference", "50", ">= 100"]),
+        (lambda d: d["worlds"].update(per_training_seed=10), ["worlds.per_training_seed", "10", ">= 20"]),
+        (lambda d: d["worlds"].update(training_seeds=1), ["worlds.training_seeds", "1", ">= 5"]),
+        (lambda d: d["tasks"]["grasp"]["splits"].pop("larger"), ["tasks.grasp.splits", "larger"]),
+        (lambda d: d.update(version="v2"), ["version", "'v2'", "'v1'"]),
+    ],
+)
+def test_bad_protocol_file_is_one_config_error_naming_the_field(tmp_path, edit, names):
+    root = _protocol_copy(tmp_path, edit)
+    with pytest.raises(ConfigError) as err:
+        benchmark.judge("v1", policy="rules", out=tmp_path / "out", root=root, progress=False)
+    for name in names:
+        assert name in str(err.value), (name, str(err.value))
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, names",
+    [
+        (["--benchmark", "v9", "--policy", "rules"], ["'v9'", "allowed: v1"]),
+        (["--benchmark", "v1", "--checkpoint", "checkpoints/chain/sb3_ppo"], ["'chain-v0'", "chain-v1"]),
+        (["--benchmark", "v1", "--checkpoint", "checkpoints/chain/imitation_full/seed_0"], ["'full'", "move"]),
+        (["--benchmark", "v1", "--policy", "ppo"], ["--policy 'ppo'", "rules, random"]),
+        (["--benchmark", "v1", "--policy", "rules", "--level", "move+mode"], ["'move+mode'", "full, move"]),
+        (["--benchmark", "v1", "--policy", "rules", "--worlds-cap", "0"], ["--worlds-cap = 0", ">= 1"]),
+        (["--benchmark", "v1", "--policy", "rules", "--tasks", "snake"], ["--tasks 'snake'", "chain"]),
+        (["--benchmark", "v1"], ["neither --checkpoint nor --policy"]),
+        (["--benchmark", "v1", "--policy", "rules", "--seeds", "3"], ["--seeds", "not allowed"]),
+        (
+            [
+                "--benchmark",
+                "v1",
+                "--checkpoint",
+                CHAIN_CHECKPOINT,
+                "--checkpoint",
+                "checkpoints/grasp/ppo_move/seed_0",
+            ],
+            ["chain, grasp", "one recipe"],
+        ),
+        (["--benchmark", "v1", "--checkpoint", CHAIN_CHECKPOINT, "--checkpoint", CHAIN_CHECKPOINT], ["twice"]),
+        (["--policy", "rules"], ["without --benchmark"]),
+    ],
+)
+def test_bad_command_line_is_one_error_and_nothing_is_written(tmp_path, capsys, monkeypatch, argv, names):
+    from training.cli import main
+
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "out"
+    assert main(["eval", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("proteo: error:") == 1
+    for name in names:
+        assert name in err, (name, err)
+    assert not out.exists()
+
+
+def _direct(source: str, task_id: str, env: dict, level: str, seed: int):
+    """One episode re-run outside the benchmark: load_controller and run_episode."""
+    from proteo_env.rollout import run_episode
+    from training import load_controller
+
+    if source.startswith("baselines."):
+        env_, policy = load_controller(f"rules:{task_id}", seed=1000, **env, control=level)
+    else:
+        env_, policy = load_controller(source, seed=1000, **env)
+    episode = run_episode(env_, policy, seed=seed)
+    env_.close()
+    return episode
+
+
+def _check_schema(doc: dict) -> None:
+    assert doc["schema"] == "proteo-benchmark-results" and doc["schema_version"] == 1
+    assert doc["protocol"] == "v1" and doc["protocol_file"] == "configs/benchmark/v1.yaml"
+    assert len(doc["protocol_sha256"]) == 64
+    for key in ("proteo_version", "commit", "created", "worlds_cap", "complete", "notes", "rows"):
+        assert key in doc
+    for row in doc["rows"]:
+        for key in ("task", "split", "about", "env", "policy", "kind", "level", "recipe", "world_seeds", "runs"):
+            assert key in row
+        for run in row["runs"]:
+            assert len(run["successes"]) == len(run["cycles"]) == len(run["returns"]) == len(row["world_seeds"])
+        s = row["summary"]
+        assert s["successes"] == sum(sum(r["successes"]) for r in row["runs"])
+        assert s["episodes"] == len(row["runs"]) * len(row["world_seeds"])
+        assert 0.0 <= s["success_lo"] <= s["success_rate"] <= s["success_hi"] <= 1.0
+
+
+def test_rules_and_a_checkpoint_end_to_end(tmp_path, monkeypatch):
+    from training.cli import main
+
+    monkeypatch.chdir(ROOT)
+    rules_out, ckpt_out = tmp_path / "rules", tmp_path / "ckpt"
+    assert main(["eval", "--benchmark", "v1", "--policy", "rules", "--tasks", "chain", "--worlds-cap", "3"]
+                + ["--out", str(rules_out)]) == 0  # fmt: skip
+    assert main(["eval", "--benchmark", "v1", "--checkpoint", CHAIN_CHECKPOINT, "--worlds-cap", "2"]
+                + ["--out", str(ckpt_out)]) == 0  # fmt: skip
+    rules = json.loads((rules_out / "benchmark.json").read_text())
+    ckpt = json.loads((ckpt_out / "benchmark.json").read_text())
+    for doc in (rules, ckpt):
+        _check_schema(doc)
+        assert doc["worlds_cap"] is not None and not doc["complete"] and doc["notes"]
+    assert "| chain-v1 | larger |" in (rules_out / "benchmark.md").read_text()
+    assert [(r["split"], r["policy"], r["level"]) for r in rules["rows"]] == [
+        ("heldout", "rules", "full"),
+        ("larger", "rules", "full"),
+        ("heldout", "rules-move", "move"),
+        ("larger", "rules-move", "move"),
+    ]
+    assert [(r["split"], r["policy"], r["recipe"], r["kind"]) for r in ckpt["rows"]] == [
+        ("heldout", "kickstart-move", "kickstart-move", "learned"),
+        ("larger", "kickstart-move", "kickstart-move", "learned"),
+    ]
+    # the same first world seeds: the policy judged on fewer worlds takes the first ones
+    for r in rules["rows"]:
+        assert r["world_seeds"] == [1000, 1001, 1002]
+    for r in ckpt["rows"]:
+        assert r["world_seeds"] == [1000, 1001] == rules["rows"][0]["world_seeds"][:2]
+        assert r["runs"][0]["training_seed"] == 0 and r["summary"]["interval"] == "wilson, t"
+    # the success and cycles recorded are those of a direct re-run of the episode
+    for doc in (rules, ckpt):
+        for row in (doc["rows"][0], doc["rows"][-1]):
+            run, seed = row["runs"][0], row["world_seeds"][-1]
+            episode = _direct(run["source"], row["task"], row["env"], row["level"], seed)
+            assert (episode.success, episode.cycles) == (run["successes"][-1], run["cycles"][-1])
+            assert row["summary"]["successes"] == sum(run["successes"])
+
+
+def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_path):
+    seeds = [f"checkpoints/chain/kickstart_move/seed_{k}" for k in (0, 1)]
+    doc = benchmark.judge(
+        "v1", checkpoints=[str(ROOT / s) for s in seeds], out=tmp_path / "out", worlds_cap=2, progress=False
+    )
+    _check_schema(doc)
+    assert len(doc["rows"]) == 2
+    for row in doc["rows"]:
+        assert [r["training_seed"] for r in row["runs"]] == [0, 1]
+        assert row["summary"]["interval"] == "stratified bootstrap" and row["summary"]["training_seeds"] == 2
+        assert not row["complete"]  # 2 training seeds of the 5 the protocol asks for
+    assert any("2 training seed(s)" in n for n in doc["notes"])
