@@ -153,9 +153,13 @@ def test_lattice_actor_is_one_encoder_shared_by_the_directions():
     assert int(change.argmax()) == 5
 
 
+@pytest.mark.slow  # about 30 s of training
 def test_the_learner_improves_on_a_small_chain(tmp_path):
-    """Move-level chain of 12 modules (the training size): after ~20 s of training the learned moves
-    earn more than random moves under the rules, by more than 3 standard errors, and finish sooner."""
+    """Move-level chain of 12 modules (the training size): after 1.2 M agent-steps the learned moves
+    earn more than random moves under the rules, by more than 3 standard errors, and finish sooner.
+    (Measured over training seeds 0-3: gaps 0.80-0.94 against 0.23-0.39 needed. At 0.6 M steps
+    seeds 0 and 1 failed, and with the former world streams seed 1 failed too: that budget held
+    for some seeds only.)"""
     env = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
     final = ppo.main(
         [
@@ -166,7 +170,7 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
             "--env",
             json.dumps(env),
             "--total-steps",
-            "600000",
+            "1200000",
             "--time-limit-minutes",
             "0",
             "--run-dir",
