@@ -37,14 +37,14 @@ bench: install
 	$(BIN)/python benchmarks/mobility.py
 
 eval: install
-	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/guides/learning.md
+	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
 # The multi-seed study at control level move (python -m training.study): plain PPO (16 M
 # agent-steps per run), then the clones of the rules (training/imitate.py) and PPO kickstarted
 # from them (6 M agent-steps), three training seeds each, about 80 minutes on 2 cores; then its
 # evaluation: the table with the spread over training seeds goes into docs/eval/study,
-# docs/guides/learning.md and README.md; the same checkpoints at twice their size into
-# docs/eval/study_larger and docs/guides/learning.md.
+# docs/journal/learning-study-move.md and README.md; the same checkpoints at twice their size into
+# docs/eval/study_larger and docs/journal/learning-study-move.md.
 learning-results: install
 	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
 	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
@@ -53,11 +53,11 @@ learning-results: install
 	$(BIN)/python -m training.study --recipes "[curriculum]" --tasks "[chain, table, grasp, locomotion]" --minutes 0 --parallel 2
 	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" --minutes 0 --parallel 2
 	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
-		--publish docs/guides/learning.md --publish README.md
+		--publish docs/journal/learning-study-move.md --publish README.md
 	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \
-		--publish docs/guides/learning.md
+		--publish docs/journal/learning-study-move.md
 	$(BIN)/proteo eval --config configs/eval_study_larger_curriculum.yaml --tasks chain,table,grasp,locomotion \
-		--out docs/eval/study_larger_curriculum --pictures --publish docs/guides/learning.md
+		--out docs/eval/study_larger_curriculum --pictures --publish docs/journal/learning-curriculum-credit.md
 
 # One task of the study, every recipe (make learning-task TASK=grasp, about 15 minutes; table's 48 M-step
 # curriculum adds half an hour): its checkpoints and curves are replaced; the evaluation goes to
