@@ -90,7 +90,7 @@ def seed_everything(seed: int, *, threads: int | None = 1) -> None:
     One thread is the right default on these 2-core machines: with two, OpenMP (torch) and
     numba worker threads spin against each other and against the other core's work; a small
     MLP's forward pass measured 20 times slower, a 12-module environment step 100 times
-    slower (see docs/guides/learning.md).
+    slower (docs/journal/throughput-training.md).
     """
     random.seed(seed)
     np.random.seed(seed)

@@ -88,7 +88,7 @@ SAMPLED = ("all", "move")
 ``move`` only. A clone of the rules (:mod:`training.imitate`) at ``move+mode`` or ``full``
 samples its moves, as the rules' random moves do, and takes the arg-max of the mode, scent
 roles and messages, which the rules choose deterministically: one sampled slip in a seed's
-mode or its broadcast breaks the structure (docs/guides/learning.md)."""
+mode or its broadcast breaks the structure (docs/journal/learning-memory-full-action.md)."""
 
 
 def check_sampled(sampled) -> str:

@@ -2,7 +2,7 @@
 
 TorchRL's ``PettingZooWrapper`` works on :class:`~proteo_env.env.ProteoEnv` too, but it goes
 through per-agent dicts every cycle; this env reads ``env.observe_arrays()`` and calls
-``env.step_arrays()`` directly (docs/guides/learning.md compares the two speeds).
+``env.step_arrays()`` directly (docs/journal/learning-first-round.md compares the two).
 
 Batch size ``(n_copies,)``; the ``A`` modules of a copy form the agent group ``"agents"``:
 
