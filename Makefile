@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint bench eval learning-results learning-task
+.PHONY: install install-distributed demo test test-all lint results bench eval learning-results learning-task
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -35,6 +35,11 @@ lint: install
 bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
+
+# docs/results.md: every controller judged under benchmark protocol v1 (docs/benchmark/v1, written by
+# proteo eval --benchmark v1; docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
+results: install
+	$(BIN)/python -m training.results --benchmark v1
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md

@@ -1,0 +1,107 @@
+"""The results page (training/results.py): built from benchmark.json files, it states a
+difference only where the intervals allow one."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from proteo_env.config import ConfigError
+from training import results
+from training.benchmark import load_protocol
+from training.statistics import group_bootstrap, wilson
+
+
+def _summary(runs: list[dict]) -> dict:
+    wins = sum(sum(r["successes"]) for r in runs)
+    n = sum(len(r["successes"]) for r in runs)
+    cycles = [c for r in runs for c, s in zip(r["cycles"], r["successes"]) if s]
+    if len(runs) == 1:
+        lo, hi = wilson(wins, n)
+        clo, chi = (min(cycles), max(cycles)) if cycles else (float("nan"), float("nan"))
+        return {
+            "episodes": n,
+            "successes": wins,
+            "success_rate": wins / n,
+            "success_lo": lo,
+            "success_hi": hi,
+            "cycles_to_success": float(np.mean(cycles)) if cycles else float("nan"),
+            "cycles_lo": clo,
+            "cycles_hi": chi,
+        }
+    boot = group_bootstrap([r["successes"] for r in runs], [r["cycles"] for r in runs])
+    return {"episodes": n, "successes": wins, **boot}
+
+
+def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dict) -> None:
+    """A benchmark.json of one policy: ``per_split`` maps a split to a list of runs' success lists."""
+    rows = []
+    for split, runs in per_split.items():
+        run_dicts = [
+            {"successes": s, "cycles": [50 if ok else 300 for ok in s], "returns": [0.0] * len(s)} for s in runs
+        ]
+        rows.append(
+            {
+                "task_name": task,
+                "split": split,
+                "policy": policy,
+                "kind": kind,
+                "level": level,
+                "world_seeds": list(range(1000, 1000 + len(runs[0]))),
+                "runs": run_dicts,
+                "summary": _summary(run_dicts),
+            }
+        )
+    out = folder / task / policy
+    out.mkdir(parents=True)
+    (out / "benchmark.json").write_text(json.dumps({"commit": "abc", "rows": rows}))
+
+
+def _bench(tmp_path, learned_rate: float):
+    """Grasp: rules 90/100, random 0/100, a recipe of 5 seeds x 20 worlds at ``learned_rate``."""
+    folder = tmp_path / "bench" / "v1"
+    rules = [[True] * 90 + [False] * 10]
+    _write(folder, "grasp", "rules", "hand-coded", "full", {"heldout": rules, "larger": rules})
+    _write(folder, "grasp", "random", "random", "move", {"heldout": [[False] * 100], "larger": [[False] * 100]})
+    k = int(round(learned_rate * 20))
+    seeds = [[True] * k + [False] * (20 - k) for _ in range(5)]
+    _write(folder, "grasp", "clone", "learned", "move", {"heldout": seeds, "larger": seeds})
+    return folder
+
+
+def test_a_recipe_below_the_rules_is_said_to_be_below(tmp_path):
+    folder = _bench(tmp_path, 0.3)
+    rows, headers = results.read_rows(folder)
+    text = results.render(
+        rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
+    )
+    assert "clone succeeds below the rules: 0.30" in text
+    assert "| clone (move, 5 seeds) | 30/100 (" in text
+    assert (tmp_path / "docs" / "results" / "profiles.png").is_file()
+
+
+def test_overlapping_intervals_are_no_detectable_difference(tmp_path):
+    folder = _bench(tmp_path, 0.85)
+    rows, headers = results.read_rows(folder)
+    text = results.render(
+        rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
+    )
+    assert "clone: no detectable difference in success from the rules" in text
+    assert "above the rules" not in text and "below the rules" not in text
+
+
+def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
+    """Every seed at 0.85 against rules 0.9 and random 0: every score 0.85 / 0.9, so the IQM is
+    that; the rules' first 20 worlds are all successes, so no seed beats them."""
+    rows, _ = results.read_rows(_bench(tmp_path, 0.85))
+    agg = results.aggregate(rows, per_training_seed=20)["clone"]
+    assert agg["scores"].shape == (5, 2)
+    assert agg["iqm"][0] == pytest.approx(0.85 / 0.9)
+    assert agg["improvement"][0] == pytest.approx(0.0)
+
+
+def test_a_folder_without_results_is_one_clear_error(tmp_path):
+    with pytest.raises(ConfigError, match="holds no benchmark.json"):
+        results.read_rows(tmp_path)

@@ -1,0 +1,346 @@
+"""The results page: every controller judged under a benchmark protocol, on one page.
+
+    python -m training.results                       # docs/benchmark/v1 -> docs/results.md (make results)
+    python -m training.results --benchmark v1 --root docs/benchmark --out docs/results.md
+
+It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
+``ROOT/VERSION/`` (one folder per task and policy, :mod:`training.benchmark`) and the training
+progress of the protocol's learned runs (``ROOT/VERSION/learning/progress/<recipe>_<task>_<level>_s<k>.csv``,
+written by ``python -m training.study --keep-dir checkpoints/VERSION --docs-dir ROOT/VERSION/learning``),
+and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``results/``:
+
+- a short answer at the top, in sentences that say only what the intervals support: a
+  difference is claimed only where two 95 % intervals do not overlap, otherwise "no detectable
+  difference";
+- per task, one table: a row per policy, a column per split, each cell the successes with the
+  95 % interval of the success rate and the mean cycles to success with its interval (Wilson
+  and Student t for one run, the stratified bootstrap over training seeds and worlds for a
+  learned recipe: :mod:`training.statistics`);
+- the aggregate over tasks and splits, after rliable: the interquartile mean of the normalised
+  score (rules at ``full`` = 1, random = 0, on the 100 reference worlds) over training seeds x
+  (task, split) with its bootstrap interval; the probability that a training seed of a recipe
+  beats the rules on the same worlds (its first ``per_training_seed`` worlds), with its
+  interval; performance profiles (``results/profiles.png``);
+- learning curves: the training success rate against agent-steps, the mean over training seeds
+  with a 95 % t band (``results/curves_<task>.png``).
+
+Every number comes from the files; nothing is typed in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from proteo_env.config import ConfigError
+from training import statistics as st
+
+RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
+"""The policy names of the reference rows in ``benchmark.json``."""
+
+
+@dataclass
+class Row:
+    """One policy on one split of one task, from a ``benchmark.json`` row."""
+
+    task: str
+    split: str
+    policy: str
+    kind: str
+    level: str
+    world_seeds: list
+    runs: list
+    summary: dict
+
+    @property
+    def rates(self) -> np.ndarray:
+        """``(runs,)``: each training seed's (or the single run's) success rate."""
+        return np.array([np.mean(r["successes"]) for r in self.runs])
+
+    def rates_on_first(self, n: int) -> np.ndarray:
+        """``(runs,)``: each run's success rate on its first ``n`` worlds."""
+        return np.array([np.mean(r["successes"][:n]) for r in self.runs])
+
+
+def read_rows(folder: Path) -> tuple[list[Row], list[dict]]:
+    """Every row of every ``benchmark.json`` below ``folder``, and each file's header."""
+    rows, headers = [], []
+    files = sorted(folder.rglob("benchmark.json"))
+    if not files:
+        raise ConfigError(
+            f"benchmark folder {str(folder)!r} holds no benchmark.json; allowed: a folder written by "
+            "proteo eval --benchmark VERSION --out FOLDER/<task>/<policy>"
+        )
+    for file in files:
+        data = json.loads(file.read_text())
+        headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
+        for r in data["rows"]:
+            rows.append(
+                Row(
+                    task=r["task_name"],
+                    split=r["split"],
+                    policy=r["policy"],
+                    kind=r["kind"],
+                    level=r["level"],
+                    world_seeds=r["world_seeds"],
+                    runs=r["runs"],
+                    summary=r["summary"],
+                )
+            )
+    return rows, headers
+
+
+def _interval(lo: float, hi: float, digits: int = 2) -> str:
+    return f"{lo:.{digits}f}-{hi:.{digits}f}" if np.isfinite(lo) and np.isfinite(hi) else "-"
+
+
+def cell(row: Row) -> str:
+    """``k/n (lo-hi), c (lo-hi)``: successes with the interval of the rate, cycles with theirs."""
+    s = row.summary
+    text = f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
+    if s["successes"]:
+        text += f", {s['cycles_to_success']:.0f} ({_interval(s['cycles_lo'], s['cycles_hi'], 0)})"
+    return text
+
+
+def overlap(a: dict, b: dict, low: str = "success_lo", high: str = "success_hi") -> bool:
+    """Whether two summaries' intervals overlap (no detectable difference)."""
+    return not (a[high] < b[low] or b[high] < a[low])
+
+
+def compare(name: str, row: Row, rules: Row) -> str:
+    """One sentence comparing a learned recipe with the rules on a split, as the intervals allow."""
+    a, b = row.summary, rules.summary
+    rate = f"{a['success_rate']:.2f} ({_interval(a['success_lo'], a['success_hi'])})"
+    ref = f"{b['success_rate']:.2f} ({_interval(b['success_lo'], b['success_hi'])})"
+    if not overlap(a, b):
+        verdict = "above the rules" if a["success_rate"] > b["success_rate"] else "below the rules"
+        return f"{name} succeeds {verdict}: {rate} against {ref}"
+    text = f"{name}: no detectable difference in success from the rules, {rate} against {ref}"
+    if a["successes"] >= 2 and b["successes"] >= 2 and not overlap(a, b, "cycles_lo", "cycles_hi"):
+        faster = "fewer" if a["cycles_to_success"] < b["cycles_to_success"] else "more"
+        text += (
+            f", in {faster} cycles ({a['cycles_to_success']:.0f}, {_interval(a['cycles_lo'], a['cycles_hi'], 0)}, "
+            f"against {b['cycles_to_success']:.0f}, {_interval(b['cycles_lo'], b['cycles_hi'], 0)})"
+        )
+    return text
+
+
+def aggregate(rows: list[Row], per_training_seed: int) -> dict[str, dict]:
+    """Per learned recipe: normalised scores ``(training seeds, task-splits)`` and the aggregate
+    statistics (IQM, probability of improvement over the rules, the task-splits used)."""
+    by_key = {(r.task, r.split, r.policy): r for r in rows}
+    recipes = sorted({r.policy for r in rows if r.kind in ("learned", "evolved")})
+    out = {}
+    for recipe in recipes:
+        pairs = sorted({(r.task, r.split) for r in rows if r.policy == recipe})
+        pairs = [p for p in pairs if (*p, RULES) in by_key and (*p, RANDOM) in by_key]
+        if not pairs:
+            continue
+        learned = [by_key[(*p, recipe)] for p in pairs]
+        n_runs = min(len(r.runs) for r in learned)
+        rates = np.stack([r.rates[:n_runs] for r in learned], axis=1)  # (runs, task-splits)
+        rules = np.array([by_key[(*p, RULES)].rates[0] for p in pairs])
+        random = np.array([by_key[(*p, RANDOM)].rates[0] for p in pairs])
+        scores = st.normalized_score(rates, random, rules)
+        same_worlds = np.array([by_key[(*p, RULES)].rates_on_first(per_training_seed)[0] for p in pairs])[None, :]
+        entry = {"pairs": pairs, "scores": scores, "training_seeds": n_runs}
+        try:
+            entry["iqm"] = st.iqm_ci(scores)
+            entry["improvement"] = st.probability_of_improvement_ci(rates, same_worlds)
+        except ValueError as error:  # no task-split where the rules and random differ
+            entry["error"] = str(error)
+        out[recipe] = entry
+    return out
+
+
+def _profiles(agg: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    taus = np.linspace(-0.25, 1.5, 71)
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    for recipe, entry in agg.items():
+        if "error" in entry:
+            continue
+        profile, lo, hi = st.performance_profile(entry["scores"], taus)
+        ax.plot(taus, profile, label=recipe)
+        ax.fill_between(taus, lo, hi, alpha=0.2)
+    ax.axvline(1.0, color="grey", linestyle="--", linewidth=0.8)
+    ax.set_xlabel("normalised score tau (random = 0, rules = 1)")
+    ax.set_ylabel("fraction of runs x splits above tau")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def curves(progress: Path, task: str) -> dict[str, list[np.ndarray]]:
+    """Per recipe of ``task``: the training seeds' ``(agent_steps, success)`` arrays."""
+    from training.plots import read_progress
+
+    found = defaultdict(list)
+    for csv in sorted(progress.glob(f"*_{task}_*_s*.csv")):
+        recipe = csv.stem.split(f"_{task}_")[0]
+        data = read_progress(csv)
+        keep = np.isfinite(data["episode/success"])
+        found[recipe].append(np.stack([data["agent_steps"][keep], data["episode/success"][keep]]))
+    return dict(found)
+
+
+def _curve_figure(task: str, found: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.4))
+    for recipe, runs in sorted(found.items()):
+        end = min(r[0, -1] for r in runs)
+        grid = np.linspace(max(r[0, 0] for r in runs), end, 60)
+        ys = np.stack([np.interp(grid, r[0], r[1]) for r in runs])
+        mean = ys.mean(axis=0)
+        if len(runs) > 1:
+            half = st.t_quantile(len(runs) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(runs))
+            ax.fill_between(grid / 1e6, mean - half, mean + half, alpha=0.2)
+        ax.plot(grid / 1e6, mean, label=f"{recipe} ({len(runs)} seeds)")
+    ax.set_xlabel("agent-steps (millions)")
+    ax.set_ylabel("training success rate")
+    ax.set_title(task)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _policy_order(policies) -> list[str]:
+    first = [p for p in (RULES, RULES_MOVE, RANDOM) if p in policies]
+    return first + sorted(p for p in policies if p not in first)
+
+
+def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
+    """The page's markdown (figures written beside ``out``); ``protocol`` a
+    :class:`training.benchmark.Protocol`."""
+    figures = out.parent / "results"
+    figures.mkdir(parents=True, exist_ok=True)
+    tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
+    by_key = {(r.task, r.split, r.policy): r for r in rows}
+    agg = aggregate(rows, protocol.per_training_seed)
+
+    answer = []
+    for recipe, entry in agg.items():
+        if "error" in entry:
+            continue
+        m, lo, hi = entry["iqm"]
+        p, plo, phi = entry["improvement"]
+        tasks_of = sorted({t for t, _ in entry["pairs"]})
+        answer.append(
+            f"- **{recipe}** ({entry['training_seeds']} training seeds; {', '.join(tasks_of)}): IQM normalised score "
+            f"{m:.2f} ({lo:.2f}-{hi:.2f}), rules = 1; P(a training seed beats the rules on the same worlds) "
+            f"{p:.2f} ({plo:.2f}-{phi:.2f})."
+        )
+    for task in tasks:
+        for recipe in sorted({r.policy for r in rows if r.task == task and r.kind in ("learned", "evolved")}):
+            if (task, "heldout", recipe) in by_key and (task, "heldout", RULES) in by_key:
+                answer.append(
+                    f"- {task}, held-out worlds: "
+                    + compare(recipe, by_key[(task, "heldout", recipe)], by_key[(task, "heldout", RULES)])
+                    + "."
+                )
+    commits = sorted({h.get("commit") or "unknown" for h in headers})
+    lines = [
+        "# Results",
+        "",
+        f"Every controller judged under benchmark protocol **{version}** "
+        f"([configs/benchmark/{version}.yaml](../configs/benchmark/{version}.yaml), "
+        "[the guide](guides/benchmark.md)): the rules and random on "
+        f"{protocol.reference} worlds per split, a learned recipe on {protocol.per_training_seed} worlds per "
+        f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
+        f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
+        "Regenerate: `make results` (`python -m training.results`).",
+        "",
+        "## The short answer",
+        "",
+        *(answer or ["- No learned or evolved recipe has been judged under this protocol yet."]),
+        "",
+        "A difference is stated only where the two intervals do not overlap.",
+        "",
+    ]
+    for task in tasks:
+        about = {split.name: split.about for split in protocol.tasks[task].splits}
+        splits = [s for s in about if any(r.task == task and r.split == s for r in rows)]
+        policies = _policy_order({r.policy for r in rows if r.task == task})
+        lines += [f"## {task} ({protocol.tasks[task].task_id})", ""]
+        lines += ["| policy | " + " | ".join(splits) + " |", "|---|" + "---|" * len(splits)]
+        for policy in policies:
+            some = next(r for r in rows if r.task == task and r.policy == policy)
+            seeds = f", {len(some.runs)} seeds" if some.kind in ("learned", "evolved") else ""
+            cells = [cell(by_key[(task, s, policy)]) if (task, s, policy) in by_key else "-" for s in splits]
+            lines.append(f"| {policy} ({some.level}{seeds}) | " + " | ".join(cells) + " |")
+        lines += [
+            "",
+            "Each cell: successes / worlds (95 % interval of the success rate), mean cycles to success (its interval).",
+            "",
+        ]
+        lines += [f"- `{s}`: {about[s]}" for s in splits]
+        lines.append("")
+        found = curves(root / version / "learning" / "progress", task)
+        if found:
+            picture = figures / f"curves_{task}.png"
+            _curve_figure(task, found, picture)
+            lines += [
+                f"![Training success of {task}: mean over training seeds with a 95 % band](results/{picture.name})",
+                "",
+            ]
+    usable = {k: v for k, v in agg.items() if "error" not in v}
+    if usable:
+        _profiles(usable, figures / "profiles.png")
+        lines += [
+            "## Aggregate",
+            "",
+            "Normalised score per training seed and task-split: (rate - random) / (rules - random) on the "
+            "reference worlds; IQM: the mean of the middle half of runs x task-splits; P(improvement): the "
+            "probability that a training seed's success on the first worlds of a split exceeds the rules' on "
+            "the same worlds (ties count half), averaged over task-splits. Stratified bootstrap intervals.",
+            "",
+            "| recipe | training seeds | task-splits | IQM (95 % interval) | P(beats the rules) (95 % interval) |",
+            "|---|---|---|---|---|",
+        ]
+        for recipe, entry in usable.items():
+            m, lo, hi = entry["iqm"]
+            p, plo, phi = entry["improvement"]
+            lines.append(
+                f"| {recipe} | {entry['training_seeds']} | {len(entry['pairs'])} | {m:.2f} ({lo:.2f}-{hi:.2f}) | "
+                f"{p:.2f} ({plo:.2f}-{phi:.2f}) |"
+            )
+        lines += ["", "![Performance profiles with bootstrap bands](results/profiles.png)", ""]
+    lines += [f"Judged by commit(s): {', '.join(c[:10] for c in commits)}.", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    from training.benchmark import load_protocol
+
+    parser = argparse.ArgumentParser(prog="python -m training.results", description=__doc__.splitlines()[0])
+    parser.add_argument("--benchmark", default="v1", help="protocol version (configs/benchmark/<version>.yaml)")
+    parser.add_argument("--root", default="docs/benchmark", help="folder holding <version>/<task>/<policy>/")
+    parser.add_argument("--out", default="docs/results.md", help="the page to write")
+    args = parser.parse_args(argv)
+    protocol = load_protocol(args.benchmark)
+    root, out = Path(args.root), Path(args.out)
+    rows, headers = read_rows(root / args.benchmark)
+    text = render(rows, headers, args.benchmark, root, out, protocol)
+    out.write_text(text)
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
