@@ -29,25 +29,23 @@ import torch
 import yaml
 
 from training.common import seed_everything
+from training.networks import ActorCritic, masked_log_probs, teacher_cross_entropy
 from training.policies import with_memory
-from training.ppo import ActorCritic, TrainingEnvs, masked_log_probs, teacher_cross_entropy
 from training.teachers import Teachers
+from training.worlds import TrainingEnvs
 
 
 def collect(task: str, env: dict, n_envs: int, cycles: int, seed: int) -> dict[str, np.ndarray]:
     """Samples of rules-driven worlds: features, masks, labels, previous moves and the rules' memory."""
-    worlds = TrainingEnvs(
-        SimpleNamespace(task=task, control="move", env=env, n_envs=n_envs, n_groups=1, message_encoding="compact"),
-        env_seed=seed,
-    )
-    teachers = Teachers(worlds.groups[0], worlds.n_envs, seed=seed)
+    worlds = TrainingEnvs(task, "move", env, n_envs, seed)
+    teachers = Teachers(worlds.batch, worlds.n_envs, seed=seed)
     n = worlds.n_envs * worlds.n_agents
     features, mask = np.zeros((n, worlds.size), np.float32), np.zeros((n, 13), bool)
     out: dict[str, list] = {k: [] for k in ("x", "mask", "label", "previous", "heading", "growth", "asked")}
     for _ in range(cycles):
         worlds.encode(features, mask)
         memory = [p.memory_rows(range(worlds.n_agents)) for p in teachers.policies]
-        labels = teachers.labels(worlds.buffers)
+        labels = teachers.labels([worlds.buffers])
         keep = (mask.sum(axis=1) > 1) & mask[np.arange(n), labels[:, 0]]
         previous = worlds.previous_actions[:, 0]
         for name, value in (("x", features), ("mask", mask), ("label", labels), ("previous", previous)):

@@ -21,11 +21,8 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
    at ``move`` with the distillation term of kickstarting on (``distill_coef=1``: the rules
    label every module every cycle; their time counts as forward passes), with
    ``memory=last_move`` (the previous move as 13 more inputs), with ``value_norm`` (the critic
-   on scaled returns), with ``recurrent=64`` (a GRU state per module, the update
-   back-propagating through each rollout's cycles) and with ``n_envs=256`` (four times the
-   worlds per forward pass), and at ``full`` with ``memory=last_action`` (the whole previous
-   action as inputs) and ``memory=last_action+clock`` (and the cycles in the module's mode), in
-   the same run. With ``--devices cpu cuda`` each of these runs on every device in turn (the
+   on scaled returns) and with ``n_envs=256`` (four times the worlds per forward pass), and at
+   ``full`` with ``memory=last_action`` (the whole previous action as inputs), in the same run. With ``--devices cpu cuda`` each of these runs on every device in turn (the
    environment stays on the CPU; the networks, their forward passes and updates move). The machine's description
    (CPU model, torch's vector instruction set, the GPU's name, load average) is written beside
    the figures.
@@ -148,7 +145,7 @@ def ppo_training(
 
     # a long run's steady state: the rules of every world in one call (compiled in the warm-up)
     batched.ONE_CALL_AFTER = 0
-    base = parse_args(ppo.Args, ["--config", config]) if Path(config).is_file() else ppo.Args()
+    base = parse_args(ppo.Args, ["--config", config], retired=ppo.RETIRED) if Path(config).is_file() else ppo.Args()
     with tempfile.TemporaryDirectory() as tmp:
         args = dataclasses.replace(
             base,
@@ -181,7 +178,6 @@ def ppo_training(
         "arch": args.arch,
         "hidden": list(args.hidden),
         "n_envs": args.n_envs,
-        "n_groups": args.n_groups,
         "n_steps": args.n_steps,
         "minibatch_size": args.minibatch_size,
         "n_epochs": args.n_epochs,
@@ -299,10 +295,8 @@ def main(argv=None) -> int:
             ("move, distillation term", {"distill_coef": 1.0, "distill_steps": 0}),
             ("move, memory=last_move", {"memory": "last_move"}),
             ("move, value_norm", {"value_norm": True}),
-            ("move, recurrent=64 (GRU)", {"recurrent": 64}),
             ("move, n_envs=256", {"n_envs": 256}),
             ("full, memory=last_action", {"memory": "last_action"}),
-            ("full, memory=last_action+clock", {"memory": "last_action+clock"}),
         ]
     result["ppo"] = {}
     for name, variant in runs:  # the devices alternate, so that each pair shares the machine's state

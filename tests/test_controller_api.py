@@ -254,7 +254,7 @@ def test_proteo_train_ppo_writes_a_checkpoint_with_its_provenance(tmp_path, monk
     monkeypatch.chdir(ROOT)
     run_dir = tmp_path / "run"
     flags = ["--task", "chain-v1", "--control", "move", "--env", "{n_modules: 6, max_cycles: 20}"]
-    flags += ["--n-envs", "2", "--n-groups", "2", "--n-steps", "8", "--minibatch-size", "32"]
+    flags += ["--n-envs", "2", "--n-steps", "8", "--minibatch-size", "32"]
     flags += ["--total-steps", "96", "--checkpoint-every", "96", "--run-dir", str(run_dir)]
     flags += ["--tensorboard", "false", "--progress-bar", "false"]
     assert cli_main(["train", "ppo", *flags]) == 0

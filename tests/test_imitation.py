@@ -237,49 +237,6 @@ def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_
         assert np.flatnonzero(block).tolist() == (starts + np.asarray(first[agent])).tolist()
 
 
-def test_clock_memory_counts_the_cycles_each_module_has_kept_its_mode_in_training_and_in_the_policy():
-    from training.policies import CLOCK_STEPS, LogitsPolicy, check_memory
-
-    assert check_memory("clock") == len(CLOCK_STEPS) == 60
-    assert check_memory("last_action+clock", [13, 4, 3]) == 20 + 60
-    args = ppo.Args(task="chain-v0", control="move", env={**SMALL_ENV, "max_cycles": 12}, n_envs=2, memory="clock")
-    worlds = ppo.TrainingEnvs(args, env_seed=4)
-    n, size = worlds.n_envs * worlds.n_agents, worlds.encoder.size
-    assert worlds.size == size + 60
-    seen = []
-
-    def logits_fn(features):
-        seen.append(features.copy())
-        return np.zeros((len(features), 13))
-
-    policy = LogitsPolicy(
-        worlds.groups[0].action_layout,
-        worlds.groups[0].task.modes,
-        seed=1,
-        encoder=worlds.encoder,
-        logits_fn=logits_fn,
-        nvec=[13],
-        memory="clock",
-    )
-    features, move_mask = np.zeros((n, worlds.size), dtype=np.float32), np.zeros((n, 13), dtype=bool)
-    expected, last_mode, finished, changes = np.zeros(n, dtype=np.int64), None, [], 0
-    for _ in range(30):
-        worlds.encode(features, move_mask)
-        modes = np.concatenate([b.own_mode.reshape(-1) for b in worlds.buffers]).astype(np.int64)
-        if last_mode is not None:
-            expected = np.where(modes == last_mode, expected + 1, 0)
-            changes += int((modes != last_mode).sum())
-        assert (features[:, size:] == (expected[:, None] >= CLOCK_STEPS)).all()
-        moves = policy.act_arrays(features[:, :size], move_mask)  # the same count, kept by row
-        np.testing.assert_array_equal(seen[-1][:, size:], features[:, size:])
-        _, terminal, truncated = worlds.step(moves.reshape(worlds.n_envs, worlds.n_agents, 1), finished)
-        ended = np.repeat(terminal | truncated, worlds.n_agents)
-        policy.forget(np.flatnonzero(ended))
-        last_mode = np.where(ended, -1, modes)
-        expected[ended] = 0
-    assert finished and changes and expected.max() >= 3  # episodes restarted, modes changed, counts grew
-
-
 def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_path):
     clone = tiny_clone(tmp_path / "memory", "--memory", "last_move", "--rounds", "0")
     meta = read_meta(clone)

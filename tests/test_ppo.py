@@ -34,8 +34,6 @@ def tiny_run(run_dir, *extra: str, steps: int = 3000):
         "3",
         "--n-envs",
         "8",
-        "--n-groups",
-        "8",
         "--n-steps",
         "16",
         "--minibatch-size",
@@ -77,7 +75,7 @@ def test_checkpoint_loads_and_proteo_eval_runs_it_at_its_level(trained, tmp_path
     )
     learned = [r.summary() for r in rows if r.kind == "learned"]
     assert len(learned) == 1 and learned[0]["level"] == "move" and learned[0]["episodes"] == 2
-    assert "ppo-mlp" in (tmp_path / "eval" / "results.md").read_text()
+    assert "ppo-shared" in (tmp_path / "eval" / "results.md").read_text()
 
 
 def test_checkpoint_of_another_task_or_level_is_refused_naming_both(trained):
@@ -112,45 +110,24 @@ def test_same_seed_same_first_update(tmp_path):
 
 
 def test_bad_arguments_are_refused(tmp_path):
-    with pytest.raises(ValueError, match="arch='conv'.*allowed: mlp, lattice, shared"):
+    with pytest.raises(ValueError, match="arch='conv'.*allowed: shared, mlp"):
         tiny_run(tmp_path / "a", "--arch", "conv")
-    with pytest.raises(ValueError, match="n_groups=3.*n_envs=8"):
-        tiny_run(tmp_path / "b", "--n-groups", "3")
+    config = tmp_path / "old.yaml"
+    config.write_text("n_groups: 3\n")  # a removed option, at another value than the one that did nothing
+    with pytest.raises(ValueError, match="n_groups"):
+        tiny_run(tmp_path / "b", "--config", str(config))
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
-def test_learning_rate_and_entropy_coefficient_fall_linearly_to_their_final_values(tmp_path):
-    final = tiny_run(tmp_path / "run", "--learning-rate-final", "0", "--ent-coef-final", "0.002", steps=3000)
-    with (final.parent / "progress.csv").open() as fh:
-        rows = list(csv.DictReader(fh))
-    steps = [float(r["agent_steps"]) for r in rows]
-    rates = [float(r["loss/learning_rate"]) for r in rows]
-    coefs = [float(r["loss/ent_coef"]) for r in rows]
-    assert rates[0] == 1e-3 and coefs[0] == 0.01  # the first update runs at the start values
-    assert all(b < a for a, b in zip(rates, rates[1:])) and all(b < a for a, b in zip(coefs, coefs[1:]))
-    for s, rate, coef in zip(steps[1:], rates[1:], coefs[1:]):  # each update uses the values at its start
-        done = min(1.0, steps[steps.index(s) - 1] / 3000)
-        assert math.isclose(rate, 1e-3 * (1 - done)) and math.isclose(coef, 0.01 + (0.002 - 0.01) * done)
-    constant = ppo.Args(total_steps=1000)
-    assert constant.annealed("learning_rate", 900) == 1e-3 and constant.annealed("ent_coef", 900) == 0.01
-    with pytest.raises(ValueError, match=r"ent_coef_final=-0.1 is not allowed; allowed: a number >= 0.0"):
-        ppo.Args(ent_coef_final=-0.1)
-
-
-def test_lattice_actor_is_one_encoder_shared_by_the_directions():
-    env = proteo_env.make("chain-v0", control="move+mode", **SMALL_ENV)
-    from proteo_env.adapters.flatten import ObservationEncoder
-
-    encoder = ObservationEncoder.for_env(env)
-    net = ppo.ActorCritic(encoder, env.control_nvec, "lattice", (16, 16))
-    observations, _ = env.reset(seed=1)
-    x = torch.from_numpy(encoder.encode_observations(observations))
-    assert net.logits(x).shape == (len(observations), 13 + len(env.task.modes))
-    # the move logit of direction k reads direction k's token: changing one site changes mostly its own logit
-    token = net.actor.token_columns.reshape(12, -1)
-    y = x.clone()
-    y[:, token[5]] += 1.0
-    change = (net.logits(y) - net.logits(x))[:, 1:13].abs().mean(dim=0)
-    assert int(change.argmax()) == 5
+def test_a_checkpoint_saved_with_the_removed_options_at_their_neutral_values_resumes(tmp_path):
+    first = tiny_run(tmp_path / "run", steps=1)
+    saved = yaml.safe_load((first / "args.yaml").read_text())
+    saved.update(ppo.RETIRED)
+    (first / "args.yaml").write_text(yaml.safe_dump(saved))
+    final = ppo.main(
+        ["--resume", str(first), "--total-steps", "1000", "--tensorboard", "false", "--progress-bar", "false"]
+    )
+    assert read_meta(final)["agent_steps"] >= 1000
 
 
 @pytest.mark.slow  # about 30 s of training
@@ -206,15 +183,14 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
     restarts its world at once (reset() without a seed), and the features of its last
     observation are kept for the value bootstrap."""
     env = {"n_modules": 8, "max_cycles": 5}
-    args = ppo.Args(task="chain-v1", control="move", env=env, n_envs=3, n_groups=1, message_encoding="compact")
-    worlds = ppo.TrainingEnvs(args, env_seed=11)
+    worlds = ppo.TrainingEnvs("chain-v1", "move", env, 3, 11)
     singles = [proteo_env.make("chain-v1", control="move", **env) for _ in range(3)]
     for w, single in enumerate(singles):
         single.reset(seed=world_seeds(11, 3)[w])
     a, enc, rng = worlds.n_agents, worlds.encoder, np.random.default_rng(0)
     n_truncated = 0
     for _ in range(1, 8):
-        mask = np.concatenate([b.action_mask for b in worlds.buffers]).astype(bool)
+        mask = worlds.buffers.action_mask.astype(bool)
         moves = np.argmax(mask * rng.random(mask.shape), axis=1).reshape(3, a, 1)
         finished = []
         reward, terminal, truncated = worlds.step(moves, finished)
@@ -228,26 +204,26 @@ def test_worlds_restart_alone_and_keep_the_last_observation_of_a_truncated_episo
             if ended:
                 single.reset()
             np.testing.assert_array_equal(
-                enc.encode_buffers(worlds.buffers[0].rows(w * a, (w + 1) * a)),
+                enc.encode_buffers(worlds.buffers.rows(w * a, (w + 1) * a)),
                 enc.encode_buffers(single.observe_arrays()),
             )
         assert len(finished) == int((terminal | truncated).sum())
         n_truncated += int(truncated.sum())
     assert n_truncated > 0
-    assert worlds.groups[0].cycles.tolist() == [single.cycle for single in singles]
+    assert worlds.batch.cycles.tolist() == [single.cycle for single in singles]
 
 
-def test_shared_trunk_feeds_both_heads_and_its_checkpoint_loads(tmp_path):
+def test_shared_trunk_feeds_both_heads_and_an_mlp_checkpoint_loads(tmp_path):
     env = proteo_env.make("chain-v1", control="move", **SMALL_ENV)
     from proteo_env.adapters.flatten import ObservationEncoder
 
     net = ppo.ActorCritic(ObservationEncoder.for_env(env), env.control_nvec, "shared", (16, 16))
     x = torch.randn(5, ObservationEncoder.for_env(env).size)
-    logits, values, _ = net(x)
+    logits, values = net(x)
     assert logits.shape == (5, 13) and values.shape == (5,)
     values.sum().backward()  # the value's gradient reaches the trunk the policy reads
     assert net.trunk[0].weight.grad.abs().sum() > 0 and net.actor.weight.grad is None
-    final = tiny_run(tmp_path / "s", "--arch", "shared")
+    final = tiny_run(tmp_path / "s", "--arch", "mlp")
     assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name
 
 
@@ -266,7 +242,7 @@ def test_sampled_move_draws_the_move_alone_and_the_checkpoint_acts_so(tmp_path):
     assert torch.allclose(move_logp, log_probs[0].gather(1, move_only[:, :1])[:, 0])
     assert torch.allclose(every_logp, sum(lp.gather(1, every[:, k : k + 1])[:, 0] for k, lp in enumerate(log_probs)))
 
-    final = tiny_run(tmp_path / "run", "--control", "full", "--sampled", "move", "--arch", "shared")
+    final = tiny_run(tmp_path / "run", "--control", "full", "--sampled", "move")
     assert read_meta(final)["sampled"] == "move"
     policy = load_policy(final, proteo_env.make("chain-v0", control="full", **SMALL_ENV), seed=0)
     assert isinstance(policy, LogitsPolicy) and policy.sampled == "move"
@@ -278,16 +254,15 @@ def test_sampled_move_draws_the_move_alone_and_the_checkpoint_acts_so(tmp_path):
 def test_module_credit_marks_the_modules_that_joined_the_structure():
     """``joined`` is True exactly for the modules whose own mode left SLEEP or SEARCH in the last
     cycle (at move the autopilot makes that change when a module reaches the chain's growth spot)."""
-    args = ppo.Args(task="chain-v1", control="move", env={"n_modules": 8, "max_cycles": 400}, n_envs=4, join_bonus=1.0)
-    worlds = ppo.TrainingEnvs(args, env_seed=5)
+    worlds = ppo.TrainingEnvs("chain-v1", "move", {"n_modules": 8, "max_cycles": 400}, 4, 5, join_bonus=1.0)
     rng, joins = np.random.default_rng(0), 0
     for _ in range(120):
-        before = worlds._own_modes()
-        mask = np.concatenate([b.action_mask for b in worlds.buffers]).astype(bool)
+        before = worlds.own_modes()
+        mask = worlds.buffers.action_mask.astype(bool)
         moves = np.argmax(mask * rng.random(mask.shape), axis=1).reshape(4, worlds.n_agents, 1)
         _, terminal, truncated = worlds.step(moves, [])
         going = ~np.repeat(terminal | truncated, worlds.n_agents)  # an ended world shows its next episode
-        expected = (before <= 1) & (worlds._own_modes() >= 2)  # chain: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL
+        expected = (before <= 1) & (worlds.own_modes() >= 2)  # chain: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL
         np.testing.assert_array_equal(worlds.joined[going], expected[going])
         joins += int(worlds.joined.sum())
     assert joins >= 4

@@ -10,7 +10,7 @@ import proteo_env
 from proteo_env.config import ConfigError, world_seeds
 
 pytest.importorskip("torch")
-from training import ppo  # noqa: E402
+from training.worlds import TrainingEnvs, training_worlds_seed  # noqa: E402
 
 ENV = {"n_modules": 12, "max_cycles": 20}
 
@@ -26,25 +26,17 @@ def test_no_two_worlds_of_training_seeds_0_to_4_share_a_stream():
     layouts would mean shared streams."""
     layouts = []
     for seed in range(5):
-        args = ppo.Args(task="chain-v1", control="move", env=ENV, n_envs=16, n_groups=1)
-        worlds = ppo.TrainingEnvs(args, env_seed=ppo.training_worlds_seed(seed, 0))
-        layouts += _start_layouts(worlds.groups[0].worlds)
+        worlds = TrainingEnvs("chain-v1", "move", ENV, 16, training_worlds_seed(seed, 0))
+        layouts += _start_layouts(worlds.batch.worlds)
     assert len(layouts) == 80
     assert len(set(layouts)) == 80
 
 
-def test_a_run_split_into_groups_has_the_worlds_of_one_group():
-    """World ``w`` of a run is child ``w`` of its seed whatever the number of groups."""
-    one = ppo.TrainingEnvs(ppo.Args(task="chain-v1", control="move", env=ENV, n_envs=4, n_groups=1), env_seed=3)
-    two = ppo.TrainingEnvs(ppo.Args(task="chain-v1", control="move", env=ENV, n_envs=4, n_groups=2), env_seed=3)
-    assert _start_layouts(one.groups[0].worlds) == _start_layouts([w for g in two.groups for w in g.worlds])
-
-
 def test_a_curriculum_stage_and_a_resumed_run_get_new_worlds():
-    first = world_seeds(ppo.training_worlds_seed(0, 0), 2)
+    first = world_seeds(training_worlds_seed(0, 0), 2)
     assert [s.generate_state(2).tolist() for s in first] == [s.generate_state(2).tolist() for s in world_seeds(0, 2)]
-    later = world_seeds(ppo.training_worlds_seed(0, 100_000), 2)
-    other_seed = world_seeds(ppo.training_worlds_seed(100_000, 0), 2)
+    later = world_seeds(training_worlds_seed(0, 100_000), 2)
+    other_seed = world_seeds(training_worlds_seed(100_000, 0), 2)
     states = {tuple(s.generate_state(4)) for s in first + later + other_seed}
     assert len(states) == 6
 

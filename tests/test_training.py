@@ -429,7 +429,7 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
 # ---------------------------------------------------------------------- every training config, every task
 TRAIN_CONFIGS = sorted(p.name for p in Path("configs/train").glob("*.yaml"))
 PPO_TINY = [
-    *("--total-steps", "64", "--n-steps", "4", "--n-envs", "2", "--n-groups", "2"),
+    *("--total-steps", "64", "--n-steps", "4", "--n-envs", "2"),
     *("--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"),
 ]
 """The flags that shrink a training/ppo.py run (every recipe of it) to seconds."""

@@ -10,7 +10,7 @@ and the algorithm's files:
 ``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
 ``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
 ``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
-``ppo``              ``policy.pt``           the network of :mod:`training.ppo` (MLP, lattice, GRU)
+``ppo``              ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
 ``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
 ``imitation``        ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
 ==================== ======================= ===========================================
@@ -102,14 +102,12 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         return policy
     encoder = _check_compatible(meta, env)
     label = meta.get("label", algorithm)
-    state_size = 0
     if algorithm == "sb3-maskable-ppo":
         logits_fn = _sb3_logits(folder / "model.zip", encoder)
     elif algorithm in ("torchrl-ppo", "rllib-ppo"):
         logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
     elif algorithm in ("ppo", "imitation"):
         logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)
-        state_size = int(meta.get("recurrent", 0))
     else:
         logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(
@@ -124,7 +122,6 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
         nvec=meta["nvec"],
         memory=meta.get("memory", "none"),
         sampled=meta.get("sampled", "all"),
-        state_size=state_size,
     )
 
 
@@ -248,35 +245,25 @@ def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
 def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     import torch
 
-    from training.networks import ActorCritic
+    from training.networks import ARCHS, ActorCritic
 
-    try:
-        net = ActorCritic(
-            encoder,
-            meta["nvec"],
-            meta.get("arch", "mlp"),
-            tuple(meta["hidden"]),
-            memory=meta.get("memory", "none"),
-            recurrent=int(meta.get("recurrent", 0)),
+    arch = meta.get("arch", "mlp")
+    if meta.get("recurrent", 0) or arch not in ARCHS:
+        raise CheckpointError(
+            f"checkpoint {str(file)!r} has arch={arch!r}, recurrent={meta.get('recurrent', 0)!r}; allowed: a "
+            f"feed-forward network of arch {', '.join(ARCHS)} (the lattice and recurrent networks were removed)"
         )
+    try:
+        net = ActorCritic(encoder, meta["nvec"], arch, tuple(meta["hidden"]), memory=meta.get("memory", "none"))
         net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise
     except Exception as err:
         raise CheckpointError(
-            f"checkpoint {str(file)!r} is not a loadable ppo network (arch {meta.get('arch')!r}, "
+            f"checkpoint {str(file)!r} is not a loadable ppo network (arch {arch!r}, "
             f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}"
         ) from None
     net.eval()
-
-    if net.recurrent:
-
-        def recurrent_logits_fn(features: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            with torch.no_grad():
-                logits, _, state = net(torch.as_tensor(features), torch.as_tensor(state))
-            return logits.numpy(), state.numpy()
-
-        return recurrent_logits_fn
 
     def logits_fn(features: np.ndarray) -> np.ndarray:
         with torch.no_grad():

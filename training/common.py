@@ -39,12 +39,14 @@ META_FILE = "proteo.json"
 
 
 # ---------------------------------------------------------------------- args
-def parse_args(args_cls, argv=None, *, description: str = ""):
+def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | None = None):
     """Build ``args_cls`` (a frozen dataclass) from ``--config FILE.yaml`` and ``--<field> VALUE`` flags.
 
     Values on the command line are read as YAML (``--env "{n_modules: 16}"``, ``--total-steps
     2e5`` needs ``200000``). The config file and flags may name only fields of ``args_cls``;
-    anything else is an error that lists the allowed keys.
+    anything else is an error that lists the allowed keys. ``retired`` maps options that were
+    removed to the value that made them do nothing: a config file (an older checkpoint's
+    ``args.yaml``) that holds that value is read without them.
     """
     parser = argparse.ArgumentParser(description=description or args_cls.__doc__.splitlines()[0])
     parser.add_argument("--config", help="YAML file of arguments (see configs/train/)")
@@ -65,7 +67,7 @@ def parse_args(args_cls, argv=None, *, description: str = ""):
         loaded = load_yaml(path) or {}
         if not isinstance(loaded, dict):
             raise ConfigError(f"config file {str(path)!r}: a mapping of argument names is required")
-        values.update(loaded)
+        values.update({k: v for k, v in loaded.items() if k not in (retired or {}) or v != retired[k]})
     for f in dataclasses.fields(args_cls):
         raw = getattr(ns, f.name)
         if raw is not None:

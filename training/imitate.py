@@ -62,10 +62,10 @@ from training.common import (
     torch_device,
     write_checkpoint_meta,
 )
-from training.networks import ARCHS, ActorCritic
+from training.networks import ARCHS, ActorCritic, masked_log_probs, sample, teacher_cross_entropy
 from training.policies import check_memory, check_sampled
-from training.ppo import TrainingEnvs, masked_log_probs, sample, teacher_cross_entropy
 from training.teachers import DEFAULT_TEACHER, Teachers
+from training.worlds import TrainingEnvs
 
 ALGORITHM = "imitation"
 
@@ -85,8 +85,6 @@ class Args:
     seed: int = 0
     n_envs: int = 16
     """Worlds stepped together."""
-    n_groups: int = 1
-    """BatchedEnvs the worlds are split into."""
     rounds: int = 4
     """DAgger rounds after round 0 (0: behaviour cloning only)."""
     cycles_per_round: int = 300
@@ -104,16 +102,13 @@ class Args:
     message_encoding: str = "compact"
     """How the features encode the messages received (proteo_env.adapters.flatten)."""
     arch: str = "shared"
-    """Network: mlp, shared or lattice (training/ppo.py)."""
+    """Network: shared or mlp (training/networks.py)."""
     hidden: tuple[int, ...] = (128, 128)
     memory: str = "none"
-    """What the network remembers between cycles: none, last_move (the move the module played last
-    cycle) or last_action (every field it played last cycle), each optionally with +clock (the
-    cycles the module has been in its mode), or clock alone; training/policies.py MEMORIES."""
+    """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
     sampled: str = "move"
-    """Which fields the clone samples when it acts (the others take their arg-max), in the DAgger
-    rounds and, through the checkpoint, in ``proteo eval``: move (the rules' random moves; their
-    mode, roles and messages are deterministic) or all (training/policies.py SAMPLED)."""
+    """Which fields the clone samples when it acts, here and in ``proteo eval``: move (the others take
+    their arg-max, as the rules' mode, roles and messages are deterministic) or all."""
     run_dir: str | None = None
     threads: int = 1
     device: str = "cpu"
@@ -163,7 +158,7 @@ def collect(
     kept_x, kept_m, kept_y, finished = [], [], [], []
     for _ in range(cycles):
         worlds.encode(features, move_mask)
-        labels = teachers.labels(worlds.buffers)
+        labels = teachers.labels([worlds.buffers])
         legal_label = move_mask[np.arange(n), labels[:, 0]]
         keep = legal_label & (move_mask.sum(axis=1) > 1 if args.control == "move" else True)
         kept_x.append(features[keep].copy())
@@ -191,7 +186,7 @@ def collect(
 
 def main(argv=None) -> Path:
     """Parse the arguments (``--config FILE`` and ``--<field> VALUE``) and train."""
-    return train(parse_args(Args, argv))
+    return train(parse_args(Args, argv, retired={"n_groups": 1}))
 
 
 def train(args: Args) -> Path:
@@ -202,10 +197,18 @@ def train(args: Args) -> Path:
         args.run_dir, f"imitate_{task_name(args.task)}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
     )
     save_args(args, run_dir)
-    worlds = TrainingEnvs(args, env_seed=args.seed)
+    worlds = TrainingEnvs(
+        args.task,
+        args.control,
+        args.env,
+        args.n_envs,
+        args.seed,
+        message_encoding=args.message_encoding,
+        memory=args.memory,
+    )
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
-    fields = worlds.groups[0].control_fields
-    teachers = Teachers(worlds.groups[0], worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
+    fields = worlds.batch.control_fields
+    teachers = Teachers(worlds.batch, worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory).to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
     rng = np.random.default_rng(args.seed)

@@ -26,21 +26,14 @@ from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.spaces import N_MOVES
 
-MEMORIES = ("none", "last_move", "last_action", "clock", "last_move+clock", "last_action+clock")
+MEMORIES = ("none", "last_move", "last_action")
 """What a network remembers between cycles, as extra inputs after the observation's features:
 ``none``; ``last_move``, the one-hot move the module chose in the previous cycle (13 inputs);
 ``last_action``, the one-hot of every field it chose in the previous cycle (``sum(nvec)``
 inputs; the same as ``last_move`` at control level ``move``). All zero-index (stay, and the
-first value of every other field) at an episode's start. ``clock`` (alone or after either):
-the cycles the module has spent in the mode it observes itself in, as a thermometer code over
-:data:`CLOCK_STEPS` (one input per step, 1 once the count reaches it; ``len(CLOCK_STEPS)``
-inputs). The hand-coded rules keep such private memory (their heading, a seed's growth
+first value of every other field) at an episode's start. The hand-coded rules keep such private memory (their heading, a seed's growth
 direction that it broadcasts every cycle, whether they asked to move, how long a seed has
 waited for a hand-over); the observation does not carry it."""
-
-CLOCK_STEPS = np.concatenate([np.arange(1, 33), np.arange(40, 257, 8)])
-"""The counts at which a ``clock`` input turns on: every cycle up to 32, then every 8 up to
-256 (60 inputs). Exact where the rules' patiences lie (tens of cycles), coarser beyond."""
 
 
 def check_memory(memory, nvec=(N_MOVES,)) -> int:
@@ -48,39 +41,22 @@ def check_memory(memory, nvec=(N_MOVES,)) -> int:
     naming the allowed memories."""
     if memory not in MEMORIES:
         raise ConfigError(f"memory={memory!r} is not allowed; allowed: {', '.join(map(repr, MEMORIES))}")
-    previous = memory.removesuffix("+clock").removesuffix("clock")
-    clock = len(CLOCK_STEPS) if memory.endswith("clock") else 0
-    return {"": 0, "none": 0, "last_move": N_MOVES, "last_action": int(np.sum(nvec))}[previous] + clock
+    return {"none": 0, "last_move": N_MOVES, "last_action": int(np.sum(nvec))}[memory]
 
 
-def with_memory(
-    features: np.ndarray, previous: np.ndarray, memory: str, nvec=(N_MOVES,), clock: np.ndarray | None = None
-) -> np.ndarray:
+def with_memory(features: np.ndarray, previous: np.ndarray, memory: str, nvec=(N_MOVES,)) -> np.ndarray:
     """``(N, D + extra)``: ``features (N, D)`` followed by the memory inputs of each row, from
-    each row's previous action ``(N, F)`` (or its previous move ``(N,)``) over fields ``nvec``
-    and, for a ``clock`` memory, each row's count of cycles in its mode ``clock (N,)``."""
+    each row's previous action ``(N, F)`` (or its previous move ``(N,)``) over fields ``nvec``."""
     if memory == "none":
         return features
-    parts = [features]
-    if memory.startswith("last_"):
-        previous = np.asarray(previous).reshape(len(features), -1)
-        sizes = [N_MOVES] if memory.startswith("last_move") else [int(n) for n in nvec]
-        extra = np.zeros((len(features), sum(sizes)), dtype=np.float32)
-        rows, start = np.arange(len(features)), 0
-        for k, size in enumerate(sizes):
-            extra[rows, start + previous[:, k]] = 1.0
-            start += size
-        parts.append(extra)
-    if memory.endswith("clock"):
-        parts.append((np.asarray(clock).reshape(-1, 1) >= CLOCK_STEPS).astype(np.float32))
-    return np.concatenate(parts, axis=1)
-
-
-def clock_step(last_mode: np.ndarray, count: np.ndarray, mode: np.ndarray) -> np.ndarray:
-    """The ``clock`` memory's counts after one cycle ``(N,)``: a module that observes itself in
-    the mode it had at the last cycle (``last_mode``, -1 at an episode's first cycle) counts one
-    more, any other starts at 0."""
-    return np.where(np.asarray(mode) == last_mode, np.asarray(count) + 1, 0)
+    previous = np.asarray(previous).reshape(len(features), -1)
+    sizes = [N_MOVES] if memory == "last_move" else [int(n) for n in nvec]
+    extra = np.zeros((len(features), sum(sizes)), dtype=np.float32)
+    rows, start = np.arange(len(features)), 0
+    for k, size in enumerate(sizes):
+        extra[rows, start + previous[:, k]] = 1.0
+        start += size
+    return np.concatenate([features, extra], axis=1)
 
 
 SAMPLED = ("all", "move")
@@ -138,12 +114,8 @@ class LogitsPolicy(Policy):
         nvec: values of each field the network chooses (default: every field of ``layout``);
             at control level ``move`` only ``[13]``, and an action is then the move alone.
         memory: what the network remembers (:data:`MEMORIES`); with memory the policy keeps
-            each agent's previous action and, for a ``clock``, its mode and the cycles it has
-            been in it (by name in :meth:`act`, by row in :meth:`act_arrays`), cleared by
-            :meth:`reset`.
-        state_size: ``R > 0`` for a recurrent network: ``logits_fn(features (B, D), state (B, R))``
-            then returns ``(logits, next_state (B, R))``, and the policy keeps each agent's state
-            (zeros at first sight), kept and cleared as the previous action is.
+            each agent's previous action (by name in :meth:`act`, by row in :meth:`act_arrays`),
+            cleared by :meth:`reset`.
     """
 
     name = "learned"
@@ -162,7 +134,6 @@ class LogitsPolicy(Policy):
         nvec=None,
         memory: str = "none",
         sampled: str = "all",
-        state_size: int = 0,
     ):
         super().__init__(layout, modes, scent_max=scent_max, seed=seed)
         self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
@@ -176,23 +147,16 @@ class LogitsPolicy(Policy):
         self.memory = memory
         self.previous: dict = {}
         """Each agent's (name or row) previous action ``(F,)``, with memory."""
-        self.clocks: dict = {}
-        """Each agent's (name or row) ``(mode, cycles in it)``, with a ``clock`` memory."""
-        self.state_size = int(state_size)
-        self.states: dict = {}
-        """Each agent's (name or row) recurrent state ``(R,)``, when ``state_size > 0``."""
 
     def reset(self, seed=None):
         super().reset(seed)
-        self.previous, self.states, self.clocks = {}, {}, {}
+        self.previous = {}
 
     def forget(self, keys) -> None:
-        """Start the agents ``keys`` (names or rows) afresh: no previous action, zero state
-        (a world's new episode when one policy acts for several worlds by row)."""
+        """Start the agents ``keys`` (names or rows) afresh: no previous action (a world's new
+        episode when one policy acts for several worlds by row)."""
         for key in keys:
             self.previous.pop(key, None)
-            self.states.pop(key, None)
-            self.clocks.pop(key, None)
 
     def act(self, observations):
         if not observations:
@@ -210,30 +174,14 @@ class LogitsPolicy(Policy):
         if self.memory != "none":
             start = np.zeros(len(self.nvec), dtype=np.int64)
             previous = np.array([self.previous.get(k, start) for k in keys], dtype=np.int64).reshape(-1, len(start))
-            features = with_memory(features, previous, self.memory, self.nvec, self._tick(keys, features))
-        if self.state_size:
-            start = np.zeros(self.state_size, dtype=np.float32)
-            logits, states = self.logits_fn(features, np.stack([self.states.get(k, start) for k in keys]))
-            self.states.update(zip(keys, states))
-        else:
-            logits = self.logits_fn(features)
+            features = with_memory(features, previous, self.memory, self.nvec)
+        logits = self.logits_fn(features)
         actions = sample_actions(
             logits, self.nvec, move_mask, self.rng, deterministic=self.deterministic, sampled=self.sampled
         )
         if self.memory != "none":
             self.previous.update(zip(keys, actions))
         return actions
-
-    def _tick(self, keys, features: np.ndarray) -> np.ndarray | None:
-        """With a ``clock`` memory, advance each agent's clock by its observed mode (read from
-        its features) and return the counts ``(B,)`` (:func:`clock_step`)."""
-        if not self.memory.endswith("clock"):
-            return None
-        modes = features[:, self.encoder.slices["own_mode"]].argmax(axis=1)
-        last = np.array([self.clocks.get(k, (-1, 0)) for k in keys], dtype=np.int64).reshape(-1, 2)
-        counts = clock_step(last[:, 0], last[:, 1], modes)
-        self.clocks.update(zip(keys, zip(modes, counts)))
-        return counts
 
     @staticmethod
     def level_of(layout, nvec) -> str:
