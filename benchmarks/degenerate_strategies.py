@@ -29,8 +29,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 import proteo_env  # noqa: E402
 from baselines import POLICIES, make_policy  # noqa: E402
 from baselines.base import Policy  # noqa: E402

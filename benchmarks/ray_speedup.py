@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-sys.path.insert(0, os.path.dirname(__file__))
 from machine_info import describe  # noqa: E402
 
 
