@@ -131,6 +131,25 @@ def compare(name: str, row: Row, rules: Row) -> str:
     return text
 
 
+def verdicts(task: str, recipe: str, by_key: dict, splits: list[str]) -> str:
+    """Where a recipe's success interval lies above or below the rules' on ``splits``, and where
+    the two overlap (no detectable difference), in a few words."""
+    above, below, same = [], [], []
+    for split in splits:
+        if (task, split, recipe) not in by_key or (task, split, RULES) not in by_key:
+            continue
+        a, b = by_key[(task, split, recipe)].summary, by_key[(task, split, RULES)].summary
+        pair = f"{split} ({a['success_rate']:.2f} against {b['success_rate']:.2f})"
+        if overlap(a, b):
+            same.append(split)
+        else:
+            (above if a["success_rate"] > b["success_rate"] else below).append(pair)
+    parts = [f"above the rules on {', '.join(above)}"] if above else []
+    parts += [f"below them on {', '.join(below)}"] if below else []
+    parts += [f"no detectable difference on {', '.join(same)}"] if same else []
+    return "; ".join(parts)
+
+
 def aggregate(rows: list[Row], per_training_seed: int) -> dict[str, dict]:
     """Per learned recipe: normalised scores ``(training seeds, task-splits)`` and the aggregate
     statistics (IQM, probability of improvement over the rules, the task-splits used)."""
@@ -195,6 +214,17 @@ def curves(progress: Path, task: str) -> dict[str, list[np.ndarray]]:
     return dict(found)
 
 
+SMOOTH_ROWS = 5
+"""Log rows each point of a learning curve averages (a row's success rate is over few episodes)."""
+
+
+def _smooth(y: np.ndarray, rows: int) -> np.ndarray:
+    """The trailing mean of ``y`` over ``rows`` entries (fewer at the start)."""
+    cumulative = np.cumsum(np.insert(y, 0, 0.0))
+    counts = np.minimum(np.arange(1, len(y) + 1), rows)
+    return (cumulative[1:] - cumulative[np.arange(1, len(y) + 1) - counts]) / counts
+
+
 def _curve_figure(task: str, found: dict, path: Path) -> None:
     import matplotlib
 
@@ -205,14 +235,15 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
     for recipe, runs in sorted(found.items()):
         end = min(r[0, -1] for r in runs)
         grid = np.linspace(max(r[0, 0] for r in runs), end, 60)
-        ys = np.stack([np.interp(grid, r[0], r[1]) for r in runs])
+        ys = np.stack([np.interp(grid, r[0], _smooth(r[1], SMOOTH_ROWS)) for r in runs])
         mean = ys.mean(axis=0)
         if len(runs) > 1:
             half = st.t_quantile(len(runs) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(runs))
-            ax.fill_between(grid / 1e6, mean - half, mean + half, alpha=0.2)
+            ax.fill_between(grid / 1e6, np.clip(mean - half, 0, 1), np.clip(mean + half, 0, 1), alpha=0.2)
         ax.plot(grid / 1e6, mean, label=f"{recipe} ({len(runs)} seeds)")
+    ax.set_ylim(0, 1.02)
     ax.set_xlabel("agent-steps (millions)")
-    ax.set_ylabel("training success rate")
+    ax.set_ylabel(f"training success rate ({SMOOTH_ROWS}-row mean)")
     ax.set_title(task)
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -249,9 +280,11 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     for task in tasks:
         for recipe in sorted({r.policy for r in rows if r.task == task and r.kind in ("learned", "evolved")}):
             if (task, "heldout", recipe) in by_key and (task, "heldout", RULES) in by_key:
+                others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]])
                 answer.append(
                     f"- {task}, held-out worlds: "
                     + compare(recipe, by_key[(task, "heldout", recipe)], by_key[(task, "heldout", RULES)])
+                    + (f"; on the other splits {others}" if others else "")
                     + "."
                 )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
