@@ -105,3 +105,25 @@ def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
 def test_a_folder_without_results_is_one_clear_error(tmp_path):
     with pytest.raises(ConfigError, match="holds no benchmark.json"):
         results.read_rows(tmp_path)
+
+
+def test_publish_writes_the_held_out_table_between_the_markers_only(tmp_path):
+    rows, _ = results.read_rows(_bench(tmp_path, 0.3))
+    page = tmp_path / "README.md"
+    page.write_text(f"intro\n{results.PUBLISH_BEGIN}\nold table\n{results.PUBLISH_END}\nafter\n")
+    results.publish(page, results.heldout_table(rows, load_protocol("v1")))
+    text = page.read_text()
+    assert text.startswith("intro\n") and text.endswith(f"{results.PUBLISH_END}\nafter\n")
+    assert "old table" not in text
+    assert "| task | rules | random | clone |" in text
+    assert "| grasp-v0 | 90/100 (0.83-0.94), 50 (50-50) | 0/100 (0.00-0.04) | 30/100 (0.21-0.40), 50 (50-50) |" in text
+
+
+def test_publish_to_a_page_without_markers_is_refused_before_anything_is_written(tmp_path):
+    folder = _bench(tmp_path, 0.3)
+    page = tmp_path / "README.md"
+    page.write_text("no markers\n")
+    out = tmp_path / "docs" / "results.md"
+    with pytest.raises(ConfigError, match="no file with the"):
+        results.main(["--root", str(folder.parent), "--out", str(out), "--publish", str(page)])
+    assert not out.exists() and page.read_text() == "no markers\n"

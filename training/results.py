@@ -358,6 +358,41 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     return "\n".join(lines)
 
 
+PUBLISH_BEGIN = "<!-- make results: the held-out table -->"
+PUBLISH_END = "<!-- end of the results table -->"
+"""The markers between which ``--publish FILE`` writes :func:`heldout_table` (the README's)."""
+
+
+def heldout_table(rows: list[Row], protocol) -> str:
+    """One row per task, one column per policy: each policy's ``heldout`` cell (:func:`cell`)."""
+    by_key = {(r.task, r.split, r.policy): r for r in rows}
+    tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
+    policies = _policy_order({r.policy for r in rows})
+    lines = ["| task | " + " | ".join(policies) + " |", "|---|" + "---|" * len(policies)]
+    for task in tasks:
+        cells = [cell(by_key[(task, "heldout", p)]) if (task, "heldout", p) in by_key else "-" for p in policies]
+        lines.append(f"| {protocol.tasks[task].task_id} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def published_text(path: Path) -> str:
+    """``path``'s text, or one :class:`ConfigError` unless it exists and holds both markers in order."""
+    text = path.read_text() if path.is_file() else ""
+    if PUBLISH_BEGIN not in text or PUBLISH_END not in text.split(PUBLISH_BEGIN, 1)[1]:
+        raise ConfigError(
+            f"--publish {str(path)!r} is not allowed: no file with the {PUBLISH_BEGIN!r} ... {PUBLISH_END!r} "
+            "markers; allowed: a file that has both, in that order"
+        )
+    return text
+
+
+def publish(path: Path, table: str) -> None:
+    """Replace what stands between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END` in ``path``."""
+    head, rest = published_text(path).split(PUBLISH_BEGIN, 1)
+    tail = rest.split(PUBLISH_END, 1)[1]
+    path.write_text(f"{head}{PUBLISH_BEGIN}\n{table}\n{PUBLISH_END}{tail}")
+
+
 def main(argv=None) -> int:
     from training.benchmark import load_protocol
 
@@ -365,13 +400,20 @@ def main(argv=None) -> int:
     parser.add_argument("--benchmark", default="v1", help="protocol version (configs/benchmark/<version>.yaml)")
     parser.add_argument("--root", default="docs/benchmark", help="folder holding <version>/<task>/<policy>/")
     parser.add_argument("--out", default="docs/results.md", help="the page to write")
+    parser.add_argument(
+        "--publish", action="append", default=[], help="also write the held-out table between its markers in FILE"
+    )
     args = parser.parse_args(argv)
     protocol = load_protocol(args.benchmark)
     root, out = Path(args.root), Path(args.out)
     rows, headers = read_rows(root / args.benchmark)
+    for page in args.publish:  # checked before anything is written
+        published_text(Path(page))
     text = render(rows, headers, args.benchmark, root, out, protocol)
     out.write_text(text)
-    print(f"wrote {out}")
+    for page in args.publish:
+        publish(Path(page), heldout_table(rows, protocol))
+    print(f"wrote {out}" + "".join(f", {page}" for page in args.publish))
     return 0
 
 
