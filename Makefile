@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint results bench eval learning-results learning-task
+.PHONY: install install-distributed demo test test-all lint results bench eval learning-results benchmark-references
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -39,38 +39,32 @@ bench: install
 # docs/results.md: every controller judged under benchmark protocol v1 (docs/benchmark/v1, written by
 # proteo eval --benchmark v1; docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
 results: install
-	$(BIN)/python -m training.results --benchmark v1
+	$(BIN)/python -m training.results --benchmark v1 --publish README.md
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
-# The multi-seed study at control level move (python -m training.study): plain PPO (16 M
-# agent-steps per run), then the clones of the rules (training/imitate.py) and PPO kickstarted
-# from them (6 M agent-steps), three training seeds each, about 80 minutes on 2 cores; then its
-# evaluation: the table with the spread over training seeds goes into docs/eval/study,
-# docs/journal/learning-study-move.md and README.md; the same checkpoints at twice their size into
-# docs/eval/study_larger and docs/journal/learning-study-move.md.
+# The study under benchmark protocol v1 (configs/benchmark/v1.yaml, docs/guides/benchmark.md), about
+# 75 minutes on 2 cores: five independent training seeds of each recipe in docs/results.md
+# (python -m training.study) into checkpoints/v1, each recipe judged on every split of its task
+# (proteo eval --benchmark v1) into docs/benchmark/v1/<task>/<recipe>, then make results. The
+# rules' and random's rows are judged once per protocol: make benchmark-references (about 25 minutes).
+# The former three-seed study (docs/journal/learning-study-move.md) is reproduced from its own
+# checkpoints by proteo eval --config configs/eval_study.yaml.
+STUDY_V1 := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]" --keep-dir checkpoints/v1 \
+	--docs-dir docs/benchmark/v1/learning --runs-dir runs/v1
 learning-results: install
-	$(BIN)/python -m training.study --total-steps 16000000 --minutes 0 --parallel 2
-	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
-	$(BIN)/python -m training.study --recipes "[imitation]" --level full --tasks "[chain, grasp]" --seeds "[0]" --parallel 2
-	$(BIN)/python -m training.study --recipes "[ppo48]" --tasks "[table]" --minutes 0 --parallel 2
-	$(BIN)/python -m training.study --recipes "[curriculum]" --tasks "[chain, table, grasp, locomotion]" --minutes 0 --parallel 2
-	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" --minutes 0 --parallel 2
-	$(BIN)/proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures \
-		--publish docs/journal/learning-study-move.md --publish README.md
-	$(BIN)/proteo eval --config configs/eval_study_larger.yaml --out docs/eval/study_larger \
-		--publish docs/journal/learning-study-move.md
-	$(BIN)/proteo eval --config configs/eval_study_larger_curriculum.yaml --tasks chain,table,grasp,locomotion \
-		--out docs/eval/study_larger_curriculum --pictures --publish docs/journal/learning-curriculum-credit.md
+	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
+	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
+	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[locomotion]" --total-steps 16000000 $(STUDY_V1)
+	for recipe in checkpoints/v1/*/*_move; do \
+		$(BIN)/proteo eval --benchmark v1 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
+			--out docs/benchmark/v1/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
+	$(MAKE) results
 
-# One task of the study, every recipe (make learning-task TASK=grasp, about 15 minutes; table's 48 M-step
-# curriculum adds half an hour): its checkpoints and curves are replaced; the evaluation goes to
-# docs/eval/study_<task> (not published).
-learning-task: install
-	@test -n "$(TASK)" || { echo "TASK is required; allowed: chain, branch, table, grasp, locomotion"; exit 2; }
-	$(BIN)/python -m training.study --tasks "[$(TASK)]" --total-steps 16000000 --minutes 0 --parallel 2
-	$(BIN)/python -m training.study --tasks "[$(TASK)]" --recipes "[imitation, kickstart]" --minutes 0 --parallel 2
-	case "$(TASK)" in chain|table|grasp|locomotion) \
-		$(BIN)/python -m training.study --tasks "[$(TASK)]" --recipes "[curriculum]" --minutes 0 --parallel 2;; esac
-	$(BIN)/proteo eval --config configs/eval_study.yaml --tasks $(TASK) --out docs/eval/study_$(TASK)
+benchmark-references: install
+	for task in chain branch table grasp locomotion; do \
+		$(BIN)/proteo eval --benchmark v1 --policy rules --level full --tasks $$task --out docs/benchmark/v1/$$task/rules_full && \
+		$(BIN)/proteo eval --benchmark v1 --policy rules --level move --tasks $$task --out docs/benchmark/v1/$$task/rules_move && \
+		$(BIN)/proteo eval --benchmark v1 --policy random --level move --tasks $$task --out docs/benchmark/v1/$$task/random \
+		|| exit 1; done

@@ -33,8 +33,10 @@ thread each; a kickstart run waits for its clone), then keeps:
 - ``docs/learning/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
   checkpoint (runs of other recipes, tasks or seeds already recorded there are kept).
 
-Then ``proteo eval --config configs/eval_study.yaml --out docs/eval/study --pictures`` gives
-the table with the spread over training seeds (``make learning-results`` runs both).
+Then ``proteo eval --benchmark v1 --checkpoint ... --out docs/benchmark/v1/<task>/<recipe>`` judges
+each recipe's seeds on every split of the benchmark protocol and ``make results`` writes
+docs/results.md (``make learning-results`` runs all three for the published recipes, with
+``--keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning``).
 """
 
 from __future__ import annotations
