@@ -693,6 +693,7 @@ def markdown(document: dict) -> str:
 def main(args) -> int:
     """``proteo eval --benchmark VERSION ...`` (arguments parsed in :mod:`training.cli`)."""
     from training.distributed import ray_options
+    from training.evaluate import refuse_flags
 
     conflicting = {
         "--config": args.config,
@@ -702,13 +703,12 @@ def main(args) -> int:
         "--pictures": args.pictures,
         "--from-results": args.from_results,
     }
-    given = [flag for flag, value in conflicting.items() if value]
-    if given:
-        raise ConfigError(
-            f"--benchmark with {given[0]} is not allowed (the protocol fixes the worlds and settings); allowed with "
-            "--benchmark: --checkpoint, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, "
-            "--address, --no-plots"
-        )
+    refuse_flags(
+        "--benchmark",
+        conflicting,
+        "the protocol fixes the worlds and settings",
+        "--checkpoint, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, --address, --no-plots",
+    )
     document = judge(
         args.benchmark,
         checkpoints=args.checkpoint or (),

@@ -895,11 +895,19 @@ def published(results: list, out, files) -> dict:
     return texts
 
 
+def refuse_flags(mode: str, flags: dict, why: str, allowed: str) -> None:
+    """One :class:`~proteo_env.config.ConfigError` naming the first of ``flags`` (``{flag: value}``)
+    that was given with ``mode``, why it is refused and what ``mode`` allows."""
+    from proteo_env.config import ConfigError
+
+    given = [flag for flag, value in flags.items() if value]
+    if given:
+        raise ConfigError(f"{mode} with {given[0]} is not allowed ({why}); allowed with {mode}: {allowed}")
+
+
 def main(args) -> int:
     """Entry point of ``proteo eval`` (arguments parsed in :mod:`training.cli`)."""
     if getattr(args, "from_results", None):
-        from proteo_env.config import ConfigError
-
         running = {
             "--config": args.config,
             "--tasks": args.tasks,
@@ -909,12 +917,7 @@ def main(args) -> int:
             "--pictures": args.pictures,
             "--fresh": args.fresh,
         }
-        given = [flag for flag, value in running.items() if value]
-        if given:
-            raise ConfigError(
-                f"--from-results with {given[0]} is not allowed (no episode runs); allowed with --from-results: "
-                "--out, --publish, --no-plots"
-            )
+        refuse_flags("--from-results", running, "no episode runs", "--out, --publish, --no-plots")
         results = rerender(args.from_results, args.out, plots=not args.no_plots, pages=args.publish or ())
         print(markdown_table(results))
         print(f"\nre-rendered {args.from_results} into {Path(args.out).resolve()}")
