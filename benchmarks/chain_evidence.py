@@ -29,16 +29,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
+from evidence import add_workers, command, machine, publish, run_jobs
 
 
 def cycle_limit(expr: str, n: int) -> int:
@@ -120,7 +116,7 @@ def main(argv=None) -> int:
         default=10,
         help="episodes per size in the scaling table (sizes also in the main table reuse those)",
     )
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    add_workers(parser)
     parser.add_argument("--out", type=Path, default=None, help="write the Markdown report here")
     args = parser.parse_args(argv)
     random_seeds = args.seeds if args.random_seeds is None else args.random_seeds
@@ -144,15 +140,14 @@ def main(argv=None) -> int:
 
     started = time.time()
     rows = []
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        for row in pool.map(run_one, jobs):
-            rows.append(row)
-            print(
-                f"{row['policy']:6s} {row['model']:8s} N={row['n']:<4d} seed={row['seed']:<3d} "
-                f"{'ok  ' if row['success'] else 'FAIL'} {row['cycles']:6d} cycles {row['seconds']:7.1f} s",
-                file=sys.stderr,
-                flush=True,
-            )
+    for row in run_jobs(run_one, jobs, args.workers):
+        rows.append(row)
+        print(
+            f"{row['policy']:6s} {row['model']:8s} N={row['n']:<4d} seed={row['seed']:<3d} "
+            f"{'ok  ' if row['success'] else 'FAIL'} {row['cycles']:6d} cycles {row['seconds']:7.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
     wall = time.time() - started
 
     def group(policy, model, n, seeds=None):
@@ -172,11 +167,10 @@ def main(argv=None) -> int:
         "than the limit.",
         "",
         "```",
-        "python benchmarks/chain_evidence.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        command("chain_evidence.py", argv),
         "```",
         "",
-        f"Machine: {platform.platform()}, {os.cpu_count()} CPUs, {args.workers} workers; wall time "
-        f"{wall / 60:.1f} min.",
+        f"Machine: {machine(args.workers)}; wall time {wall / 60:.1f} min.",
         "",
         "## Success and cycles to success",
         "",
@@ -229,11 +223,7 @@ def main(argv=None) -> int:
         )
         + ".",
     ]
-    report = "\n".join(lines) + "\n"
-    print(report)
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(report)
+    publish("\n".join(lines) + "\n", args.out)
     return 0
 
 

@@ -28,16 +28,11 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import os
-import platform
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
+from evidence import add_workers, command, machine, mean_cell, publish, run_jobs, success_cell
 
 SHAPES = ("sphere", "box", "blob")
 SIZES = (1.5, 2.5, 3.5)
@@ -86,30 +81,6 @@ def run_one(job: dict) -> dict:
     }
 
 
-def _mean_ci(values) -> str:
-    """Mean ± the half-width of its 95 % Student t interval (:func:`training.statistics.mean_ci`)."""
-    from training.statistics import mean_ci
-
-    v = [x for x in values if x is not None]
-    if not v:
-        return "n/a"
-    mean, half = mean_ci(v)
-    if len(v) == 1:
-        return f"{mean:.0f}" if mean >= 10 else f"{mean:.2f}"
-    fmt = "{:.0f} ± {:.0f}" if abs(mean) >= 10 else "{:.2f} ± {:.2f}"
-    return fmt.format(mean, half)
-
-
-def _wilson(k: int, n: int) -> str:
-    """Successes over episodes and the 95 % Wilson interval (:func:`training.statistics.wilson`)."""
-    from training.statistics import wilson
-
-    if n == 0:
-        return "n/a"
-    lo, hi = wilson(k, n)
-    return f"{k}/{n} [{lo:.2f}, {hi:.2f}]"
-
-
 def table(rows: list[dict]) -> str:
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
@@ -128,25 +99,13 @@ def table(rows: list[dict]) -> str:
         k = sum(r["success"] for r in g)
         contact = [r["contact_at"] for r in g]
         lines.append(
-            f"| {key[0]} | {key[1]} | {key[2]} | {key[3]:g} | {_mean_ci([r['surface_sites'] for r in g])} | "
-            f"{_wilson(k, len(g))} | {_mean_ci([r['coverage'] for r in g])} | "
-            f"{_mean_ci([r['surround'] for r in g])} | {_mean_ci([r['contact'] for r in g])} | "
-            f"{_mean_ci(contact)} ({sum(c is not None for c in contact)}/{len(g)}) | "
-            f"{_mean_ci([r['grasp_at'] for r in g])} ({sum(r['grasp_at'] is not None for r in g)}/{len(g)}) |"
+            f"| {key[0]} | {key[1]} | {key[2]} | {key[3]:g} | {mean_cell([r['surface_sites'] for r in g])} | "
+            f"{success_cell(k, len(g))} | {mean_cell([r['coverage'] for r in g])} | "
+            f"{mean_cell([r['surround'] for r in g])} | {mean_cell([r['contact'] for r in g])} | "
+            f"{mean_cell(contact)} ({sum(c is not None for c in contact)}/{len(g)}) | "
+            f"{mean_cell([r['grasp_at'] for r in g])} ({sum(r['grasp_at'] is not None for r in g)}/{len(g)}) |"
         )
     return "\n".join(lines)
-
-
-def machine() -> str:
-    import numba
-
-    import proteo_env
-
-    return (
-        f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, Python "
-        f"{platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
-        f"proteo {proteo_env.__version__}"
-    )
 
 
 PAPER_ONLY = {"relocate": False, "retire": False, "straight": False, "wrap_forward": False, "prefer_touch": False}
@@ -223,7 +182,7 @@ def main(argv=None) -> int:
     ap.add_argument("--max-cycles", type=int, default=3000)
     ap.add_argument("--quick", action="store_true", help="object size 2.5 only (a smoke run)")
     ap.add_argument("--only", type=int, nargs="+", default=None, help="run only these suites (0-based)")
-    ap.add_argument("--workers", type=int, default=os.cpu_count())
+    add_workers(ap)
     ap.add_argument("--out", default=None, help="Markdown report (printed if omitted)")
     ap.add_argument("--json", default=None, help="per-episode rows as JSON")
     args = ap.parse_args(argv)
@@ -252,24 +211,22 @@ def main(argv=None) -> int:
                 )
     started = time.perf_counter()
     rows = []
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        for i, row in enumerate(pool.map(run_one, jobs, chunksize=1), start=1):
-            rows.append(row)
-            print(
-                f"[{i}/{len(jobs)}] suite {row['suite']} {row['policy']} {row['overrides']['motion_model']} "
-                f"{row['overrides']['shape']} {row['overrides']['object_size']} seed {row['seed']}: "
-                f"success={row['success']} coverage={row['coverage']:.2f} surround={row['surround']:.2f} "
-                f"cycles={row['cycles']} ({row['seconds']:.0f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
+    for i, row in enumerate(run_jobs(run_one, jobs, args.workers), start=1):
+        rows.append(row)
+        print(
+            f"[{i}/{len(jobs)}] suite {row['suite']} {row['policy']} {row['overrides']['motion_model']} "
+            f"{row['overrides']['shape']} {row['overrides']['object_size']} seed {row['seed']}: "
+            f"success={row['success']} coverage={row['coverage']:.2f} surround={row['surround']:.2f} "
+            f"cycles={row['cycles']} ({row['seconds']:.0f} s)",
+            file=sys.stderr,
+            flush=True,
+        )
     wall = time.perf_counter() - started
-    cmd = "python benchmarks/grasp_evidence.py " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = [
-        f"Command: `{cmd.strip()}`",
+        f"Command: `{command('grasp_evidence.py', argv)}`",
         "",
-        f"Machine: {machine()}; {len(jobs)} episodes in {wall / 60:.1f} min wall-clock "
-        f"({args.workers} worker processes).",
+        f"Machine: {machine(args.workers, packages=('numpy', 'numba', 'proteo_env'))}; {len(jobs)} episodes in "
+        f"{wall / 60:.1f} min wall-clock.",
         "",
         f"Every episode: task defaults (`grasp-v0`) except the shape, size and motion model in the row, "
         f"`max_cycles={args.max_cycles}`, seeds {args.first_seed} and up.",
@@ -277,11 +234,7 @@ def main(argv=None) -> int:
     ]
     for k, suite in enumerate(chosen):
         lines += [f"### {suite['title']}", "", table([r for r in rows if r["suite"] == k]), ""]
-    report = "\n".join(lines)
-    if args.out:
-        Path(args.out).write_text(report)
-    else:
-        print(report)
+    publish("\n".join(lines), args.out)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0

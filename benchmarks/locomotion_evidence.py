@@ -12,11 +12,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
+from evidence import add_workers, machine, run_jobs, write_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,18 +28,22 @@ COURSES = [("flat" if h == 0 else f"step h={h}", {"step_height": h}) for h in HE
 ]
 
 
-def run_one(n_modules: int, overrides: dict, model: str, seed: int, max_cycles: int) -> dict:
-    """One episode of the hand-coded policy: success, cycles, centroid advance and speed."""
+def run_one(job: dict) -> dict:
+    """One episode of the hand-coded policy (``job``: ``n``, ``overrides``, ``model``, ``seed``,
+    ``max_cycles``): success, cycles, centroid advance and speed."""
     from baselines import make_policy
     from baselines.compiled import compiled_rollout
     from proteo_env import make
 
-    env = make("locomotion-v0", n_modules=n_modules, motion_model=model, max_cycles=max_cycles, **overrides)
-    env.reset(seed=seed)
+    env = make(
+        "locomotion-v0", n_modules=job["n"], motion_model=job["model"], max_cycles=job["max_cycles"], **job["overrides"]
+    )
+    env.reset(seed=job["seed"])
     start = env.world.positions[:, 0].mean()
-    result = compiled_rollout(env, make_policy("locomotion", env, seed=seed))
+    result = compiled_rollout(env, make_policy("locomotion", env, seed=job["seed"]))
     distance = float(result.positions[:, 0].mean() - start)
     return {
+        **job,
         "success": result.success,
         "cycles": result.cycles,
         "distance": distance,
@@ -65,15 +69,23 @@ def main(argv=None) -> int:
     parser.add_argument("--max-cycles", type=int, default=3000)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "evidence" / "locomotion.md")
     parser.add_argument("--figure", type=Path, default=ROOT / "docs" / "figures" / "locomotion_evidence.png")
+    add_workers(parser, default=1)
     args = parser.parse_args(argv)
     started = time.perf_counter()
+    jobs = [
+        dict(model=model, n=n, label=label, overrides=overrides, seed=s, max_cycles=args.max_cycles)
+        for model in MODELS
+        for n in SIZES
+        for label, overrides in COURSES
+        for s in range(args.seeds)
+    ]
+    groups: dict = {}
+    for row in run_jobs(run_one, jobs, args.workers):
+        groups.setdefault((row["model"], row["n"], row["label"]), []).append(row)
     table = {}
-    for model in MODELS:
-        for n in SIZES:
-            for label, overrides in COURSES:
-                rows = [run_one(n, overrides, model, s, args.max_cycles) for s in range(args.seeds)]
-                table[model, n, label] = summary(rows)
-                print(model, n, label, table[model, n, label], flush=True)
+    for key, rows in groups.items():
+        table[key] = summary(rows)
+        print(*key, table[key], flush=True)
     lines = [
         "| motion model | modules | course | successes | median cycles to success | mean speed (sites/cycle) "
         "| mean share beyond the line |",
@@ -83,21 +95,12 @@ def main(argv=None) -> int:
         lines.append(
             f"| {model} | {n} | {label} | {s['success']} | {s['cycles']} | {s['speed']:.3f} | {s['beyond']:.2f} |"
         )
-    import numba
-
-    machine = (
-        f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy "
-        f"{np.__version__}, numba {numba.__version__}, {time.perf_counter() - started:.0f} s"
+    write_tables(
+        args.out,
+        f"{args.seeds} seeds per row (seeds 0..{args.seeds - 1}), at most {args.max_cycles} cycles, `distance` 3, "
+        f"defaults otherwise; `python benchmarks/locomotion_evidence.py --seeds {args.seeds}` "
+        f"({machine(seconds=time.perf_counter() - started)}).\n\n" + "\n".join(lines),
     )
-    text = args.out.read_text() if args.out.exists() else "<!-- tables -->\n<!-- /tables -->\n"
-    head, rest = text.split("<!-- tables -->", 1)
-    tail = rest.split("<!-- /tables -->", 1)[1]
-    block = (
-        f"<!-- tables -->\n{args.seeds} seeds per row (seeds 0..{args.seeds - 1}), at most {args.max_cycles} "
-        f"cycles, `distance` 3, defaults otherwise; `python benchmarks/locomotion_evidence.py --seeds "
-        f"{args.seeds}` ({machine}).\n\n" + "\n".join(lines) + "\n<!-- /tables -->"
-    )
-    args.out.write_text(head + block + tail)
     plot(table, args.figure)
     return 0
 

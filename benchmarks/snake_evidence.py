@@ -12,13 +12,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from evidence import add_workers, machine, run_jobs, write_tables
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,16 +34,18 @@ RULES = (("snake-v0", "snake"), ("locomotion-v0", "locomotion"))
 """(task id, policy) of the composed behaviour and of the tread rule."""
 
 
-def run_one(task_id: str, policy: str, n_modules: int, overrides: dict, seed: int, max_cycles: int) -> dict:
-    """One episode: success and cycles of ``policy`` on ``task_id`` with ``overrides``."""
+def run_one(job: dict) -> dict:
+    """One episode (``job``: ``task_id``, ``policy``, ``n``, ``overrides``, ``seed``, ``max_cycles``):
+    success and cycles of ``policy`` on ``task_id`` with ``overrides``."""
     from baselines import make_policy
     from baselines.compiled import compiled_rollout
     from proteo_env import make
 
-    env = make(task_id, n_modules=n_modules, max_cycles=max_cycles, **overrides)
-    env.reset(seed=seed)
-    result = compiled_rollout(env, make_policy(policy, env, seed=seed))
+    env = make(job["task_id"], n_modules=job["n"], max_cycles=job["max_cycles"], **job["overrides"])
+    env.reset(seed=job["seed"])
+    result = compiled_rollout(env, make_policy(job["policy"], env, seed=job["seed"]))
     return {
+        **job,
         "success": bool(result.success),
         "cycles": int(result.cycles),
         "beyond": float((result.positions[:, 0] >= env.task.finish).mean()),
@@ -65,21 +65,21 @@ def main(argv=None) -> int:
     parser.add_argument("--first-seed", type=int, default=200)
     parser.add_argument("--sizes", type=int, nargs="+", default=[20])
     parser.add_argument("--max-cycles", type=int, default=3000)
-    parser.add_argument("--workers", type=int, default=2)
+    add_workers(parser, default=2)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "evidence" / "snake.md")
     args = parser.parse_args(argv)
     started = time.perf_counter()
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    jobs = {
-        (label, n, task_id): [(task_id, policy, n, overrides, s, args.max_cycles) for s in seeds]
+    jobs = [
+        dict(label=label, task_id=task_id, policy=policy, n=n, overrides=overrides, seed=s, max_cycles=args.max_cycles)
         for label, overrides in COURSES
         for n in args.sizes
         for task_id, policy in RULES
-    }
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    with ProcessPoolExecutor(args.workers) as pool:
-        futures = {key: [pool.submit(run_one, *job) for job in batch] for key, batch in jobs.items()}
-        results = {key: [f.result() for f in batch] for key, batch in futures.items()}
+        for s in seeds
+    ]
+    results = {}
+    for row in run_jobs(run_one, jobs, args.workers):
+        results.setdefault((row["label"], row["n"], row["task_id"]), []).append(row)
     lines = [
         "| course | modules | snake: successes | median cycles | share beyond | locomotion's tread: successes "
         "| median cycles | share beyond |",
@@ -90,24 +90,15 @@ def main(argv=None) -> int:
             cells = " | ".join(summary(results[label, n, task_id]) for task_id, _ in RULES)
             lines.append(f"| {label} | {n} | {cells} |")
             print(lines[-1], flush=True)
-    import numba
-
-    machine = (
-        f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, numpy "
-        f"{np.__version__}, numba {numba.__version__}, {args.workers} workers, {time.perf_counter() - started:.0f} s"
-    )
     command = f"python benchmarks/snake_evidence.py --seeds {args.seeds} --first-seed {args.first_seed}" + (
         f" --sizes {' '.join(map(str, args.sizes))}" if args.sizes != [20] else ""
     )
-    block = (
-        f"<!-- tables -->\n{args.seeds} robots per row (seeds {seeds.start}..{seeds.stop - 1}), at most "
-        f"{args.max_cycles} cycles, `minimal`, every obstacle 3 sites ahead of the robot; `{command}` "
-        f"({machine}).\n\n" + "\n".join(lines) + "\n<!-- /tables -->"
+    write_tables(
+        args.out,
+        f"{args.seeds} robots per row (seeds {seeds.start}..{seeds.stop - 1}), at most {args.max_cycles} cycles, "
+        f"`minimal`, every obstacle 3 sites ahead of the robot; `{command}` "
+        f"({machine(args.workers, time.perf_counter() - started)}).\n\n" + "\n".join(lines),
     )
-    text = args.out.read_text() if args.out.exists() else "<!-- tables -->\n<!-- /tables -->\n"
-    head, rest = text.split("<!-- tables -->", 1)
-    tail = rest.split("<!-- /tables -->", 1)[1]
-    args.out.write_text(head + block + tail)
     return 0
 
 

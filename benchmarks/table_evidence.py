@@ -20,12 +20,12 @@ world than the default thread pool)::
 from __future__ import annotations
 
 import argparse
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from evidence import add_workers, machine, publish, run_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -69,6 +69,11 @@ def run(task_id: str, overrides: dict, seed: int, policy: str = "table") -> dict
         "reward": result.total_reward,
         "seconds": seconds,
     }
+
+
+def run_job(job: dict) -> dict:
+    """:func:`run` of one job (its keyword arguments), for :func:`evidence.run_jobs`."""
+    return run(**job)
 
 
 def shift_windows(schedule, cycles: int) -> list[tuple[int, int]]:
@@ -175,25 +180,6 @@ def _shown(path) -> str:
     return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
-def machine() -> str:
-    import numba
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import os
-
-    return (
-        f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {np.__version__}, "
-        f"numba {numba.__version__}, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'default')}"
-    )
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=str(ROOT / "configs" / "table.yaml"))
@@ -204,6 +190,7 @@ def main(argv=None) -> int:
     parser.add_argument("--random-seeds", type=int, default=3)
     parser.add_argument("--every", type=int, default=50, help="legs-over-time sampling period (cycles)")
     parser.add_argument("--out", default=None, help="markdown file (default: print)")
+    add_workers(parser, default=1)
     args = parser.parse_args(argv)
 
     task_id, base = load_run_config(args.config)
@@ -228,24 +215,24 @@ def main(argv=None) -> int:
         f"{params.root_spacing} sites, depth {params.depth}, {params.n_spares} spare modules, "
         f"F_max = {params.f_max}, F_min = {params.f_min}, stable window {params.stable_window} cycles, "
         f"motion model `{base.get('motion_model', 'default')}`, schedule (cycle, W1, W2) = {list(schedule)}.",
-        f"Seeds 0..{args.seeds - 1} for each setting. Machine: {machine()}.",
+        f"Seeds 0..{args.seeds - 1} for each setting. Machine: {machine(args.workers)}.",
         "",
     ]
 
+    def episodes(overrides: dict, seeds: int, policy: str = "table") -> list[dict]:
+        jobs = [dict(task_id=task_id, overrides=overrides, seed=seed, policy=policy) for seed in range(seeds)]
+        return list(run_jobs(run_job, jobs, args.workers))
+
     results: dict[float, list[dict]] = {}
     for p in args.p_values:
-        overrides = {**base, "p_max": p, "p_min": p}
-        episodes = []
-        for seed in range(args.seeds):
-            ep = run(task_id, overrides, seed)
+        results[p] = episodes({**base, "p_max": p, "p_min": p}, args.seeds)
+        for seed, ep in enumerate(results[p]):
             ep["shifts"] = per_shift(ep, schedule)
-            episodes.append(ep)
             print(
                 f"p={p} seed={seed}: {ep['cycles']} cycles, success={ep['success']}, "
                 f"restabilise={[s['restabilise'] for s in ep['shifts']]}, {ep['seconds']:.1f}s",
                 flush=True,
             )
-        results[p] = episodes
 
     # 1. re-stabilisation
     lines += [
@@ -338,7 +325,7 @@ def main(argv=None) -> int:
     )
     for model in ("sphere", "rounded", "rhombic"):
         overrides = {**base, "motion_model": model, "max_cycles": args.model_cycles}
-        eps = [run(task_id, overrides, seed) for seed in range(args.model_seeds)]
+        eps = episodes(overrides, args.model_seeds)
         best = max(int(ep["series"]["grounded_legs"].max()) for ep in eps)
         print(f"{model}: most grounded legs {best}", flush=True)
         lines.append(
@@ -358,7 +345,7 @@ def main(argv=None) -> int:
     ]
     for name, eps in (
         (f"table (p = {args.p_values[0]:g})", results[args.p_values[0]]),
-        ("random", [run(task_id, base, seed, policy="random") for seed in range(args.random_seeds)]),
+        ("random", episodes(base, args.random_seeds, policy="random")),
     ):
         per_cycle = [ep["reward"] / max(ep["cycles"], 1) for ep in eps]
         lines.append(
@@ -374,12 +361,7 @@ def main(argv=None) -> int:
         "",
     ]
 
-    text = "\n".join(lines)
-    if args.out:
-        Path(args.out).write_text(text)
-        print(f"wrote {args.out}")
-    else:
-        print(text)
+    publish("\n".join(lines), args.out)
     return 0
 
 
