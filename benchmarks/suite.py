@@ -63,9 +63,26 @@ module in the first 61 cycles, so those are the default box's cycles (its grid w
 memory above a few thousand modules)."""
 
 
-def _stepper(mode: str, n: int, batch_modules: int):
+WORKLOADS = ("uniform", "legal")
+"""Actions of the ``engine`` and ``pettingzoo`` modes: ``uniform`` on every field (most rolls are
+illegal and denied, as in early RL exploration; the suite's workload) or ``legal``: each module's
+move drawn uniformly among the moves its action mask allows (a stress case: about a fifth of the
+modules roll every cycle), every other field uniform."""
+
+
+def _draw(nvec, n: int, rng, mask: np.ndarray | None = None) -> np.ndarray:
+    """``(n, fields)`` uniform actions of one cycle; with the ``(n, moves)`` action ``mask`` (the
+    ``legal`` workload), each move uniform among the legal ones."""
+    actions = rng.integers(0, nvec, size=(n, len(nvec)))
+    if mask is not None:
+        actions[:, 0] = np.argmax(mask * rng.random(mask.shape), axis=1)
+    return actions
+
+
+def _stepper(mode: str, n: int, batch_modules: int, workload: str = "uniform", motion_model: str | None = None):
     """``(reset, step, rows, n_envs)``: ``reset()`` restarts the episode, ``step(rng)`` runs one
-    cycle with actions drawn from ``rng`` and returns the seconds spent stepping."""
+    cycle with actions drawn from ``rng`` and returns the seconds spent stepping. ``workload``
+    and ``motion_model`` (default: the task's) apply to the ``engine`` and ``pettingzoo`` modes."""
     import proteo_env
 
     if mode == "batched":
@@ -100,28 +117,41 @@ def _stepper(mode: str, n: int, batch_modules: int):
 
         return reset, step, n, 1
 
-    env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9)
+    extra = {} if motion_model is None else {"motion_model": motion_model}
+    env = proteo_env.make("sandbox-v0", n_modules=n, max_cycles=10**9, **extra)
     nvec = env.action_layout.nvec
+    legal = workload == "legal"
+    last = {"mask": None}
     if mode == "engine":
 
+        def reset():
+            env.reset(seed=0)
+            if legal:
+                last["mask"] = env.observe_arrays().action_mask
+
         def step(rng):
-            actions = rng.integers(0, nvec, size=(n, len(nvec)))
+            actions = _draw(nvec, n, rng, last["mask"])
             t = time.perf_counter()
             env.step_arrays(actions)
-            env.observe_arrays()
+            obs = env.observe_arrays()
+            last["mask"] = obs.action_mask if legal else None
             return time.perf_counter() - t
 
-        return (lambda: env.reset(seed=0)), step, n, 1
+        return reset, step, n, 1
     if mode == "pettingzoo":
         agents = env.possible_agents
 
+        def reset():
+            last["obs"], _ = env.reset(seed=0)
+
         def step(rng):
-            actions = dict(zip(agents, rng.integers(0, nvec, size=(n, len(nvec)))))
+            mask = np.stack([last["obs"][a]["action_mask"] for a in agents]) if legal else None
+            actions = dict(zip(agents, _draw(nvec, n, rng, mask)))
             t = time.perf_counter()
-            env.step(actions)
+            last["obs"], *_ = env.step(actions)
             return time.perf_counter() - t
 
-        return (lambda: env.reset(seed=0)), step, n, 1
+        return reset, step, n, 1
     if mode == "reference":
         from proteo_env.core.reference import ReferenceWorld
 
@@ -158,14 +188,15 @@ def _stepper(mode: str, n: int, batch_modules: int):
     raise ValueError(f"mode={mode!r} is not known; allowed: {', '.join(MODES)}")
 
 
-def measure(mode: str, n: int, batch_modules: int, budget_s: float, cycles: int) -> dict:
+def measure(mode: str, n: int, batch_modules: int, budget_s: float, cycles: int, **workload) -> dict:
     """One measurement in this process (called in a subprocess by :func:`main`).
 
     Repeats the episode (reset, then ``cycles`` timed cycles) until ``budget_s`` seconds of
     stepping are spent; returns the mean time of each cycle index over the repeats.
+    ``workload``: :func:`_stepper`'s ``workload`` and ``motion_model``.
     """
     started = time.perf_counter()
-    reset, step, rows, n_envs = _stepper(mode, n, batch_modules)
+    reset, step, rows, n_envs = _stepper(mode, n, batch_modules, **workload)
     reset()
     first = step(np.random.default_rng(0)) + (time.perf_counter() - started)
     per_cycle = np.zeros(cycles)
