@@ -1,18 +1,8 @@
-"""The part every evidence script (``benchmarks/*_evidence.py``) shares: the per-seed job runner,
-the table cells with intervals, the machine line and the writing of the page.
-
-An evidence script keeps only what is its own: its episode function (one job in, one row
-out), its metrics and its table layout. Here:
-
-- :func:`run_jobs`: the episode function over the jobs, results in the jobs' order, serially
-  or in a pool of worker processes with one numba thread each;
-- :func:`success_cell` and :func:`mean_cell`: a success count with its Wilson interval and a
-  mean with its Student t half-width (the intervals are :mod:`training.statistics`'s);
-- :func:`machine`: what the page was measured on (CPU, load average, versions, workers, time),
-  from :func:`machine_info.describe`;
-- :func:`command`, :func:`publish` and :func:`write_tables`: the command a page records, a
-  whole page written (or printed), and the tables written between a page's
-  ``<!-- tables -->`` and ``<!-- /tables -->`` markers, the prose around them kept.
+"""What every evidence script (``benchmarks/*_evidence.py``) shares, so that each keeps only its
+episode function (one job in, one row out), its metrics and its tables: the per-seed job runner
+(:func:`run_jobs`), the cells with intervals (from :mod:`training.statistics`), the machine line
+(from :mod:`machine_info`) and the writing of the page, whole (:func:`publish`) or its tables
+between the ``<!-- tables -->`` markers (:func:`write_tables`).
 """
 
 from __future__ import annotations
