@@ -219,13 +219,13 @@ def main(argv=None) -> int:
         "",
     ]
 
-    def episodes(overrides: dict, seeds: int, policy: str = "table") -> list[dict]:
+    def run_seeds(overrides: dict, seeds: int, policy: str = "table") -> list[dict]:
         jobs = [dict(task_id=task_id, overrides=overrides, seed=seed, policy=policy) for seed in range(seeds)]
         return list(run_jobs(run_job, jobs, args.workers))
 
     results: dict[float, list[dict]] = {}
     for p in args.p_values:
-        results[p] = episodes({**base, "p_max": p, "p_min": p}, args.seeds)
+        results[p] = run_seeds({**base, "p_max": p, "p_min": p}, args.seeds)
         for seed, ep in enumerate(results[p]):
             ep["shifts"] = per_shift(ep, schedule)
             print(
@@ -325,7 +325,7 @@ def main(argv=None) -> int:
     )
     for model in ("sphere", "rounded", "rhombic"):
         overrides = {**base, "motion_model": model, "max_cycles": args.model_cycles}
-        eps = episodes(overrides, args.model_seeds)
+        eps = run_seeds(overrides, args.model_seeds)
         best = max(int(ep["series"]["grounded_legs"].max()) for ep in eps)
         print(f"{model}: most grounded legs {best}", flush=True)
         lines.append(
@@ -345,7 +345,7 @@ def main(argv=None) -> int:
     ]
     for name, eps in (
         (f"table (p = {args.p_values[0]:g})", results[args.p_values[0]]),
-        ("random", episodes(base, args.random_seeds, policy="random")),
+        ("random", run_seeds(base, args.random_seeds, policy="random")),
     ):
         per_cycle = [ep["reward"] / max(ep["cycles"], 1) for ep in eps]
         lines.append(
