@@ -89,7 +89,8 @@ def test_overlapping_intervals_are_no_detectable_difference(tmp_path):
         rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
     )
     assert "clone: no detectable difference in success from the rules" in text
-    assert "above the rules" not in text and "below the rules" not in text
+    assert "succeeds above the rules" not in text and "succeeds below the rules" not in text
+    assert "success detectably above the rules: none; below them: none" in text
 
 
 def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):

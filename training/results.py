@@ -265,7 +265,7 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     agg = aggregate(rows, protocol.per_training_seed)
 
-    answer = []
+    answer, details, above, below = [], [], [], []
     for recipe, entry in agg.items():
         if "error" in entry:
             continue
@@ -280,13 +280,24 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     for task in tasks:
         for recipe in sorted({r.policy for r in rows if r.task == task and r.kind in ("learned", "evolved")}):
             if (task, "heldout", recipe) in by_key and (task, "heldout", RULES) in by_key:
+                mine, rules = by_key[(task, "heldout", recipe)].summary, by_key[(task, "heldout", RULES)].summary
+                if not overlap(mine, rules):
+                    (above if mine["success_rate"] > rules["success_rate"] else below).append(f"{task} {recipe}")
                 others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]])
-                answer.append(
+                details.append(
                     f"- {task}, held-out worlds: "
                     + compare(recipe, by_key[(task, "heldout", recipe)], by_key[(task, "heldout", RULES)])
                     + (f"; on the other splits {others}" if others else "")
                     + "."
                 )
+    if details:
+        answer.append(
+            "- On the held-out worlds, success detectably above the rules: "
+            + (", ".join(above) or "none")
+            + "; below them: "
+            + (", ".join(below) or "none")
+            + "; every other recipe and task: no detectable difference (per split below)."
+        )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
     lines = [
         "# Results",
@@ -305,6 +316,7 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         "",
         "A difference is stated only where the two intervals do not overlap.",
         "",
+        *(["## Against the rules, task by task", "", *details, ""] if details else []),
     ]
     for task in tasks:
         about = {split.name: split.about for split in protocol.tasks[task].splits}
