@@ -26,7 +26,7 @@ def main() -> None:
 
     from training import cma_es
     from training.distributed import run_jobs
-    from training.evaluate import EpisodeJob, run_episode_job
+    from training.episodes import EpisodeJob, run_episode_job
 
     jobs = [
         EpisodeJob(

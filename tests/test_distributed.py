@@ -81,12 +81,13 @@ def _interrupting(fn, after: int, calls: list):
 
 # ---------------------------------------------------------------------- resume (serial)
 def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path, monkeypatch):
+    from training import episodes
     from training import evaluate as ev
 
     config = _eval_config(tmp_path)
     ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "whole", progress=False, plots=False)
-    original, calls = ev.run_episode_job, []
-    monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 7, calls))
+    original, calls = episodes.run_episode_job, []
+    monkeypatch.setattr(episodes, "run_episode_job", _interrupting(original, 7, calls))
     with pytest.raises(Interrupt):
         ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
     assert not (tmp_path / "cut" / "results.md").exists()  # no partial table
@@ -95,7 +96,7 @@ def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path,
     with pytest.raises(ConfigError, match="unfinished evaluation with other settings.*seeds"):
         ev.evaluate(config=config, tasks=TASKS, seeds=2, out=tmp_path / "cut", progress=False, plots=False)
     calls.clear()
-    monkeypatch.setattr(ev, "run_episode_job", _interrupting(original, 10**6, calls))
+    monkeypatch.setattr(episodes, "run_episode_job", _interrupting(original, 10**6, calls))
     ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
     total = len(_episodes(tmp_path / "whole")) * 3
     assert len(calls) == total - 7  # only the missing episodes ran

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from proteo_env.config import ConfigError
-from training.evaluate import GroupResult, evaluate, load_config
+from training.evaluate import evaluate, load_config
+from training.report import GroupResult
 from training.statistics import group_bootstrap, wilson
 
 RUNS = ["checkpoints/chain/cma_rules", "checkpoints/chain/cma_neural", "checkpoints/chain/sb3_ppo"]
@@ -81,7 +82,7 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
 
 
 def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
-    from training.evaluate import INTERVALS, PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
+    from training.report import INTERVALS, PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
 
     def result(task, policy, kind, successes, cycles, level="move"):
         return PolicyResult(
@@ -131,7 +132,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
 
 
 def _run(policy, successes, cycles, group="", source="", task="grasp-v0", kind="learned", level="move"):
-    from training.evaluate import PolicyResult
+    from training.report import PolicyResult
 
     return PolicyResult(
         task=task,
@@ -159,7 +160,7 @@ def _kickstart_runs():
 
 
 def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width():
-    from training.evaluate import grouped, markdown_table, summary_table
+    from training.report import grouped, markdown_table, summary_table
 
     rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
     rows = grouped([rules, *_kickstart_runs()])
@@ -179,7 +180,7 @@ def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width()
 
 def _written(tmp_path, results, name="first"):
     """A results.json as proteo eval writes it, of ``results``, in ``tmp_path / name``."""
-    from training.evaluate import write_results
+    from training.report import write_results
 
     out = tmp_path / name
     write_results(
@@ -191,7 +192,8 @@ def _written(tmp_path, results, name="first"):
 def test_from_results_re_renders_the_tables_and_the_published_pages_without_running_episodes(tmp_path, monkeypatch):
     import json
 
-    import training.evaluate as ev
+    import training.report as ev
+    from training import episodes
     from training.cli import main
 
     rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
@@ -204,7 +206,7 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     (first / "results.md").write_text("an old table\n")
     page = tmp_path / "page.md"
     page.write_text(f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\nold\n{ev.PUBLISH_END}\nb\n")
-    monkeypatch.setattr(ev, "run_episode_job", lambda job: pytest.fail("no episode may run"))
+    monkeypatch.setattr(episodes, "run_episode_job", lambda job: pytest.fail("no episode may run"))
     argv = ["eval", "--from-results", str(first / "results.json"), "--out", str(first), "--no-plots"]
     assert main([*argv, "--publish", str(page)]) == 0
     again = _written(tmp_path, results, "again")

@@ -17,7 +17,7 @@ a value of the wrong kind, fewer worlds or training seeds than the protocol's st
 is one :class:`~proteo_env.config.ConfigError` naming the field, the value and what is allowed.
 
 :func:`judge` runs the episodes with the machinery of ``proteo eval``
-(:class:`training.evaluate.EpisodeJob`, :func:`training.evaluate.run_episodes`: serially or as
+(:class:`training.episodes.EpisodeJob`, :func:`training.episodes.run_episodes`: serially or as
 Ray tasks, recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
 ``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
 protocol, the checkpoints' task and control level, the flags) before anything is written::
@@ -52,7 +52,7 @@ protocol, the checkpoints' task and control level, the flags) before anything is
              "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
              "seconds": 3.1}
           ],
-          "summary": {...}                     # training.evaluate.PolicyResult.summary (one run:
+          "summary": {...}                     # training.report.PolicyResult.summary (one run:
                                                # Wilson, Student t) or GroupResult.summary (several
                                                # training seeds: the stratified bootstrap
                                                # training.statistics.group_bootstrap)
@@ -508,7 +508,8 @@ def judge(
     from training.checkpoints import load_policy
     from training.common import provenance
     from training.distributed import Journal
-    from training.evaluate import EpisodeJob, PolicyResult, run_episodes
+    from training.episodes import EpisodeJob, run_episodes
+    from training.report import PolicyResult
 
     protocol = load_protocol(version, root)
     if worlds_cap is not None:
@@ -594,7 +595,7 @@ def judge(
     run_episodes(results, jobs, out_dir, ray=ray, journal=journal, progress=progress)
     seconds = time.perf_counter() - started
 
-    from training.evaluate import GroupResult
+    from training.report import GroupResult
 
     doc_rows = []
     for e, split, seeds, indices in rows:
@@ -653,7 +654,7 @@ def judge(
 
 def markdown(document: dict) -> str:
     """The rows of a ``benchmark.json`` document as a markdown table with 95 % intervals."""
-    from training.evaluate import INTERVALS, cycles_cell, interval, success_cell
+    from training.report import INTERVALS, cycles_cell, interval, success_cell
 
     head = [
         "task",

@@ -1,0 +1,144 @@
+"""The episodes of ``proteo eval`` and ``proteo sweep``: one :class:`EpisodeJob` per episode.
+
+:func:`run_episode_job` runs one job (building its env and policy once per process, cached
+in :data:`_BUILT`) and returns what the tables need; :func:`run_episodes` runs a list of
+jobs serially or as Ray tasks (:mod:`training.distributed`), writing each finished episode to a
+journal as it arrives, so an interrupted run resumes with the missing episodes only.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from proteo_env.registry import task_name
+
+
+def _picture_png(env, caption: str) -> str:
+    """The world of ``env`` as it is now, as a base64-encoded PNG."""
+    import base64
+    import tempfile
+
+    from proteo_env.render.renderer import Renderer
+    from proteo_env.render.scene import Scene
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "picture.png"
+        renderer = Renderer()
+        renderer.savefig(Scene.from_world(env.world, caption=caption), path)
+        renderer.close()
+        return base64.b64encode(path.read_bytes()).decode()
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    """One episode: everything its result depends on (picklable; sent to Ray workers as it is).
+
+    ``policy`` is a registered policy name (``checkpoint=False``) or a checkpoint path;
+    ``overrides`` is the JSON of the ``proteo_env.make`` overrides; ``picture`` a caption: when
+    not empty the end of the episode is drawn and returned.
+    """
+
+    task_id: str
+    overrides: str
+    level: str
+    policy: str
+    checkpoint: bool
+    seed: int
+    policy_seed: int
+    deterministic: bool = False
+    picture: str = ""
+
+    @property
+    def key(self) -> str:
+        """The job's name in a journal: task, settings, level, policy and seed."""
+        return f"{self.task_id}|{self.overrides}|{self.level}|{self.policy}|{self.seed}"
+
+
+_BUILT: dict = {}
+"""(env, policy) per (task, overrides, level, policy): built once per process, reused across episodes."""
+
+
+def built(job: EpisodeJob):
+    """The environment and policy ``job`` runs (cached per process; at most 4 kept)."""
+    spec = (job.task_id, job.overrides, job.level, job.policy, job.checkpoint, job.policy_seed, job.deterministic)
+    if spec not in _BUILT:
+        import proteo_env
+        from baselines import make_policy
+        from training.checkpoints import load_policy
+        from training.common import limit_threads
+
+        limit_threads(1)
+        while len(_BUILT) >= 4:
+            _BUILT.pop(next(iter(_BUILT)))[0].close()
+        overrides = json.loads(job.overrides)
+        env = proteo_env.make(job.task_id, **overrides, **({} if job.level == "full" else {"control": job.level}))
+        policy = (
+            load_policy(job.policy, env, seed=job.policy_seed, deterministic=job.deterministic)
+            if job.checkpoint
+            else make_policy(job.policy, env, seed=job.policy_seed)
+        )
+        _BUILT[spec] = (env, policy)
+    return _BUILT[spec]
+
+
+def run_episode_job(job: EpisodeJob) -> dict:
+    """Run one episode: ``{"return", "success", "cycles", "metrics", "seconds", "picture"}`` (JSON-ready)."""
+    from proteo_env.rollout import run_episode
+
+    env, policy = built(job)
+    started = time.perf_counter()
+    episode = run_episode(env, policy, seed=job.seed)
+    out = {
+        "return": float(episode.total_reward),
+        "success": bool(episode.success),
+        "cycles": int(episode.cycles),
+        "metrics": {k: float(v) for k, v in episode.metrics.items()},
+        "seconds": time.perf_counter() - started,
+        "picture": None,
+    }
+    if job.picture:
+        out["picture"] = _picture_png(
+            env, f"{job.picture} · seed {job.seed} · cycle {episode.cycles}{' · success' if episode.success else ''}"
+        )
+    return out
+
+
+def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool) -> None:
+    """Run the planned ``jobs`` (serially or on Ray, recorded in ``journal``) and add each
+    episode to its row of ``results``; pictures go to ``out_dir/pictures``."""
+    import base64
+
+    from training.distributed import run_jobs
+
+    episodes = run_jobs(
+        run_episode_job,
+        [j for _, j in jobs],
+        [j.key for _, j in jobs],
+        ray=ray,
+        journal=journal,
+        desc="episodes",
+        progress=progress,
+    )
+    for (row, job), episode in zip(jobs, episodes):
+        result = results[row]
+        result.returns.append(episode["return"])
+        result.successes.append(episode["success"])
+        result.cycles.append(episode["cycles"])
+        result.seeds.append(job.seed)
+        result.metrics.append(episode["metrics"])
+        result.seconds += episode["seconds"]
+        if episode["picture"]:
+            file = (
+                out_dir
+                / "pictures"
+                / (
+                    f"{task_name(job.task_id)}_"
+                    f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
+                    f"_{job.level}.png"
+                ).replace("+", "-")
+            )
+            file.parent.mkdir(parents=True, exist_ok=True)
+            file.write_bytes(base64.b64decode(episode["picture"]))
