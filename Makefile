@@ -45,7 +45,7 @@ eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
 # The study under benchmark protocol v1 (configs/benchmark/v1.yaml, docs/guides/benchmark.md), about
-# 75 minutes on 2 cores: five independent training seeds of each recipe in docs/results.md
+# 95 minutes on 2 cores: five independent training seeds of each recipe in docs/results.md
 # (python -m training.study) into checkpoints/v1, each recipe judged on every split of its task
 # (proteo eval --benchmark v1) into docs/benchmark/v1/<task>/<recipe>, then make results. The
 # rules' and random's rows are judged once per protocol: make benchmark-references (about 25 minutes).
@@ -56,7 +56,7 @@ STUDY_V1 := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]" --keep-dir checkp
 learning-results: install
 	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
-	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[locomotion]" --total-steps 16000000 $(STUDY_V1)
+	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[chain, branch, grasp, locomotion]" --total-steps 16000000 $(STUDY_V1)
 	for recipe in checkpoints/v1/*/*_move; do \
 		$(BIN)/proteo eval --benchmark v1 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/v1/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
