@@ -71,23 +71,23 @@ def _bench(tmp_path, learned_rate: float):
     return folder
 
 
-def test_a_recipe_below_the_rules_is_said_to_be_below(tmp_path):
-    folder = _bench(tmp_path, 0.3)
-    rows, headers = results.read_rows(folder)
-    text = results.render(
+def _page(tmp_path, learned_rate: float) -> str:
+    """The results page of :func:`_bench` (figures under ``tmp_path/docs/results``)."""
+    rows, headers = results.read_rows(_bench(tmp_path, learned_rate))
+    return results.render(
         rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
     )
+
+
+def test_a_recipe_below_the_rules_is_said_to_be_below(tmp_path):
+    text = _page(tmp_path, 0.3)
     assert "clone succeeds below the rules: 0.30" in text
     assert "| clone (move, 5 seeds) | 30/100 (" in text
     assert (tmp_path / "docs" / "results" / "profiles.png").is_file()
 
 
 def test_overlapping_intervals_are_no_detectable_difference(tmp_path):
-    folder = _bench(tmp_path, 0.85)
-    rows, headers = results.read_rows(folder)
-    text = results.render(
-        rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
-    )
+    text = _page(tmp_path, 0.85)
     assert "clone: no detectable difference in success from the rules" in text
     assert "succeeds above the rules" not in text and "succeeds below the rules" not in text
     assert "success detectably above the rules: none; below them: none" in text

@@ -10,7 +10,7 @@ import numpy as np
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
-from proteo_env.config import ConfigError, world_seeds
+from proteo_env.config import ConfigError
 from proteo_env.spaces import ObservationBuffers
 from training.policies import check_memory, with_memory
 
@@ -85,7 +85,7 @@ class TrainingEnvs:
         """Features per sample: the encoding, then the memory's inputs."""
         self.previous_actions = np.zeros((n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
         """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
-        self.buffers = self.batch.reset(world_seeds=world_seeds(env_seed, n_envs))
+        self.buffers = self.batch.reset(seed=env_seed)
         self.join_bonus = join_bonus
         self.outside = join_modes(self.batch.task, join_from) if join_bonus else np.zeros(0, dtype=np.int64)
         """Mode numbers of a module not yet in the structure (module credit; empty when off)."""
