@@ -68,7 +68,7 @@ def main() -> None:
         )
     cma = [
         "--config",
-        "configs/train/cma_rules_chain.yaml",
+        "configs/train/cma_rules_chain_full.yaml",
         "--generations",
         "2",
         "--popsize",

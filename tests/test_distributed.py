@@ -27,7 +27,7 @@ EVAL_CONFIG = {
 TASKS = ["chain", "table"]
 CMA = [
     "--config",
-    "configs/train/cma_rules_chain.yaml",
+    "configs/train/cma_rules_chain_full.yaml",
     "--generations",
     "2",
     "--popsize",

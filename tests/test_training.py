@@ -185,7 +185,7 @@ def checkpoints(tmp_path_factory):
         "cma_rules": cma_es.main(
             [
                 "--config",
-                "configs/train/cma_rules_chain.yaml",
+                "configs/train/cma_rules_chain_full.yaml",
                 "--generations",
                 "2",
                 "--popsize",
@@ -298,7 +298,7 @@ def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
     final = cma_es.main(
         [
             "--config",
-            "configs/train/cma_rules_chain.yaml",
+            "configs/train/cma_rules_chain_full.yaml",
             "--resume",
             str(first),
             "--generations",
@@ -591,7 +591,7 @@ def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_pa
 
     common = [
         "--config",
-        "configs/train/cma_rules_table.yaml",
+        "configs/train/cma_rules_table_full.yaml",
         "--generations",
         "1",
         "--popsize",

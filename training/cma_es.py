@@ -25,7 +25,7 @@ generation. The checkpoint holds the distribution's mean (CMA-ES's best estimate
 the mean was mapped into the bounds, see :func:`distribution_mean`, hold clipped parameters;
 ``--resume CHECKPOINT --generations <its generation>`` writes them again, corrected.)
 
-    python -m training.cma_es --config configs/train/cma_rules_chain.yaml
+    python -m training.cma_es --config configs/train/cma_rules_chain_full.yaml
     python -m training.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
     python -m training.cma_es --resume runs/cma_rules_chain_s0/checkpoints/step_0000123456 --generations 50
 """
@@ -90,6 +90,7 @@ class Args:
     resume: str | None = None
     threads: int = 1
     tensorboard: bool = True
+    progress_bar: bool = True
     ray: bool = False
     """Evaluate the population's episodes as Ray tasks (same results as serially)."""
     address: str | None = None
@@ -308,6 +309,7 @@ RESUME_INDEPENDENT = (
     "resume",
     "threads",
     "tensorboard",
+    "progress_bar",
     "ray",
     "address",
     "workers",
@@ -358,6 +360,12 @@ def main(argv=None) -> Path:
             )
     save_args(args, run_dir)
 
+    # Two independent streams of the run's seed (numpy.random.SeedSequence children): the episodes'
+    # world seeds, and CMA-ES's own sampling (cma seeds numpy's legacy generator with an integer;
+    # it reads 0 as "the clock").
+    episode_stream, cma_stream = np.random.SeedSequence(args.seed).spawn(2)
+    cma_seed = int(cma_stream.generate_state(1)[0]) or 1
+
     # ------------------------------------------------------------------ genome <-> policy
     params: tuple = ()
     policy_name = ""
@@ -372,12 +380,12 @@ def main(argv=None) -> Path:
             return {p.name: p.decode(v) for p, v in zip(params, x)}
 
         x0 = np.array([p.encode(p.default) for p in params])
-        options = {"bounds": [0.0, 1.0], "popsize": args.popsize, "seed": args.seed + 1, "verbose": -9}
+        options = {"bounds": [0.0, 1.0], "popsize": args.popsize, "seed": cma_seed, "verbose": -9}
     else:
         x0 = NumpyMLP(encoder.size, int(nvec.sum()), args.hidden).init_genome(np.random.default_rng(args.seed))
-        options = {"popsize": args.popsize, "seed": args.seed + 1, "verbose": -9, "CMA_diagonal": True}
+        options = {"popsize": args.popsize, "seed": cma_seed, "verbose": -9, "CMA_diagonal": True}
 
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(episode_stream)
     agent_steps = 0
     if interrupted:
         es, agent_steps = state["es"], state["agent_steps"]
@@ -441,7 +449,9 @@ def main(argv=None) -> Path:
     journal = Journal(run_dir / "episodes.jsonl", fingerprint, what="CMA-ES run")
     """Every finished episode of this run (by candidate and seed): an interrupted generation resumes."""
     n_agents = len(env.possible_agents)
-    bar = tqdm(total=args.generations, initial=es.countiter, unit="generation", desc=algorithm)
+    bar = tqdm(
+        total=args.generations, initial=es.countiter, unit="generation", desc=algorithm, disable=not args.progress_bar
+    )
     overrides = json.dumps(args.env, sort_keys=True)
     while es.countiter < args.generations:
         seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
@@ -467,7 +477,7 @@ def main(argv=None) -> Path:
             ray=ray,
             journal=journal,
             desc=f"generation {es.countiter + 1}",
-            progress=True,
+            progress=args.progress_bar,
         )
         fitness, outcomes = [], []
         for c in range(len(candidates)):

@@ -19,10 +19,13 @@ recipe         script                   config
                                         of env overrides, no demonstrations)
 ``credit``     ``training/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
                                         with module credit (``join_bonus``), from the same clone
+``cma``        ``training/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
+                                        the hand-coded rules' parameters (level ``full``, for
+                                        the config's generations)
 ============== ======================== ====================================================
 
 For each recipe, task and seed it trains the config with ``--seed S`` (PPO recipes for
-``total_steps`` agent-steps or the time limit ``minutes``; ``parallel`` runs at a time, one
+``total_steps`` agent-steps or the time limit ``minutes``, CMA-ES for its generations or that limit; ``parallel`` runs at a time, one
 thread each; a kickstart run waits for its clone), then keeps:
 
 - the final checkpoint, without its optimiser state (``--resume`` reads that from the run
@@ -58,6 +61,7 @@ RECIPES = {
     "kickstart": ("training.ppo", "kickstart", 0),
     "curriculum": ("training.ppo", "curriculum", 0),
     "credit": ("training.ppo", "credit", 0),
+    "cma": ("training.cma_es", "cma_rules", 0),
 }
 """Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
 unless ``total_steps`` says otherwise; 0: the config's)."""
@@ -78,7 +82,7 @@ class Args:
     total_steps: int = 0
     """Agent-steps of each PPO run (0: the config's total_steps)."""
     minutes: float = 6.0
-    """Wall-clock limit of each PPO run (0: none; then every run trains for its steps, whatever the machine's load)."""
+    """Wall-clock limit of each PPO or CMA-ES run (0: none; then every run trains for its steps, whatever the machine's load)."""
     parallel: int = 2
     """Runs at a time (each uses one thread)."""
     flags: dict = field(default_factory=dict)
@@ -116,8 +120,9 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
         "--progress-bar",
         "false",
     ]
-    if module == "training.ppo":
+    if module in ("training.ppo", "training.cma_es"):
         cmd += ["--time-limit-minutes", str(args.minutes)]
+    if module == "training.ppo":
         steps = args.total_steps or RECIPES[recipe][2]
         cmd += ["--total-steps", str(steps)] if steps else []
     if recipe in FROM_CLONE:
