@@ -37,7 +37,7 @@ def test_v1_loads_and_fixes_the_study():
     for name, t in p.tasks.items():
         splits = [s.name for s in t.splits]
         assert splits[:2] == ["heldout", "larger"], name
-        assert t.levels == {"learned": ["move"], "rules": ["full", "move"], "random": ["move"]}
+        assert t.levels == {"learned": ["move"], "rules": ["full", "move"], "random": ["move"], "evolved": ["move"]}
         assert t.splits[0].env == t.env  # heldout: the training size
         for recipe in t.recipes.values():
             assert (ROOT / recipe["config"]).is_file()
@@ -70,7 +70,7 @@ def _protocol_copy(tmp_path: Path, edit) -> Path:
         (lambda d: d.update(extra=1), ["top level", "'extra'", "version, worlds, tasks"]),
         (lambda d: d["worlds"].update(world=5), ["worlds", "'world'", "first_seed"]),
         (lambda d: d["tasks"]["chain"].update(budget=1), ["tasks.chain", "'budget'", "recipes"]),
-        (lambda d: d["tasks"]["grasp"]["levels"].update(evolved=["move"]), ["tasks.grasp.levels", "'evolved'"]),
+        (lambda d: d["tasks"]["grasp"]["levels"].update(evolve=["move"]), ["tasks.grasp.levels", "'evolve'"]),
         (
             lambda d: d["tasks"]["table"]["recipes"]["ppo-move"].update(steps=3),
             ["tasks.table.recipes.ppo-move", "'steps'", "agent_steps"],
@@ -94,6 +94,77 @@ def test_bad_protocol_file_is_one_config_error_naming_the_field(tmp_path, edit, 
     root = _protocol_copy(tmp_path, edit)
     with pytest.raises(ConfigError) as err:
         benchmark.judge("v1", policy="rules", out=tmp_path / "out", root=root, progress=False)
+    for name in names:
+        assert name in str(err.value), (name, str(err.value))
+    assert not (tmp_path / "out").exists()
+
+
+def test_v2_extends_v1_with_the_evolved_recipes_only():
+    """v2 adds the evolved level (full) and the CMA-ES recipe to chain, branch, table and grasp;
+    everything v1 fixes stays, so v1's results hold under v2."""
+    v1, v2 = load_protocol("v1"), load_protocol("v2")
+    assert [v for v, _ in v2.lineage] == ["v1", "v2"] and v2.lineage[0] == v1.lineage[0]
+    assert (v2.first_seed, v2.reference, v2.per_training_seed, v2.training_seeds) == (
+        v1.first_seed,
+        v1.reference,
+        v1.per_training_seed,
+        v1.training_seeds,
+    )
+    for name, t in v2.tasks.items():
+        before = v1.tasks[name]
+        assert (t.task_id, t.trained_on, t.env, t.splits) == (
+            before.task_id,
+            before.trained_on,
+            before.env,
+            before.splits,
+        )
+        added = {k: v for k, v in t.recipes.items() if k not in before.recipes}
+        assert {k: t.recipes[k] for k in before.recipes} == before.recipes
+        evolved = name != "locomotion"
+        assert t.levels == {**before.levels, "evolved": ["full"] if evolved else ["move"]}
+        assert list(added) == (["cma-full"] if evolved else [])
+        for recipe in added.values():
+            assert (ROOT / recipe["config"]).is_file()
+
+
+def _extension(tmp_path: Path, text: str) -> Path:
+    """A repository root holding configs/benchmark/v1.yaml and an extension v2.yaml of ``text``."""
+    (tmp_path / "configs/benchmark").mkdir(parents=True)
+    (tmp_path / "configs/train").symlink_to(ROOT / "configs/train")
+    (tmp_path / "configs/benchmark/v1.yaml").write_bytes((ROOT / "configs/benchmark/v1.yaml").read_bytes())
+    (tmp_path / "configs/benchmark/v2.yaml").write_text(text)
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    "text, names",
+    [
+        ("version: v2\nextends: v1\nworlds: {reference: 200}\n", ["top level", "'worlds'", "version, extends, tasks"]),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {tiny: {env: {n_modules: 4}}}}}\n",
+            ["tasks.chain", "'splits'", "levels, recipes"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {levels: {learned: [full]}}}\n",
+            ["tasks.chain.levels.learned", "v1 already fixes it"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {recipes: {ppo-move: {config: configs/train/ppo_chain_move.yaml}}}}\n",
+            ["tasks.chain.recipes.ppo-move", "v1 already fixes it"],
+        ),
+        ("version: v2\nextends: v1\ntasks: {chian: {}}\n", ["tasks", "'chian'", "did you mean 'chain'"]),
+        ("version: v2\nextends: v9\ntasks: {}\n", ["extends 'v9'", "allowed: v1"]),
+        ("version: v2\nextends: v2\ntasks: {}\n", ["extends = 'v2'", "a cycle (v2 -> v2)"]),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {levels: {evolved: [fast]}}}\n",
+            ["tasks.chain.levels.evolved", "'fast'", "full"],
+        ),
+    ],
+)
+def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, names):
+    root = _extension(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        benchmark.judge("v2", policy="rules", out=tmp_path / "out", root=root, progress=False)
     for name in names:
         assert name in str(err.value), (name, str(err.value))
     assert not (tmp_path / "out").exists()

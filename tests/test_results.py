@@ -35,7 +35,7 @@ def _summary(runs: list[dict]) -> dict:
     return {"episodes": n, "successes": wins, **boot}
 
 
-def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dict) -> None:
+def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dict, protocol: str = "v1") -> None:
     """A benchmark.json of one policy: ``per_split`` maps a split to a list of runs' success lists."""
     rows = []
     for split, runs in per_split.items():
@@ -56,7 +56,8 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
         )
     out = folder / task / policy
     out.mkdir(parents=True)
-    (out / "benchmark.json").write_text(json.dumps({"commit": "abc", "rows": rows}))
+    document = {"protocol": protocol, "protocol_sha256": load_protocol(protocol).sha256, "commit": "abc", "rows": rows}
+    (out / "benchmark.json").write_text(json.dumps(document))
 
 
 def _bench(tmp_path, learned_rate: float):
@@ -73,7 +74,7 @@ def _bench(tmp_path, learned_rate: float):
 
 def _page(tmp_path, learned_rate: float) -> str:
     """The results page of :func:`_bench` (figures under ``tmp_path/docs/results``)."""
-    rows, headers = results.read_rows(_bench(tmp_path, learned_rate))
+    rows, headers = results.read_rows(_bench(tmp_path, learned_rate).parent, load_protocol("v1").lineage)
     return results.render(
         rows, headers, "v1", tmp_path / "bench", tmp_path / "docs" / "results.md", load_protocol("v1")
     )
@@ -96,7 +97,7 @@ def test_overlapping_intervals_are_no_detectable_difference(tmp_path):
 def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
     """Every seed at 0.85 against rules 0.9 and random 0: every score 0.85 / 0.9, so the IQM is
     that; the rules' first 20 worlds are all successes, so no seed beats them."""
-    rows, _ = results.read_rows(_bench(tmp_path, 0.85))
+    rows, _ = results.read_rows(_bench(tmp_path, 0.85).parent, load_protocol("v1").lineage)
     agg = results.aggregate(rows, per_training_seed=20)["clone"]
     assert agg["scores"].shape == (5, 2)
     assert agg["iqm"][0] == pytest.approx(0.85 / 0.9)
@@ -104,12 +105,33 @@ def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
 
 
 def test_a_folder_without_results_is_one_clear_error(tmp_path):
-    with pytest.raises(ConfigError, match="holds no benchmark.json"):
-        results.read_rows(tmp_path)
+    with pytest.raises(ConfigError, match="hold no benchmark.json"):
+        results.read_rows(tmp_path, load_protocol("v1").lineage)
+
+
+def test_a_result_judged_under_a_changed_protocol_file_is_refused(tmp_path):
+    folder = _bench(tmp_path, 0.3)
+    file = folder / "grasp" / "clone" / "benchmark.json"
+    document = json.loads(file.read_text())
+    file.write_text(json.dumps({**document, "protocol_sha256": "0" * 64}))
+    with pytest.raises(ConfigError, match="protocol 'v1' with sha256 000000000000 is not allowed"):
+        results.read_rows(folder.parent, load_protocol("v1").lineage)
+
+
+def test_a_page_of_an_extension_holds_the_results_of_the_protocol_it_extends(tmp_path):
+    """v2 extends v1: its page reads docs/benchmark/v1 (the rules, random, the clone) and
+    docs/benchmark/v2 (an evolved recipe), and v1's page does not read v2's folder."""
+    folder = _bench(tmp_path, 0.3)
+    seeds = [[True] * 19 + [False] for _ in range(5)]
+    _write(folder.parent / "v2", "grasp", "cma-full", "evolved", "full", {"heldout": seeds, "larger": seeds}, "v2")
+    rows, _ = results.read_rows(folder.parent, load_protocol("v2").lineage)
+    assert {r.policy for r in rows} == {"rules", "random", "clone", "cma-full"}
+    rows, _ = results.read_rows(folder.parent, load_protocol("v1").lineage)
+    assert "cma-full" not in {r.policy for r in rows}
 
 
 def test_publish_writes_the_held_out_table_between_the_markers_only(tmp_path):
-    rows, _ = results.read_rows(_bench(tmp_path, 0.3))
+    rows, _ = results.read_rows(_bench(tmp_path, 0.3).parent, load_protocol("v1").lineage)
     page = tmp_path / "README.md"
     page.write_text(f"intro\n{results.PUBLISH_BEGIN}\nold table\n{results.PUBLISH_END}\nafter\n")
     results.publish(page, results.heldout_table(rows, load_protocol("v1")))

@@ -1,10 +1,10 @@
 """``proteo eval --benchmark VERSION``: judge a controller on every split of a versioned protocol.
 
 A protocol is one YAML file per version, ``configs/benchmark/<version>.yaml`` (``v1.yaml`` is
-the first; a published version is never changed, a new one is a new file). It fixes, for each
-task of the study: the task version judged (``task``) and the versions whose checkpoints are
-judged on it (``trained_on``), the control levels judged (``levels``: ``learned``, ``rules``,
-``random``), the training settings (``env``), the training recipes (``recipes``: a config in
+the first; a published version is never changed, a new one is a new file; ``v2.yaml`` extends
+v1, see :func:`load_protocol`). It fixes, for each task of the study: the task version judged
+(``task``) and the versions whose checkpoints are judged on it (``trained_on``), the control
+levels judged (``levels``: ``learned``, ``rules``, ``random``, and optionally ``evolved``), the training settings (``env``), the training recipes (``recipes``: a config in
 ``configs/train`` and a budget in agent-steps) and the evaluation splits (``splits``: each its
 settings over ``env``; ``heldout``, the training size, and ``larger``, about twice the size, in
 every task, then the out-of-distribution variants the task has parameters for). ``worlds``
@@ -96,9 +96,14 @@ MIN_TRAINING_SEEDS = 5
 """A learned or evolved recipe is judged with at least this many training seeds."""
 
 PROTOCOL_KEYS = ("version", "worlds", "tasks")
+EXTENSION_KEYS = ("version", "extends", "tasks")
+"""The keys of a protocol that extends another: it only adds levels and recipes to its tasks."""
 WORLDS_KEYS = ("first_seed", "reference", "per_training_seed", "training_seeds")
 TASK_KEYS = ("task", "trained_on", "levels", "env", "recipes", "splits")
+EXTENSION_TASK_KEYS = ("levels", "recipes")
 LEVEL_KEYS = ("learned", "rules", "random")
+OPTIONAL_LEVEL_KEYS = ("evolved",)
+"""``evolved``: the levels evolved controllers are judged at (without it: ``learned``'s)."""
 RECIPE_KEYS = ("config", "agent_steps", "init")
 SPLIT_KEYS = ("about", "env")
 REQUIRED_SPLITS = ("heldout", "larger")
@@ -123,7 +128,8 @@ class TaskProtocol:
     task_id: str
     trained_on: tuple
     levels: dict
-    """``{"learned": [...], "rules": [...], "random": [...]}``: the control levels judged."""
+    """``{"learned": [...], "rules": [...], "random": [...], "evolved": [...]}``: the control levels
+    judged (``evolved`` defaults to ``learned``'s)."""
     env: dict
     recipes: dict
     splits: tuple
@@ -137,6 +143,11 @@ class Protocol:
     version: str
     path: Path
     sha256: str
+    """Of this version's file (see ``lineage`` for the files it extends)."""
+    lineage: tuple
+    """``((version, sha256), ...)``: the versions this one extends, oldest first, then itself.
+    A result judged under an earlier version of the lineage holds under this one: an extension
+    only adds levels and recipes."""
     first_seed: int
     reference: int
     per_training_seed: int
@@ -205,6 +216,59 @@ def _settings(where: str, at: str, field_path: str, value, cls) -> dict:
     return dict(value)
 
 
+def _protocol_data(version: str, root: Path, children: tuple) -> tuple[dict, tuple]:
+    """The checked top level of ``<version>.yaml`` with the protocols it extends merged in, and
+    its lineage (:attr:`Protocol.lineage`). ``children``: the versions that extend it (a cycle
+    is an error)."""
+    from proteo_env.config import load_yaml
+
+    present = versions(root)
+    if not isinstance(version, str) or version not in present:
+        field_path = f"{PROTOCOL_DIR}/{children[-1]}.yaml: extends" if children else "--benchmark"
+        raise ConfigError(
+            f"{field_path} {version!r} is not allowed: no protocol file {PROTOCOL_DIR}/{version}.yaml; "
+            f"allowed: {', '.join(v for v in present if v not in children) or 'none present'}"
+        )
+    if version in children:
+        raise ConfigError(
+            f"benchmark {PROTOCOL_DIR}/{children[-1]}.yaml: extends = {version!r} is not allowed: a cycle "
+            f"({' -> '.join([*children, version])}); allowed: an earlier version"
+        )
+    path = root / PROTOCOL_DIR / f"{version}.yaml"
+    where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    data = load_yaml(path, "benchmark protocol", f"one of {', '.join(present)}")
+    allowed = EXTENSION_KEYS if isinstance(data, dict) and "extends" in data else PROTOCOL_KEYS
+    data = _mapping(where, "top level", data, allowed)
+    _unknown(f"{where}: top level", data, allowed)
+    if data.get("version") != version:
+        raise ConfigError(
+            f"{where}: version = {data.get('version')!r} is not allowed; allowed: {version!r} (the file's name)"
+        )
+    if "extends" not in data:
+        return data, ((version, sha),)
+    parent, lineage = _protocol_data(data["extends"], root, (*children, version))
+    merged = {**parent, "version": version, "tasks": {k: dict(v) for k, v in parent["tasks"].items()}}
+    tasks = _mapping(where, "tasks", data.get("tasks"), list(parent["tasks"]))
+    _unknown(f"{where}: tasks", tasks, list(parent["tasks"]))
+    for name, entry in tasks.items():
+        at = f"tasks.{name}"
+        entry = _mapping(where, at, entry, EXTENSION_TASK_KEYS)
+        _unknown(f"{where}: {at} (an extension only adds levels and recipes)", entry, EXTENSION_TASK_KEYS)
+        into = merged["tasks"][name]
+        for key in EXTENSION_TASK_KEYS:
+            added = _mapping(where, f"{at}.{key}", entry.get(key), ["new names"])
+            before = dict(into.get(key) or {})
+            again = [k for k in added if k in before]
+            if again:
+                raise ConfigError(
+                    f"{where}: {at}.{key}.{again[0]} = {added[again[0]]!r} is not allowed: {data['extends']} "
+                    f"already fixes it; allowed: {key} that {data['extends']} does not have"
+                )
+            into[key] = {**before, **added}
+    return merged, (*lineage, (version, sha))
+
+
 def load_protocol(version: str, root=None) -> Protocol:
     """The protocol ``configs/benchmark/<version>.yaml``, checked.
 
@@ -216,27 +280,17 @@ def load_protocol(version: str, root=None) -> Protocol:
     a protocol without a ``heldout`` or ``larger`` split, and fewer worlds or training seeds than
     :data:`MIN_REFERENCE_WORLDS`, :data:`MIN_WORLDS_PER_TRAINING_SEED` and
     :data:`MIN_TRAINING_SEEDS`.
+
+    A file with ``extends: <earlier version>`` holds only what it adds to that version: new
+    levels (``evolved``) and new recipes of its tasks; changing anything the earlier version fixes
+    (worlds, splits, settings, a level or recipe it has) is an error, so every result judged under
+    the earlier version holds under this one (:attr:`Protocol.lineage`).
     """
-    from proteo_env.config import load_yaml
     from proteo_env.registry import TASKS
 
     root = Path(root or ROOT)
-    present = versions(root)
-    if not isinstance(version, str) or version not in present:
-        raise ConfigError(
-            f"--benchmark {version!r} is not allowed: no protocol file {PROTOCOL_DIR}/{version}.yaml; "
-            f"allowed: {', '.join(present) or 'none present'}"
-        )
-    path = root / PROTOCOL_DIR / f"{version}.yaml"
+    data, lineage = _protocol_data(version, root, ())
     where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"
-    raw = path.read_bytes()
-    data = load_yaml(path, "benchmark protocol", f"one of {', '.join(present)}")
-    data = _mapping(where, "top level", data, PROTOCOL_KEYS)
-    _unknown(f"{where}: top level", data, PROTOCOL_KEYS)
-    if data.get("version") != version:
-        raise ConfigError(
-            f"{where}: version = {data.get('version')!r} is not allowed; allowed: {version!r} (the file's name)"
-        )
     worlds = _mapping(where, "worlds", data.get("worlds"), WORLDS_KEYS)
     _unknown(f"{where}: worlds", worlds, WORLDS_KEYS)
     least = {
@@ -274,9 +328,10 @@ def load_protocol(version: str, root=None) -> Protocol:
                 f"{where}: {at}.trained_on = {trained_on!r} is not allowed; allowed: a list of versions of "
                 f"{name} ({', '.join(ids)}) that holds {task_id!r}"
             )
-        levels = _mapping(where, f"{at}.levels", entry.get("levels"), LEVEL_KEYS)
-        _unknown(f"{where}: {at}.levels", levels, LEVEL_KEYS)
-        for key in LEVEL_KEYS:
+        levels = _mapping(where, f"{at}.levels", entry.get("levels"), LEVEL_KEYS + OPTIONAL_LEVEL_KEYS)
+        _unknown(f"{where}: {at}.levels", levels, LEVEL_KEYS + OPTIONAL_LEVEL_KEYS)
+        levels.setdefault("evolved", levels.get("learned"))
+        for key in LEVEL_KEYS + OPTIONAL_LEVEL_KEYS:
             value = levels.get(key)
             if not isinstance(value, list) or not value or any(v not in CONTROL_LEVELS for v in value):
                 raise ConfigError(
@@ -327,15 +382,16 @@ def load_protocol(version: str, root=None) -> Protocol:
             name=name,
             task_id=task_id,
             trained_on=tuple(trained_on),
-            levels={k: list(levels[k]) for k in LEVEL_KEYS},
+            levels={k: list(levels[k]) for k in LEVEL_KEYS + OPTIONAL_LEVEL_KEYS},
             env=env,
             recipes=recipes,
             splits=tuple(splits),
         )
     return Protocol(
         version=version,
-        path=path,
-        sha256=hashlib.sha256(raw).hexdigest(),
+        path=root / PROTOCOL_DIR / f"{version}.yaml",
+        sha256=lineage[-1][1],
+        lineage=lineage,
         first_seed=counts["first_seed"],
         reference=counts["reference"],
         per_training_seed=counts["per_training_seed"],
@@ -357,6 +413,11 @@ class Entrant:
     checkpoints: list = field(default_factory=list)
     """``[(path, meta)]``: one per training seed."""
     recipe: str | None = None
+
+
+def checkpoint_kind(meta: dict) -> str:
+    """``"evolved"`` for a checkpoint an evolution strategy wrote (its ``algorithm``), else ``"learned"``."""
+    return "evolved" if str(meta["algorithm"]).startswith("cma") else "learned"
 
 
 def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
@@ -389,12 +450,12 @@ def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
         )
     levels = {m.get("control", "full") for m in metas}
     for path, meta in zip(paths, metas):
-        level = meta.get("control", "full")
-        if level not in task.levels["learned"]:
+        level, kind = meta.get("control", "full"), checkpoint_kind(meta)
+        if level not in task.levels[kind]:
             raise ConfigError(
                 f"--checkpoint {str(path)!r}: control level = {level!r} is not allowed; allowed: the levels "
-                f"benchmark {protocol.version} judges learned and evolved {task.name} controllers at "
-                f"({', '.join(task.levels['learned'])})"
+                f"benchmark {protocol.version} judges {kind} {task.name} controllers at "
+                f"({', '.join(task.levels[kind])})"
             )
     if len(levels) > 1:
         raise ConfigError(
@@ -409,7 +470,7 @@ def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
         raise ConfigError(
             f"--checkpoint: training seeds {seeds!r} are not allowed; allowed: checkpoints of distinct training seeds"
         )
-    kinds = {"evolved" if str(m["algorithm"]).startswith("cma") else "learned" for m in metas}
+    kinds = {checkpoint_kind(m) for m in metas}
     parents = {Path(p).resolve().parent.name for p in paths}
     folder = parents.pop() if len(parents) == 1 and len(paths) > 1 else Path(paths[0]).resolve().name
     if folder.startswith("seed_"):

@@ -67,17 +67,28 @@ class Row:
         return np.array([np.mean(r["successes"][:n]) for r in self.runs])
 
 
-def read_rows(folder: Path) -> tuple[list[Row], list[dict]]:
-    """Every row of every ``benchmark.json`` below ``folder``, and each file's header."""
+def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
+    """Every row of every ``benchmark.json`` below ``root/<version>`` for each ``(version,
+    sha256)`` of a protocol's :attr:`~training.benchmark.Protocol.lineage`, and each file's
+    header. A file judged under another protocol, or under a protocol file that has changed
+    since (its ``protocol_sha256``), is a :class:`ConfigError`."""
     rows, headers = [], []
-    files = sorted(folder.rglob("benchmark.json"))
+    shas = dict(lineage)
+    files = [f for version in shas for f in sorted((root / version).rglob("benchmark.json"))]
     if not files:
         raise ConfigError(
-            f"benchmark folder {str(folder)!r} holds no benchmark.json; allowed: a folder written by "
-            "proteo eval --benchmark VERSION --out FOLDER/<task>/<policy>"
+            f"benchmark folders {', '.join(str(root / v) for v in shas)} hold no benchmark.json; allowed: folders "
+            "written by proteo eval --benchmark VERSION --out ROOT/VERSION/<task>/<policy>"
         )
     for file in files:
         data = json.loads(file.read_text())
+        judged_by = (data.get("protocol"), data.get("protocol_sha256"))
+        if shas.get(judged_by[0]) != judged_by[1]:
+            raise ConfigError(
+                f"{file}: protocol {judged_by[0]!r} with sha256 {str(judged_by[1])[:12]} is not allowed; allowed: "
+                + ", ".join(f"{v} with sha256 {h[:12]}" for v, h in shas.items())
+                + " (the protocol files as they are now: judge it again)"
+            )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
         for r in data["rows"]:
             rows.append(
@@ -299,11 +310,13 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
             + "; every other recipe and task: no detectable difference (per split below)."
         )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
+    files = " extended by ".join(
+        f"[configs/benchmark/{v}.yaml](../configs/benchmark/{v}.yaml)" for v, _ in protocol.lineage
+    )
     lines = [
         "# Results",
         "",
-        f"Every controller judged under benchmark protocol **{version}** "
-        f"([configs/benchmark/{version}.yaml](../configs/benchmark/{version}.yaml), "
+        f"Every controller judged under benchmark protocol **{version}** ({files}, "
         "[the guide](guides/benchmark.md)): the rules and random on "
         f"{protocol.reference} worlds per split, a learned recipe on {protocol.per_training_seed} worlds per "
         f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
@@ -336,7 +349,9 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         ]
         lines += [f"- `{s}`: {about[s]}" for s in splits]
         lines.append("")
-        found = curves(root / version / "learning" / "progress", task)
+        found = {}
+        for earlier, _ in protocol.lineage:
+            found.update(curves(root / earlier / "learning" / "progress", task))
         if found:
             picture = figures / f"curves_{task}.png"
             _curve_figure(task, found, picture)
@@ -418,7 +433,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     protocol = load_protocol(args.benchmark)
     root, out = Path(args.root), Path(args.out)
-    rows, headers = read_rows(root / args.benchmark)
+    rows, headers = read_rows(root, protocol.lineage)
     for page in args.publish:  # checked before anything is written
         published_text(Path(page))
     text = render(rows, headers, args.benchmark, root, out, protocol)
