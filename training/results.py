@@ -125,7 +125,7 @@ def overlap(a: dict, b: dict, low: str = "success_lo", high: str = "success_hi")
 
 
 def compare(name: str, row: Row, rules: Row) -> str:
-    """One sentence comparing a learned recipe with the rules on a split, as the intervals allow."""
+    """One sentence comparing a learned or evolved recipe with the rules on a split, as the intervals allow."""
     a, b = row.summary, rules.summary
     rate = f"{a['success_rate']:.2f} ({_interval(a['success_lo'], a['success_hi'])})"
     ref = f"{b['success_rate']:.2f} ({_interval(b['success_lo'], b['success_hi'])})"
@@ -162,7 +162,7 @@ def verdicts(task: str, recipe: str, by_key: dict, splits: list[str]) -> str:
 
 
 def aggregate(rows: list[Row], per_training_seed: int) -> dict[str, dict]:
-    """Per learned recipe: normalised scores ``(training seeds, task-splits)`` and the aggregate
+    """Per learned or evolved recipe: normalised scores ``(training seeds, task-splits)`` and the aggregate
     statistics (IQM, probability of improvement over the rules, the task-splits used)."""
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     recipes = sorted({r.policy for r in rows if r.kind in ("learned", "evolved")})
@@ -318,7 +318,7 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         "",
         f"Every controller judged under benchmark protocol **{version}** ({files}, "
         "[the guide](guides/benchmark.md)): the rules and random on "
-        f"{protocol.reference} worlds per split, a learned recipe on {protocol.per_training_seed} worlds per "
+        f"{protocol.reference} worlds per split, a learned or evolved recipe on {protocol.per_training_seed} worlds per "
         f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
         f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
         "Regenerate: `make results` (`python -m training.results`).",
