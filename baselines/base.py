@@ -180,7 +180,7 @@ class KernelPolicy(Policy):
       policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions;
     - ``memory``: a :class:`SlotMemory` (set in ``__init__``);
     - ``rule_params`` (a property): the rule's parameters as ``rule`` reads them (a
-      NamedTuple such as :class:`~baselines.chain_rules.ChainRules`).
+      NamedTuple such as :class:`~baselines.chain_rules.ChainRuleParams`).
 
     The same kernel runs here (:meth:`act`, :meth:`act_arrays`) and inside the compiled
     rollout (:mod:`baselines.compiled`), which is how a new behaviour gets both. Private

@@ -70,7 +70,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .chain_rules import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
+from .chain_rules import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRuleParams, chain_decide
 
 ON_STUCK = ("stay", "random")
 
@@ -178,10 +178,10 @@ class ChainPolicy(KernelPolicy):
         """Private memory of every module (see :class:`ModuleMemory`)."""
 
     @property
-    def rule_params(self) -> ChainRules:
+    def rule_params(self) -> ChainRuleParams:
         """The parameters as the kernels of :mod:`baselines.chain_rules` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
-        return ChainRules(
+        return ChainRuleParams(
             scent_max=int(self.scent_max),
             p_seed=float(self.p_seed),
             p_random=float(self.p_random),

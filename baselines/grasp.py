@@ -90,7 +90,7 @@ import numpy as np
 from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .base import KernelPolicy, SlotMemory
-from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRules, grasp_decide
+from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRuleParams, grasp_decide
 
 
 class GraspMemory(SlotMemory):
@@ -196,9 +196,9 @@ class GraspPolicy(KernelPolicy):
         """Private memory of every module (see :class:`GraspMemory`)."""
 
     @property
-    def rule_params(self) -> GraspRules:
+    def rule_params(self) -> GraspRuleParams:
         """The parameters as :func:`~baselines.grasp_rules.grasp_actions` reads them."""
-        return GraspRules(
+        return GraspRuleParams(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),
             random_on_flat=self.on_flat == "random",

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .locomotion_rules import LocomotionRules, locomotion_decide
+from .locomotion_rules import LocomotionRuleParams, locomotion_decide
 
 
 class LocomotionMemory(SlotMemory):
@@ -96,9 +96,9 @@ class LocomotionPolicy(KernelPolicy):
         """Private memory of every module (see :class:`LocomotionMemory`)."""
 
     @property
-    def rule_params(self) -> LocomotionRules:
+    def rule_params(self) -> LocomotionRuleParams:
         """The parameters as :func:`~baselines.locomotion_rules.locomotion_actions` reads them."""
-        return LocomotionRules(
+        return LocomotionRuleParams(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),
             patience=int(self.patience),

@@ -76,7 +76,7 @@ import numpy as np
 from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .base import KernelPolicy, SlotMemory
-from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
+from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRuleParams, table_decide
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
 
@@ -131,9 +131,9 @@ class TablePolicy(KernelPolicy):
         return super().for_env(env, seed=seed, **{**rules, **params})
 
     @property
-    def rule_params(self) -> TableRules:
+    def rule_params(self) -> TableRuleParams:
         """The parameters as :func:`~baselines.table_rules.table_actions` reads them."""
-        return TableRules(
+        return TableRuleParams(
             scent_max=int(self.scent_max),
             p_max=self.p_max,
             p_min=self.p_min,
