@@ -114,7 +114,7 @@ class BranchPolicy(ChainPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -127,7 +127,7 @@ class BranchPolicy(ChainPolicy):
         patience=30,
         **chain,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed, **chain)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed, **chain)
         if T < 1:
             raise ValueError(f"T={T!r} is not allowed; allowed: an integer >= 1")
         if B < 1:

@@ -129,7 +129,7 @@ class ChainPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -149,7 +149,7 @@ class ChainPolicy(KernelPolicy):
         prefer_chain=True,
         avoid_octahedra=True,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if not 0.0 <= p_seed <= 1.0:
             raise ValueError(f"p_seed={p_seed!r} is not allowed; allowed: a probability in [0, 1]")
         if not 0.0 <= p_random <= 1.0:

@@ -69,7 +69,7 @@ class CrawlPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -80,7 +80,7 @@ class CrawlPolicy(KernelPolicy):
         greedy_approach=True,
         prefer="downhill",
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         for name, value in (("patience", patience), ("head_patience", head_patience)):

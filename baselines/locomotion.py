@@ -69,7 +69,7 @@ class LocomotionPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -80,7 +80,7 @@ class LocomotionPolicy(KernelPolicy):
         low_first=True,
         contacts=2,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         if isinstance(patience, bool) or not isinstance(patience, int) or patience < 1:
