@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.structure import StructureProbe
 from ..core.world import MODULE_BYTES, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box

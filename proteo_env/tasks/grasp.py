@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
