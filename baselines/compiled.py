@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from proteo_env.core import kernels as engine
+from proteo_env.core import cycle as engine
 from proteo_env.core.jit import generated_kernel
 from proteo_env.core.records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 from proteo_env.env import ProteoEnv
