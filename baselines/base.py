@@ -24,7 +24,7 @@ class Policy:
     between calls, keyed by agent name; :meth:`reset` clears it.
 
     Args:
-        layout: the task's :class:`~proteo_env.spaces.ActionLayout`.
+        action_layout: the task's :class:`~proteo_env.spaces.ActionLayout`.
         modes: the task's mode names (``env.task.modes``).
         scent_max: the scent value that means "no scent" (``env.config.physics.scent_max``).
         seed: seed of the policy's own random generator.
@@ -34,8 +34,8 @@ class Policy:
     levels: tuple[str, ...] = ("full",)
     """The control levels (:mod:`proteo_env.control`) whose actions this policy gives."""
 
-    def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
-        self.layout = layout
+    def __init__(self, action_layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
+        self.action_layout = action_layout
         self.modes = tuple(modes)
         self.scent_max = scent_max
         self.rng = np.random.default_rng(seed)
@@ -180,7 +180,7 @@ class KernelPolicy(Policy):
       policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions;
     - ``memory``: a :class:`SlotMemory` (set in ``__init__``);
     - ``rule_params`` (a property): the rule's parameters as ``rule`` reads them (a
-      NamedTuple such as :class:`~baselines.chain_rules.ChainRules`).
+      NamedTuple such as :class:`~baselines.chain_rules.ChainRuleParams`).
 
     The same kernel runs here (:meth:`act`, :meth:`act_arrays`) and inside the compiled
     rollout (:mod:`baselines.compiled`), which is how a new behaviour gets both. Private
@@ -205,8 +205,8 @@ class KernelPolicy(Policy):
         policy.n_fields = len(getattr(env, "control_fields", env.action_layout.field_names))
         return policy
 
-    def __init__(self, layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+    def __init__(self, action_layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         self._slots: dict = {}
         """Memory slot of each agent name seen by :meth:`act`."""
         self._keyed_by: str | None = None
@@ -283,7 +283,7 @@ class KernelPolicy(Policy):
     def _act(self, slots: np.ndarray, field) -> np.ndarray:
         """``(A, L)`` actions of the agents with memory ``slots`` (A,), in row order; ``field(name)``
         gives an observation field stacked over them."""
-        actions = np.empty((len(slots), self.layout.length), dtype=np.int64)
+        actions = np.empty((len(slots), self.action_layout.length), dtype=np.int64)
         seen = Observed(*stacked_fields(field, Observed._fields))
         self.rule(seen, slots, self.memory.arrays(), self.rule_params, self.rng, actions)
         return actions
@@ -397,7 +397,7 @@ class PolicyBatch:
             )
         self._sync(n_agents)
         first = self.policies[0]
-        actions = np.empty((n_agents * n_worlds, first.layout.length), dtype=np.int64)
+        actions = np.empty((n_agents * n_worlds, first.action_layout.length), dtype=np.int64)
         seen = Observed(*stacked_fields(lambda f: getattr(buffers, f), Observed._fields))
         # every world's rows are slots 0 .. A-1 of its own memory: the slots act_arrays keeps
         self.kernel(seen, n_agents, first._row_slots, self._memories, self.rules, self._rngs, actions)

@@ -70,9 +70,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .branch_rules import NO_COUNT, BranchRules, branch_decide
+from .branch_rules import NO_COUNT, BranchRuleParams, branch_decide
 from .chain import ChainPolicy, ModuleMemory
-from .chain_rules import ChainRules
+from .chain_rules import ChainRuleParams
 
 
 class BranchMemory(ModuleMemory):
@@ -114,7 +114,7 @@ class BranchPolicy(ChainPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -127,7 +127,7 @@ class BranchPolicy(ChainPolicy):
         patience=30,
         **chain,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed, **chain)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed, **chain)
         if T < 1:
             raise ValueError(f"T={T!r} is not allowed; allowed: an integer >= 1")
         if B < 1:
@@ -144,9 +144,9 @@ class BranchPolicy(ChainPolicy):
         """Private memory of every module (see :class:`BranchMemory`)."""
 
     @property
-    def branch_params(self) -> BranchRules:
+    def branch_params(self) -> BranchRuleParams:
         """The branch's own parameters as the kernels of :mod:`baselines.branch_rules` read them."""
-        return BranchRules(
+        return BranchRuleParams(
             T=int(self.T),
             B=int(self.B),
             p_node=float(self.p_node),
@@ -166,6 +166,6 @@ class BranchPolicy(ChainPolicy):
         return super().for_env(env, seed=seed, **params)
 
     @property
-    def rule_params(self) -> tuple[ChainRules, BranchRules]:
+    def rule_params(self) -> tuple[ChainRuleParams, BranchRuleParams]:
         """The chain's and the branch's parameters, as :func:`~baselines.branch_rules.branch_decide` reads them."""
         return super().rule_params, self.branch_params

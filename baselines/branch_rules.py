@@ -38,7 +38,7 @@ NO_COUNT = np.iinfo(np.int64).min
 """``spawned`` of a module that has no count (a count may go below 0 when seeds refuse)."""
 
 
-class BranchRules(NamedTuple):
+class BranchRuleParams(NamedTuple):
     """The branch rule's own parameters as the kernels read them (see :class:`~baselines.branch.BranchPolicy`)."""
 
     T: int
@@ -378,7 +378,7 @@ def branch_actions(
 def branch_decide(seen, slots, memory, rules, rng, actions):
     """:func:`branch_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
     ``memory`` is the 8 arrays of :class:`~baselines.branch.BranchMemory`, ``rules`` a
-    ``(ChainRules, BranchRules)`` pair."""
+    ``(ChainRuleParams, BranchRuleParams)`` pair."""
     heading, growth, asked, spawned, spot_direction, spot_announced, spot_waited, refused = memory
     chain_rules, branch_rules = rules
     branch_actions(

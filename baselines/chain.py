@@ -70,7 +70,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .chain_rules import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRules, chain_decide
+from .chain_rules import OCTAHEDRA_ALL, OCTAHEDRA_CHAIN, OCTAHEDRA_OFF, ChainRuleParams, chain_decide
 
 ON_STUCK = ("stay", "random")
 
@@ -129,7 +129,7 @@ class ChainPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -149,7 +149,7 @@ class ChainPolicy(KernelPolicy):
         prefer_chain=True,
         avoid_octahedra=True,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if not 0.0 <= p_seed <= 1.0:
             raise ValueError(f"p_seed={p_seed!r} is not allowed; allowed: a probability in [0, 1]")
         if not 0.0 <= p_random <= 1.0:
@@ -178,10 +178,10 @@ class ChainPolicy(KernelPolicy):
         """Private memory of every module (see :class:`ModuleMemory`)."""
 
     @property
-    def rule_params(self) -> ChainRules:
+    def rule_params(self) -> ChainRuleParams:
         """The parameters as the kernels of :mod:`baselines.chain_rules` read them."""
         octahedra = {False: OCTAHEDRA_OFF, True: OCTAHEDRA_CHAIN, "all": OCTAHEDRA_ALL}[self.avoid_octahedra]
-        return ChainRules(
+        return ChainRuleParams(
             scent_max=int(self.scent_max),
             p_seed=float(self.p_seed),
             p_random=float(self.p_random),

@@ -70,10 +70,10 @@ from .primitives import (
 BECOME_SEED = 13
 """Message value asking the receiver to become the new SEED (it grows on in the same direction)."""
 OCTAHEDRA_OFF, OCTAHEDRA_CHAIN, OCTAHEDRA_ALL = range(3)
-"""``ChainRules.avoid_octahedra``: off, when a chain module is among the 4 sites, always."""
+"""``ChainRuleParams.avoid_octahedra``: off, when a chain module is among the 4 sites, always."""
 
 
-class ChainRules(NamedTuple):
+class ChainRuleParams(NamedTuple):
     """The chain rule's parameters as the kernels read them (see :class:`~baselines.chain.ChainPolicy`)."""
 
     scent_max: int
@@ -524,7 +524,7 @@ def chain_actions(
 @kernel
 def chain_decide(seen, slots, memory, rules, rng, actions):
     """:func:`chain_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
-    ``memory`` is ``(heading, growth, asked)``, ``rules`` a :class:`ChainRules`."""
+    ``memory`` is ``(heading, growth, asked)``, ``rules`` a :class:`ChainRuleParams`."""
     heading, growth, asked = memory
     chain_actions(
         seen.own_mode,

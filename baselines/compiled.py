@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from proteo_env.core import kernels as engine
+from proteo_env.core import cycle as engine
 from proteo_env.core.jit import generated_kernel
 from proteo_env.core.records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 from proteo_env.env import ProteoEnv
@@ -213,8 +213,10 @@ class CompiledRollout:
                 f"task={task.task_id()!r} is not allowed; allowed: a task with compiled kernels "
                 "(Task.kernels returns a TaskKernels)"
             )
-        if policy.layout != env.action_layout:
-            raise ValueError(f"policy layout {policy.layout} is not allowed; allowed: the env's {env.action_layout}")
+        if policy.action_layout != env.action_layout:
+            raise ValueError(
+                f"policy action layout {policy.action_layout} is not allowed; allowed: the env's {env.action_layout}"
+            )
         self.world = world
         self.room = task.window_room
         self.loop = rollout_loop(policy.rule, kernels.sense, kernels.update_and_test)

@@ -181,8 +181,8 @@ def compose(name: str, first: Stage, then: Stage, handover, *, doc: str = "") ->
         stages = (first, then)
         rule = staticmethod(composed_rule(first.policy.rule, then.policy.rule, handover))
 
-        def __init__(self, layout, modes, *, scent_max=65535, seed=None, first=None, then=None):
-            super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        def __init__(self, action_layout, modes, *, scent_max=65535, seed=None, first=None, then=None):
+            super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
             composed = self.stages[0].modes + self.stages[1].modes
             if self.modes != composed:
                 raise ValueError(
@@ -190,7 +190,7 @@ def compose(name: str, first: Stage, then: Stage, handover, *, doc: str = "") ->
                     f"modes {composed}; the task's modes are {self.modes}; allowed: a task with those modes"
                 )
             self.parts = tuple(
-                stage.policy(layout, stage.modes, scent_max=scent_max, seed=seed, **(params or {}))
+                stage.policy(action_layout, stage.modes, scent_max=scent_max, seed=seed, **(params or {}))
                 for stage, params in zip(self.stages, (first, then), strict=True)
             )
             """The stages' policies (their parameters; their generators and memories are not used)."""

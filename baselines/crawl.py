@@ -38,10 +38,10 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .crawl_rules import PREFER_AHEAD, PREFER_DOWNHILL, PREFER_NONE, CrawlRules, crawl_decide
+from .crawl_rules import PREFER_AHEAD, PREFER_DOWNHILL, PREFER_NONE, CrawlRuleParams, crawl_decide
 
 PREFER = {"none": PREFER_NONE, "ahead": PREFER_AHEAD, "downhill": PREFER_DOWNHILL}
-"""``CrawlPolicy(prefer=...)``: the names of :data:`~baselines.crawl_rules.CrawlRules.prefer`'s values."""
+"""``CrawlPolicy(prefer=...)``: the names of :data:`~baselines.crawl_rules.CrawlRuleParams.prefer`'s values."""
 
 
 class CrawlMemory(SlotMemory):
@@ -69,7 +69,7 @@ class CrawlPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -80,7 +80,7 @@ class CrawlPolicy(KernelPolicy):
         greedy_approach=True,
         prefer="downhill",
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         for name, value in (("patience", patience), ("head_patience", head_patience)):
@@ -97,9 +97,9 @@ class CrawlPolicy(KernelPolicy):
         """Private memory of every module (see :class:`CrawlMemory`)."""
 
     @property
-    def rule_params(self) -> CrawlRules:
+    def rule_params(self) -> CrawlRuleParams:
         """The parameters as :func:`~baselines.crawl_rules.crawl_actions` reads them."""
-        return CrawlRules(
+        return CrawlRuleParams(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),
             patience=int(self.patience),

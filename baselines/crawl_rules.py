@@ -51,12 +51,12 @@ from .primitives import (
 BECOME_HEAD = 14
 """Message value asking the receiver (a CRAWL module at the HEAD's growth spot) to become the HEAD."""
 PREFER_NONE, PREFER_AHEAD, PREFER_DOWNHILL = range(3)
-"""``CrawlRules.prefer``: how a crawler picks among the rolls that keep its lowest neighbour."""
+"""``CrawlRuleParams.prefer``: how a crawler picks among the rolls that keep its lowest neighbour."""
 CHAIN_BITS = (1 << HEAD) | (1 << BODY)
 """The chain's modes as a bit set: a growth spot next to one of these (but the HEAD) would make the chain two thick."""
 
 
-class CrawlRules(NamedTuple):
+class CrawlRuleParams(NamedTuple):
     """The crawl rule's parameters as the kernel reads them (see :class:`~baselines.crawl.CrawlPolicy`)."""
 
     scent_max: int
@@ -219,7 +219,7 @@ def crawl_actions(
     actions,
 ):
     """Write every row's crawl action into ``actions`` (A, 5) and update its memory (shapes and
-    draws: module docstring; ``rules``: :class:`CrawlRules`)."""
+    draws: module docstring; ``rules``: :class:`CrawlRuleParams`)."""
     for i in range(own_mode.shape[0]):
         own = own_mode[i, 0]
         s = slots[i]
@@ -252,7 +252,7 @@ def crawl_actions(
 @kernel
 def crawl_decide(seen, slots, memory, rules, rng, actions):
     """:func:`crawl_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
-    ``memory`` is ``(growth, idle)``, ``rules`` a :class:`CrawlRules`."""
+    ``memory`` is ``(growth, idle)``, ``rules`` a :class:`CrawlRuleParams`."""
     growth, idle = memory
     crawl_actions(
         seen.own_mode,

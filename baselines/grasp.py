@@ -90,7 +90,7 @@ import numpy as np
 from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .base import KernelPolicy, SlotMemory
-from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRules, grasp_decide
+from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRuleParams, grasp_decide
 
 
 class GraspMemory(SlotMemory):
@@ -149,7 +149,7 @@ class GraspPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -167,7 +167,7 @@ class GraspPolicy(KernelPolicy):
         wrap_forward=True,
         prefer_touch=True,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         if on_flat not in ("stay", "random"):
@@ -187,18 +187,18 @@ class GraspPolicy(KernelPolicy):
         self.prefer_touch = prefer_touch
         self.straight = straight
         self.wrap_forward = wrap_forward
-        if layout.n_channels != 2:
+        if action_layout.n_channels != 2:
             raise ValueError(
-                f"layout with n_channels={layout.n_channels} is not allowed; allowed: 2 (the grasp "
+                f"action_layout with n_channels={action_layout.n_channels} is not allowed; allowed: 2 (the grasp "
                 "task's seed and touch scents)"
             )
         self.memory = GraspMemory()
         """Private memory of every module (see :class:`GraspMemory`)."""
 
     @property
-    def rule_params(self) -> GraspRules:
+    def rule_params(self) -> GraspRuleParams:
         """The parameters as :func:`~baselines.grasp_rules.grasp_actions` reads them."""
-        return GraspRules(
+        return GraspRuleParams(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),
             random_on_flat=self.on_flat == "random",

@@ -56,7 +56,7 @@ PASS_SEED = 15
 """Message value: "become TOUCHSEED" (a stuck TOUCHSEED to a TOUCH neighbour; ``relocate`` only)."""
 
 
-class GraspRules(NamedTuple):
+class GraspRuleParams(NamedTuple):
     """The grasp rule's parameters as the kernel reads them (see :class:`~baselines.grasp.GraspPolicy`);
     ``touch_channel`` is the touch scent's channel, -1 when the searchers ignore it."""
 
@@ -343,7 +343,7 @@ def grasp_actions(
 ):
     """Write every row's grasp action into ``actions`` (A, 6) and update the memory of its slot.
 
-    Shapes and the order of draws: module docstring. ``rules``: :class:`GraspRules`.
+    Shapes and the order of draws: module docstring. ``rules``: :class:`GraspRuleParams`.
     """
     n = own_mode.shape[0]
     near_seed = np.zeros(n, dtype=np.bool_)
@@ -435,7 +435,7 @@ def grasp_actions(
 @kernel
 def grasp_decide(seen, slots, memory, rules, rng, actions):
     """:func:`grasp_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
-    ``memory`` is ``(growth, waited, stuck, age, previous)``, ``rules`` a :class:`GraspRules`."""
+    ``memory`` is ``(growth, waited, stuck, age, previous)``, ``rules`` a :class:`GraspRuleParams`."""
     growth, waited, stuck, age, previous = memory
     grasp_actions(
         seen.own_mode,

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KernelPolicy, SlotMemory
-from .locomotion_rules import LocomotionRules, locomotion_decide
+from .locomotion_rules import LocomotionRuleParams, locomotion_decide
 
 
 class LocomotionMemory(SlotMemory):
@@ -69,7 +69,7 @@ class LocomotionPolicy(KernelPolicy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max=65535,
@@ -80,7 +80,7 @@ class LocomotionPolicy(KernelPolicy):
         low_first=True,
         contacts=2,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
             raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
         if isinstance(patience, bool) or not isinstance(patience, int) or patience < 1:
@@ -96,9 +96,9 @@ class LocomotionPolicy(KernelPolicy):
         """Private memory of every module (see :class:`LocomotionMemory`)."""
 
     @property
-    def rule_params(self) -> LocomotionRules:
+    def rule_params(self) -> LocomotionRuleParams:
         """The parameters as :func:`~baselines.locomotion_rules.locomotion_actions` reads them."""
-        return LocomotionRules(
+        return LocomotionRuleParams(
             scent_max=int(self.scent_max),
             p_random=float(self.p_random),
             patience=int(self.patience),

@@ -41,7 +41,7 @@ from .primitives import (
 )
 
 
-class LocomotionRules(NamedTuple):
+class LocomotionRuleParams(NamedTuple):
     """The locomotion rule's parameters as the kernel reads them (see
     :class:`~baselines.locomotion.LocomotionPolicy`)."""
 
@@ -57,7 +57,7 @@ class LocomotionRules(NamedTuple):
 def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, hint, slots, idle, rules, rng, actions):
     """Write every row's locomotion action into ``actions`` (A, 5) and update its ``idle`` count.
 
-    Shapes and the order of draws: module docstring. ``rules``: :class:`LocomotionRules`.
+    Shapes and the order of draws: module docstring. ``rules``: :class:`LocomotionRuleParams`.
     """
     scent = np.empty(12, dtype=np.int64)
     for i in range(own_scent.shape[0]):
@@ -108,7 +108,7 @@ def locomotion_actions(neighbour_kind, neighbour_scent, own_scent, action_mask, 
 @kernel
 def locomotion_decide(seen, slots, memory, rules, rng, actions):
     """:func:`locomotion_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
-    ``memory`` is ``(idle,)``, ``rules`` a :class:`LocomotionRules`."""
+    ``memory`` is ``(idle,)``, ``rules`` a :class:`LocomotionRuleParams`."""
     (idle,) = memory
     locomotion_actions(
         seen.neighbour_kind,

@@ -17,9 +17,9 @@ class RandomPolicy(Policy):
     name = "random"
     levels = ("move", "move+mode", "full")
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, n_fields=None):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
-        self.nvec = layout.nvec[: n_fields or layout.length]
+    def __init__(self, action_layout, modes, *, scent_max=65535, seed=None, n_fields=None):
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
+        self.nvec = action_layout.nvec[: n_fields or action_layout.length]
 
     @classmethod
     def for_env(cls, env, *, seed=None, **params):
@@ -38,6 +38,6 @@ class RandomPolicy(Policy):
         for agent, obs in observations.items():
             action = self.rng.integers(0, self.nvec)
             legal = obs["action_mask"].nonzero()[0]
-            action[self.layout.move] = self.rng.choice(legal)
+            action[self.action_layout.move] = self.rng.choice(legal)
             actions[agent] = action
         return actions

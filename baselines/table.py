@@ -76,7 +76,7 @@ import numpy as np
 from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .base import KernelPolicy, SlotMemory
-from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRules, table_decide
+from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRuleParams, table_decide
 
 RULE_PARAMS = ("p_max", "p_min", "f_max", "f_min")
 
@@ -110,9 +110,19 @@ class TablePolicy(KernelPolicy):
     rule = staticmethod(table_decide)
 
     def __init__(
-        self, layout, modes, *, scent_max=65535, seed=None, p_max=0.05, p_min=0.05, f_max=2.0, f_min=1.0, p_random=0.05
+        self,
+        action_layout,
+        modes,
+        *,
+        scent_max=65535,
+        seed=None,
+        p_max=0.05,
+        p_min=0.05,
+        f_max=2.0,
+        f_min=1.0,
+        p_random=0.05,
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         for name, value in (("p_max", p_max), ("p_min", p_min), ("p_random", p_random)):
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name}={value!r} is not allowed; allowed: a probability in [0, 1]")
@@ -131,9 +141,9 @@ class TablePolicy(KernelPolicy):
         return super().for_env(env, seed=seed, **{**rules, **params})
 
     @property
-    def rule_params(self) -> TableRules:
+    def rule_params(self) -> TableRuleParams:
         """The parameters as :func:`~baselines.table_rules.table_actions` reads them."""
-        return TableRules(
+        return TableRuleParams(
             scent_max=int(self.scent_max),
             p_max=self.p_max,
             p_min=self.p_min,

@@ -69,7 +69,7 @@ ZIGZAG = _zigzag()
 """For a parent in direction ``k`` (up), the down direction on the opposite side of the leg."""
 
 
-class TableRules(NamedTuple):
+class TableRuleParams(NamedTuple):
     """The table rule's parameters as the kernel reads them (see :class:`~baselines.table.TablePolicy`)."""
 
     scent_max: int
@@ -214,7 +214,7 @@ def table_actions(
 ):
     """Write every row's table action into ``actions`` (A, 5) and update the memory of its slot.
 
-    Shapes and draws: module docstring. ``rules``: :class:`TableRules`.
+    Shapes and draws: module docstring. ``rules``: :class:`TableRuleParams`.
     """
     n = own_mode.shape[0]
     climbers = np.empty(n, dtype=np.int64)
@@ -284,7 +284,7 @@ def table_actions(
 @kernel
 def table_decide(seen, slots, memory, rules, rng, actions):
     """:func:`table_actions` as a policy's ``rule`` (:attr:`baselines.base.KernelPolicy.rule`):
-    ``memory`` is ``(spot, parent, child)``, ``rules`` a :class:`TableRules`."""
+    ``memory`` is ``(spot, parent, child)``, ``rules`` a :class:`TableRuleParams`."""
     spot, parent, child = memory
     table_actions(
         seen.own_mode,

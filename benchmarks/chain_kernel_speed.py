@@ -147,7 +147,7 @@ def profile(n: int, cycles: int) -> dict:
     import numba
 
     from baselines.chain_rules import chain_actions
-    from proteo_env.core import kernels
+    from proteo_env.core import cycle
     from proteo_env.core.records import Actions, Observation
     from proteo_env.tasks.chain_kernels import is_chain
 
@@ -182,9 +182,9 @@ def profile(n: int, cycles: int) -> dict:
         n_search = n_requested = n_moved = 0
         for _ in range(cycles):
             t0 = time.perf_counter()
-            kernels.articulation_points(w.grid, w.cell, n, w.dir_delta, s)
+            cycle.articulation_points(w.grid, w.cell, n, w.dir_delta, s)
             t1 = time.perf_counter()
-            kernels.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(obs))
+            cycle.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(obs))
             t2 = time.perf_counter()
             searching = int((obs.own_mode[:, 0] == 1).sum())
             spare = copy.deepcopy(policy.rng)
@@ -212,7 +212,7 @@ def profile(n: int, cycles: int) -> dict:
             for keep, part in ((True, "moves"), (False, "moves without the connectivity check")):
                 trial = w.state._replace(grid=w.grid.copy(), cell=w.cell.copy(), rng_state=w.rng_state.copy())
                 started = time.perf_counter()
-                kernels.execute_moves(trial, w.settings._replace(keep_connected=keep), w.geometry, move, moved, s)
+                cycle.execute_moves(trial, w.settings._replace(keep_connected=keep), w.geometry, move, moved, s)
                 parts[part] += time.perf_counter() - started
             n_requested += int((move > 0).sum())
             t6 = time.perf_counter()
@@ -223,7 +223,7 @@ def profile(n: int, cycles: int) -> dict:
                 message_target=actions[:, -2].copy(),
                 message_value=actions[:, -1],
             )
-            kernels.run_cycle(w.state, w.settings, w.geometry, step, moved, s)
+            cycle.run_cycle(w.state, w.settings, w.geometry, step, moved, s)
             t7 = time.perf_counter()
             n_moved += int(moved.sum())
             is_chain(w.grid, w.cell, n, w.dir_delta, *test)

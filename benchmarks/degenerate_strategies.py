@@ -43,8 +43,8 @@ class FixedModePolicy(Policy):
 
     name = "fixed-mode"
 
-    def __init__(self, layout, modes, *, scent_max=65535, seed=None, mode=None, moving=False):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
+    def __init__(self, action_layout, modes, *, scent_max=65535, seed=None, mode=None, moving=False):
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
         self.mode, self.moving = mode, moving
 
     def act(self, observations):
@@ -52,7 +52,7 @@ class FixedModePolicy(Policy):
         for agent, obs in observations.items():
             mode = int(obs["own_mode"][0]) if self.mode is None else self.mode
             move = self.random_legal_move(obs["action_mask"]) if self.moving else 0
-            actions[agent] = self.layout.encode(move=move, mode=mode)
+            actions[agent] = self.action_layout.encode(move=move, mode=mode)
         return actions
 
 

@@ -6,13 +6,13 @@ next cycle on copies of that state, ``--repeats`` times each, and prints the bes
 each part in milliseconds:
 
 * ``checks``: validating the action batch (:meth:`BatchedEnv.check_actions`);
-* ``messages``: :func:`~proteo_env.core.kernels.deliver_messages`;
-* ``moves``: :func:`~proteo_env.core.kernels.execute_moves` with connectivity kept, and
+* ``messages``: :func:`~proteo_env.core.cycle.deliver_messages`;
+* ``moves``: :func:`~proteo_env.core.cycle.execute_moves` with connectivity kept, and
   ``moves without connectivity`` (the same requests, no detach check) to show its share;
 * ``scent``: the scent sweep of channel 0;
-* ``cut modules``: :func:`~proteo_env.core.kernels.articulation_points` (Tarjan), needed for
+* ``cut modules``: :func:`~proteo_env.core.cycle.articulation_points` (Tarjan), needed for
   exact action masks;
-* ``observation``: :func:`~proteo_env.core.kernels.observe` (neighbour fields and masks);
+* ``observation``: :func:`~proteo_env.core.cycle.observe` (neighbour fields and masks);
 * ``per-agent dicts``: what the PettingZoo API adds, building one dict per agent.
 
 Usage::
@@ -41,7 +41,7 @@ def best_ms(run, prepare, repeats: int) -> float:
 
 def profile(n: int, at: int, repeats: int) -> dict[str, float]:
     import proteo_env
-    from proteo_env.core import kernels
+    from proteo_env.core import cycle
     from proteo_env.core.lattice import OPPOSITE
     from proteo_env.core.records import Actions, Observation
     from proteo_env.spaces import ObservationBuffers
@@ -68,7 +68,7 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
         message_target=actions[:, lay.message_target],
         message_value=actions[:, lay.message_value],
     )
-    role = np.full(w.n_modules, kernels.RELAY, dtype=np.int8)
+    role = np.full(w.n_modules, cycle.RELAY, dtype=np.int8)
     role[:n] = actions[:, lay.roles][:, 0]
     scent = w.scent[0].copy()
     moved = np.zeros(n, dtype=np.bool_)
@@ -76,20 +76,20 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
 
     def moves(keep_connected):
         settings = w.settings._replace(keep_connected=keep_connected)
-        return lambda: kernels.execute_moves(w.state, settings, w.geometry, move, moved, s)
+        return lambda: cycle.execute_moves(w.state, settings, w.geometry, move, moved, s)
 
     def observation():
-        kernels.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(buffers))
+        cycle.observe(w.state, w.settings, w.geometry, s.is_cut, Observation.of(buffers))
 
     parts = {
         "checks": lambda: env.batch.check_actions(actions[None]),
-        "messages": lambda: kernels.deliver_messages(w.state, n, messages, w.dir_delta, OPPOSITE),
+        "messages": lambda: cycle.deliver_messages(w.state, n, messages, w.dir_delta, OPPOSITE),
         "moves": moves(True),
         "moves without connectivity": moves(False),
-        "scent": lambda: kernels.relax_scent(
+        "scent": lambda: cycle.relax_scent(
             w.grid, w.cell, w.n_modules, role, False, scent, s.scent_buffer, p.scent_sweeps, p.scent_max, w.dir_delta
         ),
-        "cut modules": lambda: kernels.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s),
+        "cut modules": lambda: cycle.articulation_points(w.grid, w.cell, w.n_modules, w.dir_delta, s),
         "observation": observation,
         "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
     }

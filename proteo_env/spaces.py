@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from .core.kernels import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, KIND_SOLID, RELAY, SILENT
+from .core.cycle import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, KIND_SOLID, RELAY, SILENT
 from .core.world import MESSAGE_TO_ALL
 
 __all__ = [

@@ -22,7 +22,7 @@ SMALL_OVERRIDES: dict[str, dict] = {
     "chain": {"n_modules": 12},
     "branch": {"n_modules": 12, "T": 3, "B": 2},
     "table": {"board_size": 6, "depth": 2, "n_spares": 8},
-    "grasp": {"n_modules": 16, "n_seeds": 2, "object_size": 1.5, "distance": 1, "margin": 2},
+    "grasp": {"n_modules": 16, "n_seed_modules": 2, "object_size": 1.5, "distance": 1, "margin": 2},
 }
 
 

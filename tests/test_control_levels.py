@@ -17,7 +17,7 @@ from baselines import make_policy
 from baselines.autopilot import hand_coded_rules
 from proteo_env import control
 from proteo_env.config import ConfigError, world_seeds
-from proteo_env.core.kernels import EMIT, RELAY
+from proteo_env.core.cycle import EMIT, RELAY
 
 RULE_TASKS = task_params(sorted(tid for tid, cls in proteo_env.TASKS.items() if cls.name != "sandbox"))
 LEVELS = ("move", "move+mode")  # "full" is every other test file's level

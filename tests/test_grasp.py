@@ -19,7 +19,7 @@ from proteo_env.tasks.grasp import SIDES, Grasp, GraspParams
 from proteo_env.tasks.grasp_kernels import TOUCH, TOUCHSEED
 
 ROOT = Path(__file__).resolve().parents[1]
-SMALL = {"n_modules": 60, "n_seeds": 4, "object_size": 1.5, "distance": 3}
+SMALL = {"n_modules": 60, "n_seed_modules": 4, "object_size": 1.5, "distance": 3}
 """A small grasp: a 13-site object 3 layers in front of a 60-module base with 4 seeds."""
 
 
@@ -274,8 +274,8 @@ def test_config_files_build_and_run(path):
     "key, value",
     [
         ("shape", "cone"),
-        ("n_seeds", 0),
-        ("n_seeds", 1000),
+        ("n_seed_modules", 0),
+        ("n_seed_modules", 1000),
         ("object_size", 0.1),
         ("direction", (0.0, 0.0, 0.0)),
         ("hint_noise_deg", 120.0),

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import run_without_jit
 
-from proteo_env.core.kernels import LAST_EPOCH
+from proteo_env.core.cycle import LAST_EPOCH
 from proteo_env.core.motion import MOTION_MODELS
 from proteo_env.core.reference import ReferenceWorld
 from proteo_env.core.world import Physics, World
@@ -274,9 +274,9 @@ def nojit_child() -> None:
     import numba
 
     assert numba.config.DISABLE_JIT, "NUMBA_DISABLE_JIT was not picked up"
-    from proteo_env.core import kernels
+    from proteo_env.core import cycle
 
-    assert not hasattr(kernels.execute_moves, "signatures"), "kernels are still compiled"
+    assert not hasattr(cycle.execute_moves, "signatures"), "kernels are still compiled"
     for case in NOJIT_CASES:
         run_parity(case)
     print("NOJIT-PARITY-OK")

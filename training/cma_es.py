@@ -136,7 +136,7 @@ def rule_params(policy_cls, args: Args, defaults: dict | None = None) -> list[Pa
     """
     from proteo_env.config import ConfigError
 
-    skip = {"self", "layout", "modes", "scent_max", "seed", *args.fixed}
+    skip = {"self", "action_layout", "modes", "scent_max", "seed", *args.fixed}
     candidates = {
         name: p
         for name, p in constructor_parameters(policy_cls).items()

@@ -105,13 +105,13 @@ class LogitsPolicy(Policy):
     """A shared controller given by ``logits_fn(features (B, D)) -> logits (B, sum(nvec))``.
 
     Args:
-        layout, modes, scent_max, seed: as for every :class:`~baselines.base.Policy`.
+        action_layout, modes, scent_max, seed: as for every :class:`~baselines.base.Policy`.
         encoder: the observation encoding the network was trained on.
         logits_fn: the network.
         label: the name shown in tables (``"sb3-ppo"``, ``"cma-neural"``, ...).
         deterministic: take each field's arg-max instead of sampling.
         sampled: which fields are sampled when not ``deterministic`` (:data:`SAMPLED`).
-        nvec: values of each field the network chooses (default: every field of ``layout``);
+        nvec: values of each field the network chooses (default: every field of ``action_layout``);
             at control level ``move`` only ``[13]``, and an action is then the move alone.
         memory: what the network remembers (:data:`MEMORIES`); with memory the policy keeps
             each agent's previous action (by name in :meth:`act`, by row in :meth:`act_arrays`),
@@ -122,7 +122,7 @@ class LogitsPolicy(Policy):
 
     def __init__(
         self,
-        layout,
+        action_layout,
         modes,
         *,
         scent_max: int = 65535,
@@ -135,9 +135,9 @@ class LogitsPolicy(Policy):
         memory: str = "none",
         sampled: str = "all",
     ):
-        super().__init__(layout, modes, scent_max=scent_max, seed=seed)
-        self.nvec = np.asarray(layout.nvec if nvec is None else nvec, dtype=np.int64)
-        self.levels = (self.level_of(layout, self.nvec),)
+        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
+        self.nvec = np.asarray(action_layout.nvec if nvec is None else nvec, dtype=np.int64)
+        self.levels = (self.level_of(action_layout, self.nvec),)
         self.encoder = encoder
         self.logits_fn = logits_fn
         self.name = label
@@ -184,8 +184,8 @@ class LogitsPolicy(Policy):
         return actions
 
     @staticmethod
-    def level_of(layout, nvec) -> str:
-        """The control level whose action fields ``nvec`` are (a prefix of ``layout.nvec``)."""
+    def level_of(action_layout, nvec) -> str:
+        """The control level whose action fields ``nvec`` are (a prefix of ``action_layout.nvec``)."""
         return {1: "move", 2: "move+mode"}.get(len(nvec), "full")
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernels
+from . import cycle
 from .jit import kernel, parallel_kernel, prange
 from .records import Actions, Observation, Scratch, WorldState, row
 from .world import World
@@ -21,25 +21,25 @@ from .world import World
 
 @parallel_kernel
 def _run_cycles(state, settings, geometry, actions, moved, scratch):
-    """:func:`~.kernels.run_cycle` of every world; ``state``, ``actions``, ``moved`` and
+    """:func:`~.cycle.run_cycle` of every world; ``state``, ``actions``, ``moved`` and
     ``scratch`` have a leading ``B`` axis."""
     for b in prange(moved.shape[0]):
-        kernels.run_cycle(row(state, b), settings, geometry, row(actions, b), moved[b], row(scratch, b))
+        cycle.run_cycle(row(state, b), settings, geometry, row(actions, b), moved[b], row(scratch, b))
 
 
 @kernel
 def _out_of_room(cell, strides, guards, out):
-    """:func:`~.kernels.out_of_room` of every world into ``out`` (B,); ``cell`` (B, N), ``guards`` (B, 6)."""
+    """:func:`~.cycle.out_of_room` of every world into ``out`` (B,); ``cell`` (B, N), ``guards`` (B, 6)."""
     for b in range(cell.shape[0]):
-        out[b] = kernels.out_of_room(cell[b], strides, guards[b])
+        out[b] = cycle.out_of_room(cell[b], strides, guards[b])
 
 
 @parallel_kernel
 def _observe_worlds(state, settings, geometry, scratch, out):
-    """:func:`~.kernels.observe_world` of every world; ``state``, ``scratch`` and ``out`` have a
+    """:func:`~.cycle.observe_world` of every world; ``state``, ``scratch`` and ``out`` have a
     leading ``B`` axis."""
     for b in prange(state[0].shape[0]):
-        kernels.observe_world(row(state, b), settings, geometry, row(scratch, b), row(out, b))
+        cycle.observe_world(row(state, b), settings, geometry, row(scratch, b), row(out, b))
 
 
 class WorldBatch:

@@ -122,7 +122,7 @@ def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
       about that pivot is one of the set bits of ``byte``, read as bits ``8 i .. 8 i + 7``.
 
     So a roll towards ``k`` is legal when bit ``k`` of ``pivots & ~swept`` is set for some
-    ``j`` (see :func:`~proteo_env.core.kernels.legal_rolls`): 4 x (2 + R / 8) lookups decide
+    ``j`` (see :func:`~proteo_env.core.cycle.legal_rolls`): 4 x (2 + R / 8) lookups decide
     all 12 directions at once. The tables are built once per model; each call returns copies.
     """
     roll_offsets, roll_table = _motion_tables(model)

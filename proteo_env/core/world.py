@@ -34,7 +34,7 @@ from operator import attrgetter
 
 import numpy as np
 
-from . import kernels
+from . import cycle
 from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
 from .motion import LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
@@ -223,7 +223,7 @@ class World:
             else np.asarray(surface_channels, dtype=np.bool_)
         )
         self.passive_role = (
-            np.full(n_channels, kernels.RELAY, dtype=np.int8)
+            np.full(n_channels, cycle.RELAY, dtype=np.int8)
             if passive_role is None
             else np.asarray(passive_role, dtype=np.int8)
         )
@@ -319,7 +319,7 @@ class World:
                 f"{shape.size}; allowed: 0 <= site < size"
             )
         index = shape.index(positions)
-        if not shape.whole and kernels.out_of_room(index, shape.strides, shape.guard()):
+        if not shape.whole and cycle.out_of_room(index, shape.strides, shape.guard()):
             raise ValueError(f"a module lies outside the guard of the window {shape.origin} + {shape.extent}")
         occupied = grid[index]
         if (occupied != EMPTY).any():
@@ -350,7 +350,7 @@ class World:
     def n_components(self) -> int:
         """Number of connected pieces of the module graph (board modules included)."""
         return int(
-            kernels.count_components(
+            cycle.count_components(
                 self.grid,
                 self.cell,
                 self.n_modules,
@@ -362,18 +362,18 @@ class World:
 
     def cut_modules(self) -> np.ndarray:
         """``(N,)`` bool: modules whose removal would disconnect the others (articulation points)."""
-        kernels.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, self.scratch)
+        cycle.articulation_points(self.grid, self.cell, self.n_modules, self.dir_delta, self.scratch)
         return self.scratch.is_cut
 
     def roll_is_legal(self, module: int, direction: int) -> bool:
         """Geometry alone: may ``module`` roll towards ``DIRECTIONS[direction]`` now?"""
         g = self.geometry
-        legal = kernels.legal_directions(self.grid, self.cell[module], g.roll_delta, g.roll_table)
+        legal = cycle.legal_directions(self.grid, self.cell[module], g.roll_delta, g.roll_table)
         return bool((legal >> direction) & 1)
 
     def can_detach(self, module: int) -> bool:
         """Do the other modules stay connected if ``module`` leaves its site?"""
-        return bool(kernels.detach_keeps_connected(self.grid, self.cell, module, self.geometry, self.scratch))
+        return bool(cycle.detach_keeps_connected(self.grid, self.cell, module, self.geometry, self.scratch))
 
     # ------------------------------------------------------------------ the cycle
     def seed(self, seed: int) -> None:
@@ -394,14 +394,14 @@ class World:
         actions = Actions.of(
             move=move, mode=mode, scent_role=scent_role, message_target=message_target, message_value=message_value
         )
-        kernels.run_cycle(
+        cycle.run_cycle(
             tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(actions), moved, tuple(self.scratch)
         )
         return moved
 
     def observe(self, out) -> None:
         """Fill an :class:`~proteo_env.spaces.ObservationBuffers`-like ``out`` for all agents."""
-        kernels.observe_world(
+        cycle.observe_world(
             tuple(self.state), tuple(self.settings), tuple(self.geometry), tuple(self.scratch), Observation.plain(out)
         )
 

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 from .branch_kernels import INODE, NODE, SEARCH, SEED, SLEEP, BranchMode, branch_update_and_test, measure_tree

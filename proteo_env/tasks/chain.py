@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.structure import StructureProbe
 from ..core.world import MODULE_BYTES, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box
@@ -50,7 +50,7 @@ class ChainParams:
 
     Attributes:
         n_modules: number of modules in the start blob.
-        initial_seed: start with one SEED (paper: "determined centrally"); if False every
+        initial_seed_module: start with one SEED module (paper: "determined centrally"); if False every
             module starts in SLEEP and the policy must elect seeds itself.
         margin: free sites around the blob: above and below it, and horizontally on top of
             the room a straight chain needs (``n_modules + margin`` on every horizontal side,
@@ -71,7 +71,7 @@ class ChainParams:
     """
 
     n_modules: int = 50
-    initial_seed: bool = True
+    initial_seed_module: bool = True
     margin: int = 3
     time_penalty: float = 0.001
     room: int | None = None
@@ -118,7 +118,7 @@ class Chain(Task):
 
     def initial_modes(self, layout):
         modes = np.full(len(layout.positions), SLEEP, dtype=np.int32)
-        if self.params.initial_seed:
+        if self.params.initial_seed_module:
             centre = layout.modules.mean(axis=0)
             modes[int(np.argmax(((layout.modules - centre) ** 2).sum(axis=1)))] = SEED
         return modes

@@ -2,7 +2,7 @@
 
 Description
     The robot starts as a connected lump of modules (the base: a random blob, new each
-    episode, or a compact ball), all in SLEEP except ``n_seeds`` (paper: eight) SEED modules
+    episode, or a compact ball), all in SLEEP except ``n_seed_modules`` (paper: eight) SEED modules
     spread over the front of the base, the side that faces the object. The object is a
     solid set of lattice sites (a discretised sphere, an axis-aligned box, or a random
     connected blob, new each episode) placed about ``distance`` empty layers in front of
@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.lattice import DIRECTIONS, EMPTY
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
@@ -86,7 +86,7 @@ class GraspParams:
         n_modules: modules in the base (all of them agents).
         base: ``blob`` (a random connected blob, new each episode) or ``ball`` (the ``n_modules``
             sites nearest a point: compact, and under the stricter motion models mostly jammed).
-        n_seeds: initial SEED modules on the side of the base facing the object (paper: 8).
+        n_seed_modules: initial SEED modules on the side of the base facing the object (paper: 8).
         seed_spread: the seeds are spread over the front of the base (modules with a line of
             sight towards the object) within this lateral distance of the axis through the
             base's centroid along the true direction.
@@ -110,7 +110,7 @@ class GraspParams:
 
     n_modules: int = 160
     base: str = "blob"
-    n_seeds: int = 8
+    n_seed_modules: int = 8
     seed_spread: float = 3.0
     shape: str = "sphere"
     object_size: float = 2.5
@@ -134,8 +134,8 @@ class GraspParams:
             bad("n_modules", "an integer >= 2")
         if self.base not in BASES:
             bad("base", ", ".join(BASES))
-        if not 1 <= self.n_seeds <= self.n_modules // 2:
-            bad("n_seeds", f"an integer in 1..{self.n_modules // 2} (half of n_modules)")
+        if not 1 <= self.n_seed_modules <= self.n_modules // 2:
+            bad("n_seed_modules", f"an integer in 1..{self.n_modules // 2} (half of n_modules)")
         if self.shape not in SHAPES:
             bad("shape", ", ".join(SHAPES))
         if not 0.5 <= self.object_size <= 20:
@@ -225,8 +225,8 @@ def nearest_fcc_site(point) -> np.ndarray:
     return q
 
 
-def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seeds: int, spread: float) -> np.ndarray:
-    """Indices of ``n_seeds`` base sites on the front of the base, spread out across ``direction``.
+def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seed_modules: int, spread: float) -> np.ndarray:
+    """Indices of ``n_seed_modules`` base sites on the front of the base, spread out across ``direction``.
 
     A site is on the front when no other base site lies ahead of it along ``direction``
     within a lateral distance of 1.5 (a clear line of sight towards the object). Among the front
@@ -244,13 +244,13 @@ def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seeds: int, spread:
     front = np.flatnonzero(~blocked)
     radius = np.linalg.norm(lateral, axis=1)
     pool = front[radius[front] <= spread]
-    if len(pool) < n_seeds:
-        pool = front[np.argsort(radius[front], kind="stable")[:n_seeds]]
-    if len(pool) < n_seeds:  # a tiny base: the foremost sites
-        pool = np.argsort(-ahead, kind="stable")[:n_seeds]
+    if len(pool) < n_seed_modules:
+        pool = front[np.argsort(radius[front], kind="stable")[:n_seed_modules]]
+    if len(pool) < n_seed_modules:  # a tiny base: the foremost sites
+        pool = np.argsort(-ahead, kind="stable")[:n_seed_modules]
     chosen = [int(pool[np.argmin(radius[pool])])]
     dist = ((lateral[pool] - lateral[chosen[0]]) ** 2).sum(axis=1)
-    for _ in range(n_seeds - 1):
+    for _ in range(n_seed_modules - 1):
         dist[np.isin(pool, chosen)] = -1.0
         nxt = int(np.argmax(dist))
         chosen.append(int(pool[nxt]))
@@ -287,7 +287,7 @@ class Grasp(Task):
         back = float((-(obj @ direction)).max())
         centre = nearest_fcc_site(direction * (front + p.distance + 1 + back))
         obj = obj + centre
-        seeds = spread_seeds(base, direction, p.n_seeds, p.seed_spread)
+        seeds = spread_seeds(base, direction, p.n_seed_modules, p.seed_spread)
         everything = np.concatenate([base, obj])
         lo = everything.min(axis=0) - p.margin
         hi = everything.max(axis=0) + p.margin

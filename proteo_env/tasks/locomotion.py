@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.lattice import PAD
 from ..layouts import Layout, blob_sites
 from .base import Task, TaskKernels, no_sensor

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from .locomotion import Locomotion, LocomotionParams
 from .snake_kernels import SnakeMode
 

@@ -96,7 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.kernels import EMIT, RELAY
+from ..core.cycle import EMIT, RELAY
 from ..core.lattice import DIRECTIONS
 from ..layouts import Layout
 from .base import Task, TaskKernels

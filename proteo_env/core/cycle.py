@@ -134,7 +134,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
     neighbours, or else through the modules within two hops of ``m`` (read only then), yes.
     Otherwise one depth-first search per group of neighbours runs in lockstep over the module
-    graph (``m`` removed), each stepping first towards the next group's seed. The searches stop
+    graph (``m`` removed), each stepping first towards the next group's start. The searches stop
     when all groups have met (connected) or one group's stacks run out (that piece is cut off),
     so the cost is bounded by the size of the smallest piece.
 
@@ -143,7 +143,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     ``(cell, x, y, z)``, the position relative to ``m`` riding along. ``search`` (13,) holds
     the epoch in ``search[0]``, bumped so that ``mark`` needs clearing only when the epochs run
     out (:data:`LAST_EPOCH`), and the depth of each group's stack in ``search[1:13]``. The
-    groups' union-find parents and seed directions are packed 4 bits per group in two
+    groups' union-find parents and start directions are packed 4 bits per group in two
     integers, so a search allocates nothing.
     """
     dir_delta, directions = geometry.dir_delta, geometry.directions
@@ -172,21 +172,21 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     depth = search[1:13]
     mark[c] = base + REMOVED_LABEL
     parents = 0
-    seed_slots = 0
+    start_directions = 0
     n_groups = 0
     remaining = touching
     while remaining:
         bit = remaining & -remaining
         remaining &= ~_flood(bit, modules, local_adjacent)
         k = LOWEST_BIT[bit]
-        seed = c + dir_delta[k]
-        mark[seed] = base + n_groups
-        stacks[n_groups, 0, 0] = seed
+        start = c + dir_delta[k]
+        mark[start] = base + n_groups
+        stacks[n_groups, 0, 0] = start
         for axis in range(3):
             stacks[n_groups, 0, 1 + axis] = directions[k, axis]
         depth[n_groups] = 1
         parents |= n_groups << (4 * n_groups)
-        seed_slots |= np.int64(k) << (4 * n_groups)
+        start_directions |= np.int64(k) << (4 * n_groups)
         n_groups += 1
     groups_left = n_groups
     while True:
@@ -197,7 +197,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
             entry = stacks[g, depth[g]]
             cn, x, y, z = entry[0], entry[1], entry[2], entry[3]
             label = _group_root(parents, g)
-            target = directions[(seed_slots >> (4 * ((g + 1) % n_groups))) & 15]
+            target = directions[(start_directions >> (4 * ((g + 1) % n_groups))) & 15]
             best_at, best_distance = -1, 1 << 62
             around = 0
             for k in range(12):
