@@ -38,6 +38,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .core.cycle import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, KIND_SOLID, RELAY, SILENT
+from .core.records import OBSERVATION_FIELDS
 from .core.world import MESSAGE_TO_ALL
 
 __all__ = [
@@ -146,18 +147,7 @@ class ActionLayout:
 class ObservationBuffers:
     """Per-agent observation arrays for ``A`` agents; field ``f`` of agent ``i`` is ``getattr(self, f)[i]``."""
 
-    FIELDS = (
-        "neighbour_kind",
-        "neighbour_mode",
-        "neighbour_scent",
-        "own_mode",
-        "own_scent",
-        "messages",
-        "contact",
-        "load",
-        "hint",
-        "action_mask",
-    )
+    FIELDS = OBSERVATION_FIELDS
 
     def __init__(self, n_agents: int, n_sites: int, n_channels: int):
         a = n_agents

@@ -22,6 +22,7 @@ import proteo_env
 from baselines.branch import BranchPolicy
 from baselines.random_policy import RandomPolicy
 from proteo_env.core.lattice import DIRECTIONS
+from proteo_env.core.records import OBSERVATION_FIELDS
 from proteo_env.core.world import Physics, World
 from proteo_env.tasks.branch import Branch, BranchParams
 from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
@@ -29,18 +30,6 @@ from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SL
 N, T, B = 40, 4, 3
 LIMIT = 400
 SEEDS = range(6)
-OBSERVATION_FIELDS = {
-    "neighbour_kind",
-    "neighbour_mode",
-    "neighbour_scent",
-    "own_mode",
-    "own_scent",
-    "messages",
-    "contact",
-    "load",
-    "hint",
-    "action_mask",
-}
 GROWN = (SEED, FINAL, NODE, INODE)
 
 
@@ -282,7 +271,7 @@ def test_policy_sees_only_observations_and_acts_legally():
             promotions += action[lay.message_value] == 13
             nodes += obs[a]["own_mode"][0] == FINAL and action[lay.mode] == NODE
         obs, *_ = env.step(actions)
-    assert seen_fields <= OBSERVATION_FIELDS
+    assert seen_fields <= set(OBSERVATION_FIELDS)
     assert promotions > 0 and nodes > 0  # seeds were spawned and FINAL modules became nodes
 
 

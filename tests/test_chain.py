@@ -20,23 +20,12 @@ import proteo_env
 from baselines.chain import ChainPolicy
 from baselines.random_policy import RandomPolicy
 from proteo_env.core.lattice import DIRECTIONS
+from proteo_env.core.records import OBSERVATION_FIELDS
 
 N = 30
 LIMIT = 600
 SEEDS = range(5)
 WORKING_MODELS = ("minimal", "rounded", "sphere")
-OBSERVATION_FIELDS = {
-    "neighbour_kind",
-    "neighbour_mode",
-    "neighbour_scent",
-    "own_mode",
-    "own_scent",
-    "messages",
-    "contact",
-    "load",
-    "hint",
-    "action_mask",
-}
 
 
 def is_chain(positions: np.ndarray) -> bool:
@@ -137,7 +126,7 @@ def test_policy_sees_only_observations_and_acts_legally():
             assert obs[a]["action_mask"][action[lay.move]] == 1, (a, action)  # only legal rolls
             promotions += action[lay.message_value] == 13
         obs, *_ = env.step(actions)
-    assert seen_fields <= OBSERVATION_FIELDS
+    assert seen_fields <= set(OBSERVATION_FIELDS)
     assert promotions > 0  # the chain was growing
 
 

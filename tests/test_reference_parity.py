@@ -16,21 +16,11 @@ from conftest import run_without_jit
 
 from proteo_env.core.cycle import LAST_EPOCH
 from proteo_env.core.motion import MOTION_MODELS
+from proteo_env.core.records import Observation
 from proteo_env.core.reference import ReferenceWorld
 from proteo_env.core.world import Physics, World
 from proteo_env.layouts import ball_sites, blob_sites, line_sites, place_in_box
 from proteo_env.spaces import ObservationBuffers
-
-OBS_FIELDS = (
-    "neighbour_kind",
-    "neighbour_mode",
-    "neighbour_scent",
-    "own_mode",
-    "own_scent",
-    "messages",
-    "contact",
-    "action_mask",
-)
 
 
 @dataclass(frozen=True)
@@ -135,7 +125,7 @@ def assert_same(world: World, ref: ReferenceWorld, buffers: ObservationBuffers, 
     assert int(world.rng_state[0]) == s["rng_state"], f"{where}: rng state"
     world.observe(buffers)
     obs = ref.observe()
-    for f in OBS_FIELDS:
+    for f in Observation._fields:
         np.testing.assert_array_equal(getattr(buffers, f), obs[f], err_msg=f"{where}: observation {f}")
 
 

@@ -47,6 +47,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..core.records import OBSERVATION_FIELDS
 from ..spaces import N_MOVES
 
 SCENT_SCALE = 16
@@ -147,12 +148,12 @@ class ObservationEncoder:
     # ------------------------------------------------------------------ encoding
     def encode_buffers(self, buffers) -> np.ndarray:
         """Features of every agent from :class:`~proteo_env.spaces.ObservationBuffers`: ``(A, size)``."""
-        return self.encode_fields({name: getattr(buffers, name) for name in _FIELDS})
+        return self.encode_fields({name: getattr(buffers, name) for name in OBSERVATION_FIELDS})
 
     def encode_observations(self, observations: Mapping[str, Mapping[str, np.ndarray]]) -> np.ndarray:
         """Features from the per-agent dict that ``env.reset``/``env.step`` return: ``(len, size)``, in dict order."""
         obs = list(observations.values())
-        return self.encode_fields({name: np.stack([o[name] for o in obs]) for name in _FIELDS})
+        return self.encode_fields({name: np.stack([o[name] for o in obs]) for name in OBSERVATION_FIELDS})
 
     def encode_fields(self, fields: Mapping[str, np.ndarray]) -> np.ndarray:
         """Features from observation fields that carry a leading batch axis ``B``: ``(B, size)``."""
@@ -209,19 +210,6 @@ class ObservationEncoder:
 
 MESSAGE_ENCODINGS = ("per_direction", "compact")
 """How :class:`ObservationEncoder` encodes the messages received (module docstring)."""
-
-_FIELDS = (
-    "neighbour_kind",
-    "neighbour_mode",
-    "neighbour_scent",
-    "own_mode",
-    "own_scent",
-    "messages",
-    "contact",
-    "load",
-    "hint",
-    "action_mask",
-)
 
 
 def flat_action_mask(move_mask: np.ndarray, nvec: np.ndarray) -> np.ndarray:

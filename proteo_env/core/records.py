@@ -224,6 +224,11 @@ class Observation(NamedTuple):
         )
 
 
+OBSERVATION_FIELDS = (*Observation._fields[:-1], "load", "hint", Observation._fields[-1])
+"""The fields of a module's observation, in order (:mod:`proteo_env.spaces` has their shapes):
+the engine's :class:`Observation` with the task's ``load`` and ``hint`` before the action mask."""
+
+
 def row(record, b):
     """World ``b``'s row of a batch's ``record`` (every field indexed by ``b``), as a plain tuple."""
     return tuple(x[b] for x in record)

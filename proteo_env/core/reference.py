@@ -31,6 +31,7 @@ import numpy as np
 
 from .lattice import DIRECTIONS
 from .motion import swept_cells
+from .records import Observation
 
 MASK64 = 0xFFFF_FFFF_FFFF_FFFF
 SILENT, RELAY, EMIT = 0, 1, 2
@@ -353,19 +354,7 @@ class ReferenceWorld:
     def observe(self) -> dict[str, np.ndarray]:
         """Observation fields of every agent (first axis: agent), as ``World.observe`` fills them."""
         top = self.physics.scent_max
-        out: dict[str, list] = {
-            f: []
-            for f in (
-                "neighbour_kind",
-                "neighbour_mode",
-                "neighbour_scent",
-                "own_mode",
-                "own_scent",
-                "messages",
-                "contact",
-                "action_mask",
-            )
-        }
+        out: dict[str, list] = {f: [] for f in Observation._fields}
         for a in range(self.n_agents):
             p = self.site_of[a]
             kinds, modes, scents = [], [], []
