@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from proteo_env.core.jit import kernel
 from proteo_env.spaces import KIND_MODULE
-from proteo_env.tasks.chain_kernels import ChainMode
+from proteo_env.tasks.chain import ChainMode
 from proteo_env.tasks.snake_kernels import CrawlMode, SnakeMode
 
 from .chain import ChainPolicy

@@ -1,6 +1,6 @@
 """The snake task's modes (:mod:`proteo_env.tasks.snake` is the task).
 
-The snake is a composed behaviour: the chain's modes (:class:`~proteo_env.tasks.chain_kernels.ChainMode`)
+The snake is a composed behaviour: the chain's modes (:class:`~proteo_env.tasks.chain.ChainMode`)
 followed by the crawl's (:class:`CrawlMode`), so ``SnakeMode`` numbers the crawl's modes from 4.
 The success test is locomotion's (:func:`~proteo_env.tasks.locomotion_kernels.locomotion_update_and_test`).
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-from .chain_kernels import ChainMode
+from .chain import ChainMode
 
 
 class CrawlMode(IntEnum):
