@@ -170,13 +170,15 @@ class Chain(Task):
         self._previous = self._last
 
     def _measure(self, world):
-        shape, n = self._probe.measure(world), world.n_modules
-        complete = shape.edges == n - 1 and shape.thin == n and shape.thin_piece == n
+        probe = self._probe
+        shape = probe.measure(world)  # is_chain below reuses its scratch; the degrees it writes are the same
         return {
             "thin": shape.thin,
             "max_degree": shape.max_degree,
             "chain_length": shape.thin_piece,
-            "complete": complete,
+            "complete": is_chain(
+                world.grid, world.cell, world.n_modules, world.dir_delta, probe.degree, probe.mark, probe.queue
+            ),
         }
 
     def after_cycle(self, world, cycle):
