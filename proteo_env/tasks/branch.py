@@ -208,13 +208,15 @@ def measure_tree(
 
 
 @kernel
-def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
-    """The branch task's success test as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`):
-    the grown piece from the root is a tree with at least ``target_levels`` levels of branching
-    (:func:`measure_tree`). ``test`` is ``(first_node, min_gap, target_levels, scratch)``: the
-    root is ``first_node``, or when it is -1 the lowest-index NODE or INODE (module 0 when there
-    is none); ``scratch`` is ``(9, N)`` int64."""
-    first_node, min_gap, target_levels, scratch = test
+def measure_branch(grid, cell, mode, dir_delta, first_node, min_gap, target_levels, scratch):
+    """The grown piece measured from its root by :func:`measure_tree`, and the success test, for
+    the environment and for compiled rollouts alike.
+
+    The root is ``first_node``, or when it is -1 the lowest-index NODE or INODE (module 0 when
+    there is none); ``scratch`` is ``(9, N)`` int64. Returns :func:`measure_tree`'s nine numbers
+    followed by ``tree`` (the piece has ``size - 1`` contacts: no cycles) and ``success`` (a
+    tree with at least ``target_levels`` levels of branching).
+    """
     n_modules = cell.shape[0]
     root = first_node
     if root < 0:
@@ -223,7 +225,7 @@ def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
             if mode[n] == NODE or mode[n] == INODE:
                 root = n
                 break
-    size, edges, _, levels, _, _, _, _, _ = measure_tree(
+    size, edges, points, levels, children, most_children, dist_sum, dist_count, leaves = measure_tree(
         grid,
         cell,
         mode,
@@ -241,7 +243,18 @@ def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
         scratch[7],
         scratch[8],
     )
-    return size > 0 and edges == size - 1 and levels >= target_levels
+    tree = size > 0 and edges == size - 1
+    success = tree and levels >= target_levels
+    return size, edges, points, levels, children, most_children, dist_sum, dist_count, leaves, tree, success
+
+
+@kernel
+def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
+    """:func:`measure_branch`'s success as a task's ``update_and_test``
+    (:class:`~proteo_env.tasks.base.TaskKernels`); ``test`` is ``(first_node, min_gap,
+    target_levels, scratch)``."""
+    first_node, min_gap, target_levels, scratch = test
+    return measure_branch(grid, cell, mode, dir_delta, first_node, min_gap, target_levels, scratch)[10]
 
 
 @dataclass(frozen=True)
@@ -333,7 +346,7 @@ class Branch(Task):
 
     def reset(self, world, rng):
         n = world.n_modules
-        self._scratch = [np.zeros(n, dtype=np.int64) for _ in range(9)]
+        self._scratch = np.zeros((9, n), dtype=np.int64)
         if not hasattr(self, "_root") or self._root >= n:
             self._root = 0
         self._last = self._measure(world)
@@ -344,27 +357,17 @@ class Branch(Task):
         ``initial_node``)."""
         return self._root
 
-    def _root_now(self, world) -> int:
-        """The root: the task's first node; without one (``initial_node=False``) the lowest-index
-        NODE or INODE module, else module 0."""
-        if self.params.initial_node:
-            return self._root
-        nodes = np.flatnonzero((world.mode == NODE) | (world.mode == INODE))
-        return int(nodes[0]) if nodes.size else 0
+    def _given_root(self) -> int:
+        """The root handed to :func:`measure_branch`: the first node, or -1 without one
+        (``initial_node=False``), so that the kernel roots the tree at the lowest-index NODE
+        or INODE module."""
+        return self._root if self.params.initial_node else -1
 
     def _measure(self, world):
-        size, edges, points, levels, children, most, dsum, dcount, leaves = measure_tree(
-            world.grid,
-            world.cell,
-            world.mode,
-            world.n_modules,
-            world.dir_delta,
-            self._root_now(world),
-            self.params.min_gap,
-            *self._scratch,
+        p, mode = self.params, world.mode
+        size, _, points, levels, children, most, dsum, dcount, leaves, tree, complete = measure_branch(
+            world.grid, world.cell, mode, world.dir_delta, self._given_root(), p.min_gap, p.target_levels, self._scratch
         )
-        tree = size > 0 and edges == size - 1
-        mode = world.mode
         return {
             "size": int(size),
             "tree": bool(tree),
@@ -377,7 +380,7 @@ class Branch(Task):
             "nodes": int(((mode == NODE) | (mode == INODE)).sum()),
             "seeds": int((mode == SEED).sum()),
             "searching": int(((mode == SLEEP) | (mode == SEARCH)).sum()),
-            "complete": bool(tree and levels >= self.params.target_levels),
+            "complete": bool(complete),
         }
 
     def after_cycle(self, world, cycle):
@@ -412,11 +415,11 @@ class Branch(Task):
         }
 
     def kernels(self, world):
-        root = self.first_node if self.params.initial_node else -1
+        p = self.params
         return TaskKernels(
             no_sensor,
             branch_update_and_test,
-            (root, self.params.min_gap, self.params.target_levels, np.zeros((9, world.n_modules), dtype=np.int64)),
+            (self._given_root(), p.min_gap, p.target_levels, np.zeros((9, world.n_modules), dtype=np.int64)),
         )
 
     def success(self, world):
