@@ -255,6 +255,37 @@ def grounded_legs(grid, cell, mode, anchored, book):
 
 
 @kernel
+def signature_complete(book):
+    """The signature of :class:`TableLedger` ``book`` is complete: every active root, and no
+    other root, has a grounded leg; with ``carry`` the legs also carry the weight
+    (:func:`weight_carried`)."""
+    for r in range(book.roots.shape[0]):
+        if book.active[r] != book.grounded[r]:
+            return False
+    return not book.carry or weight_carried(book)
+
+
+@kernel
+def stable_start(book):
+    """The cycle from which :class:`TableLedger` ``book``'s signature counts towards a stable
+    period: its last change, or the shift of the schedule entry in force when that is later."""
+    return max(book.clock[SINCE], book.shift_cycles[book.clock[SHIFT]])
+
+
+@kernel
+def in_stable_configuration(book):
+    """The signature is complete and has stayed unchanged for ``stable_window`` cycles since
+    :func:`stable_start`, as of the last cycle."""
+    return signature_complete(book) and book.clock[CYCLE] - stable_start(book) >= book.stable_window
+
+
+@kernel
+def restabilised(book):
+    """The table task's success: the configuration after the last scheduled shift has been stable."""
+    return book.restabilise[-1] >= 0
+
+
+@kernel
 def table_update(grid, cell, mode, anchored, cycle, book):
     """Update :class:`TableLedger` ``book`` after ``cycle``: active roots and grounded legs, leg
     creations and disbands, the signature and the cycle it last changed, ``restabilise`` of the
@@ -271,20 +302,15 @@ def table_update(grid, cell, mode, anchored, cycle, book):
             clock[DISBANDS] += 1
         active[r] = now
     grounded_legs(grid, cell, mode, anchored, book)
-    complete = True
     for r in range(roots.shape[0]):
         changed |= signature[0, r] != active[r] or signature[1, r] != grounded[r]
-        complete &= active[r] == grounded[r]
-    if book.carry:
-        complete = complete and weight_carried(book)
     if changed:
         signature[0] = active
         signature[1] = grounded
         clock[SINCE] = cycle
     k = clock[SHIFT]
-    start = max(clock[SINCE], shift_cycles[k])
-    if restabilise[k] < 0 and complete and cycle - start >= book.stable_window:
-        restabilise[k] = start - shift_cycles[k]
+    if restabilise[k] < 0 and in_stable_configuration(book):
+        restabilise[k] = stable_start(book) - shift_cycles[k]
     if k + 1 < shift_cycles.shape[0] and cycle == shift_cycles[k + 1]:
         clock[SHIFT] = k + 1
         book.weights[:] = book.schedule_weights[k + 1]
@@ -299,15 +325,13 @@ def table_sense(book, load):
 
 @kernel
 def table_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, book):
-    """:func:`table_update` as a task's ``update_and_test``: success once the last schedule entry
-    has re-stabilised."""
+    """:func:`table_update`, then :func:`restabilised`, as a task's ``update_and_test``."""
     table_update(grid, cell, mode, anchored, cycle, book)
-    return book.restabilise[-1] >= 0
+    return restabilised(book)
 
 
 MODES = tuple(TableMode.__members__)
 ACTIVE = (ROOT, AROOT)
-LEG_MODES = (SEED, FINAL)
 DOWN = np.flatnonzero(DIRECTIONS[:, 2] == -1)
 """The 4 face directions that go down one layer."""
 
@@ -509,10 +533,6 @@ class Table(Task):
     def after_cycle(self, world, cycle):
         table_update(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
 
-    def _complete(self) -> bool:
-        book = self.ledger
-        return bool(np.array_equal(book.active, book.grounded)) and (not book.carry or weight_carried(book))
-
     # ------------------------------------------------------------------ sensors
     def load(self, world):
         out = np.zeros(world.n_agents, dtype=np.float32)
@@ -536,12 +556,10 @@ class Table(Task):
         return {"support": self._support(), "legs": 0.0 - self.params.leg_cost * sum(self._legs())}
 
     def metrics(self, world):
-        p, book = self.params, self.ledger
+        book = self.ledger
         clock, active, left = book.clock, book.active, book.left
         legs_left, legs_right = self._legs()
         load_left, load_right = region_loads(book)
-        start = max(clock[SINCE], p.shift_cycles[clock[SHIFT]])
-        stable = self._complete() and clock[CYCLE] - start >= p.stable_window
         out = {
             "weight_left": float(book.weights[0]),
             "weight_right": float(book.weights[1]),
@@ -553,7 +571,7 @@ class Table(Task):
             "load_left": float(load_left),
             "load_right": float(load_right),
             "support": self._support(),
-            "stable": float(stable),
+            "stable": float(in_stable_configuration(book)),
             "leg_creations": float(clock[CREATIONS]),
             "leg_disbands": float(clock[DISBANDS]),
         }
@@ -566,7 +584,7 @@ class Table(Task):
         return TaskKernels(table_sense, table_update_and_test, self.ledger.copy())
 
     def success(self, world):
-        return bool(self.ledger.restabilise[-1] >= 0)
+        return bool(restabilised(self.ledger))
 
 
 class TableV1(Table):
