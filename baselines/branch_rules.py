@@ -15,7 +15,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
-from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
+from proteo_env.tasks.branch import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
 
 from .chain_rules import BECOME_SEED, search_actions, seed_blocked
 from .primitives import (

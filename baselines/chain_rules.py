@@ -47,7 +47,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
-from proteo_env.tasks.chain_kernels import FINAL, SEARCH, SEED, SLEEP
+from proteo_env.tasks.chain import FINAL, SEARCH, SEED, SLEEP
 
 from .primitives import (
     EQUATOR_BITS,

@@ -1,7 +1,7 @@
 """The crawl rule (a chain travelling head first) as a numba kernel over stacked observation fields.
 
 :func:`crawl_actions` is the one implementation of the crawl's decisions; the rules are
-listed in :mod:`baselines.crawl`. Modes are the crawl's own (:class:`~proteo_env.tasks.snake_kernels.CrawlMode`:
+listed in :mod:`baselines.crawl`. Modes are the crawl's own (:class:`~proteo_env.tasks.snake.CrawlMode`:
 0 CRAWL, 1 HEAD, 2 BODY); a composition (:mod:`baselines.compose`) shows it the modes of
 other behaviours as these.
 
@@ -30,7 +30,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
-from proteo_env.tasks.snake_kernels import BODY, CRAWL, HEAD
+from proteo_env.tasks.snake import BODY, CRAWL, HEAD
 
 from .primitives import (
     BIT_COUNT,

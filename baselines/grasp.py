@@ -87,7 +87,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
+from proteo_env.tasks.grasp import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .base import KernelPolicy, SlotMemory
 from .grasp_rules import PASS_SEED, SET_FINAL, SET_TOUCH, GraspRuleParams, grasp_decide

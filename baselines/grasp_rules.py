@@ -35,7 +35,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import DIRECTION_ADJACENCY, MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, RELAY, SILENT
-from proteo_env.tasks.grasp_kernels import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
+from proteo_env.tasks.grasp import FINAL, SEARCH, SEED, SLEEP, TOUCH, TOUCHSEED
 
 from .primitives import (
     AROUND_BITS,

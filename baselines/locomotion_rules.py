@@ -23,7 +23,7 @@ import numpy as np
 
 from proteo_env.core.jit import kernel
 from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
-from proteo_env.tasks.locomotion_kernels import SEARCH, SEED
+from proteo_env.tasks.locomotion import SEARCH, SEED
 
 from .primitives import (
     AROUND_BITS,

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 from proteo_env.core.jit import kernel
 from proteo_env.spaces import KIND_MODULE
-from proteo_env.tasks.chain_kernels import ChainMode
-from proteo_env.tasks.snake_kernels import CrawlMode, SnakeMode
+from proteo_env.tasks.chain import ChainMode
+from proteo_env.tasks.snake import CrawlMode, SnakeMode
 
 from .chain import ChainPolicy
 from .compose import Stage, compose

@@ -73,7 +73,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
+from proteo_env.tasks.table import AROOT, DISBAND, FINAL, FIXED, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .base import KernelPolicy, SlotMemory
 from .table_rules import DISBAND_NOW, SPOT_TAKEN, TableRuleParams, table_decide

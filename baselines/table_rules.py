@@ -38,7 +38,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
-from proteo_env.tasks.table_kernels import AROOT, DISBAND, FINAL, IROOT, ROOT, SEARCH, SEED, SLEEP
+from proteo_env.tasks.table import AROOT, DISBAND, FINAL, IROOT, ROOT, SEARCH, SEED, SLEEP
 
 from .primitives import (
     FAR,

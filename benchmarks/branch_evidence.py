@@ -50,7 +50,7 @@ def run_one(job: dict) -> dict:
     ``settle``, ``policy``) on ``branch-v1`` (``growth`` ``planar``: its ``planar=True``)."""
     import proteo_env
     from baselines.branch import BranchPolicy
-    from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEED
+    from proteo_env.tasks.branch import FINAL, INODE, NODE, SEED
 
     env = proteo_env.make(
         "branch-v1",

@@ -149,7 +149,7 @@ def profile(n: int, cycles: int) -> dict:
     from baselines.chain_rules import chain_actions
     from proteo_env.core import cycle
     from proteo_env.core.records import Actions, Observation
-    from proteo_env.tasks.chain_kernels import is_chain
+    from proteo_env.tasks.chain import is_chain
 
     @numba.njit
     def draw(rng, count):

@@ -24,8 +24,7 @@ from baselines.random_policy import RandomPolicy
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.core.records import OBSERVATION_FIELDS
 from proteo_env.core.world import Physics, World
-from proteo_env.tasks.branch import Branch, BranchParams
-from proteo_env.tasks.branch_kernels import FINAL, INODE, NODE, SEARCH, SEED, SLEEP
+from proteo_env.tasks.branch import FINAL, INODE, NODE, SEARCH, SEED, SLEEP, Branch, BranchParams
 
 N, T, B = 40, 4, 3
 LIMIT = 400

@@ -15,8 +15,7 @@ from proteo_env.config import ConfigError, load_run_config
 from proteo_env.core.lattice import DIRECTIONS
 from proteo_env.core.world import Physics, World
 from proteo_env.rollout import run_episode
-from proteo_env.tasks.grasp import SIDES, Grasp, GraspParams
-from proteo_env.tasks.grasp_kernels import TOUCH, TOUCHSEED
+from proteo_env.tasks.grasp import SIDES, TOUCH, TOUCHSEED, Grasp, GraspParams
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = {"n_modules": 60, "n_seed_modules": 4, "object_size": 1.5, "distance": 3}

@@ -22,7 +22,7 @@ from baselines.locomotion import LocomotionPolicy
 from baselines.snake import SnakePolicy, chain_handover
 from proteo_env.config import ConfigError
 from proteo_env.spaces import KIND_EMPTY, KIND_MODULE
-from proteo_env.tasks.snake_kernels import SnakeMode
+from proteo_env.tasks.snake import SnakeMode
 
 SMALL = dict(n_modules=12, tunnel_length=4, max_cycles=400)
 

@@ -33,15 +33,56 @@ Paper section
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
 from ..core.cycle import EMIT, RELAY
-from ..core.structure import StructureProbe
+from ..core.jit import kernel
+from ..core.structure import StructureProbe, largest_thin_piece
 from ..core.world import MODULE_BYTES, gib, machine_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
-from .chain_kernels import SEED, SLEEP, ChainMode, chain_update_and_test
+
+
+class ChainMode(IntEnum):
+    """The chain's modes (paper section 4.1): the one definition the task and its rules share."""
+
+    SLEEP = 0
+    SEARCH = 1
+    SEED = 2
+    FINAL = 3
+
+
+SLEEP, SEARCH, SEED, FINAL = (int(m) for m in ChainMode)
+"""The same modes as plain ints, for the numba kernels."""
+
+
+@kernel
+def is_chain(grid, cell, n_modules, dir_delta, degree, mark, queue):
+    """The chain task's success test: connected, ``N - 1`` contacts, every module with at most
+    2 neighbours. Stops at the first module with 3 or more (``degree``, ``mark``, ``queue``:
+    (N,) scratch)."""
+    contacts = 0
+    for n in range(n_modules):
+        d = 0
+        for k in range(12):
+            if grid[cell[n] + dir_delta[k]] >= 0:
+                d += 1
+        if d > 2:
+            return False
+        degree[n] = d
+        contacts += d
+    if contacts // 2 != n_modules - 1:
+        return False
+    return largest_thin_piece(grid, cell, n_modules, dir_delta, degree, mark, queue) == n_modules
+
+
+@kernel
+def chain_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, scratch):
+    """:func:`is_chain` as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`);
+    ``scratch`` is ``(3, N)`` int64."""
+    return is_chain(grid, cell, cell.shape[0], dir_delta, scratch[0], scratch[1], scratch[2])
 
 
 @dataclass(frozen=True)
@@ -129,13 +170,15 @@ class Chain(Task):
         self._previous = self._last
 
     def _measure(self, world):
-        shape, n = self._probe.measure(world), world.n_modules
-        complete = shape.edges == n - 1 and shape.thin == n and shape.thin_piece == n
+        probe = self._probe
+        shape = probe.measure(world)  # is_chain below reuses its scratch; the degrees it writes are the same
         return {
             "thin": shape.thin,
             "max_degree": shape.max_degree,
             "chain_length": shape.thin_piece,
-            "complete": complete,
+            "complete": is_chain(
+                world.grid, world.cell, world.n_modules, world.dir_delta, probe.degree, probe.mark, probe.queue
+            ),
         }
 
     def after_cycle(self, world, cycle):

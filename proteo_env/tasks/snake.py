@@ -37,12 +37,33 @@ Paper section
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
 from ..core.cycle import EMIT, RELAY
+from .chain import ChainMode
 from .locomotion import Locomotion, LocomotionParams
-from .snake_kernels import SnakeMode
+
+
+class CrawlMode(IntEnum):
+    """The crawl's modes, numbered within the crawl (a chain travelling head first): CRAWL (a
+    module travelling along the chain to its head), HEAD (the chain's front end, where the
+    chain grows) and BODY (the rest of the chain)."""
+
+    CRAWL = 0
+    HEAD = 1
+    BODY = 2
+
+
+CRAWL, HEAD, BODY = (int(m) for m in CrawlMode)
+"""The crawl's modes as plain ints, for the numba kernels."""
+
+SnakeMode = IntEnum(
+    "SnakeMode",
+    [(m.name, int(m)) for m in ChainMode] + [(m.name, len(ChainMode) + int(m)) for m in CrawlMode],
+)
+SnakeMode.__doc__ = "The snake's modes: the chain's (0-3), then the crawl's (4-6)."
 
 
 @dataclass(frozen=True)
