@@ -35,7 +35,7 @@ def tiny_clone(run_dir, *extra: str):
         "2",
         "--cycles-per-round",
         "150",
-        "--epochs",
+        "--n-epochs",
         "8",
         "--minibatch-size",
         "512",

@@ -18,7 +18,7 @@ The loop (Ross, Gordon & Bagnell's DAgger, with one policy shared by all modules
   with probability ``beta * beta_decay ** (i - 1)``; the teacher labels every visited state
   (also those the learner chose), the new samples join the aggregate, and the network is
   trained on the whole aggregate again;
-- training: ``epochs`` passes of cross-entropy between the network's masked logits
+- training: ``n_epochs`` passes of cross-entropy between the network's masked logits
   (illegal moves get probability zero, as when acting) and the teacher's action, summed over
   the controlled fields.
 
@@ -95,7 +95,7 @@ class Args:
     """Factor on ``beta`` per later round."""
     samples_per_round: int = 200_000
     """At most this many samples join the aggregate per round (a uniform subsample)."""
-    epochs: int = 4
+    n_epochs: int = 4
     """Passes over the aggregate after each round."""
     minibatch_size: int = 4096
     learning_rate: float = 1e-3
@@ -119,7 +119,14 @@ class Args:
     def __post_init__(self):
         check_integers(
             self,
-            {"rounds": 0, "cycles_per_round": 1, "samples_per_round": 1, "epochs": 1, "minibatch_size": 1, "n_envs": 1},
+            {
+                "rounds": 0,
+                "cycles_per_round": 1,
+                "samples_per_round": 1,
+                "n_epochs": 1,
+                "minibatch_size": 1,
+                "n_envs": 1,
+            },
         )
         for name in ("beta", "beta_decay"):
             if not 0.0 <= getattr(self, name) <= 1.0:
@@ -238,7 +245,7 @@ def train(args: Args) -> Path:
         collected = time.perf_counter()
         net.train()
         losses = []
-        for _ in range(args.epochs):
+        for _ in range(args.n_epochs):
             order = torch.randperm(len(all_x))
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start : start + args.minibatch_size]
