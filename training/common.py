@@ -127,6 +127,16 @@ def check_integers(args, least: dict[str, int]) -> None:
             raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {bound}")
 
 
+def check_numbers(args, bounds: dict[str, tuple[float, float | None]]) -> None:
+    """A :class:`ConfigError` naming the first field of ``args`` in ``bounds`` whose value is not a
+    number in its ``(low, high)`` range (``high`` ``None``: no upper bound)."""
+    for name, (low, high) in bounds.items():
+        value = getattr(args, name)
+        if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
+            allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
+            raise ConfigError(f"{name}={value!r} is not allowed; allowed: {allowed}")
+
+
 def run_script(main, argv=None) -> int:
     """Run a training script's ``main(argv)`` from the command line: bad input (a
     :class:`ConfigError` or :class:`CheckpointError`, both ``ValueError``) is one line on stderr

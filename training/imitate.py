@@ -49,12 +49,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
 from training.common import (
     ProgressLog,
     check_integers,
+    check_numbers,
     make_run_dir,
     parse_args,
     save_args,
@@ -62,7 +62,14 @@ from training.common import (
     torch_device,
     write_checkpoint_meta,
 )
-from training.networks import ARCHS, ActorCritic, masked_log_probs, sample, teacher_cross_entropy
+from training.networks import (
+    ActorCritic,
+    check_arch,
+    masked_log_probs,
+    network_meta,
+    sample,
+    teacher_cross_entropy,
+)
 from training.policies import check_memory, check_sampled
 from training.teachers import DEFAULT_TEACHER, Teachers
 from training.worlds import TrainingEnvs
@@ -128,11 +135,8 @@ class Args:
                 "n_envs": 1,
             },
         )
-        for name in ("beta", "beta_decay"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
-        if self.arch not in ARCHS:
-            raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        check_numbers(self, {"beta": (0, 1), "beta_decay": (0, 1)})
+        check_arch(self.arch)
         check_memory(self.memory)
         check_sampled(self.sampled)
 
@@ -294,10 +298,7 @@ def train(args: Args) -> Path:
         seed=args.seed,
         extra={
             "label": "imitation",
-            "control": args.control,
-            "arch": args.arch,
-            "hidden": list(args.hidden),
-            "memory": args.memory,
+            **network_meta(args),
             "run_dir": str(run_dir),
             "teacher": args.teacher,
             "sampled": args.sampled,
