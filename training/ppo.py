@@ -45,9 +45,7 @@ Writes ``runs/<name>/`` (:mod:`training.common`); a checkpoint holds ``policy.pt
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -67,7 +65,6 @@ from training.common import (
     ProgressLog,
     check_integers,
     check_numbers,
-    checkpoint_dir,
     checkpoint_folder,
     episode_stats,
     make_run_dir,
@@ -214,22 +211,6 @@ class Args:
         return self.distill_final + (self.distill_coef - self.distill_final) * done
 
 
-def gae(rewards, values, next_values, terminal, done, gamma: float, lam: float) -> torch.Tensor:
-    """Advantages ``(T, N)`` by GAE over cycles, per module.
-
-    All arguments ``(T, N)``: ``values`` at each step, ``next_values`` of the observation after
-    it (the bootstrap at ``max_cycles``; ignored where ``terminal``), ``done`` where an episode
-    ended (success or ``max_cycles``): the recursion does not carry across it.
-    """
-    advantages = torch.zeros_like(values)
-    carry = torch.zeros_like(values[0])
-    for t in reversed(range(values.shape[0])):
-        delta = rewards[t] + gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
-        carry = delta + gamma * lam * (1.0 - done[t]) * carry
-        advantages[t] = carry
-    return advantages
-
-
 # ---------------------------------------------------------------------- rollout
 @dataclass
 class Rollout:
@@ -339,17 +320,26 @@ def collect(
 def advantages_and_returns(
     rollout: Rollout, last_value: torch.Tensor, n_agents: int, args: Args
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """GAE advantages and returns ``(T, N)`` of the rollout, with the join bonus added to the rewards."""
+    """Advantages ``(T, N)`` by GAE over cycles, per module, and the returns: the join bonus is
+    added to the rewards, the value after an episode truncated at ``max_cycles`` is that of its
+    last observation (``bootstrap``) and after success zero, and the recursion does not carry
+    across the end of an episode."""
     terminal, truncated, rewards = (
         per_world.repeat_interleave(n_agents, dim=1)
         for per_world in (rollout.terminal, rollout.truncated, rollout.rewards)
     )
     if args.join_bonus:
         rewards = rewards + args.join_bonus * rollout.joined
-    next_values = torch.where(truncated, rollout.bootstrap, torch.cat([rollout.values[1:], last_value[None]]))
-    done = (terminal | truncated).float()
-    advantages = gae(rewards, rollout.values, next_values, terminal.float(), done, args.gamma, args.gae_lambda)
-    return advantages, advantages + rollout.values
+    values = rollout.values
+    next_values = torch.where(truncated, rollout.bootstrap, torch.cat([values[1:], last_value[None]]))
+    terminal, done = terminal.float(), (terminal | truncated).float()
+    advantages = torch.zeros_like(values)
+    carry = torch.zeros_like(values[0])
+    for t in reversed(range(len(values))):
+        delta = rewards[t] + args.gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
+        carry = delta + args.gamma * args.gae_lambda * (1.0 - done[t]) * carry
+        advantages[t] = carry
+    return advantages, advantages + values
 
 
 def update(
@@ -416,14 +406,7 @@ def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
 def main(argv=None) -> Path:
     """Parse the arguments and train. ``--resume CHECKPOINT`` without ``--config`` starts from the
     arguments the checkpoint was trained with (its ``args.yaml``); flags given override them."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    given = argparse.ArgumentParser(add_help=False)
-    given.add_argument("--resume")
-    given.add_argument("--config")
-    known, _ = given.parse_known_args(argv)
-    if known.resume and not known.config:
-        argv = ["--config", str(checkpoint_dir(known.resume) / "args.yaml"), *argv]
-    return train(parse_args(Args, argv, retired=RETIRED))
+    return train(parse_args(Args, argv, retired=RETIRED, saved_args=True))
 
 
 def train(args: Args) -> Path:
@@ -550,7 +533,7 @@ def train(args: Args) -> Path:
             teachers = make_teachers(args, worlds, agent_steps)
             rollout = Rollout.allocate(args.n_steps, worlds)
         if agent_steps // args.checkpoint_every > saved_interval:
-            saved_interval = agent_steps // args.checkpoint_every  # checkpoint_every intervals done at the last save
+            saved_interval = agent_steps // args.checkpoint_every
             save(checkpoint_folder(run_dir, agent_steps))
     bar.close()
     save(run_dir / "final")
