@@ -206,7 +206,7 @@ def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
             "128",
             "--minibatch-size",
             "64",
-            "--epochs",
+            "--n-epochs",
             "1",
             "--env",
             "{n_modules: 6, max_cycles: 16}",

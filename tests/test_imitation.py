@@ -16,6 +16,7 @@ from proteo_env.adapters.flatten import ObservationEncoder  # noqa: E402
 from proteo_env.config import ConfigError  # noqa: E402
 from training import imitate, ppo  # noqa: E402
 from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
+from training.networks import ReturnScale  # noqa: E402
 from training.teachers import Teachers  # noqa: E402
 
 SMALL_ENV = {"n_modules": 8, "max_cycles": 100}
@@ -35,7 +36,7 @@ def tiny_clone(run_dir, *extra: str):
         "2",
         "--cycles-per-round",
         "150",
-        "--epochs",
+        "--n-epochs",
         "8",
         "--minibatch-size",
         "512",
@@ -283,7 +284,7 @@ def test_a_clone_with_memory_loads_and_a_run_of_another_memory_refuses_it(tmp_pa
 def test_return_scale_tracks_the_mean_and_variance_of_every_return_seen_and_is_the_identity_when_off():
     gen = torch.Generator().manual_seed(0)
     batches = [400 + 30 * torch.randn(500, generator=gen), 380 + 60 * torch.randn(700, generator=gen)]
-    scale = ppo.ReturnScale(True)
+    scale = ReturnScale(True)
     for batch in batches:
         scale.update(batch)
     seen = torch.cat(batches).double()
@@ -293,7 +294,7 @@ def test_return_scale_tracks_the_mean_and_variance_of_every_return_seen_and_is_t
     targets = scale.target(seen)
     assert abs(targets.mean().item()) < 1e-9 and targets.std(unbiased=False).item() == pytest.approx(1.0)
     assert torch.allclose(scale.value(targets), seen)
-    off = ppo.ReturnScale(False)
+    off = ReturnScale(False)
     off.update(seen)
     assert off.value(seen) is seen and off.target(seen) is seen
 

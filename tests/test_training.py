@@ -142,9 +142,9 @@ def checkpoints(tmp_path_factory):
                 "192",
                 "--n-steps",
                 "8",
-                "--n-copies",
+                "--n-envs",
                 "2",
-                "--batch-size",
+                "--minibatch-size",
                 "48",
                 "--n-epochs",
                 "1",
@@ -167,7 +167,7 @@ def checkpoints(tmp_path_factory):
                 "192",
                 "--n-steps",
                 "8",
-                "--n-copies",
+                "--n-envs",
                 "2",
                 "--minibatch-size",
                 "48",
@@ -284,7 +284,7 @@ def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
             "288",
             "--n-steps",
             "8",
-            "--n-copies",
+            "--n-envs",
             "2",
             "--env",
             TINY_FLAG,
@@ -442,9 +442,9 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
             "64",
             "--n-steps",
             "4",
-            "--n-copies",
+            "--n-envs",
             "1",
-            "--batch-size",
+            "--minibatch-size",
             "32",
             "--n-epochs",
             "1",
@@ -459,7 +459,7 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
             "64",
             "--n-steps",
             "4",
-            "--n-copies",
+            "--n-envs",
             "1",
             "--minibatch-size",
             "32",
@@ -487,7 +487,7 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
     ),
     "bc_": (
         "imitate",
-        ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--epochs", "1", "--minibatch-size", "32"],
+        ["--rounds", "1", "--cycles-per-round", "4", "--n-envs", "2", "--n-epochs", "1", "--minibatch-size", "32"],
     ),
     "cma": (
         "cma_es",
@@ -504,7 +504,7 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
             "32",
             "--minibatch-size",
             "16",
-            "--epochs",
+            "--n-epochs",
             "1",
             "--checkpoint-every",
             "1",
@@ -695,6 +695,31 @@ def test_malformed_yaml_in_a_config_file_or_a_flag_is_one_error_with_its_line_an
     assert f"config file {str(bad)!r} is not valid YAML at line 3, column" in err and "Traceback" not in err
     assert run_script(main, ["--env", "{n_modules: 6", "--run-dir", str(tmp_path / "run")]) == 2
     assert "--env '{n_modules: 6' is not valid YAML at line 1, column 14" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+TRAINERS = ["ppo", "imitate", "cma_es", "sb3_ppo", "torchrl_ppo", "rllib_ppo"]
+VOCABULARY = {"n_envs": "n_copies", "minibatch_size": "batch_size", "n_epochs": "epochs", "learning_rate": "lr"}
+"""The one name every trainer gives a setting, and the word some trainers used before."""
+
+
+@pytest.mark.parametrize("trainer", TRAINERS)
+def test_every_trainer_names_a_setting_alike_and_refuses_the_old_word(trainer, tmp_path, capsys):
+    import dataclasses
+
+    from training.common import run_script
+
+    module = importlib.import_module(f"training.{trainer}")
+    names = {f.name for f in dataclasses.fields(module.Args)}
+    assert not names & set(VOCABULARY.values())
+    for new, old in VOCABULARY.items():
+        if new not in names:
+            continue
+        config = tmp_path / f"{old}.yaml"
+        config.write_text(f"{old}: 4\n")
+        assert run_script(module.main, ["--config", str(config), "--run-dir", str(tmp_path / "run")]) == 2
+        err = capsys.readouterr().err
+        assert f"unknown key '{old}'; allowed: " in err and new in err.split("allowed: ")[1], err
     assert not (tmp_path / "run").exists()
 
 

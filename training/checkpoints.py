@@ -272,6 +272,35 @@ def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     return logits_fn
 
 
+def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, where: str) -> dict:
+    """The network weights of checkpoint ``path``, after checking that training/imitate.py or
+    training/ppo.py trained it on task ``task_id`` (any version) with the network settings
+    ``network`` (:func:`training.networks.network_meta`) and the observation encoding
+    ``encoder_spec``; a :class:`CheckpointError` that starts with ``where`` and names what differs."""
+    import torch
+
+    meta = read_meta(path)
+    if meta["algorithm"] not in ("imitation", "ppo"):
+        raise CheckpointError(
+            f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
+            "training/imitate.py or training/ppo.py"
+        )
+    wanted = {"task": task_name(task_id), **network, "encoder": encoder_spec}
+    found = {
+        "task": task_name(meta["task"]),
+        **{key: meta.get(key) for key in network},
+        "memory": meta.get("memory", "none"),  # saved before the memory existed: none
+        "encoder": meta.get("encoder"),
+    }
+    for key, value in wanted.items():
+        if found[key] != value:
+            raise CheckpointError(
+                f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
+                f"allowed: a checkpoint with {key}={value!r}"
+            )
+    return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
+
+
 def _numpy_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     net = NumpyMLP(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
     try:

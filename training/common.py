@@ -39,14 +39,16 @@ META_FILE = "proteo.json"
 
 
 # ---------------------------------------------------------------------- args
-def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | None = None):
+def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | None = None, saved_args: bool = False):
     """Build ``args_cls`` (a frozen dataclass) from ``--config FILE.yaml`` and ``--<field> VALUE`` flags.
 
     Values on the command line are read as YAML (``--env "{n_modules: 16}"``, ``--total-steps
     2e5`` needs ``200000``). The config file and flags may name only fields of ``args_cls``;
     anything else is an error that lists the allowed keys. ``retired`` maps options that were
     removed to the value that made them do nothing: a config file (an older checkpoint's
-    ``args.yaml``) that holds that value is read without them.
+    ``args.yaml``) that holds that value is read without them. With ``saved_args``, ``--resume
+    CHECKPOINT`` without ``--config`` reads the checkpoint's ``args.yaml`` (the arguments it was
+    trained with) as the config file.
     """
     parser = argparse.ArgumentParser(description=description or args_cls.__doc__.splitlines()[0])
     parser.add_argument("--config", help="YAML file of arguments (see configs/train/)")
@@ -61,6 +63,8 @@ def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | No
             help=f"{getattr(hints[f.name], '__name__', hints[f.name])} (default: {default!r})",
         )
     ns = parser.parse_args(argv)
+    if saved_args and ns.resume and not ns.config:
+        ns.config = checkpoint_dir(ns.resume) / "args.yaml"
     values: dict = {}
     if ns.config:
         path = Path(ns.config)
@@ -125,6 +129,16 @@ def check_integers(args, least: dict[str, int]) -> None:
         value = getattr(args, name)
         if not isinstance(value, int) or isinstance(value, bool) or value < bound:
             raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= {bound}")
+
+
+def check_numbers(args, bounds: dict[str, tuple[float, float | None]]) -> None:
+    """A :class:`ConfigError` naming the first field of ``args`` in ``bounds`` whose value is not a
+    number in its ``(low, high)`` range (``high`` ``None``: no upper bound)."""
+    for name, (low, high) in bounds.items():
+        value = getattr(args, name)
+        if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
+            allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
+            raise ConfigError(f"{name}={value!r} is not allowed; allowed: {allowed}")
 
 
 def run_script(main, argv=None) -> int:

@@ -18,7 +18,7 @@ The loop (Ross, Gordon & Bagnell's DAgger, with one policy shared by all modules
   with probability ``beta * beta_decay ** (i - 1)``; the teacher labels every visited state
   (also those the learner chose), the new samples join the aggregate, and the network is
   trained on the whole aggregate again;
-- training: ``epochs`` passes of cross-entropy between the network's masked logits
+- training: ``n_epochs`` passes of cross-entropy between the network's masked logits
   (illegal moves get probability zero, as when acting) and the teacher's action, summed over
   the controlled fields.
 
@@ -49,12 +49,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
 from training.common import (
     ProgressLog,
     check_integers,
+    check_numbers,
     make_run_dir,
     parse_args,
     save_args,
@@ -62,7 +62,14 @@ from training.common import (
     torch_device,
     write_checkpoint_meta,
 )
-from training.networks import ARCHS, ActorCritic, masked_log_probs, sample, teacher_cross_entropy
+from training.networks import (
+    ActorCritic,
+    check_arch,
+    masked_log_probs,
+    network_meta,
+    sample,
+    teacher_cross_entropy,
+)
 from training.policies import check_memory, check_sampled
 from training.teachers import DEFAULT_TEACHER, Teachers
 from training.worlds import TrainingEnvs
@@ -95,7 +102,7 @@ class Args:
     """Factor on ``beta`` per later round."""
     samples_per_round: int = 200_000
     """At most this many samples join the aggregate per round (a uniform subsample)."""
-    epochs: int = 4
+    n_epochs: int = 4
     """Passes over the aggregate after each round."""
     minibatch_size: int = 4096
     learning_rate: float = 1e-3
@@ -119,13 +126,17 @@ class Args:
     def __post_init__(self):
         check_integers(
             self,
-            {"rounds": 0, "cycles_per_round": 1, "samples_per_round": 1, "epochs": 1, "minibatch_size": 1, "n_envs": 1},
+            {
+                "rounds": 0,
+                "cycles_per_round": 1,
+                "samples_per_round": 1,
+                "n_epochs": 1,
+                "minibatch_size": 1,
+                "n_envs": 1,
+            },
         )
-        for name in ("beta", "beta_decay"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ConfigError(f"{name}={getattr(self, name)!r} is not allowed; allowed: a number in [0, 1]")
-        if self.arch not in ARCHS:
-            raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        check_numbers(self, {"beta": (0, 1), "beta_decay": (0, 1)})
+        check_arch(self.arch)
         check_memory(self.memory)
         check_sampled(self.sampled)
 
@@ -238,7 +249,7 @@ def train(args: Args) -> Path:
         collected = time.perf_counter()
         net.train()
         losses = []
-        for _ in range(args.epochs):
+        for _ in range(args.n_epochs):
             order = torch.randperm(len(all_x))
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start : start + args.minibatch_size]
@@ -287,10 +298,7 @@ def train(args: Args) -> Path:
         seed=args.seed,
         extra={
             "label": "imitation",
-            "control": args.control,
-            "arch": args.arch,
-            "hidden": list(args.hidden),
-            "memory": args.memory,
+            **network_meta(args),
             "run_dir": str(run_dir),
             "teacher": args.teacher,
             "sampled": args.sampled,

@@ -1,6 +1,7 @@
 """The network of :mod:`training.ppo` and :mod:`training.imitate` (``arch``: ``shared`` or
-``mlp``) and the masked categorical distribution over its action fields. Checkpoints of both
-scripts hold an :class:`ActorCritic`'s weights, and :mod:`training.checkpoints` rebuilds it from here."""
+``mlp``), the masked categorical distribution over its action fields, and the scale of the
+critic's returns (:class:`ReturnScale`). Checkpoints of both scripts hold an :class:`ActorCritic`'s
+weights, and :mod:`training.checkpoints` rebuilds it from here."""
 
 from __future__ import annotations
 
@@ -13,6 +14,19 @@ from proteo_env.config import ConfigError
 from training.policies import check_memory
 
 ARCHS = ("shared", "mlp")
+
+
+def check_arch(arch) -> str:
+    """``arch`` if it is one of :data:`ARCHS`, else a :class:`ConfigError` naming it and the allowed ones."""
+    if arch not in ARCHS:
+        raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+    return arch
+
+
+def network_meta(args) -> dict:
+    """What a checkpoint of :mod:`training.ppo` or :mod:`training.imitate` records of its network
+    (from the script's ``args``): the control level, the architecture, the layer sizes and the memory."""
+    return {"control": args.control, "arch": args.arch, "hidden": list(args.hidden), "memory": args.memory}
 
 
 def hidden_layers(in_dim: int, hidden: tuple[int, ...]) -> list[nn.Module]:
@@ -52,8 +66,7 @@ class ActorCritic(nn.Module):
         memory: str = "none",
     ):
         super().__init__()
-        if arch not in ARCHS:
-            raise ConfigError(f"arch={arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        self.arch = check_arch(arch)
         self.nvec = [int(n) for n in nvec]
         hidden = tuple(hidden)
         in_dim = encoder.size + check_memory(memory, self.nvec)
@@ -76,6 +89,54 @@ class ActorCritic(nn.Module):
 
     def value(self, x: torch.Tensor) -> torch.Tensor:
         return self.critic(self.trunk(x))[:, 0]
+
+    def clip_gradients(self, max_norm: float) -> None:
+        """Scale the gradients down to norm ``max_norm``: of the whole network at ``arch="shared"``,
+        of the actor and of the critic separately at ``arch="mlp"``."""
+        if self.arch == "shared":
+            nn.utils.clip_grad_norm_(self.parameters(), max_norm)
+        else:
+            nn.utils.clip_grad_norm_(self.actor.parameters(), max_norm)
+            nn.utils.clip_grad_norm_(self.critic.parameters(), max_norm)
+
+
+class ReturnScale:
+    """Running mean and variance of the returns (Chan et al.'s parallel update, float64). With
+    ``value_norm`` the critic predicts ``(G - mean) / std`` and :meth:`value` maps its output
+    back, so that a value loss on the scaled returns stays near 1 whatever the reward's scale:
+    on a shared trunk an unscaled value loss of returns in the hundreds swamps the policy's
+    gradient under the joint norm clip. Disabled, every method is the identity."""
+
+    def __init__(self, enabled: bool):
+        self.enabled, self.mean, self.var, self.count = enabled, 0.0, 1.0, 0
+
+    def update(self, returns: torch.Tensor) -> None:
+        if not self.enabled:
+            return
+        x = returns.double()
+        n, mean, var = x.numel(), x.mean().item(), x.var(unbiased=False).item()
+        total = self.count + n
+        delta = mean - self.mean
+        self.var = (self.var * self.count + var * n + delta * delta * self.count * n / total) / total
+        self.mean, self.count = self.mean + delta * n / total, total
+
+    @property
+    def std(self) -> float:
+        return max(self.var, 1e-8) ** 0.5
+
+    def value(self, output: torch.Tensor) -> torch.Tensor:
+        """The critic's output ``(N,)`` in return units."""
+        return output * self.std + self.mean if self.enabled else output
+
+    def target(self, returns: torch.Tensor) -> torch.Tensor:
+        """Returns ``(N,)`` on the critic's scale."""
+        return (returns - self.mean) / self.std if self.enabled else returns
+
+    def state_dict(self) -> dict:
+        return {"mean": self.mean, "var": self.var, "count": self.count}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.mean, self.var, self.count = state["mean"], state["var"], state["count"]
 
 
 # ---------------------------------------------------------------------- the action distribution

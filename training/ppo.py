@@ -29,9 +29,6 @@ Module credit. ``join_bonus > 0`` adds, to the reward of each module alone, ``jo
 cycle its own mode leaves the ``join_from`` modes (SLEEP and SEARCH by default) for another: the
 cycle it joined the structure (:attr:`training.worlds.TrainingEnvs.joined`).
 
-Memory. ``memory`` feeds each module's previous action back as inputs
-(:data:`training.policies.MEMORIES`).
-
 Curricula. ``curriculum: {stages: [...], promote_at, window}`` trains on stages of env overrides
 in turn, each promoted when the success rate of its last ``window`` episodes reaches
 ``promote_at`` (:mod:`training.curriculum`); the stage is logged and saved with checkpoints.
@@ -41,37 +38,33 @@ next episode at once while the others run on, so every sample of every cycle ent
 At ``max_cycles`` the value of the last observation is bootstrapped (the observation holds no
 clock); success is terminal.
 
-Writes ``runs/<name>/`` (see :mod:`training.common`): ``progress.csv``, TensorBoard logs,
-checkpoints every ``checkpoint_every`` agent-steps and ``final/`` (``policy.pt``: the network's
-weights; ``trainer.pt``: optimiser and random state; ``args.yaml``: the arguments, for
-``--resume``); ``proteo eval --checkpoint runs/<name>`` evaluates the result at the control level
-it was trained at.
+Writes ``runs/<name>/`` (:mod:`training.common`); a checkpoint holds ``policy.pt`` (the network),
+``trainer.pt`` (optimiser and random state) and ``args.yaml`` (for ``--resume``), and ``proteo eval
+--checkpoint runs/<name>`` evaluates it at the control level it was trained at.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
-from torch import nn
 from tqdm import tqdm
 
 import proteo_env
-from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
+from training.checkpoints import network_weights
 from training.common import (
     CheckpointError,
     ProgressLog,
     check_integers,
-    checkpoint_dir,
+    check_numbers,
     checkpoint_folder,
     episode_stats,
     make_run_dir,
@@ -83,11 +76,13 @@ from training.common import (
     write_checkpoint_meta,
 )
 from training.networks import (
-    ARCHS,
     ActorCritic,
+    ReturnScale,
+    check_arch,
     entropy,
     joint_log_prob,
     masked_log_probs,
+    network_meta,
     sample,
     sampled_fields,
     teacher_cross_entropy,
@@ -127,7 +122,7 @@ class Args:
     ent_coef: float = 0.01
     vf_coef: float = 0.5
     value_norm: bool = False
-    """Train the critic on returns scaled by their running mean and spread (:class:`ReturnScale`)."""
+    """Train the critic on returns scaled by their running mean and spread (:class:`~training.networks.ReturnScale`)."""
     max_grad_norm: float = 0.5
     """Gradient norm limit (of the actor and of the critic separately at arch=mlp)."""
     message_encoding: str = "compact"
@@ -182,8 +177,7 @@ class Args:
                 "distill_steps": 0,
             },
         )
-        if self.arch not in ARCHS:
-            raise ConfigError(f"arch={self.arch!r} is not allowed; allowed: {', '.join(ARCHS)}")
+        check_arch(self.arch)
         check_memory(self.memory)
         check_sampled(self.sampled)
         if not 0.0 <= self.distill_final <= self.distill_coef:
@@ -191,22 +185,21 @@ class Args:
                 f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
                 "allowed: a number in [0, distill_coef]"
             )
-        for name, low, high in (
-            ("learning_rate", 0.0, None),
-            ("gamma", 0.0, 1.0),
-            ("gae_lambda", 0.0, 1.0),
-            ("clip_range", 0.0, None),
-            ("ent_coef", 0.0, None),
-            ("vf_coef", 0.0, None),
-            ("max_grad_norm", 0.0, None),
-            ("distill_coef", 0.0, None),
-            ("time_limit_minutes", 0.0, None),
-            ("join_bonus", 0.0, None),
-        ):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or value < low or (high is not None and value > high):
-                allowed = f"a number in [{low}, {high}]" if high is not None else f"a number >= {low}"
-                raise ConfigError(f"{name}={value!r} is not allowed; allowed: {allowed}")
+        check_numbers(
+            self,
+            {
+                "learning_rate": (0.0, None),
+                "gamma": (0.0, 1.0),
+                "gae_lambda": (0.0, 1.0),
+                "clip_range": (0.0, None),
+                "ent_coef": (0.0, None),
+                "vf_coef": (0.0, None),
+                "max_grad_norm": (0.0, None),
+                "distill_coef": (0.0, None),
+                "time_limit_minutes": (0.0, None),
+                "join_bonus": (0.0, None),
+            },
+        )
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps: linear from ``distill_coef``
@@ -218,75 +211,16 @@ class Args:
         return self.distill_final + (self.distill_coef - self.distill_final) * done
 
 
-def gae(rewards, values, next_values, terminal, done, gamma: float, lam: float) -> torch.Tensor:
-    """Advantages ``(T, N)`` by GAE over cycles, per module.
-
-    All arguments ``(T, N)``: ``values`` at each step, ``next_values`` of the observation after
-    it (the bootstrap at ``max_cycles``; ignored where ``terminal``), ``done`` where an episode
-    ended (success or ``max_cycles``): the recursion does not carry across it.
-    """
-    advantages = torch.zeros_like(values)
-    carry = torch.zeros_like(values[0])
-    for t in reversed(range(values.shape[0])):
-        delta = rewards[t] + gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
-        carry = delta + gamma * lam * (1.0 - done[t]) * carry
-        advantages[t] = carry
-    return advantages
-
-
-class ReturnScale:
-    """Running mean and variance of the returns (Chan et al.'s parallel update, float64). With
-    ``value_norm`` the critic predicts ``(G - mean) / std`` and :meth:`value` maps its output
-    back, so that a value loss on the scaled returns stays near 1 whatever the reward's scale:
-    on a shared trunk an unscaled value loss of returns in the hundreds swamps the policy's
-    gradient under the joint norm clip. Disabled, every method is the identity."""
-
-    def __init__(self, enabled: bool):
-        self.enabled, self.mean, self.var, self.count = enabled, 0.0, 1.0, 0
-
-    def update(self, returns: torch.Tensor) -> None:
-        if not self.enabled:
-            return
-        x = returns.double()
-        n, mean, var = x.numel(), x.mean().item(), x.var(unbiased=False).item()
-        total = self.count + n
-        delta = mean - self.mean
-        self.var = (self.var * self.count + var * n + delta * delta * self.count * n / total) / total
-        self.mean, self.count = self.mean + delta * n / total, total
-
-    @property
-    def std(self) -> float:
-        return max(self.var, 1e-8) ** 0.5
-
-    def value(self, output: torch.Tensor) -> torch.Tensor:
-        """The critic's output ``(N,)`` in return units."""
-        return output * self.std + self.mean if self.enabled else output
-
-    def target(self, returns: torch.Tensor) -> torch.Tensor:
-        """Returns ``(N,)`` on the critic's scale."""
-        return (returns - self.mean) / self.std if self.enabled else returns
-
-    def state_dict(self) -> dict:
-        return {"mean": self.mean, "var": self.var, "count": self.count}
-
-    def load_state_dict(self, state: dict) -> None:
-        self.mean, self.var, self.count = state["mean"], state["var"], state["count"]
-
-
 # ---------------------------------------------------------------------- rollout
 @dataclass
 class Rollout:
-    """The arrays of one rollout of ``T`` cycles: ``(T, N, ...)`` per module (``N`` modules of all
-    worlds, world-major), ``(T, n_envs)`` per world."""
+    """The tensors of one rollout of ``T`` cycles, on the CPU: ``(T, N, ...)`` per module (``N``
+    modules of all worlds, world-major), ``(T, n_envs)`` per world."""
 
-    features: np.ndarray
-    """``(T, N, D)`` float32: every module's features, written by :meth:`TrainingEnvs.encode`."""
-    move_mask: np.ndarray
-    """``(T, N, 13)`` bool: its legal moves."""
     obs: torch.Tensor
-    """``features`` as a tensor (the same memory)."""
+    """``(T, N, D)`` float32: every module's features, written by :meth:`TrainingEnvs.encode`."""
     mask: torch.Tensor
-    """``move_mask`` as a tensor (the same memory)."""
+    """``(T, N, 13)`` bool: its legal moves."""
     actions: torch.Tensor
     """``(T, N, F)`` int64: the actions played."""
     labels: torch.Tensor
@@ -299,27 +233,59 @@ class Rollout:
     """``(T, N)``: the value of the last observation of an episode truncated at that cycle."""
     joined: torch.Tensor
     """``(T, N)``: 1 where a module joined the structure (module credit only)."""
-    rewards: np.ndarray
+    rewards: torch.Tensor
     """``(T, n_envs)`` float32: the team reward."""
-    terminal: np.ndarray
+    terminal: torch.Tensor
     """``(T, n_envs)`` bool: the episode succeeded."""
-    truncated: np.ndarray
+    truncated: torch.Tensor
     """``(T, n_envs)`` bool: the episode hit ``max_cycles``."""
 
     @classmethod
     def allocate(cls, t_steps: int, worlds: TrainingEnvs) -> Rollout:
-        n, n_fields = worlds.n_envs * worlds.n_agents, len(worlds.nvec)
-        features = np.zeros((t_steps, n, worlds.size), dtype=np.float32)
-        move_mask = np.zeros((t_steps, n, N_MOVES), dtype=bool)
+        n, per_world = worlds.n_envs * worlds.n_agents, (t_steps, worlds.n_envs)
+        fields = (t_steps, n, len(worlds.nvec))
         return cls(
-            features,
-            move_mask,
-            torch.from_numpy(features),
-            torch.from_numpy(move_mask),
-            *(torch.zeros((t_steps, n, n_fields), dtype=torch.int64) for _ in range(2)),
-            *(torch.zeros((t_steps, n)) for _ in range(4)),
-            *(np.zeros((t_steps, worlds.n_envs), dtype=d) for d in (np.float32, bool, bool)),
+            obs=torch.zeros((t_steps, n, worlds.size)),
+            mask=torch.zeros((t_steps, n, N_MOVES), dtype=torch.bool),
+            actions=torch.zeros(fields, dtype=torch.int64),
+            labels=torch.zeros(fields, dtype=torch.int64),
+            logp=torch.zeros((t_steps, n)),
+            values=torch.zeros((t_steps, n)),
+            bootstrap=torch.zeros((t_steps, n)),
+            joined=torch.zeros((t_steps, n)),
+            rewards=torch.zeros(per_world),
+            terminal=torch.zeros(per_world, dtype=torch.bool),
+            truncated=torch.zeros(per_world, dtype=torch.bool),
         )
+
+    def samples(self, advantages: torch.Tensor, returns: torch.Tensor) -> Samples:
+        """Every module-cycle of the rollout as one sample of the update, with its advantage and return."""
+        n_fields = self.actions.shape[-1]
+        return Samples(
+            self.obs.reshape(-1, self.obs.shape[-1]),
+            self.mask.reshape(-1, N_MOVES),
+            self.actions.reshape(-1, n_fields),
+            self.logp.reshape(-1),
+            advantages.reshape(-1),
+            returns.reshape(-1),
+            self.labels.reshape(-1, n_fields),
+        )
+
+
+class Samples(NamedTuple):
+    """A rollout's module-cycles flattened to rows for the update (:meth:`Rollout.samples`)."""
+
+    obs: torch.Tensor
+    mask: torch.Tensor
+    actions: torch.Tensor
+    logp: torch.Tensor
+    advantages: torch.Tensor
+    returns: torch.Tensor
+    labels: torch.Tensor
+
+    def rows(self, index: torch.Tensor, device) -> Samples:
+        """The samples at ``index`` (a minibatch), on ``device``."""
+        return Samples(*(column[index].to(device) for column in self))
 
 
 def collect(
@@ -327,16 +293,18 @@ def collect(
 ) -> tuple[torch.Tensor, list[dict]]:
     """Fill ``rollout`` with ``n_steps`` cycles of every world; returns the value of the
     observation after the last cycle ``(N,)`` and the episodes that ended."""
-    device, a, finished = next(net.parameters()).device, worlds.n_agents, []
+    device, finished = next(net.parameters()).device, []
     for t in range(args.n_steps):
-        worlds.encode(rollout.features[t], rollout.move_mask[t])
+        worlds.encode(rollout.obs[t].numpy(), rollout.mask[t].numpy())
         if distill > 0:
             rollout.labels[t] = torch.from_numpy(teachers.labels([worlds.buffers]))
         logits, values = net(rollout.obs[t].to(device))
         actions, logp = sample(masked_log_probs(logits, rollout.mask[t].to(device), net.nvec), args.sampled)
         rollout.actions[t], rollout.logp[t], rollout.values[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
-        reward, terminal, truncated = worlds.step(rollout.actions[t].numpy().reshape(args.n_envs, a, -1), finished)
-        rollout.rewards[t], rollout.terminal[t], rollout.truncated[t] = reward, terminal, truncated
+        played = rollout.actions[t].numpy().reshape(args.n_envs, worlds.n_agents, -1)
+        reward, terminal, truncated = worlds.step(played, finished)
+        rollout.rewards[t] = torch.from_numpy(reward)
+        rollout.terminal[t], rollout.truncated[t] = torch.from_numpy(terminal), torch.from_numpy(truncated)
         if args.join_bonus:
             rollout.joined[t] = torch.from_numpy(worlds.joined.astype(np.float32))
         if distill > 0:
@@ -344,60 +312,63 @@ def collect(
         if len(worlds.final_rows):  # the value at max_cycles, bootstrapped
             final_values = net.value(torch.from_numpy(worlds.final_features).to(device))
             rollout.bootstrap[t, worlds.final_rows] = scale.value(final_values).cpu()
-    n = worlds.n_envs * a
-    last = np.zeros((n, worlds.size), dtype=np.float32)
-    worlds.encode(last, np.zeros((n, N_MOVES), dtype=bool))
-    return scale.value(net.value(torch.from_numpy(last).to(device))).cpu(), finished
+    last = torch.zeros(rollout.obs.shape[1:])
+    worlds.encode(last.numpy(), np.zeros((len(last), N_MOVES), dtype=bool))
+    return scale.value(net.value(last.to(device))).cpu(), finished
+
+
+def advantages_and_returns(
+    rollout: Rollout, last_value: torch.Tensor, n_agents: int, args: Args
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Advantages ``(T, N)`` by GAE over cycles, per module, and the returns: the join bonus is
+    added to the rewards, the value after an episode truncated at ``max_cycles`` is that of its
+    last observation (``bootstrap``) and after success zero, and the recursion does not carry
+    across the end of an episode."""
+    terminal, truncated, rewards = (
+        per_world.repeat_interleave(n_agents, dim=1)
+        for per_world in (rollout.terminal, rollout.truncated, rollout.rewards)
+    )
+    if args.join_bonus:
+        rewards = rewards + args.join_bonus * rollout.joined
+    values = rollout.values
+    next_values = torch.where(truncated, rollout.bootstrap, torch.cat([values[1:], last_value[None]]))
+    terminal, done = terminal.float(), (terminal | truncated).float()
+    advantages = torch.zeros_like(values)
+    carry = torch.zeros_like(values[0])
+    for t in reversed(range(len(values))):
+        delta = rewards[t] + args.gamma * next_values[t] * (1.0 - terminal[t]) - values[t]
+        carry = delta + args.gamma * args.gae_lambda * (1.0 - done[t]) * carry
+        advantages[t] = carry
+    return advantages, advantages + values
 
 
 def update(
-    net: ActorCritic,
-    optimiser: torch.optim.Optimizer,
-    rollout: Rollout,
-    advantages: torch.Tensor,
-    returns: torch.Tensor,
-    scale: ReturnScale,
-    distill: float,
-    args: Args,
+    net: ActorCritic, optimiser: torch.optim.Optimizer, samples: Samples, scale: ReturnScale, distill: float, args: Args
 ) -> dict[str, list[float]]:
     """``n_epochs`` passes of clipped PPO (plus the distillation term) over the rollout's samples,
     in minibatches of ``minibatch_size``; returns each loss term per minibatch."""
-    device, nvec = next(net.parameters()).device, net.nvec
-    flat = (
-        rollout.obs.reshape(-1, rollout.obs.shape[-1]),
-        rollout.mask.reshape(-1, N_MOVES),
-        rollout.actions.reshape(-1, len(nvec)),
-        rollout.logp.reshape(-1),
-        advantages.reshape(-1),
-        returns.reshape(-1),
-        rollout.labels.reshape(-1, len(nvec)),
-    )
+    device = next(net.parameters()).device
     stats = {f"loss/{k}": [] for k in ("policy", "value", "entropy", "approx_kl", "clip_fraction", "distill")}
     for _ in range(args.n_epochs):
-        order = torch.randperm(len(flat[0]))
+        order = torch.randperm(len(samples.obs))
         for start in range(0, len(order), args.minibatch_size):
-            mb = order[start : start + args.minibatch_size]
-            x, m, act, old_logp, adv, ret, labels = (v[mb].to(device) for v in flat)
-            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-            logits, values = net(x)
-            log_probs = masked_log_probs(logits, m, nvec)
+            mb = samples.rows(order[start : start + args.minibatch_size], device)
+            adv = (mb.advantages - mb.advantages.mean()) / (mb.advantages.std() + 1e-8)
+            logits, values = net(mb.obs)
+            log_probs = masked_log_probs(logits, mb.mask, net.nvec)
             drawn = sampled_fields(log_probs, args.sampled)
-            ratio = torch.exp(joint_log_prob(drawn, act) - old_logp)
+            ratio = torch.exp(joint_log_prob(drawn, mb.actions) - mb.logp)
             policy_loss = -torch.min(ratio * adv, ratio.clamp(1 - args.clip_range, 1 + args.clip_range) * adv).mean()
-            value_loss = 0.5 * (values - scale.target(ret)).pow(2).mean()
+            value_loss = 0.5 * (values - scale.target(mb.returns)).pow(2).mean()
             ent = entropy(drawn).mean()
             loss = policy_loss + args.vf_coef * value_loss - args.ent_coef * ent
             if distill > 0:
-                distill_loss = teacher_cross_entropy(log_probs, labels, m)
+                distill_loss = teacher_cross_entropy(log_probs, mb.labels, mb.mask)
                 loss = loss + distill * distill_loss
                 stats["loss/distill"].append(distill_loss.item())
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
-            if args.arch == "shared":
-                nn.utils.clip_grad_norm_(net.parameters(), args.max_grad_norm)
-            else:
-                nn.utils.clip_grad_norm_(net.actor.parameters(), args.max_grad_norm)
-                nn.utils.clip_grad_norm_(net.critic.parameters(), args.max_grad_norm)
+            net.clip_gradients(args.max_grad_norm)
             optimiser.step()
             with torch.no_grad():
                 stats["loss/policy"].append(policy_loss.item())
@@ -406,64 +377,6 @@ def update(
                 stats["loss/approx_kl"].append(((ratio - 1) - torch.log(ratio)).mean().item())
                 stats["loss/clip_fraction"].append(((ratio - 1).abs() > args.clip_range).float().mean().item())
     return stats
-
-
-def advantages_and_returns(
-    rollout: Rollout, last_value: torch.Tensor, n_agents: int, args: Args
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """GAE advantages and returns ``(T, N)`` of the rollout, with the join bonus added to the rewards."""
-    terminal, truncated, rewards = (
-        torch.from_numpy(np.repeat(w, n_agents, axis=1)) for w in (rollout.terminal, rollout.truncated, rollout.rewards)
-    )
-    if args.join_bonus:
-        rewards = rewards + args.join_bonus * rollout.joined
-    next_values = torch.where(truncated, rollout.bootstrap, torch.cat([rollout.values[1:], last_value[None]]))
-    advantages = gae(
-        rewards,
-        rollout.values,
-        next_values,
-        terminal.float(),
-        (terminal | truncated).float(),
-        args.gamma,
-        args.gae_lambda,
-    )
-    return advantages, advantages + rollout.values
-
-
-def initial_weights(args: Args, task_id: str, encoder: ObservationEncoder) -> dict:
-    """The weights from checkpoint ``args.init``, after checking that it was trained by
-    training/imitate.py or training/ppo.py on the same task, control level, observation encoding
-    and network shape; a :class:`~training.common.CheckpointError` naming what differs."""
-    meta = read_meta(args.init)
-    where = f"init={args.init!r}"
-    if meta["algorithm"] not in ("imitation", ALGORITHM):
-        raise CheckpointError(
-            f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
-            "training/imitate.py or training/ppo.py"
-        )
-    wanted = {
-        "task": task_name(task_id),
-        "control": args.control,
-        "arch": args.arch,
-        "hidden": list(args.hidden),
-        "memory": args.memory,
-        "encoder": encoder.spec(),
-    }
-    found = {
-        "task": task_name(meta["task"]),
-        "control": meta.get("control"),
-        "arch": meta.get("arch"),
-        "hidden": meta.get("hidden"),
-        "memory": meta.get("memory", "none"),
-        "encoder": meta.get("encoder"),
-    }
-    for key, value in wanted.items():
-        if found[key] != value:
-            raise CheckpointError(
-                f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
-                f"allowed: a checkpoint with {key}={value!r}"
-            )
-    return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
 
 
 def make_worlds(args: Args, env: dict, agent_steps: int) -> TrainingEnvs:
@@ -490,51 +403,10 @@ def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
     return Teachers(worlds.batch, worlds.n_envs, args.teacher, seed=args.seed + agent_steps, n_fields=len(worlds.nvec))
 
 
-def save(
-    folder: Path, args: Args, run_dir: Path, net, optimiser, scale, worlds, env: dict, agent_steps: int, curriculum
-):
-    """Write a checkpoint: ``policy.pt``, ``trainer.pt`` (to resume), ``args.yaml`` and ``proteo.json``."""
-    folder.mkdir(parents=True, exist_ok=True)
-    torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
-    torch.save(
-        {"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state(), "return_scale": scale.state_dict()},
-        folder / "trainer.pt",
-    )
-    save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
-    write_checkpoint_meta(
-        folder,
-        algorithm=ALGORITHM,
-        task=worlds.task_id,
-        env_overrides=env,
-        encoder_spec=worlds.encoder.spec(),
-        nvec=net.nvec,
-        agent_steps=agent_steps,
-        seed=args.seed,
-        extra={
-            "label": f"ppo-{args.arch}",
-            "control": args.control,
-            "arch": args.arch,
-            "hidden": list(args.hidden),
-            "memory": args.memory,
-            "sampled": args.sampled,
-            "run_dir": str(run_dir),
-            "args": asdict(args),
-            **({"curriculum_stage": curriculum.stage} if curriculum else {}),
-        },
-    )
-
-
 def main(argv=None) -> Path:
     """Parse the arguments and train. ``--resume CHECKPOINT`` without ``--config`` starts from the
     arguments the checkpoint was trained with (its ``args.yaml``); flags given override them."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    given = argparse.ArgumentParser(add_help=False)
-    given.add_argument("--resume")
-    given.add_argument("--config")
-    known, _ = given.parse_known_args(argv)
-    if known.resume and not known.config:
-        argv = ["--config", str(checkpoint_dir(known.resume) / "args.yaml"), *argv]
-    return train(parse_args(Args, argv, retired=RETIRED))
+    return train(parse_args(Args, argv, retired=RETIRED, saved_args=True))
 
 
 def train(args: Args) -> Path:
@@ -560,7 +432,10 @@ def train(args: Args) -> Path:
     worlds = make_worlds(args, env, agent_steps)
     net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory)
     if args.init and resume is None:
-        net.load_state_dict(initial_weights(args, worlds.task_id, worlds.encoder))
+        weights = network_weights(
+            args.init, worlds.task_id, network_meta(args), worlds.encoder.spec(), where=f"init={args.init!r}"
+        )
+        net.load_state_dict(weights)
     # written only once the arguments, the worlds and the init checkpoint are known to be good
     run_dir = make_run_dir(
         args.run_dir or (resume or {}).get("run_dir"),
@@ -582,12 +457,44 @@ def train(args: Args) -> Path:
         torch.set_rng_state(state["torch_rng"])
         if "return_scale" in state:
             scale.load_state_dict(state["return_scale"])
+
+    def save(folder: Path) -> None:
+        """Write a checkpoint of the run so far: ``policy.pt``, ``trainer.pt`` (to resume),
+        ``args.yaml`` and ``proteo.json``."""
+        folder.mkdir(parents=True, exist_ok=True)
+        torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
+        trainer = {
+            "optimiser": optimiser.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+            "return_scale": scale.state_dict(),
+        }
+        torch.save(trainer, folder / "trainer.pt")
+        save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
+        write_checkpoint_meta(
+            folder,
+            algorithm=ALGORITHM,
+            task=worlds.task_id,
+            env_overrides=env,
+            encoder_spec=worlds.encoder.spec(),
+            nvec=net.nvec,
+            agent_steps=agent_steps,
+            seed=args.seed,
+            extra={
+                "label": f"ppo-{args.arch}",
+                **network_meta(args),
+                "sampled": args.sampled,
+                "run_dir": str(run_dir),
+                "args": asdict(args),
+                **({"curriculum_stage": curriculum.stage} if curriculum else {}),
+            },
+        )
+
     rollout = Rollout.allocate(args.n_steps, worlds)
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
     bar = tqdm(
         total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM, disable=not args.progress_bar
     )
-    next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
+    saved_interval = agent_steps // args.checkpoint_every  # checkpoint_every intervals done at the last save
     while agent_steps < args.total_steps:
         if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
             break
@@ -599,11 +506,10 @@ def train(args: Args) -> Path:
         collected = time.perf_counter()
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)
-        stats = update(net, optimiser, rollout, advantages, returns, scale, distill, args)
+        stats = update(net, optimiser, rollout.samples(advantages, returns), scale, distill, args)
         updated = time.perf_counter()
-        used = returns.numel()
-        agent_steps += used
-        bar.update(used)
+        agent_steps += returns.numel()
+        bar.update(returns.numel())
         env_time, enc_time = worlds.env_seconds - env_s, worlds.encode_seconds - enc_s
         v, r = rollout.values.reshape(-1), returns.reshape(-1)
         log.log(
@@ -618,7 +524,7 @@ def train(args: Args) -> Path:
                 "time/encode_seconds": enc_time,
                 "time/forward_seconds": collected - started - env_time - enc_time,
                 "time/update_seconds": updated - collected,
-                "throughput/agent_steps_per_s": used / (updated - started),
+                "throughput/agent_steps_per_s": returns.numel() / (updated - started),
             },
         )
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
@@ -626,22 +532,11 @@ def train(args: Args) -> Path:
             worlds = make_worlds(args, env, agent_steps)
             teachers = make_teachers(args, worlds, agent_steps)
             rollout = Rollout.allocate(args.n_steps, worlds)
-        if agent_steps >= next_checkpoint:
-            save(
-                checkpoint_folder(run_dir, agent_steps),
-                args,
-                run_dir,
-                net,
-                optimiser,
-                scale,
-                worlds,
-                env,
-                agent_steps,
-                curriculum,
-            )
-            next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
+        if agent_steps // args.checkpoint_every > saved_interval:
+            saved_interval = agent_steps // args.checkpoint_every
+            save(checkpoint_folder(run_dir, agent_steps))
     bar.close()
-    save(run_dir / "final", args, run_dir, net, optimiser, scale, worlds, env, agent_steps, curriculum)
+    save(run_dir / "final")
     log.close()
     print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
     return run_dir / "final"

@@ -66,8 +66,8 @@ class Args:
     train_batch_size: int = 1000
     """Cycles (env steps) sampled per iteration; each gives one agent-step per module."""
     minibatch_size: int = 500
-    epochs: int = 4
-    lr: float = 3e-4
+    n_epochs: int = 4
+    learning_rate: float = 3e-4
     gamma: float = 0.99
     hidden: tuple[int, ...] = (64, 64)
     checkpoint_every: int = 10
@@ -199,8 +199,8 @@ def build_config(args: Args):
         .training(
             train_batch_size_per_learner=args.train_batch_size,
             minibatch_size=args.minibatch_size,
-            num_epochs=args.epochs,
-            lr=args.lr,
+            num_epochs=args.n_epochs,
+            lr=args.learning_rate,
             gamma=args.gamma,
         )
         .debugging(seed=args.seed)

@@ -1,6 +1,6 @@
 """MaskablePPO (sb3-contrib) with one policy shared by every module.
 
-Every module of ``n_copies`` copies of the task is one sub-env of
+Every module of ``n_envs`` worlds (copies of the task) is one sub-env of
 :class:`~proteo_env.adapters.sb3.ProteoVecEnv`; the policy sees one module's flattened
 observation, illegal moves are masked out of its move distribution, and every module gets
 the team reward. ``total_steps`` counts agent-steps (module-cycles).
@@ -48,12 +48,13 @@ class Args:
     """Overrides passed to ``proteo_env.make`` (size, cycle limit, physics, task parameters)."""
     seed: int = 0
     total_steps: int = 200_000
-    """Agent-steps (module-cycles) to train for, counted across all copies."""
-    n_copies: int = 4
-    """Environment copies; sub-envs = n_copies * modules."""
+    """Agent-steps (module-cycles) to train for, counted across all worlds."""
+    n_envs: int = 4
+    """Worlds (environment copies); sub-envs = n_envs * modules."""
     n_steps: int = 128
-    """Cycles per copy in one rollout (rollout size = n_steps * n_copies * modules)."""
-    batch_size: int = 1024
+    """Cycles per world in one rollout (rollout size = n_steps * n_envs * modules)."""
+    minibatch_size: int = 1024
+    """Agent-steps per minibatch (MaskablePPO's ``batch_size``)."""
     n_epochs: int = 4
     learning_rate: float = 3e-4
     gamma: float = 0.99
@@ -73,6 +74,7 @@ class Args:
     device: str = "cpu"
     """Where the networks run: cpu (the default), cuda, cuda:N or mps."""
     tensorboard: bool = True
+    progress_bar: bool = True
 
 
 def main(argv=None) -> Path:
@@ -93,7 +95,7 @@ def main(argv=None) -> Path:
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)
-    venv = ProteoVecEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
+    venv = ProteoVecEnv(args.task, n_copies=args.n_envs, seed=args.seed, **args.env)
     tb_dir = str(run_dir / "tb") if args.tensorboard else None
     if resume_meta is not None:
         model = MaskablePPO.load(
@@ -104,7 +106,7 @@ def main(argv=None) -> Path:
             "MlpPolicy",
             venv,
             n_steps=args.n_steps,
-            batch_size=args.batch_size,
+            batch_size=args.minibatch_size,
             n_epochs=args.n_epochs,
             learning_rate=args.learning_rate,
             gamma=args.gamma,
@@ -139,7 +141,13 @@ def main(argv=None) -> Path:
         """Progress bar, episode statistics, the time split, and periodic checkpoints."""
 
         def _on_training_start(self):
-            self.bar = tqdm(total=args.total_steps, initial=self.num_timesteps, unit="agent-step", desc=ALGORITHM)
+            self.bar = tqdm(
+                total=args.total_steps,
+                initial=self.num_timesteps,
+                unit="agent-step",
+                desc=ALGORITHM,
+                disable=not args.progress_bar,
+            )
             self.episodes, self.next_checkpoint = (
                 [],
                 (self.num_timesteps // args.checkpoint_every + 1) * args.checkpoint_every,

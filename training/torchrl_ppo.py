@@ -1,7 +1,7 @@
 """IPPO or MAPPO with TorchRL: one actor shared by every module, masked multi-discrete actions.
 
 The environment is :class:`~proteo_env.adapters.torchrl.ProteoTorchRLEnv`, a native TorchRL
-``EnvBase`` over the array API (``n_copies`` copies batched, the modules of a copy form the
+``EnvBase`` over the array API (``n_envs`` worlds batched, the modules of a world form the
 group ``"agents"``). The actor maps one module's flattened observation to logits of every
 action field; :class:`MaskedMultiCategorical` masks illegal moves. The critic is TorchRL's
 ``MultiAgentMLP``: per module (``variant: ippo``) or over all modules' observations
@@ -48,13 +48,14 @@ class Args:
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make``."""
     variant: str = "ippo"
-    """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the copy)."""
+    """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the world)."""
     seed: int = 0
     total_steps: int = 200_000
     """Agent-steps (module-cycles) to train for."""
-    n_copies: int = 4
+    n_envs: int = 4
+    """Worlds (environment copies) batched together."""
     n_steps: int = 128
-    """Cycles per copy in one batch (batch = n_steps * n_copies * modules agent-steps)."""
+    """Cycles per world in one batch (batch = n_steps * n_envs * modules agent-steps)."""
     minibatch_size: int = 1024
     """Agent-steps per minibatch."""
     n_epochs: int = 4
@@ -73,6 +74,7 @@ class Args:
     threads: int = 1
     """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
     tensorboard: bool = True
+    progress_bar: bool = True
 
 
 def make_distribution_class(nvec):
@@ -140,7 +142,7 @@ def main(argv=None) -> Path:
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)
-    env = ProteoTorchRLEnv(args.task, n_copies=args.n_copies, seed=args.seed, **args.env)
+    env = ProteoTorchRLEnv(args.task, n_copies=args.n_envs, seed=args.seed, **args.env)
     n_agents, obs_size, nvec = env.n_agents, env.encoder.size, env.nvec
 
     # ------------------------------------------------------------------ actor and critic
@@ -219,24 +221,30 @@ def main(argv=None) -> Path:
         )
 
     # ------------------------------------------------------------------ data
-    steps_per_batch = args.n_steps * args.n_copies * n_agents
+    steps_per_batch = args.n_steps * args.n_envs * n_agents
     collector = Collector(
         env,
         actor,
-        frames_per_batch=args.n_steps * args.n_copies,
+        frames_per_batch=args.n_steps * args.n_envs,
         total_frames=-1,
         device="cpu",
         auto_register_policy_transforms=False,
     )
     buffer = ReplayBuffer(
-        storage=LazyTensorStorage(args.n_steps * args.n_copies),
+        storage=LazyTensorStorage(args.n_steps * args.n_envs),
         sampler=SamplerWithoutReplacement(),
         batch_size=max(1, args.minibatch_size // n_agents),
     )
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
-    running_return = np.zeros(args.n_copies)
-    running_cycles = np.zeros(args.n_copies, dtype=np.int64)
-    bar = tqdm(total=args.total_steps, initial=agent_steps, unit="agent-step", desc=f"torchrl-{args.variant}")
+    running_return = np.zeros(args.n_envs)
+    running_cycles = np.zeros(args.n_envs, dtype=np.int64)
+    bar = tqdm(
+        total=args.total_steps,
+        initial=agent_steps,
+        unit="agent-step",
+        desc=f"torchrl-{args.variant}",
+        disable=not args.progress_bar,
+    )
     next_checkpoint = (agent_steps // args.checkpoint_every + 1) * args.checkpoint_every
     collect_started = time.perf_counter()
     env_seconds = env.step_seconds
@@ -249,7 +257,7 @@ def main(argv=None) -> Path:
         for key in ("done", "terminated"):
             data.set(("next", "agents", key), data.get(("next", key)).unsqueeze(-1).expand(reward_shape))
 
-        # episode statistics (data is [copy, time])
+        # episode statistics (data is [world, time])
         rewards = data.get(("next", "agents", "reward"))[..., 0, 0].numpy()
         done = data.get(("next", "done"))[..., 0].numpy()
         terminated = data.get(("next", "terminated"))[..., 0].numpy()
