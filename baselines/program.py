@@ -298,8 +298,8 @@ class _Loader:
             self.fail(
                 ("channels",),
                 list(self.channels),
-                f"at most {self.task.n_channels} names",
-                "the task has fewer channels",
+                f"at most {self.task.n_channels} channel names",
+                "the task has fewer",
             )
         self.parameters = self.read_parameters(data.get("parameters", {}))
         start = tuple(self.mode(("start", n), m) for n, m in enumerate(self.names(("start",), data.get("start", []))))
