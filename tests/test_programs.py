@@ -124,3 +124,11 @@ def test_every_phrase_runs_and_gives_allowed_actions():
         actions = policy.act(observations)
         env.action_layout.check(np.stack(list(actions.values())), list(actions))
         observations, *_ = env.step(actions)
+
+
+def test_proteo_run_takes_a_program(capsys):
+    from training.cli import main
+
+    settings = ["--set", "n_modules=12", "--set", "max_cycles=300", "--set", "motion_model=sphere"]
+    assert main(["run", "chain-v1", *settings, "--program", "chain", "--seed", "1000"]) == 0
+    assert "success 1/1" in capsys.readouterr().out
