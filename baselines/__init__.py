@@ -1,4 +1,4 @@
-"""Baseline policies: the paper's hand-coded behaviours and the random floor.
+"""Baseline policies: the paper's hand-coded behaviours, programs of its primitives, and the random floor.
 
 ``POLICIES`` maps policy names to classes; :func:`make_policy` builds one for an env.
 """
@@ -10,6 +10,7 @@ from .branch import BranchPolicy
 from .chain import ChainPolicy
 from .grasp import GraspPolicy
 from .locomotion import LocomotionPolicy
+from .program_policy import ProgramPolicy
 from .random_policy import RandomPolicy
 from .snake import SnakePolicy
 from .table import TablePolicy
@@ -24,6 +25,7 @@ POLICIES: dict[str, type[Policy]] = {
         BranchPolicy,
         LocomotionPolicy,
         SnakePolicy,
+        ProgramPolicy,
     )
 }
 

@@ -32,6 +32,7 @@ def _run(
     fps: float = 20.0,
     max_frames: int | None = 300,
     view: Path | None = None,
+    program: str | None = None,
 ):
     from tqdm import tqdm
 
@@ -41,7 +42,10 @@ def _run(
     from proteo_env.rollout import run_episode
 
     env = make(task_id, **overrides)
-    policy = make_policy(policy_name or env.task.default_policy, env, seed=seed)
+    if program is not None:
+        policy = make_policy("program", env, seed=seed, program=program)
+    else:
+        policy = make_policy(policy_name or env.task.default_policy, env, seed=seed)
     label = f"{env.task.task_id()} / {policy.name}"
     wants_recording = any(x is not None for x in (out, record, movie, plots, view))
     recorder = (
@@ -253,6 +257,7 @@ def run(args) -> int:
                 fps=args.fps,
                 max_frames=args.max_frames,
                 view=_per_episode(args.view, seed, many),
+                program=args.program,
             )
         )
     print(_table(rows))
@@ -469,6 +474,9 @@ def main(argv=None) -> int:
         help="override a setting (repeatable), e.g. --set n_modules=40 --set max_cycles=3000",
     )
     p.add_argument("--policy", default=None, help="policy name (default: the task's hand-coded one)")
+    p.add_argument(
+        "--program", default=None, help="run a program of the paper's primitives: a YAML file or a name such as chain"
+    )
     p.add_argument("--seed", type=int, default=0, help="first seed")
     p.add_argument("--episodes", type=int, default=1)
     p.add_argument("--out", default=None, help="folder for start and end pictures (none if omitted)")
