@@ -108,14 +108,14 @@ class ProgramTables(NamedTuple):
     Attributes:
         mode_rules: ``(M + 1,)`` int64, the rules of mode ``m`` are ``mode_rules[m] .. mode_rules[m + 1] - 1``.
         rule_conditions: ``(R + 1,)`` int64, the same for each rule's conditions.
-        rule_actions: ``(R + 1,)`` int64, the same for each rule's actions.
+        rule_actions: ``(R + 1,)`` int64, the same for each rule's actions (rows of ``steps``).
         go: ``(R,)`` int64, the mode a rule goes to (-1: the module's mode).
         set_at: ``(R,)`` int64, where the rule's mode set goes (``SET_AT_GROWTH``, ``SET_AT_ANY``; -1: none).
         set_value: ``(R,)`` int64, the message value of the rule's mode set.
         conditions: ``(Q, 4)`` int64, per condition its opcode (``IF_*``), 1 when negated, its
             channel or mode, and its direction class (``CLASS_*``).
         condition_numbers: ``(Q,)`` float64, a condition's number (a parameter's value).
-        actions: ``(P, 3)`` int64, per action its opcode (``DO_*``), its fixed argument (the
+        steps: ``(P, 3)`` int64, per action its opcode (``DO_*``), its fixed argument (the
             role, the level flag) and its channel, mode or direction class.
         mode_sets: ``(J, 2)`` int64, the mode a set applies to and the mode it sets; set ``j``
             travels as message value ``DIRECTION_MESSAGES + 1 + j``.
@@ -130,7 +130,7 @@ class ProgramTables(NamedTuple):
     set_value: np.ndarray
     conditions: np.ndarray
     condition_numbers: np.ndarray
-    actions: np.ndarray
+    steps: np.ndarray
     mode_sets: np.ndarray
     scent_max: int
 
@@ -193,20 +193,20 @@ def encode(program: Program, modes, scent_max: int) -> ProgramTables:
         set_value=table(set_value),
         conditions=table(conditions, 4),
         condition_numbers=table(numbers, dtype=np.float64),
-        actions=table(actions, 3),
+        steps=table(actions, 3),
         mode_sets=table([(modes.index(a), modes.index(b)) for a, b in mode_sets], 2),
         scent_max=int(scent_max),
     )
 
 
 @kernel
-def class_bits(code, growth, hint, i):
-    """The face directions of direction class ``code`` (``CLASS_*``) for row ``i`` whose growth
-    direction is ``growth`` (-1: none) and ``hint`` (A, 3), as a bit set."""
+def class_bits(code, growth, ahead):
+    """The face directions of direction class ``code`` (``CLASS_*``) of a module with the growth
+    direction ``growth`` (-1: none) and the hint's bit set ``ahead``, as a bit set."""
     if code == CLASS_GROWTH:
         return 0 if growth < 0 else 1 << growth
     if code == CLASS_HINT:
-        return hint_bits(hint, i)[0]
+        return ahead
     if code == CLASS_DOWN:
         return DOWN_BITS
     if code == CLASS_UP:
@@ -217,123 +217,115 @@ def class_bits(code, growth, hint, i):
 
 
 @kernel
-def channel_scents(seen, i, channel, scent_max, out):
-    """Write ``out`` (12,): the ``channel`` scent of each face neighbour of row ``i`` (``scent_max`` where no module)."""
-    for k in range(12):
-        out[k] = seen.neighbour_scent[i, k, channel] if seen.neighbour_kind[i, k] == KIND_MODULE else scent_max
-
-
-@kernel
-def holds(seen, i, q, tables, growth, waited, legal, rng, scents):
-    """Whether condition ``q`` of ``tables`` holds for row ``i`` (growth direction ``growth``,
-    ``waited`` cycles in its mode, legal rolls ``legal``); ``scents`` (12,) is scratch."""
-    code, subject, number = tables.conditions[q, 0], tables.conditions[q, 2], tables.condition_numbers[q]
-    truth = False
-    if code == IF_DETECTS:
-        channel_scents(seen, i, subject, tables.scent_max, scents)
-        truth = seen.own_scent[i, subject] < tables.scent_max or scents.min() < tables.scent_max
-    elif code == IF_SCENT_ABOVE:
-        truth = seen.own_scent[i, subject] > number
-    elif code == IF_SCENT_BELOW:
-        truth = seen.own_scent[i, subject] < number
-    elif code == IF_NEIGHBOUR:
-        bits = class_bits(tables.conditions[q, 3], growth, seen.hint, i)
-        for k in range(12):
-            if (bits >> k) & 1 and seen.neighbour_mode[i, k] == subject:
-                truth = True
-    elif code == IF_GROUND:
-        truth = seen.contact[i, 0] != 0
-    elif code == IF_OBJECT:
-        truth = seen.contact[i, 1] != 0
-    elif code == IF_LOAD_ABOVE:
-        truth = seen.load[i, 0] > number
-    elif code == IF_LOAD_BELOW:
-        truth = seen.load[i, 0] < number
-    elif code == IF_CAN_MOVE:
-        truth = legal != 0
-    elif code == IF_WAITED:
-        truth = waited >= number
-    elif code == IF_CHANCE:
-        truth = rng.random() < number
-    return truth != (tables.conditions[q, 1] != 0)
-
-
-@kernel
-def act(seen, i, s, p, tables, memory, legal, rng, scents, actions):
-    """Carry out action ``p`` of ``tables`` for row ``i`` (memory slot ``s``, legal rolls
-    ``legal``): write ``actions[i]`` and the module's ``memory``; ``scents`` (12,) is scratch."""
-    growth, heard = memory[0], memory[1]
-    code, fixed, argument = tables.actions[p, 0], tables.actions[p, 1], tables.actions[p, 2]
-    n_fields = actions.shape[1]
-    if code == DO_ROLE:
-        actions[i, 2 + argument] = fixed
-    elif code == DO_MOVE:
-        actions[i, 0] = random_pick(rng, legal & class_bits(argument, growth[s], seen.hint, i)) + 1
-    elif code == DO_GRADIENT:
-        channel_scents(seen, i, argument, tables.scent_max, scents)
-        pool, lowest = lowest_rolls(scents, legal)
-        actions[i, 0] = 0 if legal == 0 or lowest > scents.min() else random_pick(rng, pool) + 1
-    elif code == DO_SPOT:
-        for k in range(12):
-            if seen.neighbour_mode[i, k] == argument:
-                if heard[s] >= 0:
-                    actions[i, 0] = approach_spot(seen.action_mask, i, k, heard[s], True, rng)
-                break
-    elif code == DO_STAY:
-        actions[i, 0] = 0
-    elif code == DO_PICK_GROWTH:
-        if growth[s] < 0:
-            growth[s] = growth_direction(seen.neighbour_kind, seen.neighbour_mode, i, rng, fixed == 1, -1, 0, False)
-    elif code == DO_TELL_GROWTH:
-        if growth[s] >= 0:
-            actions[i, n_fields - 2] = MESSAGE_TO_ALL
-            actions[i, n_fields - 1] = growth[s] + 1
-
-
-@kernel
 def run_program(seen, slots, memory, tables, rng, actions):
     """Every module's action under the program of ``tables`` (a :class:`ProgramTables`), module
     by module in row order, as :func:`baselines.program_policy.interpret` reads it: messages
     (heard growth, mode sets), ``waited``, the first rule of the mode whose conditions all hold
     (its actions, ``go`` and ``set``; defaults: stay, keep the mode, relay, no message).
-    ``memory`` is ``(growth, heard, last_mode, waited)`` (shapes in the module docstring)."""
+    ``memory`` is ``(growth, heard, last_mode, waited)`` (shapes in the module docstring).
+
+    One loop with the opcodes' meanings written in it: a call with array arguments per
+    condition or action would cost more than the opcode's work."""
     growth, heard, last_mode, waited = memory
-    n_channels, n_fields = seen.own_scent.shape[1], actions.shape[1]
-    n_sets = tables.mode_sets.shape[0]
+    own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask, contact, load, hint = (
+        seen
+    )
+    mode_rules, rule_conditions, rule_actions, go, set_at, set_value, conditions, numbers, steps, mode_sets, smax = (
+        tables
+    )
+    n_channels, n_fields, n_sets = own_scent.shape[1], actions.shape[1], mode_sets.shape[0]
     scents = np.empty(12, dtype=np.int64)
     for i in range(slots.shape[0]):
         s = slots[i]
-        mode = np.int64(seen.own_mode[i, 0])
+        mode = np.int64(own_mode[i, 0])
         for k in range(12):
-            v = seen.messages[i, k]
+            v = messages[i, k]
             if 1 <= v <= DIRECTION_MESSAGES:
                 heard[s] = v - 1
             elif DIRECTION_MESSAGES < v <= DIRECTION_MESSAGES + n_sets:
                 j = v - DIRECTION_MESSAGES - 1
-                if mode == tables.mode_sets[j, 0]:
-                    mode = tables.mode_sets[j, 1]
+                if mode == mode_sets[j, 0]:
+                    mode = mode_sets[j, 1]
                     growth[s] = OPPOSITE[k]
         waited[s] = waited[s] + 1 if mode == last_mode[s] else 0
         last_mode[s] = mode
         actions[i, :] = 0
         actions[i, 1] = mode
         actions[i, 2 : 2 + n_channels] = RELAY
-        legal = legal_bits(seen.action_mask, i)
-        for r in range(tables.mode_rules[mode], tables.mode_rules[mode + 1]):
+        legal = legal_bits(action_mask, i)
+        for r in range(mode_rules[mode], mode_rules[mode + 1]):
             fires = True
-            for q in range(tables.rule_conditions[r], tables.rule_conditions[r + 1]):
-                if not holds(seen, i, q, tables, growth[s], waited[s], legal, rng, scents):
+            for q in range(rule_conditions[r], rule_conditions[r + 1]):  # up to the first that fails
+                code, subject, number = conditions[q, 0], conditions[q, 2], numbers[q]
+                truth = False
+                if code == IF_DETECTS:
+                    truth = own_scent[i, subject] < smax
+                    for k in range(12):
+                        if neighbour_kind[i, k] == KIND_MODULE and neighbour_scent[i, k, subject] < smax:
+                            truth = True
+                elif code == IF_SCENT_ABOVE:
+                    truth = own_scent[i, subject] > number
+                elif code == IF_SCENT_BELOW:
+                    truth = own_scent[i, subject] < number
+                elif code == IF_NEIGHBOUR:
+                    direction = conditions[q, 3]
+                    ahead = hint_bits(hint, i)[0] if direction == CLASS_HINT else 0
+                    bits = class_bits(direction, growth[s], ahead)
+                    for k in range(12):
+                        if (bits >> k) & 1 and neighbour_mode[i, k] == subject:
+                            truth = True
+                elif code == IF_GROUND:
+                    truth = contact[i, 0] != 0
+                elif code == IF_OBJECT:
+                    truth = contact[i, 1] != 0
+                elif code == IF_LOAD_ABOVE:
+                    truth = load[i, 0] > number
+                elif code == IF_LOAD_BELOW:
+                    truth = load[i, 0] < number
+                elif code == IF_CAN_MOVE:
+                    truth = legal != 0
+                elif code == IF_WAITED:
+                    truth = waited[s] >= number
+                elif code == IF_CHANCE:
+                    truth = rng.random() < number
+                if truth == (conditions[q, 1] != 0):
                     fires = False
                     break
             if not fires:
                 continue
-            for p in range(tables.rule_actions[r], tables.rule_actions[r + 1]):
-                act(seen, i, s, p, tables, memory, legal, rng, scents, actions)
-            if tables.go[r] >= 0:
-                actions[i, 1] = tables.go[r]
-            if tables.set_at[r] >= 0:
-                target = MESSAGE_TO_ALL if tables.set_at[r] == SET_AT_ANY else growth[s]
+            for p in range(rule_actions[r], rule_actions[r + 1]):
+                code, fixed, argument = steps[p, 0], steps[p, 1], steps[p, 2]
+                if code == DO_ROLE:
+                    actions[i, 2 + argument] = fixed
+                elif code == DO_MOVE:
+                    ahead = hint_bits(hint, i)[0] if argument == CLASS_HINT else 0
+                    actions[i, 0] = random_pick(rng, legal & class_bits(argument, growth[s], ahead)) + 1
+                elif code == DO_GRADIENT:
+                    for k in range(12):
+                        scents[k] = neighbour_scent[i, k, argument] if neighbour_kind[i, k] == KIND_MODULE else smax
+                    pool, lowest = lowest_rolls(scents, legal)
+                    actions[i, 0] = 0 if legal == 0 or lowest > scents.min() else random_pick(rng, pool) + 1
+                elif code == DO_SPOT:
+                    for k in range(12):
+                        if neighbour_mode[i, k] == argument:
+                            if heard[s] >= 0:
+                                actions[i, 0] = approach_spot(action_mask, i, k, heard[s], True, rng)
+                            break
+                elif code == DO_STAY:
+                    actions[i, 0] = 0
+                elif code == DO_PICK_GROWTH:
+                    if growth[s] < 0:
+                        level = fixed == 1
+                        growth[s] = growth_direction(neighbour_kind, neighbour_mode, i, rng, level, -1, 0, False)
+                elif code == DO_TELL_GROWTH:
+                    if growth[s] >= 0:
+                        actions[i, n_fields - 2] = MESSAGE_TO_ALL
+                        actions[i, n_fields - 1] = growth[s] + 1
+            if go[r] >= 0:
+                actions[i, 1] = go[r]
+            if set_at[r] >= 0:
+                target = MESSAGE_TO_ALL if set_at[r] == SET_AT_ANY else growth[s]
                 if target >= 0:
                     actions[i, n_fields - 2] = target
-                    actions[i, n_fields - 1] = tables.set_value[r]
+                    actions[i, n_fields - 1] = set_value[r]
             break
