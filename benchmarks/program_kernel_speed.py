@@ -16,7 +16,7 @@ are the worlds' cycles over their summed seconds, the best of ``--repeats`` pass
 worlds (the passes alternate the two policies; every pass runs the same trajectories). The
 two policies run different trajectories on the same worlds (the program lacks some of the
 rules' refinements, ``docs/guides/programs.md``), so the table also gives each one's
-successes and cycles; ``x rules`` is the rules' cycles per second over the program's. The
+successes and cycles; ``rules / this`` is the rules' cycles per second over the program's. The
 first call of each rollout (compiling its loop) runs on a world apart, before the timing.
 
 The decisions alone, on the same observations: the observations of the rules' own episodes
@@ -136,7 +136,7 @@ def decisions(n: int, args) -> dict:
 
 def table(rows: list[dict]) -> str:
     lines = [
-        "| N | policy | successes | mean cycles (successes) | cycles run | cycles/s | module-cycles/s | x rules |",
+        "| N | policy | successes | mean cycles (successes) | cycles run | cycles/s | module-cycles/s | rules / this, cycles/s |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
