@@ -274,6 +274,11 @@ class KernelPolicy(Policy):
             getattr(rows, name)[known] = getattr(self.memory, name)[slots[known]]
         return rows
 
+    def runs_on(self, task) -> bool:
+        """Whether the rule is written for ``task`` (a task instance): a hand-coded policy runs on
+        the task of its name (what the compiled rollout, :mod:`baselines.compiled`, checks)."""
+        return self.name == task.name
+
     @classmethod
     def batch(cls, policies) -> PolicyBatch:
         """The :class:`PolicyBatch` of ``policies`` (one per world, this class and its

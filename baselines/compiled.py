@@ -1,4 +1,4 @@
-"""Whole rollouts of a hand-coded behaviour inside compiled code.
+"""Whole rollouts of a hand-coded behaviour or a program inside compiled code.
 
 :class:`CompiledRollout` runs the loop that ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
 runs in Python, cycle after cycle, as one numba kernel: the engine's observation kernel, the
@@ -172,7 +172,7 @@ CHANGED_FIELDS = ("grid", "cell", "mode", "scent", "inbox", "rng_state")
 
 
 class CompiledRollout:
-    """A hand-coded behaviour from a copy of ``env``'s state, run inside compiled code.
+    """A hand-coded behaviour or a program from a copy of ``env``'s state, run inside compiled code.
 
     :meth:`run` advances it by up to a given number of cycles (stopping at the task's
     success); every call continues where the last one ended. The cycles are those that
@@ -184,9 +184,10 @@ class CompiledRollout:
     Args:
         env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of a task with
             :meth:`~proteo_env.tasks.base.Task.kernels` (chain, branch, table, grasp, locomotion).
-        policy: the task's hand-coded policy built for ``env``: a
-            :class:`~baselines.base.KernelPolicy` whose ``name`` is the task's name; its
-            parameters, generator state and memory are read.
+        policy: a :class:`~baselines.base.KernelPolicy` built for ``env`` whose rule is written
+            for its task (:meth:`~baselines.base.KernelPolicy.runs_on`): the task's hand-coded
+            policy, or a :class:`~baselines.program_policy.ProgramPolicy` of a program for the
+            task; its parameters, generator state and memory are read.
 
     Attributes:
         cycle: the cycle count reached, counted like ``env.cycle`` (starts at the env's).
@@ -198,11 +199,11 @@ class CompiledRollout:
         if not isinstance(env, ProteoEnv):
             raise ValueError(f"env={type(env).__name__} is not allowed; allowed: a ProteoEnv from proteo_env.make")
         task = env.task
-        if not isinstance(policy, KernelPolicy) or policy.rule is None or policy.name != task.name:
+        if not isinstance(policy, KernelPolicy) or policy.rule is None or not policy.runs_on(task):
             raise ValueError(
                 f"policy={type(policy).__name__} on task={task.task_id()!r} is not allowed; allowed: "
                 f"the task's hand-coded policy (a KernelPolicy named {task.name!r}, from "
-                "baselines.make_policy)"
+                f"baselines.make_policy) or a program for {task.name!r} (make_policy('program', env, program=...))"
             )
         world = env.engine
         if world is None:
@@ -301,7 +302,7 @@ class CompiledRollout:
 
 
 def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every: int = 0) -> Rollout:
-    """Run a hand-coded behaviour from ``env``'s current state inside compiled code.
+    """Run a hand-coded behaviour or a program from ``env``'s current state inside compiled code.
 
     ``CompiledRollout(env, policy).run(max_cycles, record_every=record_every)``: the result is
     what driving ``env`` with ``env.step_arrays(policy.act_arrays(env.observe_arrays()))``
@@ -310,7 +311,7 @@ def compiled_rollout(env, policy, *, max_cycles: int | None = None, record_every
 
     Args:
         env: a :class:`~proteo_env.env.ProteoEnv` after ``reset``, of a task with compiled kernels.
-        policy: the task's hand-coded policy built for ``env`` (see :class:`CompiledRollout`).
+        policy: the task's hand-coded policy or a program's policy built for ``env`` (see :class:`CompiledRollout`).
         max_cycles: cycles to run at most (default: the env's cycles left, ``max_cycles - cycle``).
         record_every: record positions and modes after every ``record_every``-th cycle and at
             success (0: only the final state).

@@ -1,16 +1,24 @@
-"""A policy that runs a program (:mod:`baselines.program`) for every module, interpreted in Python.
+"""A policy that runs a program (:mod:`baselines.program`) for every module.
 
-Each cycle, module by module in row order, the interpreter:
+:class:`ProgramPolicy` runs the program as tables (:func:`~baselines.program_rules.encode`)
+through the one kernel :func:`~baselines.program_rules.run_program`, the same code in its
+``act``, in a :class:`~baselines.base.PolicyBatch` and inside the compiled rollout
+(:mod:`baselines.compiled`). :func:`interpret` is the program's reading in plain Python, the
+reference the kernel follows (:class:`ProgramReading` runs it as a policy, to read or step
+through a program cycle by cycle); the tests hold the two to the same actions, cycle for cycle.
+
+Each cycle, module by module in row order, a program is read so:
 
 1. reads its messages: a direction (values ``1..12``) is remembered as the *heard* growth; a
    mode set (value ``13 + j``, pair ``j`` of :attr:`~baselines.program.Program.mode_sets`)
    sets the module's mode when the module is in the pair's first mode, and its growth to the
    direction the message travelled (so a new seed grows on straight);
 2. counts the cycles it has been in its mode (``waited``);
-3. fires the first rule of its mode whose conditions all hold, drawing from the policy's
-   generator in the order the conditions and actions are written, and writes the action:
-   the rule's roll (stay by default), ``go`` mode (its mode by default), the scent roles
-   (relay by default) and one message (``tell growth`` or ``set``).
+3. fires the first rule of its mode whose conditions all hold (they are checked in the order
+   written, up to the first that fails), drawing from the policy's generator in the order
+   the conditions and actions are written, and writes the action: the rule's roll (stay by
+   default), ``go`` mode (its mode by default), the scent roles (relay by default) and one
+   message (``tell growth`` or ``set``).
 
 The conditions and actions are the primitives of :mod:`baselines.primitives` that the
 hand-written rules use (legal rolls, the gradient's lowest rolls, growth directions, the
@@ -25,6 +33,7 @@ import numpy as np
 
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
+from proteo_env.registry import task_name
 from proteo_env.spaces import EMIT, KIND_MODULE, RELAY, SILENT
 
 from .base import KernelPolicy, SlotMemory
@@ -40,9 +49,8 @@ from .primitives import (
     random_pick,
 )
 from .program import DIRECTION_MESSAGES, Program, load_program
+from .program_rules import DOWN_BITS, ProgramTables, encode, run_program
 
-DOWN_BITS = ALL_BITS & ~(UP_BITS | HORIZONTAL_BITS)
-"""The 4 face directions pointing down (``z < 0``), as a bit set."""
 ROLE_OF = {"emit {channel}": EMIT, "relay {channel}": RELAY, "block {channel}": SILENT}
 
 
@@ -65,7 +73,7 @@ class ProgramMemory(SlotMemory):
 
 
 class ProgramParams(NamedTuple):
-    """A program as the interpreter reads it: the program, the task's modes and the scent value of "none"."""
+    """A program as :func:`interpret` reads it: the program, the task's modes and the scent value of "none"."""
 
     program: Program
     modes: tuple[str, ...]
@@ -167,8 +175,8 @@ class _Module:
 
 
 def interpret(seen, slots, memory, params: ProgramParams, rng, actions) -> None:
-    """Every module's action under ``params.program`` (the :attr:`~baselines.base.KernelPolicy.rule`
-    of :class:`ProgramPolicy`): ``seen`` an :class:`~baselines.base.Observed` of A rows, ``slots``
+    """Every module's action under ``params.program``, read in plain Python (the
+    :attr:`~baselines.base.KernelPolicy.rule` of :class:`ProgramReading`): ``seen`` an :class:`~baselines.base.Observed` of A rows, ``slots``
     (A,) memory slots, ``memory`` the arrays of :class:`ProgramMemory`; writes ``actions`` (A, L)."""
     program = params.program
     rules_of = dict(program.modes)
@@ -210,7 +218,9 @@ class ProgramPolicy(KernelPolicy):
 
     Build it with ``make_policy("program", env, program="chain", seed=0)``: ``program`` is
     program text, a path to a YAML file or the name of a program in ``baselines/programs/``,
-    checked against the env's task (:func:`~baselines.program.load_program`).
+    checked against the env's task (:func:`~baselines.program.load_program`). Its rule is the
+    kernel :func:`~baselines.program_rules.run_program` over the program's tables, so it runs
+    in a :class:`~baselines.base.PolicyBatch` and in the compiled rollout like the hand-written rules.
 
     Args:
         program: the checked :class:`~baselines.program.Program`.
@@ -218,7 +228,7 @@ class ProgramPolicy(KernelPolicy):
 
     name = "program"
     levels = ("full",)
-    rule = staticmethod(interpret)
+    rule = staticmethod(run_program)
 
     @classmethod
     def for_env(cls, env, *, seed: int | None = None, program):
@@ -229,6 +239,25 @@ class ProgramPolicy(KernelPolicy):
         self.program = program
         self.memory = ProgramMemory()
         """Private memory of every module (see :class:`ProgramMemory`)."""
+        self.tables = encode(program, self.modes, int(scent_max))
+
+    @property
+    def rule_params(self) -> ProgramTables:
+        return self.tables
+
+    def runs_on(self, task) -> bool:
+        """Whether the program is written for ``task``."""
+        return task_name(self.program.task) == task.name
+
+
+class ProgramReading(ProgramPolicy):
+    """The same policy with the program read in plain Python (:func:`interpret`): the reference
+    :class:`ProgramPolicy`'s kernel follows, action for action, to read or step through a
+    program in a debugger. Slow (Python per module), so it takes no part in a
+    :class:`~baselines.base.PolicyBatch` or the compiled rollout; build it with
+    ``ProgramReading.for_env(env, program=..., seed=...)``."""
+
+    rule = staticmethod(interpret)
 
     @property
     def rule_params(self) -> ProgramParams:

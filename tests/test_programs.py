@@ -9,10 +9,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import small_overrides
+from test_compiled_rollout import assert_same_trajectory, drive
 
 import proteo_env
 from baselines import make_policy
-from baselines.program import PROGRAMS_DIR, format_program, load_program
+from baselines.compiled import compiled_rollout
+from baselines.program import (
+    ACTIONS,
+    CONDITIONS,
+    DIRECTION_CLASSES,
+    PROGRAMS_DIR,
+    SET_TARGETS,
+    format_program,
+    load_program,
+)
+from baselines.program_policy import ProgramMemory, ProgramPolicy, ProgramReading
 from proteo_env.config import ConfigError
 from proteo_env.rollout import run_episode
 
@@ -21,23 +33,68 @@ CHAIN = (PROGRAMS_DIR / "chain.yaml").read_text()
 RICH = """\
 task: chain-v1
 channels: [scent]
-start: [SLEEP]
+start: [SLEEP, SEED]
 parameters:
   patience: 3
   weak: 40
 modes:
   SLEEP:
+    - if: [detects scent, not touching object]
+      do: [relay scent, move up]
+      go: SEARCH
     - if: [not touching ground, scent scent above weak, load below 0.5]
       do: [block scent, move hint]
       set: FINAL to SEARCH
     - if: [neighbour FINAL at down, waited patience, can move, chance 0.25]
       do: [emit scent, move level]
       go: SEED
+  SEARCH:
+    - if: [neighbour SEED]
+      do: [move spot SEED]
+    - if: [chance 0.1, not load above 0.5]
+      do: [move down]
+    - if: [scent scent below 2, neighbour SEARCH at hint]
+      do: [stay]
+      go: FINAL
+    - do: [move gradient scent]
   SEED:
-    - if: [not detects scent]
+    - if: [waited 1, neighbour SEARCH at growth]
+      do: [emit scent]
+      set: SEARCH at growth to SEED
+      go: FINAL
+    - if: [waited 20, chance 0.1]
       do: [pick growth, tell growth]
       go: SLEEP
+    - do: [emit scent, pick level growth, tell growth, move growth]
+  FINAL:
+    - if: [not detects scent]
+      do: [move any]
+    - if: [neighbour SLEEP at up, chance 0.05]
+      go: SLEEP
+    - do: [relay scent]
 """
+"""A program with every condition and action phrase, direction class and set target."""
+
+GRASP = """\
+task: grasp
+channels: [seed, touch]
+start: [SLEEP, SEED]
+modes:
+  SLEEP:
+    - if: [touching object]
+      do: [emit touch, block seed]
+      go: TOUCH
+    - if: [load above 0.5, detects touch]
+      do: [relay touch, move gradient touch]
+    - if: [not scent seed below 65535]
+      do: [move hint]
+    - do: [move gradient seed]
+  SEED:
+    - do: [emit seed]
+  TOUCH:
+    - do: [emit touch]
+"""
+"""A program for a task with two channels, a load sensor and an object to touch."""
 
 
 def chain_env():
@@ -132,3 +189,77 @@ def test_proteo_run_takes_a_program(capsys):
     settings = ["--set", "n_modules=12", "--set", "max_cycles=300", "--set", "motion_model=sphere"]
     assert main(["run", "chain-v1", *settings, "--program", "chain", "--seed", "1000"]) == 0
     assert "success 1/1" in capsys.readouterr().out
+
+
+PROGRAMS = {
+    "chain": ("chain-v1", CHAIN, {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}),
+    "rich": ("chain-v1", RICH, {"n_modules": 12, "max_cycles": 120}),
+    "grasp": ("grasp-v0", GRASP, small_overrides("grasp-v0", max_cycles=120)),
+}
+"""Programs run by the compiled interpreter against their plain-Python reading: task, text, settings."""
+
+
+def test_the_rich_program_uses_every_phrase_class_and_set_target():
+    program = load_program(RICH, "chain-v1")
+    rules = [rule for _, mode_rules in program.modes for rule in mode_rules]
+    phrases = [p for rule in rules for p in (*rule.conditions, *rule.actions)]
+    assert {p.pattern for p in phrases} == set(CONDITIONS) | set(ACTIONS)
+    assert {a for p in phrases for a in p.arguments if a in DIRECTION_CLASSES} == set(DIRECTION_CLASSES)
+    assert {rule.set.at for rule in rules if rule.set} == set(SET_TARGETS)
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_the_kernel_and_the_python_reading_give_the_same_actions(name):
+    """Whole episodes, cycle for cycle: the same actions, and at the end the same memory and generator."""
+    task_id, text, settings = PROGRAMS[name]
+    env = proteo_env.make(task_id, **settings)
+    for seed in range(1000, 1003):
+        env.reset(seed=seed)
+        compiled = make_policy("program", env, program=text, seed=seed)
+        reading = ProgramReading.for_env(env, program=text, seed=seed)
+        done = False
+        while not done:
+            buffers = env.observe_arrays()
+            actions = compiled.act_arrays(buffers)
+            np.testing.assert_array_equal(
+                actions, reading.act_arrays(buffers), err_msg=f"seed {seed} cycle {env.cycle}"
+            )
+            result = env.step_arrays(actions)
+            done = bool(result.terminated[0] or result.truncated[0])
+        for field, a, b in zip(ProgramMemory.FIELDS, compiled.memory.arrays(), reading.memory.arrays()):
+            np.testing.assert_array_equal(a, b, err_msg=field)
+        assert compiled.rng.bit_generator.state == reading.rng.bit_generator.state
+
+
+@pytest.mark.parametrize("name", list(PROGRAMS))
+def test_the_compiled_rollout_of_a_program_is_the_env_stepped_with_it(name):
+    task_id, text, settings = PROGRAMS[name]
+    env = proteo_env.make(task_id, **settings)
+    for seed in (1000, 1001):
+        env.reset(seed=seed)
+        result = compiled_rollout(env, make_policy("program", env, program=text, seed=seed), record_every=1)
+        policy = make_policy("program", env, program=text, seed=seed)
+        positions, modes, success = drive(env, policy, env.max_cycles)
+        assert_same_trajectory(result, positions, modes, success, policy.rng)
+        assert success or name != "chain", f"seed {seed}: no chain"
+
+
+def test_a_batch_of_program_policies_acts_as_each_alone():
+    env = proteo_env.make_batched("chain-v1", 3, **small_overrides("chain-v1"))
+    together = [make_policy("program", env, program="chain", seed=b) for b in range(3)]
+    alone = [make_policy("program", env, program="chain", seed=b) for b in range(3)]
+    batch, buffers, a = ProgramPolicy.batch(together), env.reset(seed=4), env.n_agents
+    for _ in range(30):
+        actions = batch.act_arrays(buffers)
+        expected = np.concatenate([p.act_arrays(buffers.rows(b * a, (b + 1) * a)) for b, p in enumerate(alone)])
+        np.testing.assert_array_equal(actions, expected)
+        env.step_arrays(actions.reshape(3, a, -1))
+        buffers = env.observe_arrays()
+
+
+def test_a_program_for_another_task_is_no_compiled_rollout():
+    env = proteo_env.make("grasp-v0", **small_overrides("grasp-v0"))
+    env.reset(seed=0)
+    policy = make_policy("program", chain_env(), program="chain", seed=0)
+    with pytest.raises(ValueError, match="a program for 'grasp'"):
+        compiled_rollout(env, policy)
