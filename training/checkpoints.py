@@ -3,18 +3,18 @@
 A checkpoint is a folder with ``proteo.json`` (written by :func:`training.common.write_checkpoint_meta`)
 and the algorithm's files:
 
-==================== ======================= ===========================================
-``algorithm``        files                   policy
-==================== ======================= ===========================================
-``sb3-maskable-ppo`` ``model.zip``           the SB3 policy network (MaskablePPO)
-``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
-``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
-``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
-``program-evolution`` ``program.yaml``       the evolved program (:mod:`training.evolve`)
-``ppo``              ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
-``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
-``imitation``        ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
-==================== ======================= ===========================================
+===================== ======================= ===========================================
+``algorithm``         files                   policy
+===================== ======================= ===========================================
+``sb3-maskable-ppo``  ``model.zip``           the SB3 policy network (MaskablePPO)
+``torchrl-ppo``       ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
+``cma-neural``        ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
+``cma-rules``         (in ``proteo.json``)    the hand-coded policy with evolved parameters
+``program-evolution`` ``program.yaml``        the evolved program (:mod:`training.evolve`)
+``ppo``               ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
+``rllib-ppo``         ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
+``imitation``         ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
+===================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
 ``final/`` checkpoint is used). :func:`load_controller` builds the environment too, from the
