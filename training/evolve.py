@@ -231,6 +231,7 @@ def main(argv=None) -> Path:
     import proteo_env
     from baselines.program import format_program, load_program
     from training.checkpoints import read_meta
+    from training.evolve import program_episode as episode  # by reference under python -m too (Ray workers)
     from training.program_variation import ProgramSpace, complexity, mutate, random_program
 
     env = proteo_env.make(args.task, **args.env)
@@ -336,7 +337,7 @@ def main(argv=None) -> Path:
             for seed in seeds
         ]
         episodes = run_jobs(
-            program_episode,
+            episode,
             jobs,
             [j.key for j in jobs],
             ray=ray,
