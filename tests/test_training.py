@@ -698,7 +698,7 @@ def test_malformed_yaml_in_a_config_file_or_a_flag_is_one_error_with_its_line_an
     assert not (tmp_path / "run").exists()
 
 
-TRAINERS = ["ppo", "imitate", "cma_es", "sb3_ppo", "torchrl_ppo", "rllib_ppo"]
+TRAINERS = ["ppo", "imitate", "cma_es", "evolve", "sb3_ppo", "torchrl_ppo", "rllib_ppo"]
 VOCABULARY = {"n_envs": "n_copies", "minibatch_size": "batch_size", "n_epochs": "epochs", "learning_rate": "lr"}
 """The one name every trainer gives a setting, and the word some trainers used before."""
 

@@ -416,8 +416,10 @@ class Entrant:
 
 
 def checkpoint_kind(meta: dict) -> str:
-    """``"evolved"`` for a checkpoint an evolution strategy wrote (its ``algorithm``), else ``"learned"``."""
-    return "evolved" if str(meta["algorithm"]).startswith("cma") else "learned"
+    """``"evolved"`` for a checkpoint an evolution strategy or program evolution wrote (its
+    ``algorithm``), else ``"learned"``."""
+    algorithm = str(meta["algorithm"])
+    return "evolved" if algorithm.startswith("cma") or algorithm == "program-evolution" else "learned"
 
 
 def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:

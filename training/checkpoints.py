@@ -3,17 +3,18 @@
 A checkpoint is a folder with ``proteo.json`` (written by :func:`training.common.write_checkpoint_meta`)
 and the algorithm's files:
 
-==================== ======================= ===========================================
-``algorithm``        files                   policy
-==================== ======================= ===========================================
-``sb3-maskable-ppo`` ``model.zip``           the SB3 policy network (MaskablePPO)
-``torchrl-ppo``      ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
-``cma-neural``       ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
-``cma-rules``        (in ``proteo.json``)    the hand-coded policy with evolved parameters
-``ppo``              ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
-``rllib-ppo``        ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
-``imitation``        ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
-==================== ======================= ===========================================
+===================== ======================= ===========================================
+``algorithm``         files                   policy
+===================== ======================= ===========================================
+``sb3-maskable-ppo``  ``model.zip``           the SB3 policy network (MaskablePPO)
+``torchrl-ppo``       ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
+``cma-neural``        ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
+``cma-rules``         (in ``proteo.json``)    the hand-coded policy with evolved parameters
+``program-evolution`` ``program.yaml``        the evolved program (:mod:`training.evolve`)
+``ppo``               ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
+``rllib-ppo``         ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
+``imitation``         ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
+===================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
 ``final/`` checkpoint is used). :func:`load_controller` builds the environment too, from the
@@ -100,6 +101,8 @@ def load_policy(path, env, *, seed: int | None = None, deterministic: bool = Fal
             raise CheckpointError(f"checkpoint {str(folder)!r}: cannot build the evolved rules: {err}") from None
         policy.name = f"{meta['policy']} (cma-rules{'; ignored: ' + ', '.join(dropped) if dropped else ''})"
         return policy
+    if algorithm == "program-evolution":
+        return _evolved_program(folder, env, seed)
     encoder = _check_compatible(meta, env)
     label = meta.get("label", algorithm)
     if algorithm == "sb3-maskable-ppo":
@@ -183,6 +186,19 @@ def load_controller(source, *, seed: int | None = 0, **env_overrides):
     except ConfigError as err:
         raise ConfigError(f"controller {source!r}: {err}") from None
     return env, make_policy(env.task.default_policy if name == RULES else name, env, seed=seed)
+
+
+def _evolved_program(folder: Path, env, seed: int | None):
+    """The program policy of an evolved program's checkpoint (``program.yaml``; a program of
+    another task than ``env``'s is a :class:`CheckpointError`)."""
+    from baselines import make_policy
+
+    try:
+        policy = make_policy("program", env, program=str(_need(folder / "program.yaml")), seed=seed)
+    except ConfigError as err:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: program.yaml is not a valid program: {err}") from None
+    policy.name = "program (program-evolution)"
+    return policy
 
 
 def _need(file: Path) -> Path:

@@ -380,6 +380,7 @@ TRAINERS = {
     "ppo": "native PPO over the array API (training/ppo.py)",
     "imitate": "clone the rules: behaviour cloning + DAgger (training/imitate.py)",
     "cma_es": "CMA-ES on the rules' parameters or a small network (training/cma_es.py)",
+    "evolve": "evolution of programs of the paper's primitives (training/evolve.py)",
     "sb3_ppo": "MaskablePPO, Stable-Baselines3 (training/sb3_ppo.py)",
     "torchrl_ppo": "IPPO / MAPPO, TorchRL (training/torchrl_ppo.py)",
     "rllib_ppo": "RLlib's PPO (training/rllib_ppo.py; the distributed extra)",

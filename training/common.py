@@ -253,7 +253,16 @@ class ProgressLog:
 
 
 # ---------------------------------------------------------------------- checkpoints
-ALGORITHMS = ("sb3-maskable-ppo", "torchrl-ppo", "cma-neural", "cma-rules", "ppo", "rllib-ppo", "imitation")
+ALGORITHMS = (
+    "sb3-maskable-ppo",
+    "torchrl-ppo",
+    "cma-neural",
+    "cma-rules",
+    "ppo",
+    "rllib-ppo",
+    "imitation",
+    "program-evolution",
+)
 
 
 class CheckpointError(ValueError):

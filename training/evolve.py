@@ -1,0 +1,393 @@
+"""Evolution of programs (:mod:`baselines.program`): their structure and their numbers.
+
+A (mu + lambda) evolutionary algorithm over programs of the paper's primitives, the
+direction the paper's conclusions propose. The population starts as ``population`` random
+programs (:func:`training.program_variation.random_program`), or as ``seed_program`` (a
+program name, path or text) and mutants of it. Each generation breeds ``offspring`` children:
+two parents picked by tournaments of ``tournament``, crossed with probability
+``crossover_rate`` (else a copy of the first), then 1 + Poisson(``mutations`` - 1) mutations
+(:mod:`training.program_variation`). Parents and children are all scored on the
+generation's worlds and the best ``population`` distinct programs survive (elitism: the best
+is never lost to a child, only to a program that scores better on the same worlds).
+
+Fitness of a program: the mean episode return over ``variations`` (env overrides over
+``env``: sizes, object shapes or directions, weight schedules, T and B ...) times
+``episodes_per_variation`` worlds, minus ``complexity_penalty`` times its rules + conditions +
+actions. The worlds are common random numbers: the same for every program of a generation,
+new each generation, their seeds drawn from a ``numpy.random.SeedSequence`` child of the run
+seed (generation ``g`` uses the child's child ``g``). Policy seeds equal world seeds.
+
+The best program of each generation is the checkpoint: ``program.yaml`` beside ``proteo.json``
+(algorithm ``program-evolution``), loaded by ``proteo eval --checkpoint`` and
+:func:`training.load_controller`. ``progress.csv`` and TensorBoard log the best and median
+fitness per generation. A run resumes like training/cma_es.py: rerun the same command after
+an interruption, or ``--resume CHECKPOINT --generations N`` to go on from a checkpoint.
+
+    python -m training.evolve --config configs/train/evolve_chain.yaml
+    python -m training.evolve --config configs/train/evolve_chain_paper.yaml --generations 5
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import pickle
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from proteo_env.registry import task_name
+from training.common import (
+    ProgressLog,
+    check_integers,
+    check_numbers,
+    checkpoint_folder,
+    make_run_dir,
+    parse_args,
+    save_args,
+    seed_everything,
+    write_checkpoint_meta,
+)
+
+ALGORITHM = "program-evolution"
+"""The ``algorithm`` of an evolved program's checkpoint."""
+
+
+@dataclass(frozen=True)
+class Args:
+    """Evolution of programs of the paper's primitives (arguments of training/evolve.py)."""
+
+    task: str = "chain-v1"
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
+    """Overrides passed to ``proteo_env.make``: the world the checkpoint is for."""
+    variations: tuple[dict, ...] = ({},)
+    """Env overrides over ``env``, one per task variation a program is scored on (at least one)."""
+    episodes_per_variation: int = 1
+    seed_program: str | None = None
+    """A program (name, path or text) the population starts from; none: random programs."""
+    population: int = 8
+    """Programs that survive each generation (mu)."""
+    offspring: int = 16
+    """Children bred each generation (lambda)."""
+    tournament: int = 3
+    crossover_rate: float = 0.3
+    mutations: float = 1.5
+    """Mean mutations per child (at least 1)."""
+    complexity_penalty: float = 0.001
+    """Subtracted from the fitness per rule, condition and action."""
+    max_rules: int = 4
+    """Rules per mode."""
+    max_conditions: int = 3
+    """Conditions per rule."""
+    max_actions: int = 3
+    """Actions per rule."""
+    seed: int = 0
+    generations: int = 50
+    checkpoint_every: int = 10
+    """Generations between checkpoints."""
+    time_limit_minutes: float = 0.0
+    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
+    run_dir: str | None = None
+    resume: str | None = None
+    threads: int = 1
+    tensorboard: bool = True
+    progress_bar: bool = True
+    ray: bool = False
+    """Run the episodes as Ray tasks (same results as serially)."""
+    address: str | None = None
+    """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
+    workers: int | None = None
+    """CPUs of the local Ray instance, or tasks at once on a cluster (with ``ray``)."""
+
+
+RESUME_INDEPENDENT = (
+    "generations",
+    "time_limit_minutes",
+    "checkpoint_every",
+    "run_dir",
+    "resume",
+    "threads",
+    "tensorboard",
+    "progress_bar",
+    "ray",
+    "address",
+    "workers",
+)
+"""Arguments that may change when an interrupted run is rerun (the others must stay)."""
+
+
+# ---------------------------------------------------------------------- episodes
+@dataclass(frozen=True)
+class ProgramEpisode:
+    """One episode of one program in one variation (picklable; a Ray task when ``--ray``)."""
+
+    task: str
+    env: str
+    """The JSON of the ``proteo_env.make`` overrides (``env`` and the variation's)."""
+    program: str
+    """The program's text."""
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """The journal key: a hash of the program and the world."""
+        return hashlib.sha256(f"{self.program}|{self.env}".encode()).hexdigest()[:16] + f"|{self.seed}"
+
+
+@functools.cache
+def _environment(task: str, overrides: str):
+    """The environment of ``(task, overrides)``, built once per process."""
+    import proteo_env
+    from training.common import limit_threads
+
+    limit_threads(1)
+    return proteo_env.make(task, **json.loads(overrides))
+
+
+def program_episode(job: ProgramEpisode) -> list:
+    """``[return, success, cycles, modules]`` of the program's episode."""
+    from baselines import make_policy
+    from proteo_env.rollout import run_episode
+
+    env = _environment(job.task, job.env)
+    result = run_episode(env, make_policy("program", env, program=job.program, seed=job.seed), seed=job.seed)
+    return [float(result.total_reward), bool(result.success), int(result.cycles), len(env.possible_agents)]
+
+
+def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: int) -> list[int]:
+    """The ``n`` world seeds of ``generation``: from the stream's child ``generation``."""
+    child = np.random.SeedSequence(world_stream.entropy, spawn_key=(*world_stream.spawn_key, generation))
+    return [int(s) for s in child.generate_state(n) % 2**31]
+
+
+# ---------------------------------------------------------------------- checking the arguments
+def check_args(args: Args) -> list[str]:
+    """The env overrides of every variation as JSON, after checking the arguments (``ConfigError``)."""
+    import proteo_env
+    from proteo_env.config import ConfigError
+
+    check_integers(
+        args,
+        {
+            "population": 1,
+            "offspring": 1,
+            "tournament": 1,
+            "episodes_per_variation": 1,
+            "max_rules": 1,
+            "max_conditions": 0,
+            "max_actions": 1,
+            "checkpoint_every": 1,
+        },
+    )
+    check_numbers(args, {"crossover_rate": (0.0, 1.0), "mutations": (1.0, None), "complexity_penalty": (0.0, None)})
+    allowed = "a non-empty list of env overrides over env, such as [{n_modules: 10}, {}, {n_modules: 14}]"
+    if not isinstance(args.variations, (list, tuple)) or not args.variations:
+        raise ConfigError(f"variations: {args.variations!r} is not allowed; allowed: {allowed}")
+    overrides = []
+    for i, variation in enumerate(args.variations):
+        if not isinstance(variation, dict):
+            raise ConfigError(f"variations[{i}]: {variation!r} is not allowed; allowed: {allowed}")
+        merged = {**args.env, **variation}
+        try:
+            proteo_env.make(args.task, **merged)
+        except ConfigError as err:
+            raise ConfigError(f"variations[{i}]: {variation!r} is not allowed: {err}") from None
+        overrides.append(json.dumps(merged, sort_keys=True))
+    return overrides
+
+
+# ---------------------------------------------------------------------- the algorithm
+def breed(population: list, space, rng: np.random.Generator, args: Args) -> list:
+    """``args.offspring`` children of ``population`` (programs, best first)."""
+    from training.program_variation import crossover, mutate
+
+    def tournament():
+        return population[int(rng.integers(len(population), size=args.tournament).min())]
+
+    children = []
+    for _ in range(args.offspring):
+        child = tournament()
+        if rng.random() < args.crossover_rate:
+            child = crossover(child, tournament(), space, rng)
+        for _ in range(1 + int(rng.poisson(args.mutations - 1.0))):
+            child = mutate(child, space, rng)
+        children.append(child)
+    return children
+
+
+def main(argv=None) -> Path:
+    args = parse_args(Args, argv)
+    from proteo_env.config import ConfigError
+    from training.distributed import Journal, ray_options, run_jobs
+
+    variations = check_args(args)
+    ray = ray_options(args)
+    seed_everything(args.seed, threads=args.threads)
+
+    import proteo_env
+    from baselines.program import format_program, load_program
+    from training.checkpoints import read_meta
+    from training.evolve import program_episode as episode  # by reference under python -m too (Ray workers)
+    from training.program_variation import ProgramSpace, complexity, mutate, random_program
+
+    env = proteo_env.make(args.task, **args.env)
+    limits = {"max_rules": args.max_rules, "max_conditions": args.max_conditions, "max_actions": args.max_actions}
+    seed_program = None if args.seed_program is None else load_program(args.seed_program, env)
+    if seed_program is None:
+        space = ProgramSpace.for_env(env, **limits)
+    else:
+        space = ProgramSpace.for_program(seed_program, type(env.task), **limits)
+    resume_meta = read_meta(args.resume) if args.resume else None
+    run_dir = Path(
+        args.run_dir
+        or (resume_meta or {}).get("run_dir")
+        or Path("runs") / f"evolve_{task_name(args.task)}_s{args.seed}"
+    )
+    state_file = run_dir / "state.pkl"
+    """The state after the last finished generation; an interrupted run (no final/) resumes from it."""
+    interrupted = state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
+    fingerprint = {k: v for k, v in asdict(args).items() if k not in RESUME_INDEPENDENT}
+    if interrupted or resume_meta is not None:
+        state = pickle.loads((state_file if interrupted else Path(resume_meta["dir"]) / "state.pkl").read_bytes())
+        if state["fingerprint"] != fingerprint:
+            diff = sorted(k for k in fingerprint if state["fingerprint"].get(k) != fingerprint[k])
+            where = (
+                f"run_dir {str(run_dir)!r} holds an interrupted run" if interrupted else f"resume={args.resume!r} is"
+            )
+            raise ConfigError(
+                f"{where} with other arguments (differing: {', '.join(diff)}); allowed: the same arguments "
+                "to resume it, or another run_dir"
+            )
+    run_dir = make_run_dir(str(run_dir), run_dir.name, resume=resume_meta is not None or interrupted)
+    save_args(args, run_dir)
+
+    # Two independent streams of the run's seed: the worlds, and the variation operators' draws.
+    world_stream, variation_stream = np.random.SeedSequence(args.seed).spawn(2)
+    rng = np.random.default_rng(variation_stream)
+    if interrupted or resume_meta is not None:
+        population = [load_program(text, env) for text in state["population"]]
+        generation, agent_steps, best_fitness = state["generation"], state["agent_steps"], state["best_fitness"]
+        rng.bit_generator.state = state["rng"]
+        print(f"resuming the run in {run_dir} after generation {generation}")
+    else:
+        if seed_program is None:
+            population = [random_program(space, rng, env.task.name) for _ in range(args.population)]
+        else:
+            population = [seed_program] + [mutate(seed_program, space, rng) for _ in range(args.population - 1)]
+        generation, agent_steps, best_fitness = 0, 0, None
+
+    def state_now() -> dict:
+        return {
+            "population": [format_program(p) for p in population],
+            "generation": generation,
+            "agent_steps": agent_steps,
+            "best_fitness": best_fitness,
+            "rng": rng.bit_generator.state,
+            "fingerprint": fingerprint,
+        }
+
+    def save(folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "program.yaml").write_text(format_program(population[0]))
+        (folder / "state.pkl").write_bytes(pickle.dumps(state_now()))  # for --resume only
+        write_checkpoint_meta(
+            folder,
+            algorithm=ALGORITHM,
+            task=env.task.task_id(),
+            env_overrides=dict(args.env),
+            encoder_spec=None,
+            nvec=env.action_layout.nvec,
+            agent_steps=agent_steps,
+            seed=args.seed,
+            extra={
+                "label": ALGORITHM,
+                "run_dir": str(run_dir),
+                "generation": generation,
+                "fitness": best_fitness,
+                "complexity": complexity(population[0]),
+                "args": asdict(args),
+            },
+        )
+
+    def save_state() -> None:
+        tmp = state_file.with_suffix(".tmp")
+        tmp.write_bytes(pickle.dumps(state_now()))
+        os.replace(tmp, state_file)
+
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    if interrupted:
+        log.drop_after("evolve/generation", generation)
+    journal = Journal(run_dir / "episodes.jsonl", fingerprint, what="evolution run")
+    """Every finished episode of this run (by program and world): an interrupted generation resumes."""
+    bar = tqdm(
+        total=args.generations, initial=generation, unit="generation", desc=ALGORITHM, disable=not args.progress_bar
+    )
+    while generation < args.generations:
+        seeds = generation_seeds(world_stream, generation, args.episodes_per_variation)
+        candidates = list({format_program(p): p for p in population + breed(population, space, rng, args)}.values())
+        texts = [format_program(p) for p in candidates]
+        jobs = [
+            ProgramEpisode(args.task, overrides, text, seed)
+            for text in texts
+            for overrides in variations
+            for seed in seeds
+        ]
+        episodes = run_jobs(
+            episode,
+            jobs,
+            [j.key for j in jobs],
+            ray=ray,
+            journal=journal,
+            desc=f"generation {generation + 1}",
+            progress=args.progress_bar,
+        )
+        per_program = len(variations) * len(seeds)
+        outcomes = [episodes[c * per_program : (c + 1) * per_program] for c in range(len(candidates))]
+        fitness = [
+            float(np.mean([r[0] for r in results])) - args.complexity_penalty * complexity(program)
+            for program, results in zip(candidates, outcomes)
+        ]
+        agent_steps += sum(r[2] * r[3] for r in episodes)
+        order = sorted(range(len(candidates)), key=lambda c: -fitness[c])[: args.population]
+        population = [candidates[c] for c in order]
+        best = order[0]
+        best_fitness = fitness[best]
+        generation += 1
+        bar.update(1)
+        log.log(
+            agent_steps,
+            {
+                "fitness/best": best_fitness,
+                "fitness/median": float(np.median(fitness)),
+                "episode/return": float(np.mean([r[0] for r in outcomes[best]])),
+                "episode/success": float(np.mean([r[1] for r in outcomes[best]])),
+                "episode/cycles": float(np.mean([r[2] for r in outcomes[best]])),
+                "program/complexity": float(complexity(candidates[best])),
+                "evolve/candidates": float(len(candidates)),
+                "evolve/generation": float(generation),
+            },
+        )
+        if generation % args.checkpoint_every == 0:
+            save(checkpoint_folder(run_dir, agent_steps))
+        save_state()
+        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+            break
+    bar.close()
+    save(run_dir / "final")
+    journal.complete()
+    log.close()
+    print(
+        f"final checkpoint: {run_dir / 'final'}  ({generation} generations, best fitness {best_fitness}, "
+        f"{agent_steps} agent-steps, {log.seconds:.0f} s)"
+    )
+    return run_dir / "final"
+
+
+if __name__ == "__main__":
+    from training.common import run_script
+
+    raise SystemExit(run_script(main))
