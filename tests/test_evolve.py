@@ -16,7 +16,7 @@ import proteo_env
 from baselines.program import format_program, load_program
 from proteo_env.config import ConfigError
 from training import load_controller
-from training.benchmark import checkpoint_kind
+from training.common import checkpoint_kind
 from training.evolve import main as evolve
 from training.program_variation import ProgramSpace, complexity, crossover, mutate, random_program
 

@@ -493,6 +493,10 @@ TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
         "cma_es",
         ["--generations", "2", "--popsize", "3", "--episodes-per-candidate", "1", "--checkpoint-every", "1"],
     ),
+    "evolve": (
+        "evolve",
+        ["--generations", "1", "--population", "2", "--offspring", "2", "--checkpoint-every", "1"],
+    ),
     "rllib": (
         "rllib_ppo",
         [
@@ -560,7 +564,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
     assert [(r.kind, r.level) for r in results] == [("hand-coded", lv) for lv in levels] + [
         ("random", lv) for lv in levels
-    ] + [("evolved" if module == "cma_es" else "learned", settings.get("control", "full"))]
+    ] + [("evolved" if module in ("cma_es", "evolve") else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
         from training.checkpoints import load_policy
 

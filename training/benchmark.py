@@ -415,16 +415,10 @@ class Entrant:
     recipe: str | None = None
 
 
-def checkpoint_kind(meta: dict) -> str:
-    """``"evolved"`` for a checkpoint an evolution strategy or program evolution wrote (its
-    ``algorithm``), else ``"learned"``."""
-    algorithm = str(meta["algorithm"])
-    return "evolved" if algorithm.startswith("cma") or algorithm == "program-evolution" else "learned"
-
-
 def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
     """The :class:`Entrant` of ``paths`` (the training seeds of one recipe), checked."""
     from training.checkpoints import read_meta
+    from training.common import checkpoint_kind
 
     metas = []
     for path in paths:

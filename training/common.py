@@ -263,6 +263,14 @@ ALGORITHMS = (
     "imitation",
     "program-evolution",
 )
+EVOLVED_ALGORITHMS = ("cma-neural", "cma-rules", "program-evolution")
+"""The algorithms of :data:`ALGORITHMS` that evolve a controller (their checkpoints are
+``"evolved"`` in tables, the rest ``"learned"``: :func:`checkpoint_kind`)."""
+
+
+def checkpoint_kind(meta: dict) -> str:
+    """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds."""
+    return "evolved" if meta["algorithm"] in EVOLVED_ALGORITHMS else "learned"
 
 
 class CheckpointError(ValueError):

@@ -69,6 +69,7 @@ import json
 from pathlib import Path
 
 from proteo_env.registry import task_name
+from training.common import checkpoint_kind
 from training.episodes import EpisodeJob, run_episodes
 from training.report import PolicyResult, markdown_table, publish, rerender, write_results
 
@@ -323,7 +324,7 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
             else:
                 meta = read_meta(path)
                 policy = load_policy(path, env, seed=seed_list[0], deterministic=deterministic)
-                kind = "evolved" if meta["algorithm"].startswith("cma") else "learned"
+                kind = checkpoint_kind(meta)
                 source = str(path)
             first_of_group = not group or not any(r.group == group and r.task == cls.task_id() for r in results)
             label = group or (policy.name if path is None else Path(path).name)
