@@ -11,7 +11,7 @@ and the fixed lattice geometry:
 - **scents** (the roles' effect as a module sees it): :func:`seen_scent`,
   :func:`detects_scent`, the gradient climb's step :func:`lowest_rolls` (the rolls whose
   target lies next to the lowest scent) and its direction :func:`downhill_bias`;
-- **seeding**: :func:`growth_direction` (where a seed grows), :func:`spot_touches`;
+- **seeding**: :func:`growth_direction` (where a seed grows), :func:`outward_pick`, :func:`spot_touches`;
 - **directed random moves**: :func:`approach_spot` (roll over a seed's faces to its growth
   spot), :func:`approach` and :func:`approach_rows` (a group rolling towards target sites over
   a pivot's faces, with random legal moves when stuck).
@@ -306,6 +306,14 @@ def growth_direction(neighbour_kind, neighbour_mode, i, rng, horizontal, previou
         return -1
     if clean:
         pool = fewest_neighbours(neighbour_kind, i, pool)
+    return outward_pick(neighbour_kind, i, rng, pool)
+
+
+@kernel
+def outward_pick(neighbour_kind, i, rng, pool):
+    """A direction of the bit set ``pool`` for the seed at row ``i``, preferring those whose
+    opposite site holds a module (growth away from the structure): a uniform pick
+    (:func:`uniform_pick`), -1 when ``pool`` is empty."""
     outward = 0
     for k in range(12):
         if (pool >> k) & 1 and neighbour_kind[i, OPPOSITE[k]] == KIND_MODULE:

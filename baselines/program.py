@@ -43,6 +43,7 @@ CONDITIONS = {
     "scent {channel} below {count}": "the module's own scent value is below the count (the scent is strong)",
     "neighbour {mode}": "a face neighbour is in the mode",
     "neighbour {mode} at {class}": "a face neighbour in a direction of the class is in the mode",
+    "at spot {mode}": "the module is at the growth spot a face neighbour in the mode told (its growth points here)",
     "touching ground": "the module touches the ground (or any solid site)",
     "touching object": "the module touches the object",
     "load above {number}": "the weight the module carries is above the number",
@@ -60,9 +61,12 @@ ACTIONS = {
     "move {class}": "a uniformly random legal roll towards a direction of the class (stay if none)",
     "move gradient {channel}": "roll over the faces of the neighbour with the lowest scent (stay when every roll loses it)",
     "move spot {mode}": "roll towards the growth spot of the neighbour in the mode (as it told; stay there)",
+    "move around {mode}": "a uniformly random legal roll over the faces of a neighbour in the mode (it stays a neighbour; stay if none)",
     "stay": "no roll",
     "pick growth": "choose the growth direction, an empty face site, unless the module has one",
     "pick level growth": "the same, among the 4 horizontal directions only",
+    "pick hint growth": "the same, among the directions at less than 90 degrees to the hint",
+    "drop growth": "forget the growth direction (the next pick chooses again)",
     "tell growth": "send the growth direction to every neighbour",
 }
 """Action phrases and what each does (one roll, scent roles, one message per cycle)."""
@@ -77,10 +81,11 @@ DIRECTION_CLASSES = {
 }
 """Direction classes, relative to the module's growth, the hint and the ground."""
 
-SET_TARGETS = ("growth", "any")
-"""Where a rule's ``set`` may send its mode message: the growth direction's neighbour, or all neighbours."""
+SET_TARGETS = ("growth", "any", "one")
+"""Where a rule's ``set`` may send its mode message: the growth direction's neighbour, all
+neighbours, or one neighbour in the set's mode (the first the module sees)."""
 
-MOVES = ("move {class}", "move gradient {channel}", "move spot {mode}", "stay")
+MOVES = ("move {class}", "move gradient {channel}", "move spot {mode}", "move around {mode}", "stay")
 MESSAGES = ("tell growth",)
 ROLES = ("emit {channel}", "relay {channel}", "block {channel}")
 PROGRAM_KEYS = ("task", "channels", "start", "parameters", "modes")

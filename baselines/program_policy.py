@@ -34,24 +34,28 @@ import numpy as np
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.registry import task_name
-from proteo_env.spaces import EMIT, KIND_MODULE, RELAY, SILENT
+from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
 
 from .base import KernelPolicy, SlotMemory
 from .primitives import (
     ALL_BITS,
+    AROUND_BITS,
     HORIZONTAL_BITS,
     UP_BITS,
     approach_spot,
-    growth_direction,
     hint_bits,
+    kind_bits,
     legal_bits,
     lowest_rolls,
+    outward_pick,
     random_pick,
 )
 from .program import DIRECTION_MESSAGES, Program, load_program
 from .program_rules import DOWN_BITS, ProgramTables, encode, run_program
 
 ROLE_OF = {"emit {channel}": EMIT, "relay {channel}": RELAY, "block {channel}": SILENT}
+PICK_CLASS = {"pick growth": "any", "pick level growth": "level", "pick hint growth": "hint"}
+"""The direction class each ``pick`` chooses the growth direction in."""
 
 
 class ProgramMemory(SlotMemory):
@@ -128,6 +132,14 @@ class _Module:
             bits = self.class_bits(args[1] if len(args) > 1 else "any")
             mode = self.mode_index(args[0])
             return any((bits >> k) & 1 and seen.neighbour_mode[i, k] == mode for k in range(12))
+        if pattern == "at spot {mode}":
+            mode = self.mode_index(args[0])
+            return any(
+                1 <= seen.messages[i, k] <= DIRECTION_MESSAGES
+                and OPPOSITE[seen.messages[i, k] - 1] == k
+                and seen.neighbour_mode[i, k] == mode
+                for k in range(12)
+            )
         if pattern == "touching ground":
             return bool(seen.contact[i, 0])
         if pattern == "touching object":
@@ -159,14 +171,21 @@ class _Module:
             slots = np.flatnonzero(seen.neighbour_mode[i, :12] == self.mode_index(args[0]))
             if slots.size and self.heard[s] >= 0:
                 action[0] = approach_spot(seen.action_mask, i, int(slots[0]), int(self.heard[s]), True, self.rng)
+        elif pattern == "move around {mode}":
+            around = 0
+            for k in np.flatnonzero(seen.neighbour_mode[i, :12] == self.mode_index(args[0])):
+                around |= int(AROUND_BITS[k])
+            action[0] = random_pick(self.rng, self.legal & around) + 1
         elif pattern == "stay":
             action[0] = 0
-        elif pattern in ("pick growth", "pick level growth"):
+        elif pattern in PICK_CLASS:
             if self.growth[s] < 0:
-                horizontal = pattern == "pick level growth"
-                self.growth[s] = growth_direction(
-                    seen.neighbour_kind, seen.neighbour_mode, i, self.rng, horizontal, -1, 0, False
+                empty = kind_bits(seen.neighbour_kind, i, KIND_EMPTY)
+                self.growth[s] = outward_pick(
+                    seen.neighbour_kind, i, self.rng, empty & self.class_bits(PICK_CLASS[pattern])
                 )
+        elif pattern == "drop growth":
+            self.growth[s] = -1
         elif pattern == "tell growth":
             if self.growth[s] >= 0:
                 action[-2:] = MESSAGE_TO_ALL, self.growth[s] + 1
@@ -208,6 +227,11 @@ def interpret(seen, slots, memory, params: ProgramParams, rng, actions) -> None:
             action[1] = module.mode_index(rule.go)
         if rule.set is not None:
             target = MESSAGE_TO_ALL if rule.set.at == "any" else int(module.growth[s])
+            if rule.set.at == "one":  # the first neighbour in the mode the set applies to
+                slots_in_mode = np.flatnonzero(
+                    seen.neighbour_mode[i, :12] == module.mode_index(rule.set.neighbour_mode)
+                )
+                target = int(slots_in_mode[0]) if slots_in_mode.size else -1
             if target >= 0:
                 pair = mode_sets.index((rule.set.neighbour_mode, rule.set.to))
                 action[-2:] = target, DIRECTION_MESSAGES + 1 + pair

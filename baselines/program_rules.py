@@ -30,17 +30,19 @@ import numpy as np
 from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
-from proteo_env.spaces import EMIT, KIND_MODULE, RELAY, SILENT
+from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY, SILENT
 
 from .primitives import (
     ALL_BITS,
+    AROUND_BITS,
     HORIZONTAL_BITS,
     UP_BITS,
     approach_spot,
-    growth_direction,
     hint_bits,
+    kind_bits,
     legal_bits,
     lowest_rolls,
+    outward_pick,
     random_pick,
 )
 from .program import DIRECTION_MESSAGES, Program
@@ -53,6 +55,7 @@ DOWN_BITS = ALL_BITS & ~(UP_BITS | HORIZONTAL_BITS)
     IF_SCENT_ABOVE,
     IF_SCENT_BELOW,
     IF_NEIGHBOUR,
+    IF_AT_SPOT,
     IF_GROUND,
     IF_OBJECT,
     IF_LOAD_ABOVE,
@@ -60,13 +63,14 @@ DOWN_BITS = ALL_BITS & ~(UP_BITS | HORIZONTAL_BITS)
     IF_CAN_MOVE,
     IF_WAITED,
     IF_CHANCE,
-) = range(11)
+) = range(12)
 CONDITION_CODES = {
     "detects {channel}": IF_DETECTS,
     "scent {channel} above {count}": IF_SCENT_ABOVE,
     "scent {channel} below {count}": IF_SCENT_BELOW,
     "neighbour {mode}": IF_NEIGHBOUR,
     "neighbour {mode} at {class}": IF_NEIGHBOUR,
+    "at spot {mode}": IF_AT_SPOT,
     "touching ground": IF_GROUND,
     "touching object": IF_OBJECT,
     "load above {number}": IF_LOAD_ABOVE,
@@ -77,7 +81,11 @@ CONDITION_CODES = {
 }
 """The opcode of each condition phrase of :data:`~baselines.program.CONDITIONS`."""
 
-DO_ROLE, DO_MOVE, DO_GRADIENT, DO_SPOT, DO_STAY, DO_PICK_GROWTH, DO_TELL_GROWTH = range(7)
+CLASS_CODES = {name: code for code, name in enumerate(("any", "growth", "hint", "down", "up", "level"))}
+"""The code of each direction class of :data:`~baselines.program.DIRECTION_CLASSES`."""
+CLASS_ANY, CLASS_GROWTH, CLASS_HINT, CLASS_DOWN, CLASS_UP, CLASS_LEVEL = CLASS_CODES.values()
+
+DO_ROLE, DO_MOVE, DO_GRADIENT, DO_SPOT, DO_AROUND, DO_STAY, DO_PICK_GROWTH, DO_DROP_GROWTH, DO_TELL_GROWTH = range(9)
 ACTION_CODES = {
     "emit {channel}": (DO_ROLE, EMIT),
     "relay {channel}": (DO_ROLE, RELAY),
@@ -85,18 +93,18 @@ ACTION_CODES = {
     "move {class}": (DO_MOVE, 0),
     "move gradient {channel}": (DO_GRADIENT, 0),
     "move spot {mode}": (DO_SPOT, 0),
+    "move around {mode}": (DO_AROUND, 0),
     "stay": (DO_STAY, 0),
-    "pick growth": (DO_PICK_GROWTH, 0),
-    "pick level growth": (DO_PICK_GROWTH, 1),
+    "pick growth": (DO_PICK_GROWTH, CLASS_ANY),
+    "pick level growth": (DO_PICK_GROWTH, CLASS_LEVEL),
+    "pick hint growth": (DO_PICK_GROWTH, CLASS_HINT),
+    "drop growth": (DO_DROP_GROWTH, 0),
     "tell growth": (DO_TELL_GROWTH, 0),
 }
 """The ``(opcode, fixed argument)`` of each action phrase of :data:`~baselines.program.ACTIONS`
-(the scent role of ``emit``/``relay``/``block``; 1: level directions only for ``pick``)."""
+(the scent role of ``emit``/``relay``/``block``; the direction class a ``pick`` chooses in)."""
 
-CLASS_CODES = {name: code for code, name in enumerate(("any", "growth", "hint", "down", "up", "level"))}
-"""The code of each direction class of :data:`~baselines.program.DIRECTION_CLASSES`."""
-CLASS_ANY, CLASS_GROWTH, CLASS_HINT, CLASS_DOWN, CLASS_UP, CLASS_LEVEL = CLASS_CODES.values()
-SET_AT_GROWTH, SET_AT_ANY = range(2)
+SET_AT_GROWTH, SET_AT_ANY, SET_AT_ONE = range(3)
 """``ProgramTables.set_at``: where a rule's mode set goes (-1: the rule sets nothing)."""
 
 
@@ -110,13 +118,13 @@ class ProgramTables(NamedTuple):
         rule_conditions: ``(R + 1,)`` int64, the same for each rule's conditions.
         rule_actions: ``(R + 1,)`` int64, the same for each rule's actions (rows of ``steps``).
         go: ``(R,)`` int64, the mode a rule goes to (-1: the module's mode).
-        set_at: ``(R,)`` int64, where the rule's mode set goes (``SET_AT_GROWTH``, ``SET_AT_ANY``; -1: none).
+        set_at: ``(R,)`` int64, where the rule's mode set goes (``SET_AT_*``; -1: none).
         set_value: ``(R,)`` int64, the message value of the rule's mode set.
         conditions: ``(Q, 4)`` int64, per condition its opcode (``IF_*``), 1 when negated, its
             channel or mode, and its direction class (``CLASS_*``).
         condition_numbers: ``(Q,)`` float64, a condition's number (a parameter's value).
         steps: ``(P, 3)`` int64, per action its opcode (``DO_*``), its fixed argument (the
-            role, the level flag) and its channel, mode or direction class.
+            role, the class a pick chooses in) and its channel, mode or direction class.
         mode_sets: ``(J, 2)`` int64, the mode a set applies to and the mode it sets; set ``j``
             travels as message value ``DIRECTION_MESSAGES + 1 + j``.
         scent_max: the scent value of "no scent".
@@ -174,7 +182,7 @@ def encode(program: Program, modes, scent_max: int) -> ProgramTables:
                 set_at.append(-1)
                 set_value.append(0)
             else:
-                set_at.append(SET_AT_ANY if rule.set.at == "any" else SET_AT_GROWTH)
+                set_at.append({"growth": SET_AT_GROWTH, "any": SET_AT_ANY, "one": SET_AT_ONE}[rule.set.at])
                 set_value.append(DIRECTION_MESSAGES + 1 + mode_sets.index((rule.set.neighbour_mode, rule.set.to)))
             rule_conditions.append(len(conditions))
             rule_actions.append(len(actions))
@@ -200,13 +208,13 @@ def encode(program: Program, modes, scent_max: int) -> ProgramTables:
 
 
 @kernel
-def class_bits(code, growth, ahead):
-    """The face directions of direction class ``code`` (``CLASS_*``) of a module with the growth
-    direction ``growth`` (-1: none) and the hint's bit set ``ahead``, as a bit set."""
+def class_bits(code, growth, hint, i):
+    """The face directions of direction class ``code`` (``CLASS_*``) of row ``i``, a module with
+    the growth direction ``growth`` (-1: none) and the hint ``hint[i]``, as a bit set."""
     if code == CLASS_GROWTH:
         return 0 if growth < 0 else 1 << growth
     if code == CLASS_HINT:
-        return ahead
+        return hint_bits(hint, i)[0]
     if code == CLASS_DOWN:
         return DOWN_BITS
     if code == CLASS_UP:
@@ -268,11 +276,14 @@ def run_program(seen, slots, memory, tables, rng, actions):
                 elif code == IF_SCENT_BELOW:
                     truth = own_scent[i, subject] < number
                 elif code == IF_NEIGHBOUR:
-                    direction = conditions[q, 3]
-                    ahead = hint_bits(hint, i)[0] if direction == CLASS_HINT else 0
-                    bits = class_bits(direction, growth[s], ahead)
+                    bits = class_bits(conditions[q, 3], growth[s], hint, i)
                     for k in range(12):
                         if (bits >> k) & 1 and neighbour_mode[i, k] == subject:
+                            truth = True
+                elif code == IF_AT_SPOT:
+                    for k in range(12):
+                        v = messages[i, k]
+                        if 1 <= v <= DIRECTION_MESSAGES and OPPOSITE[v - 1] == k and neighbour_mode[i, k] == subject:
                             truth = True
                 elif code == IF_GROUND:
                     truth = contact[i, 0] != 0
@@ -298,8 +309,7 @@ def run_program(seen, slots, memory, tables, rng, actions):
                 if code == DO_ROLE:
                     actions[i, 2 + argument] = fixed
                 elif code == DO_MOVE:
-                    ahead = hint_bits(hint, i)[0] if argument == CLASS_HINT else 0
-                    actions[i, 0] = random_pick(rng, legal & class_bits(argument, growth[s], ahead)) + 1
+                    actions[i, 0] = random_pick(rng, legal & class_bits(argument, growth[s], hint, i)) + 1
                 elif code == DO_GRADIENT:
                     for k in range(12):
                         scents[k] = neighbour_scent[i, k, argument] if neighbour_kind[i, k] == KIND_MODULE else smax
@@ -311,12 +321,20 @@ def run_program(seen, slots, memory, tables, rng, actions):
                             if heard[s] >= 0:
                                 actions[i, 0] = approach_spot(action_mask, i, k, heard[s], True, rng)
                             break
+                elif code == DO_AROUND:
+                    around = 0
+                    for k in range(12):
+                        if neighbour_mode[i, k] == argument:
+                            around |= AROUND_BITS[k]
+                    actions[i, 0] = random_pick(rng, legal & around) + 1
                 elif code == DO_STAY:
                     actions[i, 0] = 0
                 elif code == DO_PICK_GROWTH:
                     if growth[s] < 0:
-                        level = fixed == 1
-                        growth[s] = growth_direction(neighbour_kind, neighbour_mode, i, rng, level, -1, 0, False)
+                        empty = kind_bits(neighbour_kind, i, KIND_EMPTY)
+                        growth[s] = outward_pick(neighbour_kind, i, rng, empty & class_bits(fixed, -1, hint, i))
+                elif code == DO_DROP_GROWTH:
+                    growth[s] = -1
                 elif code == DO_TELL_GROWTH:
                     if growth[s] >= 0:
                         actions[i, n_fields - 2] = MESSAGE_TO_ALL
@@ -325,6 +343,11 @@ def run_program(seen, slots, memory, tables, rng, actions):
                 actions[i, 1] = go[r]
             if set_at[r] >= 0:
                 target = MESSAGE_TO_ALL if set_at[r] == SET_AT_ANY else growth[s]
+                if set_at[r] == SET_AT_ONE:  # the first neighbour in the mode the set applies to
+                    target = -1
+                    for k in range(11, -1, -1):
+                        if neighbour_mode[i, k] == mode_sets[set_value[r] - DIRECTION_MESSAGES - 1, 0]:
+                            target = k
                 if target >= 0:
                     actions[i, n_fields - 2] = target
                     actions[i, n_fields - 1] = set_value[r]

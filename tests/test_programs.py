@@ -3,6 +3,9 @@
 The chain program's limit comes from a measurement on the benchmark's setting (12 modules,
 ``sphere``, worlds 1000..1019, docs/guides/programs.md): every world formed the chain, in a
 mean 94 cycles, the slowest in 118; the limit here, 200 cycles, is well under the task's 300.
+The grasp program's bounds come from the same measurement on grasp's benchmark setting (100
+modules, distance 3, 300 cycles): 7 of the 20 worlds grasped, the slowest in 168 cycles; the
+test asks for 5 and 250.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from proteo_env.config import ConfigError
 from proteo_env.rollout import run_episode
 
 CHAIN = (PROGRAMS_DIR / "chain.yaml").read_text()
+GRASP_PAPER = (PROGRAMS_DIR / "grasp.yaml").read_text()
 
 RICH = """\
 task: chain-v1
@@ -49,6 +53,9 @@ modes:
       do: [emit scent, move level]
       go: SEED
   SEARCH:
+    - if: [at spot SEED, chance 0.5]
+      do: [move around SEED]
+      set: FINAL at one to SEARCH
     - if: [neighbour SEED]
       do: [move spot SEED]
     - if: [chance 0.1, not load above 0.5]
@@ -65,6 +72,8 @@ modes:
     - if: [waited 20, chance 0.1]
       do: [pick growth, tell growth]
       go: SLEEP
+    - if: [waited 10, chance 0.1]
+      do: [drop growth, pick hint growth]
     - do: [emit scent, pick level growth, tell growth, move growth]
   FINAL:
     - if: [not detects scent]
@@ -106,6 +115,15 @@ def test_the_paper_chain_program_builds_chains():
     for seed in range(1000, 1005):
         result = run_episode(env, make_policy("program", env, program="chain", seed=seed), seed=seed)
         assert result.success and result.cycles <= 200, (seed, result.cycles)
+
+
+def test_the_paper_grasp_program_grasps_on_some_worlds():
+    env = proteo_env.make("grasp-v0", n_modules=100, distance=3, max_cycles=300)
+    results = [
+        run_episode(env, make_policy("program", env, program="grasp", seed=s), seed=s) for s in range(1000, 1020)
+    ]
+    cycles = [r.cycles for r in results if r.success]
+    assert len(cycles) >= 5 and max(cycles) <= 250, cycles
 
 
 @pytest.mark.parametrize("text", [CHAIN, RICH], ids=["chain", "rich"])
@@ -195,6 +213,7 @@ PROGRAMS = {
     "chain": ("chain-v1", CHAIN, {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}),
     "rich": ("chain-v1", RICH, {"n_modules": 12, "max_cycles": 120}),
     "grasp": ("grasp-v0", GRASP, small_overrides("grasp-v0", max_cycles=120)),
+    "grasp paper": ("grasp-v0", GRASP_PAPER, small_overrides("grasp-v0", max_cycles=120)),
 }
 """Programs run by the compiled interpreter against their plain-Python reading: task, text, settings."""
 
