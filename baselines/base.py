@@ -75,9 +75,12 @@ def check_level(policy_cls, env) -> None:
 
 
 def constructor_parameters(policy_cls) -> dict[str, inspect.Parameter]:
-    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree."""
+    """Keyword parameters of ``policy_cls`` with defaults, following ``**kwargs`` up the class tree
+    (the fields of a :class:`KernelPolicy`'s ``Params`` are keyword parameters too)."""
     out: dict[str, inspect.Parameter] = {}
     for cls in policy_cls.__mro__:
+        for name, default in getattr(vars(cls).get("Params"), "_field_defaults", {}).items():
+            out.setdefault(name, inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default))
         if "__init__" not in vars(cls):
             continue
         signature = inspect.signature(cls.__init__).parameters
@@ -173,14 +176,19 @@ class KernelPolicy(Policy):
 
     A subclass is one behaviour's rule, given by:
 
+    - ``Params``: the rule's parameters, a ``NamedTuple`` whose fields with their defaults are
+      the policy's keyword parameters (:class:`~baselines.chain.ChainRuleParams`), with a
+      ``check()`` raising ``ValueError`` for a value not allowed and, optionally, ``CHOICES``
+      (``{field: the values allowed}``; the kernels read such a field as the index of its value);
+      a subclass's ``Params`` comes on top of its base class's (:class:`~baselines.branch.BranchPolicy`);
+    - ``Memory``: the :class:`SlotMemory` subclass of the rule's private memory;
     - ``rule``: the rule as a numba kernel (a ``staticmethod``),
       ``rule(seen, slots, memory, rules, rng, actions)``: ``seen`` an :class:`Observed` of A
       agent rows, ``slots`` (A,) int64 the memory slot of each row, ``memory`` the tuple
-      :meth:`SlotMemory.arrays` (each (S,)), ``rules`` the policy's ``rule_params``, ``rng`` the
-      policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions;
-    - ``memory``: a :class:`SlotMemory` (set in ``__init__``);
-    - ``rule_params`` (a property): the rule's parameters as ``rule`` reads them (a
-      NamedTuple such as :class:`~baselines.chain_rules.ChainRuleParams`).
+      :meth:`SlotMemory.arrays` (each (S,)), ``rules`` the policy's :attr:`rule_params`, ``rng`` the
+      policy's ``numpy.random.Generator``; writes ``actions`` (A, L) int64 full actions.
+
+    The parameters as given are attributes of the policy (``policy.p_random``).
 
     The same kernel runs here (:meth:`act`, :meth:`act_arrays`) and inside the compiled
     rollout (:mod:`baselines.compiled`), which is how a new behaviour gets both. Private
@@ -192,6 +200,8 @@ class KernelPolicy(Policy):
     """Every control level: below ``full`` the policy gives the leading fields of its full action
     (its moves at ``move``), and the level's autopilot, another instance of the task's rules with
     its own random draws, chooses the rest."""
+    Params: type | None = None
+    Memory: type[SlotMemory] | None = None
     memory: SlotMemory
     rule = None
     n_fields: int | None = None
@@ -205,13 +215,43 @@ class KernelPolicy(Policy):
         policy.n_fields = len(getattr(env, "control_fields", env.action_layout.field_names))
         return policy
 
-    def __init__(self, action_layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None):
+    def __init__(
+        self, action_layout: ActionLayout, modes, *, scent_max: int = 65535, seed: int | None = None, **params
+    ):
         super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
+        records = [vars(cls)["Params"] for cls in reversed(type(self).__mro__) if vars(cls).get("Params")]
+        unknown = set(params) - {name for record in records for name in record._fields}
+        if unknown:
+            raise TypeError(f"{type(self).__name__}() got an unexpected keyword argument {min(unknown)!r}")
+        given = {"scent_max": scent_max, **params}
+        self.params = tuple(record(**{k: v for k, v in given.items() if k in record._fields}) for record in records)
+        """The rule's parameters as given, one record per ``Params`` in the class tree, base class first."""
+        for values in self.params:
+            values.check()
+        read = tuple(_as_kernels_read(values) for values in self.params)
+        self._rule_params = read[0] if len(read) == 1 else read
+        if self.Memory is not None:
+            self.memory = self.Memory()
+            """Private memory of every module (see ``Memory``)."""
         self._slots: dict = {}
         """Memory slot of each agent name seen by :meth:`act`."""
         self._keyed_by: str | None = None
         self._row_slots = np.zeros(0, dtype=np.int64)
         """The slots of rows ``0 .. A-1`` (kept between calls of :meth:`act_arrays`)."""
+
+    def __getattr__(self, name):
+        """A rule parameter as given (``policy.p_random``)."""
+        for values in self.__dict__.get("params", ()):
+            if name in values._fields:
+                return getattr(values, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def rule_params(self):
+        """The rule's parameters as ``rule`` reads them: the ``Params`` record with every field of
+        its default's type and every choice as its index (a tuple of records, base class first,
+        when the class tree has several)."""
+        return self._rule_params
 
     def reset(self, seed=None):
         super().reset(seed)
@@ -292,6 +332,24 @@ class KernelPolicy(Policy):
         seen = Observed(*stacked_fields(field, Observed._fields))
         self.rule(seen, slots, self.memory.arrays(), self.rule_params, self.rng, actions)
         return actions
+
+
+def _as_kernels_read(values):
+    """The parameter record ``values`` as a rule kernel reads it: a field of ``CHOICES`` as the
+    index of its value among the values allowed (a ``ValueError`` for another), every other
+    converted to its default's type."""
+    choices = getattr(values, "CHOICES", {})
+    for name, allowed in choices.items():
+        if getattr(values, name) not in allowed:
+            raise ValueError(
+                f"{name}={getattr(values, name)!r} is not allowed; allowed: {', '.join(map(str, allowed))}"
+            )
+    return type(values)(
+        *(
+            choices[name].index(value) if name in choices else type(values._field_defaults[name])(value)
+            for name, value in zip(values._fields, values, strict=True)
+        )
+    )
 
 
 @functools.cache

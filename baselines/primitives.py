@@ -21,8 +21,8 @@ same actions wherever a rule runs (a policy's ``act``, the compiled rollout): a 
 among a set of directions draws 12 uniforms (one key per direction, the largest key among the
 set wins), also when the set has one member or none; :func:`uniform_pick` draws one integer.
 
-The behaviours' rules (:mod:`baselines.chain_rules`, :mod:`baselines.branch_rules`,
-:mod:`baselines.table_rules`, :mod:`baselines.grasp_rules`,
+The behaviours' rules (:mod:`baselines.chain`, :mod:`baselines.branch`,
+:mod:`baselines.table`, :mod:`baselines.grasp`,
 :mod:`baselines.locomotion_rules`, :mod:`baselines.crawl_rules`) are written with these.
 """
 

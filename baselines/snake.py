@@ -38,7 +38,7 @@ CRAWL, HEAD = int(SnakeMode.CRAWL), int(SnakeMode.HEAD)
 def chain_handover(seen, i, rules):
     """The snake's handover from the chain to the crawl (module docstring): the composed mode
     the chain module at row ``i`` of ``seen`` moves on to, or -1 (``rules``: the chain's
-    :class:`~baselines.chain_rules.ChainRuleParams`)."""
+    :class:`~baselines.chain.ChainRuleParams`)."""
     own = seen.own_mode[i, 0]
     looking, crawl = False, False
     for k in range(12):

@@ -146,7 +146,8 @@ def profile(n: int, cycles: int) -> dict:
     """
     import numba
 
-    from baselines.chain_rules import chain_actions
+    from baselines.base import Observed, stacked_fields
+    from baselines.chain import chain_actions
     from proteo_env.core import cycle
     from proteo_env.core.records import Actions, Observation
     from proteo_env.tasks.chain import is_chain
@@ -163,6 +164,7 @@ def profile(n: int, cycles: int) -> dict:
         w, s = env.engine, env.engine.scratch
         obs = env.observe_arrays()
         memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rule_params, np.arange(n)
+        seen = Observed(*stacked_fields(lambda f: getattr(obs, f), Observed._fields))
         actions = np.empty((n, env.action_layout.length), dtype=np.int64)
         moved = np.zeros(n, dtype=np.bool_)
         test = [np.zeros(n, dtype=np.int64) for _ in range(3)]
@@ -191,22 +193,7 @@ def profile(n: int, cycles: int) -> dict:
             t3 = time.perf_counter()
             draw(spare, DRAWS_PER_SEARCH_MODULE * searching)
             t4 = time.perf_counter()
-            chain_actions(
-                obs.own_mode,
-                obs.messages,
-                obs.neighbour_kind,
-                obs.neighbour_mode,
-                obs.neighbour_scent,
-                obs.own_scent,
-                obs.action_mask,
-                slots,
-                memory.heading,
-                memory.growth,
-                memory.asked,
-                rules,
-                policy.rng,
-                actions,
-            )
+            chain_actions(seen, slots, memory.arrays(), rules, policy.rng, actions)
             t5 = time.perf_counter()
             move = actions[:, 0].copy()
             for keep, part in ((True, "moves"), (False, "moves without the connectivity check")):

@@ -6,7 +6,7 @@ N = 12, the benchmark's limit), worlds ``env.reset(seed=s)`` for s in ``--first-
 ``--first-seed + --worlds - 1``, policy seed s. On every world, both:
 
 * ``rules``: the hand-written chain rules (``make_policy("chain", env)``, the kernel
-  :func:`~baselines.chain_rules.chain_decide`);
+  :func:`~baselines.chain.chain_actions`);
 * ``program``: ``baselines/programs/chain.yaml`` (``make_policy("program", env,
   program="chain")``, the program kernel :func:`~baselines.program_rules.run_program`);
 
