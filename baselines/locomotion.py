@@ -26,30 +26,107 @@ robot: modules roll over the others to the front and down ahead of it, a tread. 
 step the front piles up the step's face (each module that reaches the top of the pile is the
 new SEED) until one can roll onto the step over the pile's top.
 
-The rule runs as the numba kernel :func:`baselines.locomotion_rules.locomotion_actions`;
-every decision reads only that agent's observation and its private memory
-(:class:`LocomotionMemory`, one row per module).
+The rule runs as the numba kernel :func:`locomotion_actions` (the policy's ``rule``), here and
+in the compiled rollout (:mod:`baselines.compiled`); every decision reads only that agent's
+observation and its private memory (:class:`LocomotionMemory`, one row per module). Shared
+primitives: :mod:`baselines.primitives`.
+
+Draws from the policy's ``numpy.random.Generator``, row after row: one "random legal roll
+instead?" uniform, then 12 uniforms (:func:`~baselines.primitives.random_pick`).
+
+Array shapes (A agents, K neighbourhood sites, C = 1 scent channel, S memory slots, L = 5
+action fields): ``neighbour_kind`` (A, K) int8 and ``neighbour_scent`` (A, K, C) int32 (only
+the first 12 sites are read), ``own_scent`` (A, C) int32, ``action_mask`` (A, 13) int8,
+``hint`` (A, 3) float32 (the goal direction), ``slots`` (A,) int64, the memory ``idle`` (S,)
+int64, ``actions`` (A, L) int64.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
+from proteo_env.core.jit import kernel
+from proteo_env.spaces import EMIT, KIND_SOLID, RELAY
+from proteo_env.tasks.locomotion import SEARCH, SEED
+
 from .base import KernelPolicy, SlotMemory
-from .locomotion_rules import LocomotionRuleParams, locomotion_decide
+from .primitives import (
+    AROUND_BITS,
+    BIT_COUNT,
+    UP_BITS,
+    detects_scent,
+    hint_bits,
+    kind_bits,
+    legal_bits,
+    lowest_rolls,
+    module_bits,
+    random_pick,
+    seen_scent,
+    write_action,
+)
 
 
-class LocomotionMemory(SlotMemory):
-    """The locomotion rule's private memory of every module: ``idle`` (S,) int64, cycles in a
-    row without a roll to ask for."""
+@kernel
+def locomotion_actions(seen, slots, memory, rules, rng, actions):
+    """Every agent's action under the locomotion rule: the policy's ``rule``
+    (:attr:`baselines.base.KernelPolicy.rule`; ``memory`` is ``(idle,)``, shapes and draws in
+    the module docstring); writes ``actions`` (A, 5) and updates each row's ``idle`` count."""
+    neighbour_kind, neighbour_scent, own_scent = seen.neighbour_kind, seen.neighbour_scent, seen.own_scent
+    action_mask, hint = seen.action_mask, seen.hint
+    (idle,) = memory
+    scent = np.empty(12, dtype=np.int64)
+    for i in range(own_scent.shape[0]):
+        ahead, level = hint_bits(hint, i)
+        up = UP_BITS
+        modules = module_bits(neighbour_kind, i)
+        legal = legal_bits(action_mask, i)
+        seed = (modules & ahead) == 0 and (not rules.seed_on_top or (modules & up) == 0)
+        if seed:  # the front: a directed random roll ahead, down first; against an obstacle, up
+            pool = legal & ahead
+            if rules.low_first and pool & ~up:
+                pool &= ~up
+            if pool == 0 and kind_bits(neighbour_kind, i, KIND_SOLID) & ahead:
+                pool = legal & up & (ahead | level)
+        elif detects_scent(own_scent, neighbour_kind, neighbour_scent, i, rules.scent_max):
+            for k in range(12):
+                scent[k] = seen_scent(neighbour_kind, neighbour_scent, i, k, rules.scent_max)
+            pool, low = lowest_rolls(scent, legal)
+            here = rules.scent_max
+            for k in range(12):
+                here = min(here, scent[k])
+            if low > here or low >= rules.scent_max:
+                pool = legal & (ahead | level)
+            elif pool & ahead:
+                pool &= ahead
+                if rules.low_first and pool & ~up:
+                    pool &= ~up
+            elif pool & (ahead | level):
+                pool &= ahead | level
+        else:
+            pool = legal & ahead
+        held = 0  # no strands: rolls whose target keeps at least `contacts` of the modules seen next to it
+        for k in range(12):
+            if (pool >> k) & 1 and BIT_COUNT[modules & AROUND_BITS[k]] >= rules.contacts:
+                held |= 1 << k
+        if held:
+            pool = held
+        s = slots[i]
+        idle[s] = idle[s] + 1 if pool == 0 else 0
+        wild = rng.random() < rules.p_random or idle[s] > rules.patience
+        if wild:
+            pool = legal
+            idle[s] = 0
+        move = random_pick(rng, pool) + 1
+        write_action(actions, i, move, SEED if seed else SEARCH, EMIT if seed else RELAY, RELAY, 0, 0)
 
-    FIELDS = {"idle": (np.int64, 0)}
 
+class LocomotionRuleParams(NamedTuple):
+    """The locomotion rule's parameters, :class:`LocomotionPolicy`'s keywords (``scent_max``:
+    the scent value that means "no scent").
 
-class LocomotionPolicy(KernelPolicy):
-    """Hand-coded locomotion (rules in the module docstring).
-
-    Args:
+    Attributes:
         p_random: probability of a uniformly random legal roll instead of the rule's.
         patience: cycles in a row without a roll to ask for after which a module makes a
             random legal roll.
@@ -64,48 +141,38 @@ class LocomotionPolicy(KernelPolicy):
             with 0; docs/evidence/locomotion.md).
     """
 
+    scent_max: int = 65535
+    p_random: float = 0.02
+    patience: int = 10
+    seed_on_top: bool = True
+    low_first: bool = True
+    contacts: int = 2
+
+    def check(self) -> None:
+        """A ``ValueError`` for a value not allowed."""
+        if isinstance(self.p_random, bool) or not 0.0 <= self.p_random <= 1.0:
+            raise ValueError(f"p_random={self.p_random!r} is not allowed; allowed: a probability in [0, 1]")
+        if isinstance(self.patience, bool) or not isinstance(self.patience, int) or self.patience < 1:
+            raise ValueError(f"patience={self.patience!r} is not allowed; allowed: an integer >= 1")
+        if isinstance(self.contacts, bool) or not isinstance(self.contacts, int) or not 0 <= self.contacts <= 4:
+            raise ValueError(f"contacts={self.contacts!r} is not allowed; allowed: an integer in 0..4")
+
+
+class LocomotionMemory(SlotMemory):
+    """The locomotion rule's private memory of every module: ``idle`` (S,) int64, cycles in a
+    row without a roll to ask for."""
+
+    FIELDS = {"idle": (np.int64, 0)}
+
+
+class LocomotionPolicy(KernelPolicy):
+    """Hand-coded locomotion (rules in the module docstring; parameters:
+    :class:`LocomotionRuleParams`)."""
+
     name = "locomotion"
-    rule = staticmethod(locomotion_decide)
-
-    def __init__(
-        self,
-        action_layout,
-        modes,
-        *,
-        scent_max=65535,
-        seed=None,
-        p_random=0.02,
-        patience=10,
-        seed_on_top=True,
-        low_first=True,
-        contacts=2,
-    ):
-        super().__init__(action_layout, modes, scent_max=scent_max, seed=seed)
-        if isinstance(p_random, bool) or not 0.0 <= p_random <= 1.0:
-            raise ValueError(f"p_random={p_random!r} is not allowed; allowed: a probability in [0, 1]")
-        if isinstance(patience, bool) or not isinstance(patience, int) or patience < 1:
-            raise ValueError(f"patience={patience!r} is not allowed; allowed: an integer >= 1")
-        self.p_random = p_random
-        self.patience = patience
-        self.seed_on_top = seed_on_top
-        if isinstance(contacts, bool) or not isinstance(contacts, int) or not 0 <= contacts <= 4:
-            raise ValueError(f"contacts={contacts!r} is not allowed; allowed: an integer in 0..4")
-        self.low_first = low_first
-        self.contacts = contacts
-        self.memory = LocomotionMemory()
-        """Private memory of every module (see :class:`LocomotionMemory`)."""
-
-    @property
-    def rule_params(self) -> LocomotionRuleParams:
-        """The parameters as :func:`~baselines.locomotion_rules.locomotion_actions` reads them."""
-        return LocomotionRuleParams(
-            scent_max=int(self.scent_max),
-            p_random=float(self.p_random),
-            patience=int(self.patience),
-            seed_on_top=int(bool(self.seed_on_top)),
-            low_first=-1 if self.low_first else 0,
-            contacts=int(self.contacts),
-        )
+    Params = LocomotionRuleParams
+    Memory = LocomotionMemory
+    rule = staticmethod(locomotion_actions)
 
 
 __all__ = ["LocomotionMemory", "LocomotionPolicy"]

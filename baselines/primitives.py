@@ -23,7 +23,7 @@ set wins), also when the set has one member or none; :func:`uniform_pick` draws 
 
 The behaviours' rules (:mod:`baselines.chain`, :mod:`baselines.branch`,
 :mod:`baselines.table`, :mod:`baselines.grasp`,
-:mod:`baselines.locomotion_rules`, :mod:`baselines.crawl_rules`) are written with these.
+:mod:`baselines.locomotion`, :mod:`baselines.crawl`) are written with these.
 """
 
 from __future__ import annotations

@@ -27,8 +27,7 @@ from proteo_env.tasks.snake import CrawlMode, SnakeMode
 
 from .chain import ChainPolicy
 from .compose import Stage, compose
-from .crawl import CrawlPolicy
-from .crawl_rules import BECOME_HEAD, is_tail
+from .crawl import BECOME_HEAD, CrawlPolicy, is_tail
 
 SLEEP, SEARCH, SEED, FINAL = (int(SnakeMode[m]) for m in ("SLEEP", "SEARCH", "SEED", "FINAL"))
 CRAWL, HEAD = int(SnakeMode.CRAWL), int(SnakeMode.HEAD)

@@ -16,8 +16,7 @@ from baselines import make_policy
 from baselines.base import Observed, stacked_fields
 from baselines.compiled import compiled_rollout
 from baselines.compose import Stage, _view_table, compose
-from baselines.crawl import CrawlPolicy
-from baselines.crawl_rules import BECOME_HEAD
+from baselines.crawl import BECOME_HEAD, CrawlPolicy
 from baselines.locomotion import LocomotionPolicy
 from baselines.snake import SnakePolicy, chain_handover
 from proteo_env.config import ConfigError
