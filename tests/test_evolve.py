@@ -60,6 +60,10 @@ def test_evolution_improves_then_loads_as_a_checkpoint(tmp_path):
     final = evolve([*SMALL, *QUIET, "--generations", "6", "--run-dir", str(tmp_path / "run")])
     best = [float(row["fitness/best"]) for row in _rows(tmp_path / "run")]
     assert len(best) == 6 and best[-1] > best[0]
+    from training.plots import plot_evolution
+
+    plot_evolution({"evolve": [str(tmp_path / "run" / "progress.csv")] * 2}, tmp_path / "evolution.png")
+    assert (tmp_path / "evolution.png").stat().st_size > 0
     meta = json.loads((final / "proteo.json").read_text())
     assert (meta["algorithm"], meta["generation"], meta["seed"]) == ("program-evolution", 6, 0)
     assert checkpoint_kind(meta) == "evolved"
