@@ -127,6 +127,27 @@ def test_v2_extends_v1_with_the_evolved_recipes_only():
             assert (ROOT / recipe["config"]).is_file()
 
 
+def test_v3_extends_v2_with_the_program_evolution_recipes_on_chain_only():
+    """v3 adds the two recipes that evolve programs (from random ones and from the paper's) to
+    chain, judged at v2's evolved level; everything v2 fixes stays."""
+    v2, v3 = load_protocol("v2"), load_protocol("v3")
+    assert [v for v, _ in v3.lineage] == ["v1", "v2", "v3"] and v3.lineage[:2] == v2.lineage
+    for name, t in v3.tasks.items():
+        before = v2.tasks[name]
+        assert (t.task_id, t.trained_on, t.env, t.splits, t.levels) == (
+            before.task_id,
+            before.trained_on,
+            before.env,
+            before.splits,
+            before.levels,
+        )
+        added = {k: v for k, v in t.recipes.items() if k not in before.recipes}
+        assert {k: t.recipes[k] for k in before.recipes} == before.recipes
+        assert list(added) == (["evolve-full", "evolve-paper-full"] if name == "chain" else [])
+        for recipe in added.values():
+            assert (ROOT / recipe["config"]).is_file() and recipe["agent_steps"] is None
+
+
 def _extension(tmp_path: Path, text: str) -> Path:
     """A repository root holding configs/benchmark/v1.yaml and an extension v2.yaml of ``text``."""
     (tmp_path / "configs/benchmark").mkdir(parents=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import pickle
 
 import numpy as np
 import pytest
@@ -59,6 +60,10 @@ def test_evolution_improves_then_loads_as_a_checkpoint(tmp_path):
     final = evolve([*SMALL, *QUIET, "--generations", "6", "--run-dir", str(tmp_path / "run")])
     best = [float(row["fitness/best"]) for row in _rows(tmp_path / "run")]
     assert len(best) == 6 and best[-1] > best[0]
+    from training.plots import plot_evolution
+
+    plot_evolution({"evolve": [str(tmp_path / "run" / "progress.csv")] * 2}, tmp_path / "evolution.png")
+    assert (tmp_path / "evolution.png").stat().st_size > 0
     meta = json.loads((final / "proteo.json").read_text())
     assert (meta["algorithm"], meta["generation"], meta["seed"]) == ("program-evolution", 6, 0)
     assert checkpoint_kind(meta) == "evolved"
@@ -89,6 +94,29 @@ def test_resume_gives_the_same_run(tmp_path):
     assert (resumed / "program.yaml").read_text() == (whole / "program.yaml").read_text()
     fitness = [[row["fitness/best"] for row in _rows(tmp_path / name)] for name in ("whole", "cut")]
     assert fitness[0] == fitness[1]
+
+
+def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
+    """With ``final_episodes_per_variation`` the survivors are re-scored on new worlds after the
+    last generation; the checkpoint is the best of them there, with that fitness."""
+    from training.evolve import ProgramEpisode, generation_seeds, program_episode
+
+    final = evolve([*SMALL, *QUIET, "--generations", "2", "--final-episodes-per-variation", "2"]
+                   + ["--run-dir", str(tmp_path / "run")])  # fmt: skip
+    meta = json.loads((final / "proteo.json").read_text())
+    survivors = pickle.loads((final / "state.pkl").read_bytes())["population"]
+    assert (final / "program.yaml").read_text() == survivors[0]
+    final_stream = np.random.SeedSequence(0).spawn(3)[2]
+    seeds = generation_seeds(final_stream, 2, 2)
+    worlds = [json.dumps({**meta["args"]["env"], **v}, sort_keys=True) for v in meta["args"]["variations"]]
+    env = proteo_env.make("chain-v1", **meta["args"]["env"])
+
+    def fitness(text: str) -> float:
+        returns = [program_episode(ProgramEpisode("chain-v1", w, text, seed))[0] for w in worlds for seed in seeds]
+        return float(np.mean(returns)) - 0.001 * complexity(load_program(text, env))
+
+    scores = [fitness(text) for text in survivors]
+    assert scores[0] == pytest.approx(meta["fitness"]) and scores[0] == pytest.approx(max(scores))
 
 
 @pytest.mark.parametrize(

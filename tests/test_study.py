@@ -96,3 +96,17 @@ def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
     from training.ppo import Args
 
     assert parse_args(Args, ["--config", config]).join_bonus > 0
+
+
+@pytest.mark.parametrize(
+    ("recipe", "config"),
+    [
+        ("evolve", "configs/train/evolve_chain_full.yaml"),
+        ("evolve-paper", "configs/train/evolve_paper_chain_full.yaml"),
+    ],
+)
+def test_the_evolution_recipes_run_their_config_for_its_generations(tmp_path, recipe, config):
+    args = study.Args(tasks=("chain",), recipes=(recipe,), level="full", minutes=0.0)
+    cmd = study._command(args, recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("-m") + 1] == "training.evolve" and cmd[cmd.index("--config") + 1] == config
+    assert cmd[cmd.index("--time-limit-minutes") + 1] == "0.0" and cmd[cmd.index("--seed") + 1] == "2"

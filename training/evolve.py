@@ -17,14 +17,19 @@ actions. The worlds are common random numbers: the same for every program of a g
 new each generation, their seeds drawn from a ``numpy.random.SeedSequence`` child of the run
 seed (generation ``g`` uses the child's child ``g``). Policy seeds equal world seeds.
 
+A generation's best is chosen on few worlds, so it is partly luck. With
+``final_episodes_per_variation`` the surviving population is scored once more after the last
+generation, on that many new worlds per variation (a third stream of the run seed), and the
+best there is the final checkpoint; its ``proteo.json`` records that fitness.
+
 The best program of each generation is the checkpoint: ``program.yaml`` beside ``proteo.json``
 (algorithm ``program-evolution``), loaded by ``proteo eval --checkpoint`` and
 :func:`training.load_controller`. ``progress.csv`` and TensorBoard log the best and median
 fitness per generation. A run resumes like training/cma_es.py: rerun the same command after
 an interruption, or ``--resume CHECKPOINT --generations N`` to go on from a checkpoint.
 
-    python -m training.evolve --config configs/train/evolve_chain.yaml
-    python -m training.evolve --config configs/train/evolve_chain_paper.yaml --generations 5
+    python -m training.evolve --config configs/train/evolve_chain_full.yaml
+    python -m training.evolve --config configs/train/evolve_paper_chain_full.yaml --generations 5
 """
 
 from __future__ import annotations
@@ -85,6 +90,9 @@ class Args:
     """Conditions per rule."""
     max_actions: int = 3
     """Actions per rule."""
+    final_episodes_per_variation: int = 0
+    """Episodes per variation on which the survivors are scored after the last generation to
+    choose the final checkpoint (0: the last generation's best)."""
     seed: int = 0
     generations: int = 50
     checkpoint_every: int = 10
@@ -106,6 +114,7 @@ class Args:
 
 RESUME_INDEPENDENT = (
     "generations",
+    "final_episodes_per_variation",
     "time_limit_minutes",
     "checkpoint_every",
     "run_dir",
@@ -177,6 +186,7 @@ def check_args(args: Args) -> list[str]:
             "offspring": 1,
             "tournament": 1,
             "episodes_per_variation": 1,
+            "final_episodes_per_variation": 0,
             "max_rules": 1,
             "max_conditions": 0,
             "max_actions": 1,
@@ -265,8 +275,9 @@ def main(argv=None) -> Path:
     run_dir = make_run_dir(str(run_dir), run_dir.name, resume=resume_meta is not None or interrupted)
     save_args(args, run_dir)
 
-    # Two independent streams of the run's seed: the worlds, and the variation operators' draws.
-    world_stream, variation_stream = np.random.SeedSequence(args.seed).spawn(2)
+    # Independent streams of the run's seed: the generations' worlds, the variation operators'
+    # draws, and the worlds of the final choice.
+    world_stream, variation_stream, final_stream = np.random.SeedSequence(args.seed).spawn(3)
     rng = np.random.default_rng(variation_stream)
     if interrupted or resume_meta is not None:
         population = [load_program(text, env) for text in state["population"]]
@@ -326,32 +337,32 @@ def main(argv=None) -> Path:
     bar = tqdm(
         total=args.generations, initial=generation, unit="generation", desc=ALGORITHM, disable=not args.progress_bar
     )
-    while generation < args.generations:
-        seeds = generation_seeds(world_stream, generation, args.episodes_per_variation)
-        candidates = list({format_program(p): p for p in population + breed(population, space, rng, args)}.values())
-        texts = [format_program(p) for p in candidates]
+
+    def score(candidates: list, seeds: list[int], desc: str) -> tuple[list[float], list[list]]:
+        """The fitness of each candidate on the worlds of ``seeds`` in every variation, and its episodes."""
+        nonlocal agent_steps
         jobs = [
-            ProgramEpisode(args.task, overrides, text, seed)
-            for text in texts
+            ProgramEpisode(args.task, overrides, format_program(program), seed)
+            for program in candidates
             for overrides in variations
             for seed in seeds
         ]
         episodes = run_jobs(
-            episode,
-            jobs,
-            [j.key for j in jobs],
-            ray=ray,
-            journal=journal,
-            desc=f"generation {generation + 1}",
-            progress=args.progress_bar,
+            episode, jobs, [j.key for j in jobs], ray=ray, journal=journal, desc=desc, progress=args.progress_bar
         )
+        agent_steps += sum(r[2] * r[3] for r in episodes)
         per_program = len(variations) * len(seeds)
         outcomes = [episodes[c * per_program : (c + 1) * per_program] for c in range(len(candidates))]
         fitness = [
             float(np.mean([r[0] for r in results])) - args.complexity_penalty * complexity(program)
             for program, results in zip(candidates, outcomes)
         ]
-        agent_steps += sum(r[2] * r[3] for r in episodes)
+        return fitness, outcomes
+
+    while generation < args.generations:
+        seeds = generation_seeds(world_stream, generation, args.episodes_per_variation)
+        candidates = list({format_program(p): p for p in population + breed(population, space, rng, args)}.values())
+        fitness, outcomes = score(candidates, seeds, f"generation {generation + 1}")
         order = sorted(range(len(candidates)), key=lambda c: -fitness[c])[: args.population]
         population = [candidates[c] for c in order]
         best = order[0]
@@ -377,6 +388,12 @@ def main(argv=None) -> Path:
         if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
             break
     bar.close()
+    if args.final_episodes_per_variation:
+        seeds = generation_seeds(final_stream, generation, args.final_episodes_per_variation)
+        fitness, _ = score(population, seeds, "final choice")
+        order = sorted(range(len(population)), key=lambda c: -fitness[c])
+        population, best_fitness = [population[c] for c in order], fitness[order[0]]
+        print(f"final choice on {len(seeds) * len(variations)} worlds: survivor {order[0] + 1}, fitness {best_fitness}")
     save(run_dir / "final")
     journal.complete()
     log.close()

@@ -2,10 +2,15 @@
 
     python -m training.plots runs/sb3_ppo_chain_s0 runs/torchrl_ippo_chain_s0 --out docs/learning/curves.png
     python -m training.plots "MaskablePPO=docs/learning/progress/sb3_ppo_chain_s0.csv" --out curves.png
+    python -m training.plots --evolution "evolve=docs/benchmark/v3/learning/progress/evolve_chain_full_s*.csv" --out e.png
 
 One figure: episode return, success rate and cycles per episode against agent-steps, and the
 return against wall-clock minutes; each run is a line (smoothed over ``--window`` log rows),
 with the hand-coded policy's mean as a dashed reference when ``--reference`` is given.
+
+With ``--evolution`` each argument is ``LABEL=GLOB``, the progress of one evolution recipe's
+seeds (training/evolve.py): the best and the median fitness of each generation against the
+programs scored so far, the mean over seeds with a 95 % t band.
 """
 
 from __future__ import annotations
@@ -72,14 +77,64 @@ def plot_runs(
     plt.close(fig)
 
 
+def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = None) -> None:
+    """Best and median fitness per generation against programs scored, the mean over each recipe's
+    seeds (its ``progress.csv`` files) with a 95 % t band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from training.statistics import t_quantile
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
+    for colour, (label, paths) in enumerate(recipes.items()):
+        runs = [read_progress(path) for path in paths]
+        scored = [np.cumsum(run["evolve/candidates"]) for run in runs]
+        grid = np.linspace(max(s[0] for s in scored), min(s[-1] for s in scored), 100)
+        for ax, column in zip(axes, ("fitness/best", "fitness/median")):
+            ys = np.stack([np.interp(grid, s, run[column]) for s, run in zip(scored, runs)])
+            mean = ys.mean(axis=0)
+            if len(runs) > 1:
+                half = t_quantile(len(runs) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(runs))
+                ax.fill_between(grid, mean - half, mean + half, color=f"C{colour}", alpha=0.2)
+            ax.plot(grid, mean, color=f"C{colour}", label=f"{label} ({len(runs)} seeds)")
+    for ax, panel in zip(axes, ("best fitness of a generation", "median fitness of a generation")):
+        ax.set_xlabel("programs scored")
+        ax.set_title(panel)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("fitness (mean return - complexity penalty)")
+    axes[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", help="run folders (label=folder to name a line)")
+    parser.add_argument(
+        "runs", nargs="+", help="run folders (label=folder to name a line), or LABEL=GLOB with --evolution"
+    )
+    parser.add_argument("--evolution", action="store_true", help="fitness curves of evolution recipes, mean over seeds")
     parser.add_argument("--out", default="out/learning_curves.png")
     parser.add_argument("--window", type=int, default=5)
     parser.add_argument("--reference", default=None, help="hand-coded means, e.g. 'return=1.6,success=1,cycles=91'")
     parser.add_argument("--title", default=None, help="figure title (the task and its size, for example)")
     args = parser.parse_args(argv)
+    if args.evolution:
+        from glob import glob
+
+        groups = dict(r.split("=", 1) for r in args.runs)
+        recipes = {label: sorted(glob(pattern)) for label, pattern in groups.items()}
+        for label, paths in recipes.items():
+            if not paths:
+                raise ValueError(f"{label}={groups[label]!r} matches no file; allowed: a glob of progress.csv files")
+        plot_evolution(recipes, args.out, title=args.title)
+        print(args.out)
+        return 0
     runs = dict(r.split("=", 1) if "=" in r else (Path(r).name, r) for r in args.runs)
     reference = None
     if args.reference:

@@ -7,25 +7,32 @@
 
 Recipes (``recipes``), each a script and a config per task and level:
 
-============== ======================== ====================================================
-recipe         script                   config
-============== ======================== ====================================================
-``ppo``        ``training/ppo.py``      ``configs/train/ppo_<task>_<level>.yaml``
-``ppo48``      ``training/ppo.py``      the same, for 48 M agent-steps
-``imitation``  ``training/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
-``kickstart``  ``training/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
-                                        ``--init`` the kept clone of the same task and seed
-``curriculum`` ``training/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
-                                        of env overrides, no demonstrations)
-``credit``     ``training/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
-                                        with module credit (``join_bonus``), from the same clone
-``cma``        ``training/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
-                                        the hand-coded rules' parameters (level ``full``, for
-                                        the config's generations)
-============== ======================== ====================================================
+================ ======================== ====================================================
+recipe           script                   config
+================ ======================== ====================================================
+``ppo``          ``training/ppo.py``      ``configs/train/ppo_<task>_<level>.yaml``
+``ppo48``        ``training/ppo.py``      the same, for 48 M agent-steps
+``imitation``    ``training/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
+``kickstart``    ``training/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
+                                          ``--init`` the kept clone of the same task and seed
+``curriculum``   ``training/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
+                                          of env overrides, no demonstrations)
+``credit``       ``training/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
+                                          with module credit (``join_bonus``), from the same clone
+``cma``          ``training/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
+                                          the hand-coded rules' parameters (level ``full``, for
+                                          the config's generations)
+``evolve``       ``training/evolve.py``   ``configs/train/evolve_<task>_full.yaml``: evolution of
+                                          programs of the paper's primitives from random ones
+                                          (level ``full``, for the config's generations)
+``evolve-paper`` ``training/evolve.py``   ``configs/train/evolve_paper_<task>_full.yaml``: the
+                                          same from the paper's program
+                                          (``baselines/programs/<task>.yaml``)
+================ ======================== ====================================================
 
 For each recipe, task and seed it trains the config with ``--seed S`` (PPO recipes for
-``total_steps`` agent-steps or the time limit ``minutes``, CMA-ES for its generations or that limit; ``parallel`` runs at a time, one
+``total_steps`` agent-steps or the time limit ``minutes``, CMA-ES and program evolution for
+their generations or that limit; ``parallel`` runs at a time, one
 thread each; a kickstart run waits for its clone), then keeps:
 
 - the final checkpoint, without its optimiser state (``--resume`` reads that from the run
@@ -62,6 +69,8 @@ RECIPES = {
     "curriculum": ("training.ppo", "curriculum", 0),
     "credit": ("training.ppo", "credit", 0),
     "cma": ("training.cma_es", "cma_rules", 0),
+    "evolve": ("training.evolve", "evolve", 0),
+    "evolve-paper": ("training.evolve", "evolve_paper", 0),
 }
 """Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
 unless ``total_steps`` says otherwise; 0: the config's)."""
@@ -75,14 +84,15 @@ class Args:
 
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     recipes: tuple[str, ...] = ("ppo",)
-    """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit); see the module docstring."""
+    """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit, cma, evolve,
+    evolve-paper); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
     total_steps: int = 0
     """Agent-steps of each PPO run (0: the config's total_steps)."""
     minutes: float = 6.0
-    """Wall-clock limit of each PPO or CMA-ES run (0: none; then every run trains for its steps, whatever the machine's load)."""
+    """Wall-clock limit of each PPO, CMA-ES or evolution run (0: none; then every run trains for its steps, whatever the machine's load)."""
     parallel: int = 2
     """Runs at a time (each uses one thread)."""
     flags: dict = field(default_factory=dict)
@@ -120,7 +130,7 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
         "--progress-bar",
         "false",
     ]
-    if module in ("training.ppo", "training.cma_es"):
+    if module in ("training.ppo", "training.cma_es", "training.evolve"):
         cmd += ["--time-limit-minutes", str(args.minutes)]
     if module == "training.ppo":
         steps = args.total_steps or RECIPES[recipe][2]
