@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from proteo_env.config import ConfigError
 from proteo_env.core.lattice import OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.registry import task_name
@@ -50,7 +51,7 @@ from .primitives import (
     outward_pick,
     random_pick,
 )
-from .program import DIRECTION_MESSAGES, Program, load_program
+from .program import DIRECTION_MESSAGES, PROGRAMS_DIR, Program, load_program
 from .program_rules import DOWN_BITS, ProgramTables, encode, run_program
 
 ROLE_OF = {"emit {channel}": EMIT, "relay {channel}": RELAY, "block {channel}": SILENT}
@@ -255,7 +256,13 @@ class ProgramPolicy(KernelPolicy):
     rule = staticmethod(run_program)
 
     @classmethod
-    def for_env(cls, env, *, seed: int | None = None, program):
+    def for_env(cls, env, *, seed: int | None = None, program=None):
+        if program is None:
+            raise ConfigError(
+                "program = None is not allowed; allowed: a program's name in baselines/programs/ "
+                f"({', '.join(sorted(p.stem for p in PROGRAMS_DIR.glob('*.yaml')))}), a path to a YAML file, "
+                "or the program's text"
+            )
         return super().for_env(env, seed=seed, program=load_program(program, env))
 
     def __init__(self, action_layout, modes, *, scent_max=65535, seed=None, program: Program):

@@ -180,6 +180,12 @@ def test_a_missing_program_is_one_error():
         load_program("no_such_program", "chain")
 
 
+def test_the_program_policy_without_a_program_is_one_error():
+    env = proteo_env.make("chain-v1", n_modules=12)
+    with pytest.raises(ConfigError, match="program = None is not allowed; allowed: .*chain, grasp"):
+        make_policy("program", env)
+
+
 def test_same_seed_same_observations_same_actions():
     env = chain_env()
     observations, _ = env.reset(seed=1003)
