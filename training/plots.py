@@ -77,6 +77,22 @@ def plot_runs(
     plt.close(fig)
 
 
+def plot_mean_band(ax, x: np.ndarray, ys: np.ndarray, label: str, *, color=None, clip=None) -> None:
+    """Plot ``ys`` ``(seeds, points)`` against ``x`` ``(points,)`` as the mean over seeds with a
+    95 % Student t band (with two or more seeds), the band cut to ``clip`` ``(low, high)`` if given."""
+    from training.statistics import t_quantile
+
+    colour = {} if color is None else {"color": color}
+    mean = ys.mean(axis=0)
+    if len(ys) > 1:
+        half = t_quantile(len(ys) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(ys))
+        low, high = mean - half, mean + half
+        if clip is not None:
+            low, high = np.clip(low, *clip), np.clip(high, *clip)
+        ax.fill_between(x, low, high, alpha=0.2, **colour)
+    ax.plot(x, mean, label=label, **colour)
+
+
 def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = None) -> None:
     """Best and median fitness per generation against programs scored, the mean over each recipe's
     seeds (its ``progress.csv`` files) with a 95 % t band."""
@@ -85,8 +101,6 @@ def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from training.statistics import t_quantile
-
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
     for colour, (label, paths) in enumerate(recipes.items()):
         runs = [read_progress(path) for path in paths]
@@ -94,11 +108,7 @@ def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = No
         grid = np.linspace(max(s[0] for s in scored), min(s[-1] for s in scored), 100)
         for ax, column in zip(axes, ("fitness/best", "fitness/median")):
             ys = np.stack([np.interp(grid, s, run[column]) for s, run in zip(scored, runs)])
-            mean = ys.mean(axis=0)
-            if len(runs) > 1:
-                half = t_quantile(len(runs) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(runs))
-                ax.fill_between(grid, mean - half, mean + half, color=f"C{colour}", alpha=0.2)
-            ax.plot(grid, mean, color=f"C{colour}", label=f"{label} ({len(runs)} seeds)")
+            plot_mean_band(ax, grid, ys, f"{label} ({len(runs)} seeds)", color=f"C{colour}")
     for ax, panel in zip(axes, ("best fitness of a generation", "median fitness of a generation")):
         ax.set_xlabel("programs scored")
         ax.set_title(panel)

@@ -242,16 +242,14 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from training.plots import plot_mean_band
+
     fig, ax = plt.subplots(figsize=(6.0, 3.4))
     for recipe, runs in sorted(found.items()):
         end = min(r[0, -1] for r in runs)
         grid = np.linspace(max(r[0, 0] for r in runs), end, 60)
         ys = np.stack([np.interp(grid, r[0], _smooth(r[1], SMOOTH_ROWS)) for r in runs])
-        mean = ys.mean(axis=0)
-        if len(runs) > 1:
-            half = st.t_quantile(len(runs) - 1) * ys.std(axis=0, ddof=1) / np.sqrt(len(runs))
-            ax.fill_between(grid / 1e6, np.clip(mean - half, 0, 1), np.clip(mean + half, 0, 1), alpha=0.2)
-        ax.plot(grid / 1e6, mean, label=f"{recipe} ({len(runs)} seeds)")
+        plot_mean_band(ax, grid / 1e6, ys, f"{recipe} ({len(runs)} seeds)", clip=(0, 1))
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("agent-steps (millions)")
     ax.set_ylabel(f"training success rate ({SMOOTH_ROWS}-row mean)")
