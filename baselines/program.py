@@ -50,6 +50,7 @@ CONDITIONS = {
     "load below {number}": "the weight the module carries is below the number",
     "can move": "the module has a legal roll",
     "waited {count}": "the module has been in its mode for at least the count of cycles",
+    "sent {count}": "the module has sent at least the count of mode sets (``set``) since it entered its mode",
     "chance {probability}": "true with the probability (one draw)",
 }
 """Condition phrases and what each senses (the module's own observation and memory only)."""

@@ -13,12 +13,13 @@ Each cycle, module by module in row order, a program is read so:
    mode set (value ``13 + j``, pair ``j`` of :attr:`~baselines.program.Program.mode_sets`)
    sets the module's mode when the module is in the pair's first mode, and its growth to the
    direction the message travelled (so a new seed grows on straight);
-2. counts the cycles it has been in its mode (``waited``);
+2. counts the cycles it has been in its mode (``waited``; on a new mode ``waited`` and ``sent``
+   start again at 0);
 3. fires the first rule of its mode whose conditions all hold (they are checked in the order
    written, up to the first that fails), drawing from the policy's generator in the order
    the conditions and actions are written, and writes the action: the rule's roll (stay by
    default), ``go`` mode (its mode by default), the scent roles (relay by default) and one
-   message (``tell growth`` or ``set``).
+   message (``tell growth`` or ``set``; a ``set`` that goes out adds one to ``sent``).
 
 The conditions and actions are the primitives of :mod:`baselines.primitives` that the
 hand-written rules use (legal rolls, the gradient's lowest rolls, growth directions, the
@@ -67,6 +68,7 @@ class ProgramMemory(SlotMemory):
         heard: ``(S,)`` int64 the last growth direction a neighbour told it (-1: none).
         last_mode: ``(S,)`` int64 its mode last cycle (-1: none yet).
         waited: ``(S,)`` int64 cycles it has been in its mode.
+        sent: ``(S,)`` int64 mode sets it has sent since it entered its mode.
     """
 
     FIELDS = {
@@ -74,6 +76,7 @@ class ProgramMemory(SlotMemory):
         "heard": (np.int64, -1),
         "last_mode": (np.int64, -1),
         "waited": (np.int64, 0),
+        "sent": (np.int64, 0),
     }
 
 
@@ -90,7 +93,7 @@ class _Module:
 
     def __init__(self, seen, memory, i: int, s: int, params: ProgramParams, rng):
         self.seen, self.i, self.s, self.params, self.rng = seen, i, s, params, rng
-        self.growth, self.heard, self.last_mode, self.waited = memory
+        self.growth, self.heard, self.last_mode, self.waited, self.sent = memory
         self.legal = legal_bits(seen.action_mask, i)
 
     def channel(self, name: str) -> int:
@@ -155,6 +158,8 @@ class _Module:
             return self.waited[self.s] >= value(args[0])
         if pattern == "chance {probability}":
             return self.rng.random() < value(args[0])
+        if pattern == "sent {count}":
+            return self.sent[self.s] >= value(args[0])
         raise AssertionError(f"condition {pattern!r} has no meaning here")  # the loader admits none other
 
     def act(self, pattern: str, args: tuple, action: np.ndarray) -> None:
@@ -213,7 +218,11 @@ def interpret(seen, slots, memory, params: ProgramParams, rng, actions) -> None:
                 if mode == module.mode_index(neighbour_mode):
                     mode = module.mode_index(to)
                     module.growth[s] = OPPOSITE[k]
-        module.waited[s] = module.waited[s] + 1 if mode == module.last_mode[s] else 0
+        if mode == module.last_mode[s]:
+            module.waited[s] += 1
+        else:
+            module.waited[s] = 0
+            module.sent[s] = 0
         module.last_mode[s] = mode
         action = actions[i]
         action[:] = 0
@@ -236,6 +245,7 @@ def interpret(seen, slots, memory, params: ProgramParams, rng, actions) -> None:
             if target >= 0:
                 pair = mode_sets.index((rule.set.neighbour_mode, rule.set.to))
                 action[-2:] = target, DIRECTION_MESSAGES + 1 + pair
+                module.sent[s] += 1
 
 
 class ProgramPolicy(KernelPolicy):

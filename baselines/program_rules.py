@@ -17,7 +17,7 @@ observations, memory and generator state (``tests/test_programs.py``).
 Shapes (A agents, S memory slots, M task modes, R rules, Q conditions, P actions, J mode sets,
 C channels, L = 4 + C action fields): the observation fields as
 :class:`~baselines.base.Observed` gives them, ``slots`` (A,) int64, the memory
-``(growth, heard, last_mode, waited)`` of :class:`~baselines.program_policy.ProgramMemory`,
+``(growth, heard, last_mode, waited, sent)`` of :class:`~baselines.program_policy.ProgramMemory`,
 each (S,) int64, ``actions`` (A, L) int64 written.
 """
 
@@ -63,7 +63,8 @@ DOWN_BITS = ALL_BITS & ~(UP_BITS | HORIZONTAL_BITS)
     IF_CAN_MOVE,
     IF_WAITED,
     IF_CHANCE,
-) = range(12)
+    IF_SENT,
+) = range(13)
 CONDITION_CODES = {
     "detects {channel}": IF_DETECTS,
     "scent {channel} above {count}": IF_SCENT_ABOVE,
@@ -78,6 +79,7 @@ CONDITION_CODES = {
     "can move": IF_CAN_MOVE,
     "waited {count}": IF_WAITED,
     "chance {probability}": IF_CHANCE,
+    "sent {count}": IF_SENT,
 }
 """The opcode of each condition phrase of :data:`~baselines.program.CONDITIONS`."""
 
@@ -230,11 +232,11 @@ def run_program(seen, slots, memory, tables, rng, actions):
     by module in row order, as :func:`baselines.program_policy.interpret` reads it: messages
     (heard growth, mode sets), ``waited``, the first rule of the mode whose conditions all hold
     (its actions, ``go`` and ``set``; defaults: stay, keep the mode, relay, no message).
-    ``memory`` is ``(growth, heard, last_mode, waited)`` (shapes in the module docstring).
+    ``memory`` is ``(growth, heard, last_mode, waited, sent)`` (shapes in the module docstring).
 
     One loop with the opcodes' meanings written in it: a call with array arguments per
     condition or action would cost more than the opcode's work."""
-    growth, heard, last_mode, waited = memory
+    growth, heard, last_mode, waited, sent = memory
     own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask, contact, load, hint = (
         seen
     )
@@ -255,7 +257,11 @@ def run_program(seen, slots, memory, tables, rng, actions):
                 if mode == mode_sets[j, 0]:
                     mode = mode_sets[j, 1]
                     growth[s] = OPPOSITE[k]
-        waited[s] = waited[s] + 1 if mode == last_mode[s] else 0
+        if mode == last_mode[s]:
+            waited[s] += 1
+        else:
+            waited[s] = 0
+            sent[s] = 0
         last_mode[s] = mode
         actions[i, :] = 0
         actions[i, 1] = mode
@@ -299,6 +305,8 @@ def run_program(seen, slots, memory, tables, rng, actions):
                     truth = waited[s] >= number
                 elif code == IF_CHANCE:
                     truth = rng.random() < number
+                elif code == IF_SENT:
+                    truth = sent[s] >= number
                 if truth == (conditions[q, 1] != 0):
                     fires = False
                     break
@@ -351,4 +359,5 @@ def run_program(seen, slots, memory, tables, rng, actions):
                 if target >= 0:
                     actions[i, n_fields - 2] = target
                     actions[i, n_fields - 1] = set_value[r]
+                    sent[s] += 1
             break

@@ -5,7 +5,10 @@ The chain program's limit comes from a measurement on the benchmark's setting (1
 mean 94 cycles, the slowest in 118; the limit here, 200 cycles, is well under the task's 300.
 The grasp program's bounds come from the same measurement on grasp's benchmark setting (100
 modules, distance 3, 300 cycles): 7 of the 20 worlds grasped, the slowest in 168 cycles; the
-test asks for 5 and 250.
+test asks for 5 and 250. The branch program on branch's benchmark setting (40 modules, T = 4,
+B = 3, 200 cycles): 12 of the 20 worlds, the slowest in 166 cycles; the test asks for 8. The
+table program on table's (a 9 x 9 board, 16 spares, 600 cycles): 5 of 20 worlds; the test asks
+for 2 of them.
 """
 
 from __future__ import annotations
@@ -33,6 +36,17 @@ from proteo_env.rollout import run_episode
 
 CHAIN = (PROGRAMS_DIR / "chain.yaml").read_text()
 GRASP_PAPER = (PROGRAMS_DIR / "grasp.yaml").read_text()
+BRANCH_PAPER = (PROGRAMS_DIR / "branch.yaml").read_text()
+TABLE_PAPER = (PROGRAMS_DIR / "table.yaml").read_text()
+TABLE_BENCHMARK = {
+    "board_size": 9,
+    "depth": 2,
+    "n_spares": 16,
+    "schedule": [[0, 8, 2], [150, 2, 8], [300, 5, 5]],
+    "stable_window": 50,
+    "motion_model": "minimal",
+    "max_cycles": 600,
+}
 
 RICH = """\
 task: chain-v1
@@ -53,7 +67,7 @@ modes:
       do: [emit scent, move level]
       go: SEED
   SEARCH:
-    - if: [at spot SEED, chance 0.5]
+    - if: [at spot SEED, chance 0.5, not sent 3]
       do: [move around SEED]
       set: FINAL at one to SEARCH
     - if: [neighbour SEED]
@@ -124,6 +138,50 @@ def test_the_paper_grasp_program_grasps_on_some_worlds():
     ]
     cycles = [r.cycles for r in results if r.success]
     assert len(cycles) >= 5 and max(cycles) <= 250, cycles
+
+
+def test_the_paper_branch_program_grows_two_levels_on_most_worlds():
+    env = proteo_env.make("branch-v0", n_modules=40, T=4, B=3, max_cycles=200)
+    results = [
+        run_episode(env, make_policy("program", env, program="branch", seed=s), seed=s) for s in range(1000, 1020)
+    ]
+    assert sum(r.success for r in results) >= 8
+    assert all(r.metrics["levels"] >= 1 for r in results if r.metrics["tree_size"] > 20)
+
+
+def test_the_paper_table_program_restabilises_on_some_worlds():
+    env = proteo_env.make("table-v1", **TABLE_BENCHMARK)
+    results = [run_episode(env, make_policy("program", env, program="table", seed=s), seed=s) for s in range(1000, 1020)]
+    assert sum(r.success for r in results) >= 2
+    assert all(r.metrics["leg_creations"] >= 2 for r in results)
+
+
+SENDS_TWICE = """\
+task: chain
+channels: [scent]
+start: [SLEEP, SEED]
+modes:
+  SEED:
+    - if: [sent 2]
+      go: FINAL
+    - set: SLEEP to SEARCH
+"""
+"""A seed that sends a mode set to all neighbours each cycle and goes FINAL after two."""
+
+
+def test_sent_counts_the_mode_sets_a_module_sent_in_its_mode():
+    env = chain_env()
+    policy = make_policy("program", env, program=SENDS_TWICE, seed=0)
+    observations, _ = env.reset(seed=1000)
+    seed_mode = env.task.modes.index("SEED")
+    (seed,) = [a for a in env.agents if observations[a]["own_mode"][0] == seed_mode]
+    modes = []
+    for _ in range(3):
+        actions = policy.act(observations)
+        modes.append(env.task.modes[actions[seed][1]])
+        observations, *_ = env.step(actions)
+    assert modes == ["SEED", "SEED", "FINAL"]
+    assert dict(zip(ProgramMemory.FIELDS, policy.memory.arrays()))["sent"].max() == 2
 
 
 @pytest.mark.parametrize("text", [CHAIN, RICH], ids=["chain", "rich"])
@@ -220,6 +278,8 @@ PROGRAMS = {
     "rich": ("chain-v1", RICH, {"n_modules": 12, "max_cycles": 120}),
     "grasp": ("grasp-v0", GRASP, small_overrides("grasp-v0", max_cycles=120)),
     "grasp paper": ("grasp-v0", GRASP_PAPER, small_overrides("grasp-v0", max_cycles=120)),
+    "branch paper": ("branch-v0", BRANCH_PAPER, {"n_modules": 40, "T": 4, "B": 3, "max_cycles": 120}),
+    "table paper": ("table-v1", TABLE_PAPER, {**TABLE_BENCHMARK, "max_cycles": 200}),
 }
 """Programs run by the compiled interpreter against their plain-Python reading: task, text, settings."""
 
