@@ -36,19 +36,19 @@ bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
 
-# docs/results.md: every controller judged under benchmark protocol v3, which extends v2 and v1
-# (docs/benchmark/v1, v2 and v3, written by proteo eval --benchmark v1|v2|v3;
+# docs/results.md: every controller judged under benchmark protocol v4, which extends v3, v2 and v1
+# (docs/benchmark/v1 to v4, written by proteo eval --benchmark v1|v2|v3|v4;
 # docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
 results: install
-	$(BIN)/python -m training.results --benchmark v3 --publish README.md
+	$(BIN)/python -m training.results --benchmark v4 --publish README.md
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
-# The study under benchmark protocols v1, v2 and v3 (configs/benchmark/, docs/guides/benchmark.md),
+# The study under benchmark protocols v1 to v4 (configs/benchmark/, docs/guides/benchmark.md),
 # about 165 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
 # docs/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
-# parameters; v3: evolved programs), each recipe judged on every split of its task (proteo eval
+# parameters; v3: evolved chain programs; v4: evolved branch, table and grasp programs), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
 # judged once per protocol: make benchmark-references (about 25 minutes).
 # The former three-seed study (docs/journal/learning-study-move.md) is reproduced from its own
@@ -57,13 +57,16 @@ STUDY := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]"
 STUDY_V1 := $(STUDY) --keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning --runs-dir runs/v1
 STUDY_V2 := $(STUDY) --keep-dir checkpoints/v2 --docs-dir docs/benchmark/v2/learning --runs-dir runs/v2
 STUDY_V3 := $(STUDY) --keep-dir checkpoints/v3 --docs-dir docs/benchmark/v3/learning --runs-dir runs/v3
+STUDY_V4 := $(STUDY) --keep-dir checkpoints/v4 --docs-dir docs/benchmark/v4/learning --runs-dir runs/v4
 learning-results: install
 	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[chain, branch, grasp, locomotion]" --total-steps 16000000 $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[cma]" --tasks "[grasp, table, branch, chain]" --level full $(STUDY_V2)
 	$(BIN)/python -m training.study --recipes "[evolve, evolve-paper]" --tasks "[chain]" --level full $(STUDY_V3)
-	for version in v1 v2 v3; do for recipe in checkpoints/$$version/*/*_*; do \
+	$(BIN)/python -m training.study --recipes "[evolve-paper, evolve]" --tasks "[branch]" --level full $(STUDY_V4)
+	$(BIN)/python -m training.study --recipes "[evolve-paper]" --tasks "[table, grasp]" --level full $(STUDY_V4)
+	for version in v1 v2 v3 v4; do for recipe in checkpoints/$$version/*/*_*; do \
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done
 	$(MAKE) results

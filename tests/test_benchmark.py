@@ -314,3 +314,29 @@ def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_pa
         assert row["summary"]["interval"] == "stratified bootstrap" and row["summary"]["training_seeds"] == 2
         assert not row["complete"]  # 2 training seeds of the 5 the protocol asks for
     assert any("2 training seed(s)" in n for n in doc["notes"])
+
+
+def test_v4_extends_v3_with_the_program_evolution_recipes_on_branch_table_and_grasp():
+    """v4 adds evolution from the paper's programs on branch, table and grasp, and from random
+    programs on branch, judged at v2's evolved level; everything v3 fixes stays."""
+    v3, v4 = load_protocol("v3"), load_protocol("v4")
+    assert [v for v, _ in v4.lineage] == ["v1", "v2", "v3", "v4"] and v4.lineage[:3] == v3.lineage
+    added_by_task = {
+        "branch": ["evolve-full", "evolve-paper-full"],
+        "table": ["evolve-paper-full"],
+        "grasp": ["evolve-paper-full"],
+    }
+    for name, t in v4.tasks.items():
+        before = v3.tasks[name]
+        assert (t.task_id, t.trained_on, t.env, t.splits, t.levels) == (
+            before.task_id,
+            before.trained_on,
+            before.env,
+            before.splits,
+            before.levels,
+        )
+        added = {k: v for k, v in t.recipes.items() if k not in before.recipes}
+        assert {k: t.recipes[k] for k in before.recipes} == before.recipes
+        assert sorted(added) == added_by_task.get(name, [])
+        for recipe in added.values():
+            assert (ROOT / recipe["config"]).is_file() and recipe["agent_steps"] is None
