@@ -11,6 +11,7 @@ import numpy as np
 
 from proteo_env.config import CONTROL_LEVELS
 from proteo_env.core.jit import generated_kernel, kernel
+from proteo_env.core.records import OBSERVATION_FIELDS
 from proteo_env.spaces import ActionLayout
 
 
@@ -107,25 +108,15 @@ FIELD_DTYPES = {
 """The dtype in which the rule kernels take each observation field (those of :mod:`proteo_env.spaces`)."""
 
 
-class Observed(NamedTuple):
-    """Every observation field stacked over agents (A agents, K neighbourhood sites, C
-    channels), as a rule kernel (:attr:`KernelPolicy.rule`) reads them (dtypes: :data:`FIELD_DTYPES`).
+Observed = NamedTuple("Observed", [(name, np.ndarray) for name in OBSERVATION_FIELDS])
+Observed.__doc__ = """Every observation field stacked over agents (A agents, K neighbourhood sites, C
+channels), as a rule kernel (:attr:`KernelPolicy.rule`) reads them by name (dtypes: :data:`FIELD_DTYPES`).
 
-    ``own_mode`` (A, 1), ``messages`` (A, 12), ``neighbour_kind`` (A, K), ``neighbour_mode``
-    (A, K), ``neighbour_scent`` (A, K, C), ``own_scent`` (A, C), ``action_mask`` (A, 13),
-    ``contact`` (A, 2), ``load`` (A, 1), ``hint`` (A, 3): the fields of :mod:`proteo_env.spaces`.
-    """
-
-    own_mode: np.ndarray
-    messages: np.ndarray
-    neighbour_kind: np.ndarray
-    neighbour_mode: np.ndarray
-    neighbour_scent: np.ndarray
-    own_scent: np.ndarray
-    action_mask: np.ndarray
-    contact: np.ndarray
-    load: np.ndarray
-    hint: np.ndarray
+The fields are :data:`~proteo_env.core.records.OBSERVATION_FIELDS`, in its order:
+``neighbour_kind`` (A, K), ``neighbour_mode`` (A, K), ``neighbour_scent`` (A, K, C),
+``own_mode`` (A, 1), ``own_scent`` (A, C), ``messages`` (A, 12), ``contact`` (A, 2), ``load``
+(A, 1), ``hint`` (A, 3) and ``action_mask`` (A, 13) (:mod:`proteo_env.spaces` has their shapes).
+"""
 
 
 def stacked_fields(field, names) -> tuple[np.ndarray, ...]:
@@ -366,16 +357,16 @@ def worlds_rule(rule):
         for b in range(len(rngs)):
             lo, hi = b * n_agents, (b + 1) * n_agents
             world = Observed(
-                seen.own_mode[lo:hi],
-                seen.messages[lo:hi],
-                seen.neighbour_kind[lo:hi],
-                seen.neighbour_mode[lo:hi],
-                seen.neighbour_scent[lo:hi],
-                seen.own_scent[lo:hi],
-                seen.action_mask[lo:hi],
-                seen.contact[lo:hi],
-                seen.load[lo:hi],
-                seen.hint[lo:hi],
+                neighbour_kind=seen.neighbour_kind[lo:hi],
+                neighbour_mode=seen.neighbour_mode[lo:hi],
+                neighbour_scent=seen.neighbour_scent[lo:hi],
+                own_mode=seen.own_mode[lo:hi],
+                own_scent=seen.own_scent[lo:hi],
+                messages=seen.messages[lo:hi],
+                contact=seen.contact[lo:hi],
+                load=seen.load[lo:hi],
+                hint=seen.hint[lo:hi],
+                action_mask=seen.action_mask[lo:hi],
             )
             rule(world, slots, memories[b], rules, rngs[b], actions[lo:hi])
 

@@ -128,16 +128,16 @@ def _run_stage(stage_rule, seen, slots, mode, rows, view, memory, params, rng, a
             m = seen.neighbour_mode[i, k]
             neighbour_mode[r, k] = view[m] if m >= 0 else -1
     stage_seen = Observed(
-        own_mode,
-        seen.messages[rows],
-        seen.neighbour_kind[rows],
-        neighbour_mode,
-        seen.neighbour_scent[rows],
-        seen.own_scent[rows],
-        seen.action_mask[rows],
-        seen.contact[rows],
-        seen.load[rows],
-        seen.hint[rows],
+        neighbour_kind=seen.neighbour_kind[rows],
+        neighbour_mode=neighbour_mode,
+        neighbour_scent=seen.neighbour_scent[rows],
+        own_mode=own_mode,
+        own_scent=seen.own_scent[rows],
+        messages=seen.messages[rows],
+        contact=seen.contact[rows],
+        load=seen.load[rows],
+        hint=seen.hint[rows],
+        action_mask=seen.action_mask[rows],
     )
     stage_actions = np.empty((q, actions.shape[1]), dtype=np.int64)
     stage_rule(stage_seen, slots[rows], memory, params, rng, stage_actions)

@@ -32,7 +32,7 @@ what a tunnel two layers high leaves room for.
 The rule runs as the numba kernel :func:`crawl_actions` (the policy's ``rule``), here and in
 the compiled rollout (:mod:`baselines.compiled`); every decision reads only that agent's
 observation and its private memory (:class:`CrawlMemory`, one row per module). Modes are the
-crawl's own (:class:`~proteo_env.tasks.snake.CrawlMode`: 0 CRAWL, 1 HEAD, 2 BODY); a
+crawl's own (:class:`~proteo_env.tasks.crawl.CrawlMode`: 0 CRAWL, 1 HEAD, 2 BODY); a
 composition (:mod:`baselines.compose`) shows it the modes of other behaviours as these.
 Shared primitives: :mod:`baselines.primitives`.
 
@@ -61,7 +61,7 @@ from proteo_env.core.jit import kernel
 from proteo_env.core.lattice import DIRECTIONS, OPPOSITE
 from proteo_env.core.world import MESSAGE_TO_ALL
 from proteo_env.spaces import EMIT, KIND_EMPTY, KIND_MODULE, RELAY
-from proteo_env.tasks.snake import BODY, CRAWL, HEAD
+from proteo_env.tasks.crawl import BODY, CRAWL, HEAD
 
 from .base import KernelPolicy, SlotMemory
 from .primitives import (

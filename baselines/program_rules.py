@@ -237,9 +237,9 @@ def run_program(seen, slots, memory, tables, rng, actions):
     One loop with the opcodes' meanings written in it: a call with array arguments per
     condition or action would cost more than the opcode's work."""
     growth, heard, last_mode, waited, sent = memory
-    own_mode, messages, neighbour_kind, neighbour_mode, neighbour_scent, own_scent, action_mask, contact, load, hint = (
-        seen
-    )
+    own_mode, messages, own_scent, action_mask = seen.own_mode, seen.messages, seen.own_scent, seen.action_mask
+    neighbour_kind, neighbour_mode, neighbour_scent = seen.neighbour_kind, seen.neighbour_mode, seen.neighbour_scent
+    contact, load, hint = seen.contact, seen.load, seen.hint
     mode_rules, rule_conditions, rule_actions, go, set_at, set_value, conditions, numbers, steps, mode_sets, smax = (
         tables
     )

@@ -23,7 +23,8 @@ from __future__ import annotations
 from proteo_env.core.jit import kernel
 from proteo_env.spaces import KIND_MODULE
 from proteo_env.tasks.chain import ChainMode
-from proteo_env.tasks.snake import CrawlMode, SnakeMode
+from proteo_env.tasks.crawl import CrawlMode
+from proteo_env.tasks.snake import SnakeMode
 
 from .chain import ChainPolicy
 from .compose import Stage, compose

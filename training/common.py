@@ -409,6 +409,57 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {value!r}")
 
 
+def read_resume(path, algorithm: str, script: str) -> dict | None:
+    """The checked ``proteo.json`` of the checkpoint a run resumes from (``None`` without one),
+    refused unless ``algorithm`` (the trainer ``script``) wrote it."""
+    if not path:
+        return None
+    meta = read_meta(path)
+    if meta["algorithm"] != algorithm:
+        raise CheckpointError(
+            f"resume={path!r} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of {script}"
+        )
+    return meta
+
+
+def save_network_checkpoint(folder: Path, net, args, run_dir: Path, *, trainer: dict | None = None, **meta) -> None:
+    """Write a checkpoint of a torch network: ``policy.pt`` (its weights, on the CPU), ``trainer.pt``
+    (``trainer``, what ``--resume`` needs, when given), ``args.yaml`` (``args`` with ``run_dir`` set
+    and ``resume`` cleared) and ``proteo.json`` (:func:`write_checkpoint_meta` with ``meta``)."""
+    import torch
+
+    folder.mkdir(parents=True, exist_ok=True)
+    torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
+    if trainer is not None:
+        torch.save(trainer, folder / "trainer.pt")
+    cleared = {"resume": None} if hasattr(args, "resume") else {}
+    save_args(dataclasses.replace(args, run_dir=str(run_dir), **cleared), folder)
+    write_checkpoint_meta(folder, **meta)
+
+
+def trainer_state(optimiser, **extra) -> dict:
+    """What ``trainer.pt`` holds: the optimiser's state, torch's random state and ``extra``."""
+    import torch
+
+    return {"optimiser": optimiser.state_dict(), "torch_rng": torch.get_rng_state(), **extra}
+
+
+def load_trainer_state(meta: dict, net, optimiser, *, learning_rate: float, device) -> dict:
+    """Restore a run from the checkpoint of ``meta`` (:func:`read_resume`): the network from
+    ``policy.pt``, the optimiser (at ``learning_rate``) and torch's random state from ``trainer.pt``;
+    returns that file's dict (for what the trainer added with :func:`trainer_state`)."""
+    import torch
+
+    folder = Path(meta["dir"])
+    net.load_state_dict(torch.load(folder / "policy.pt", map_location=device, weights_only=True))
+    state = torch.load(folder / "trainer.pt", map_location="cpu", weights_only=False)
+    optimiser.load_state_dict(state["optimiser"])
+    for group in optimiser.param_groups:
+        group["lr"] = learning_rate
+    torch.set_rng_state(state["torch_rng"])
+    return state
+
+
 def checkpoint_folder(run_dir: Path, agent_steps: int) -> Path:
     return run_dir / "checkpoints" / f"step_{agent_steps:010d}"
 

@@ -40,7 +40,6 @@ Writes ``runs/<name>/`` like every training script (:mod:`training.common`), wit
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -58,9 +57,9 @@ from training.common import (
     make_run_dir,
     parse_args,
     save_args,
+    save_network_checkpoint,
     seed_everything,
     torch_device,
-    write_checkpoint_meta,
 )
 from training.networks import (
     ActorCritic,
@@ -208,15 +207,7 @@ def train(args: Args) -> Path:
         args.run_dir, f"imitate_{task_name(args.task)}_{args.control.replace('+', '-')}_s{args.seed}", resume=False
     )
     save_args(args, run_dir)
-    worlds = TrainingEnvs(
-        args.task,
-        args.control,
-        args.env,
-        args.n_envs,
-        args.seed,
-        message_encoding=args.message_encoding,
-        memory=args.memory,
-    )
+    worlds = TrainingEnvs.for_run(args, args.env)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
     fields = worlds.batch.control_fields
     teachers = Teachers(worlds.batch, worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
@@ -284,11 +275,11 @@ def train(args: Args) -> Path:
         bar.set_postfix(agreement=f"{held_out[0]:.3f}", success=measured["episode/success"])
     bar.close()
     final = run_dir / "final"
-    final.mkdir(parents=True, exist_ok=True)
-    torch.save({k: v.cpu() for k, v in net.state_dict().items()}, final / "policy.pt")
-    save_args(dataclasses.replace(args, run_dir=str(run_dir)), final)
-    write_checkpoint_meta(
+    save_network_checkpoint(
         final,
+        net,
+        args,
+        run_dir,
         algorithm=ALGORITHM,
         task=worlds.task_id,
         env_overrides=dict(args.env),

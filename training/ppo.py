@@ -1,14 +1,11 @@
 """PPO with one policy shared by every module, over the batched array API (no per-agent dicts).
 
-Every module of ``n_envs`` worlds is one sample: the worlds run as one
-:class:`~proteo_env.batched.BatchedEnv` (:class:`~training.worlds.TrainingEnvs`), the
-observations of all modules are encoded at once
-(:class:`~proteo_env.adapters.flatten.ObservationEncoder`), one forward pass of the
+Every module of ``n_envs`` worlds is one sample: the worlds run as one batch
+(:class:`~training.worlds.TrainingEnvs`), one forward pass of the
 :class:`~training.networks.ActorCritic` gives every module's logits and value, illegal moves are
-masked out of the move logits, and the sampled ``(B, A, F)`` action array goes back into
-``step_arrays``. One categorical head per field of the control level (``control``): ``move``
-only at ``move``, ``move`` and ``mode`` at ``move+mode``, every field at ``full``. Every module
-receives the team reward; the critic is one parameter-shared value per module. ``total_steps``
+masked out, and the sampled ``(B, A, F)`` actions go back into ``step_arrays``. One categorical
+head per field of the control level (``control``). Every module receives the team reward (plus
+its own ``join_bonus``); the critic is one parameter-shared value per module. ``total_steps``
 counts agent-steps (module-cycles) that enter an update.
 
     python -m training.ppo --config configs/train/ppo_chain_move.yaml
@@ -17,26 +14,10 @@ counts agent-steps (module-cycles) that enter an update.
     python -m training.ppo --config configs/train/kickstart_grasp_move.yaml --init runs/bc_grasp
     tensorboard --logdir runs
 
-Kickstarting. ``init`` starts from the network of another checkpoint (a clone from
-:mod:`training.imitate`, or a PPO run) of the same task, level, encoding and network shape.
-``distill_coef > 0`` adds to the loss the cross-entropy between the policy and the teacher's
-action (:mod:`training.teachers`, the task's rules by default) on the learner's own states; its
-weight falls linearly to ``distill_final`` over the first ``distill_steps`` agent-steps (0: it
-stays). At zero the teacher is no longer consulted; a small ``distill_final`` keeps the learner
-near it.
-
-Module credit. ``join_bonus > 0`` adds, to the reward of each module alone, ``join_bonus`` on the
-cycle its own mode leaves the ``join_from`` modes (SLEEP and SEARCH by default) for another: the
-cycle it joined the structure (:attr:`training.worlds.TrainingEnvs.joined`).
-
-Curricula. ``curriculum: {stages: [...], promote_at, window}`` trains on stages of env overrides
-in turn, each promoted when the success rate of its last ``window`` episodes reaches
-``promote_at`` (:mod:`training.curriculum`); the stage is logged and saved with checkpoints.
-
-Episode ends. A world's episode ends at success or at ``max_cycles``, and the world starts its
-next episode at once while the others run on, so every sample of every cycle enters the update.
-At ``max_cycles`` the value of the last observation is bootstrapped (the observation holds no
-clock); success is terminal.
+Kickstarting (``init``, ``distill_*``), curricula and module credit (``join_bonus``):
+docs/guides/learning.md. A world's episode ends at success (terminal) or at ``max_cycles``
+(the value of its last observation is bootstrapped: the observation holds no clock), and the
+world starts its next episode at once, so every sample of every cycle enters the update.
 
 Writes ``runs/<name>/`` (:mod:`training.common`); a checkpoint holds ``policy.pt`` (the network),
 ``trainer.pt`` (optimiser and random state) and ``args.yaml`` (for ``--resume``), and ``proteo eval
@@ -45,7 +26,6 @@ Writes ``runs/<name>/`` (:mod:`training.common`); a checkpoint holds ``policy.pt
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -61,19 +41,20 @@ from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
 from training.checkpoints import network_weights
 from training.common import (
-    CheckpointError,
     ProgressLog,
     check_integers,
     check_numbers,
     checkpoint_folder,
     episode_stats,
+    load_trainer_state,
     make_run_dir,
     parse_args,
-    read_meta,
+    read_resume,
     save_args,
+    save_network_checkpoint,
     seed_everything,
     torch_device,
-    write_checkpoint_meta,
+    trainer_state,
 )
 from training.networks import (
     ActorCritic,
@@ -88,7 +69,7 @@ from training.networks import (
     teacher_cross_entropy,
 )
 from training.policies import check_memory, check_sampled
-from training.worlds import JOIN_FROM, TrainingEnvs, training_worlds_seed
+from training.worlds import JOIN_FROM, TrainingEnvs
 
 ALGORITHM = "ppo"
 
@@ -130,7 +111,6 @@ class Args:
     arch: str = "shared"
     """Network: shared (one trunk for the policy and the value) or mlp (separate MLPs)."""
     hidden: tuple[int, ...] = (64, 64)
-    """Hidden layer sizes."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
     sampled: str = "all"
@@ -165,18 +145,8 @@ class Args:
     """The task's modes of a module not yet in the structure."""
 
     def __post_init__(self):
-        check_integers(
-            self,
-            {
-                "total_steps": 0,
-                "n_envs": 1,
-                "n_steps": 1,
-                "minibatch_size": 1,
-                "n_epochs": 1,
-                "checkpoint_every": 1,
-                "distill_steps": 0,
-            },
-        )
+        positive = ("n_envs", "n_steps", "minibatch_size", "n_epochs", "checkpoint_every")
+        check_integers(self, {"total_steps": 0, **dict.fromkeys(positive, 1), "distill_steps": 0})
         check_arch(self.arch)
         check_memory(self.memory)
         check_sampled(self.sampled)
@@ -185,21 +155,9 @@ class Args:
                 f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
                 "allowed: a number in [0, distill_coef]"
             )
-        check_numbers(
-            self,
-            {
-                "learning_rate": (0.0, None),
-                "gamma": (0.0, 1.0),
-                "gae_lambda": (0.0, 1.0),
-                "clip_range": (0.0, None),
-                "ent_coef": (0.0, None),
-                "vf_coef": (0.0, None),
-                "max_grad_norm": (0.0, None),
-                "distill_coef": (0.0, None),
-                "time_limit_minutes": (0.0, None),
-                "join_bonus": (0.0, None),
-            },
-        )
+        bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
+        loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
+        check_numbers(self, {**bounds, **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus"), (0.0, None))})
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps: linear from ``distill_coef``
@@ -217,28 +175,17 @@ class Rollout:
     """The tensors of one rollout of ``T`` cycles, on the CPU: ``(T, N, ...)`` per module (``N``
     modules of all worlds, world-major), ``(T, n_envs)`` per world."""
 
-    obs: torch.Tensor
-    """``(T, N, D)`` float32: every module's features, written by :meth:`TrainingEnvs.encode`."""
-    mask: torch.Tensor
-    """``(T, N, 13)`` bool: its legal moves."""
-    actions: torch.Tensor
-    """``(T, N, F)`` int64: the actions played."""
-    labels: torch.Tensor
-    """``(T, N, F)`` int64: the teacher's actions (distillation only)."""
-    logp: torch.Tensor
-    """``(T, N)``: the log-probability of the fields drawn at random."""
-    values: torch.Tensor
-    """``(T, N)``: the critic's values, in return units."""
-    bootstrap: torch.Tensor
-    """``(T, N)``: the value of the last observation of an episode truncated at that cycle."""
-    joined: torch.Tensor
-    """``(T, N)``: 1 where a module joined the structure (module credit only)."""
-    rewards: torch.Tensor
-    """``(T, n_envs)`` float32: the team reward."""
-    terminal: torch.Tensor
-    """``(T, n_envs)`` bool: the episode succeeded."""
-    truncated: torch.Tensor
-    """``(T, n_envs)`` bool: the episode hit ``max_cycles``."""
+    obs: torch.Tensor  # (T, N, D) float32: every module's features (TrainingEnvs.encode)
+    mask: torch.Tensor  # (T, N, 13) bool: its legal moves
+    actions: torch.Tensor  # (T, N, F) int64: the actions played
+    labels: torch.Tensor  # (T, N, F) int64: the teacher's actions (distillation only)
+    logp: torch.Tensor  # (T, N): the log-probability of the fields drawn at random
+    values: torch.Tensor  # (T, N): the critic's values, in return units
+    bootstrap: torch.Tensor  # (T, N): the value of the last observation of an episode truncated there
+    joined: torch.Tensor  # (T, N): 1 where a module joined the structure (module credit only)
+    rewards: torch.Tensor  # (T, n_envs) float32: the team reward
+    terminal: torch.Tensor  # (T, n_envs) bool: the episode succeeded
+    truncated: torch.Tensor  # (T, n_envs) bool: the episode hit max_cycles
 
     @classmethod
     def allocate(cls, t_steps: int, worlds: TrainingEnvs) -> Rollout:
@@ -260,16 +207,8 @@ class Rollout:
 
     def samples(self, advantages: torch.Tensor, returns: torch.Tensor) -> Samples:
         """Every module-cycle of the rollout as one sample of the update, with its advantage and return."""
-        n_fields = self.actions.shape[-1]
-        return Samples(
-            self.obs.reshape(-1, self.obs.shape[-1]),
-            self.mask.reshape(-1, N_MOVES),
-            self.actions.reshape(-1, n_fields),
-            self.logp.reshape(-1),
-            advantages.reshape(-1),
-            returns.reshape(-1),
-            self.labels.reshape(-1, n_fields),
-        )
+        columns = (self.obs, self.mask, self.actions, self.logp, advantages, returns, self.labels)
+        return Samples(*(column.reshape(-1, *column.shape[2:]) for column in columns))
 
 
 class Samples(NamedTuple):
@@ -379,21 +318,6 @@ def update(
     return stats
 
 
-def make_worlds(args: Args, env: dict, agent_steps: int) -> TrainingEnvs:
-    """The run's worlds with env overrides ``env``, built after ``agent_steps``."""
-    return TrainingEnvs(
-        args.task,
-        args.control,
-        env,
-        args.n_envs,
-        training_worlds_seed(args.seed, agent_steps),
-        message_encoding=args.message_encoding,
-        memory=args.memory,
-        join_bonus=args.join_bonus,
-        join_from=args.join_from,
-    )
-
-
 def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
     """The teachers of the distillation term for ``worlds`` (``None`` when it is off)."""
     if args.distill_coef <= 0:
@@ -413,11 +337,7 @@ def train(args: Args) -> Path:
     """Train; returns the final checkpoint's folder."""
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
-    resume = read_meta(args.resume) if args.resume else None
-    if resume is not None and resume["algorithm"] != ALGORITHM:
-        raise CheckpointError(
-            f"resume={args.resume!r} is a {resume['algorithm']!r} checkpoint; allowed: a checkpoint of training/ppo.py"
-        )
+    resume = read_resume(args.resume, ALGORITHM, "training/ppo.py")
     agent_steps = int(resume["agent_steps"]) if resume else 0
     curriculum = None
     if args.curriculum:
@@ -429,7 +349,7 @@ def train(args: Args) -> Path:
             stage=int((resume or {}).get("curriculum_stage", 0)),
         )
     env = args.env if curriculum is None else curriculum.overrides(args.env)
-    worlds = make_worlds(args, env, agent_steps)
+    worlds = TrainingEnvs.for_run(args, env, agent_steps)
     net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory)
     if args.init and resume is None:
         weights = network_weights(
@@ -448,30 +368,17 @@ def train(args: Args) -> Path:
     teachers = make_teachers(args, worlds, agent_steps)
     scale = ReturnScale(args.value_norm)
     if resume is not None:
-        folder = Path(resume["dir"])
-        net.load_state_dict(torch.load(folder / "policy.pt", map_location=device, weights_only=True))
-        state = torch.load(folder / "trainer.pt", map_location="cpu", weights_only=False)
-        optimiser.load_state_dict(state["optimiser"])
-        for group in optimiser.param_groups:
-            group["lr"] = args.learning_rate
-        torch.set_rng_state(state["torch_rng"])
+        state = load_trainer_state(resume, net, optimiser, learning_rate=args.learning_rate, device=device)
         if "return_scale" in state:
             scale.load_state_dict(state["return_scale"])
 
     def save(folder: Path) -> None:
-        """Write a checkpoint of the run so far: ``policy.pt``, ``trainer.pt`` (to resume),
-        ``args.yaml`` and ``proteo.json``."""
-        folder.mkdir(parents=True, exist_ok=True)
-        torch.save({k: v.cpu() for k, v in net.state_dict().items()}, folder / "policy.pt")
-        trainer = {
-            "optimiser": optimiser.state_dict(),
-            "torch_rng": torch.get_rng_state(),
-            "return_scale": scale.state_dict(),
-        }
-        torch.save(trainer, folder / "trainer.pt")
-        save_args(dataclasses.replace(args, resume=None, run_dir=str(run_dir)), folder)
-        write_checkpoint_meta(
+        save_network_checkpoint(
             folder,
+            net,
+            args,
+            run_dir,
+            trainer=trainer_state(optimiser, return_scale=scale.state_dict()),
             algorithm=ALGORITHM,
             task=worlds.task_id,
             env_overrides=env,
@@ -529,7 +436,7 @@ def train(args: Args) -> Path:
         )
         if curriculum is not None and curriculum.record(finished):  # the next stage's worlds replace these
             env = curriculum.overrides(args.env)
-            worlds = make_worlds(args, env, agent_steps)
+            worlds = TrainingEnvs.for_run(args, env, agent_steps)
             teachers = make_teachers(args, worlds, agent_steps)
             rollout = Rollout.allocate(args.n_steps, worlds)
         if agent_steps // args.checkpoint_every > saved_interval:

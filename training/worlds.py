@@ -99,6 +99,23 @@ class TrainingEnvs:
         self.env_seconds = 0.0
         self.encode_seconds = 0.0
 
+    @classmethod
+    def for_run(cls, args, env: dict, agent_steps: int = 0) -> TrainingEnvs:
+        """The worlds of a run with arguments ``args`` (task, control, n_envs, seed, message_encoding,
+        memory, and join_bonus and join_from where it has them) and env overrides ``env``, built after
+        ``agent_steps`` (seeded by :func:`training_worlds_seed`)."""
+        return cls(
+            args.task,
+            args.control,
+            env,
+            args.n_envs,
+            training_worlds_seed(args.seed, agent_steps),
+            message_encoding=args.message_encoding,
+            memory=args.memory,
+            join_bonus=getattr(args, "join_bonus", 0.0),
+            join_from=getattr(args, "join_from", JOIN_FROM),
+        )
+
     def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
         """Write every module's features ``(N, size)`` (with the memory's inputs) and legal moves
         ``(N, 13)`` into the given arrays."""

@@ -21,7 +21,7 @@ Observation
     or the slot's walls.
 Actions
     The common action. Modes: the chain's 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, then the crawl's
-    4 CRAWL, 5 HEAD, 6 BODY. Message values 1..15.
+    (:mod:`proteo_env.tasks.crawl`) 4 CRAWL, 5 HEAD, 6 BODY. Message values 1..15.
 Reward, metrics, termination
     Locomotion's: ``progress``, ``success`` and ``time``; ``distance``, ``speed``, ``beyond``,
     ``components``, ``success``; success when every module is beyond the finish line,
@@ -43,21 +43,8 @@ import numpy as np
 
 from ..core.cycle import EMIT, RELAY
 from .chain import ChainMode
+from .crawl import CrawlMode
 from .locomotion import Locomotion, LocomotionParams
-
-
-class CrawlMode(IntEnum):
-    """The crawl's modes, numbered within the crawl (a chain travelling head first): CRAWL (a
-    module travelling along the chain to its head), HEAD (the chain's front end, where the
-    chain grows) and BODY (the rest of the chain)."""
-
-    CRAWL = 0
-    HEAD = 1
-    BODY = 2
-
-
-CRAWL, HEAD, BODY = (int(m) for m in CrawlMode)
-"""The crawl's modes as plain ints, for the numba kernels."""
 
 SnakeMode = IntEnum(
     "SnakeMode",
