@@ -127,13 +127,14 @@ def test_v2_extends_v1_with_the_evolved_recipes_only():
             assert (ROOT / recipe["config"]).is_file()
 
 
-def test_v3_extends_v2_with_the_program_evolution_recipes_on_chain_only():
-    """v3 adds the two recipes that evolve programs (from random ones and from the paper's) to
-    chain, judged at v2's evolved level; everything v2 fixes stays."""
-    v2, v3 = load_protocol("v2"), load_protocol("v3")
-    assert [v for v, _ in v3.lineage] == ["v1", "v2", "v3"] and v3.lineage[:2] == v2.lineage
-    for name, t in v3.tasks.items():
-        before = v2.tasks[name]
+def assert_adds_only_recipes(parent: str, child: str, added_by_task: dict) -> None:
+    """Protocol ``child`` extends ``parent``, keeps everything it fixes, and adds exactly the recipes
+    ``added_by_task`` (task -> recipe names), each with a config and the config's own budget."""
+    before_all, after_all = load_protocol(parent), load_protocol(child)
+    assert [v for v, _ in after_all.lineage][-2:] == [parent, child]
+    assert after_all.lineage[:-1] == before_all.lineage
+    for name, t in after_all.tasks.items():
+        before = before_all.tasks[name]
         assert (t.task_id, t.trained_on, t.env, t.splits, t.levels) == (
             before.task_id,
             before.trained_on,
@@ -143,9 +144,29 @@ def test_v3_extends_v2_with_the_program_evolution_recipes_on_chain_only():
         )
         added = {k: v for k, v in t.recipes.items() if k not in before.recipes}
         assert {k: t.recipes[k] for k in before.recipes} == before.recipes
-        assert list(added) == (["evolve-full", "evolve-paper-full"] if name == "chain" else [])
+        assert sorted(added) == added_by_task.get(name, [])
         for recipe in added.values():
             assert (ROOT / recipe["config"]).is_file() and recipe["agent_steps"] is None
+
+
+def test_v3_extends_v2_with_the_program_evolution_recipes_on_chain_only():
+    """v3 adds the two recipes that evolve programs (from random ones and from the paper's) to
+    chain, judged at v2's evolved level; everything v2 fixes stays."""
+    assert_adds_only_recipes("v2", "v3", {"chain": ["evolve-full", "evolve-paper-full"]})
+
+
+def test_v4_extends_v3_with_the_program_evolution_recipes_on_branch_table_and_grasp():
+    """v4 adds evolution from the paper's programs on branch, table and grasp, and from random
+    programs on branch, judged at v2's evolved level; everything v3 fixes stays."""
+    assert_adds_only_recipes(
+        "v3",
+        "v4",
+        {
+            "branch": ["evolve-full", "evolve-paper-full"],
+            "table": ["evolve-paper-full"],
+            "grasp": ["evolve-paper-full"],
+        },
+    )
 
 
 def _extension(tmp_path: Path, text: str) -> Path:
@@ -314,29 +335,3 @@ def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_pa
         assert row["summary"]["interval"] == "stratified bootstrap" and row["summary"]["training_seeds"] == 2
         assert not row["complete"]  # 2 training seeds of the 5 the protocol asks for
     assert any("2 training seed(s)" in n for n in doc["notes"])
-
-
-def test_v4_extends_v3_with_the_program_evolution_recipes_on_branch_table_and_grasp():
-    """v4 adds evolution from the paper's programs on branch, table and grasp, and from random
-    programs on branch, judged at v2's evolved level; everything v3 fixes stays."""
-    v3, v4 = load_protocol("v3"), load_protocol("v4")
-    assert [v for v, _ in v4.lineage] == ["v1", "v2", "v3", "v4"] and v4.lineage[:3] == v3.lineage
-    added_by_task = {
-        "branch": ["evolve-full", "evolve-paper-full"],
-        "table": ["evolve-paper-full"],
-        "grasp": ["evolve-paper-full"],
-    }
-    for name, t in v4.tasks.items():
-        before = v3.tasks[name]
-        assert (t.task_id, t.trained_on, t.env, t.splits, t.levels) == (
-            before.task_id,
-            before.trained_on,
-            before.env,
-            before.splits,
-            before.levels,
-        )
-        added = {k: v for k, v in t.recipes.items() if k not in before.recipes}
-        assert {k: t.recipes[k] for k in before.recipes} == before.recipes
-        assert sorted(added) == added_by_task.get(name, [])
-        for recipe in added.values():
-            assert (ROOT / recipe["config"]).is_file() and recipe["agent_steps"] is None
