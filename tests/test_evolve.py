@@ -126,6 +126,7 @@ def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
         ("variations: []", "variations"),
         ("variations: [{n_modules: 0}]", "variations[0]"),
         ("seed_program: no_such_program", "no_such_program"),
+        ("fitness: reward", "fitness"),
     ],
 )
 def test_bad_config_is_one_error_before_anything_is_written(tmp_path, config, named):
@@ -133,3 +134,11 @@ def test_bad_config_is_one_error_before_anything_is_written(tmp_path, config, na
     with pytest.raises(ConfigError, match=named.replace("[", r"\[").replace("]", r"\]")):
         evolve(["--config", str(tmp_path / "evolve.yaml"), "--run-dir", str(tmp_path / "run")])
     assert not (tmp_path / "run").exists()
+
+
+def test_the_success_score_ranks_every_success_above_every_failure_and_faster_above_slower():
+    from training.evolve import success_score
+
+    fast, slow, failed = [0.5, True, 50, 12, 300], [0.5, True, 299, 12, 300], [9.0, False, 300, 12, 300]
+    assert success_score(fast) > success_score(slow) > success_score(failed) == 0.0
+    assert 1.0 < success_score(slow) and success_score(fast) <= 2.0

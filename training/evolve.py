@@ -10,12 +10,15 @@ two parents picked by tournaments of ``tournament``, crossed with probability
 generation's worlds and the best ``population`` distinct programs survive (elitism: the best
 is never lost to a child, only to a program that scores better on the same worlds).
 
-Fitness of a program: the mean episode return over ``variations`` (env overrides over
+Fitness of a program: the mean episode score over ``variations`` (env overrides over
 ``env``: sizes, object shapes or directions, weight schedules, T and B ...) times
 ``episodes_per_variation`` worlds, minus ``complexity_penalty`` times its rules + conditions +
-actions. The worlds are common random numbers: the same for every program of a generation,
-new each generation, their seeds drawn from a ``numpy.random.SeedSequence`` child of the run
-seed (generation ``g`` uses the child's child ``g``). Policy seeds equal world seeds.
+actions. An episode's score is its return (``fitness: return``) or, for a task whose reward a
+program can collect without succeeding, ``2 - cycles / max_cycles`` for a success and 0 for a
+failure (``fitness: success``: success first, then speed). The worlds are common random
+numbers: the same for every program of a generation, new each generation, their seeds drawn
+from a ``numpy.random.SeedSequence`` child of the run seed (generation ``g`` uses the child's
+child ``g``). Policy seeds equal world seeds.
 
 A generation's best is chosen on few worlds, so it is partly luck. With
 ``final_episodes_per_variation`` the surviving population is scored once more after the last
@@ -84,6 +87,9 @@ class Args:
     """Mean mutations per child (at least 1)."""
     complexity_penalty: float = 0.001
     """Subtracted from the fitness per rule, condition and action."""
+    fitness: str = "return"
+    """An episode's score: ``return`` (the task's reward) or ``success`` (``2 - cycles /
+    max_cycles`` for a success, 0 for a failure)."""
     max_rules: int = 4
     """Rules per mode."""
     max_conditions: int = 3
@@ -158,13 +164,29 @@ def _environment(task: str, overrides: str):
 
 
 def program_episode(job: ProgramEpisode) -> list:
-    """``[return, success, cycles, modules]`` of the program's episode."""
+    """``[return, success, cycles, modules, max_cycles]`` of the program's episode."""
     from baselines import make_policy
     from proteo_env.rollout import run_episode
 
     env = _environment(job.task, job.env)
     result = run_episode(env, make_policy("program", env, program=job.program, seed=job.seed), seed=job.seed)
-    return [float(result.total_reward), bool(result.success), int(result.cycles), len(env.possible_agents)]
+    return [
+        float(result.total_reward),
+        bool(result.success),
+        int(result.cycles),
+        len(env.possible_agents),
+        int(env.max_cycles),
+    ]
+
+
+FITNESS = ("return", "success")
+"""The episode scores ``fitness`` may name."""
+
+
+def success_score(episode: list) -> float:
+    """``2 - cycles / max_cycles`` for a successful episode (``[return, success, cycles, modules,
+    max_cycles]``), 0 for a failure."""
+    return 2.0 - episode[2] / episode[4] if episode[1] else 0.0
 
 
 def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: int) -> list[int]:
@@ -194,6 +216,8 @@ def check_args(args: Args) -> list[str]:
         },
     )
     check_numbers(args, {"crossover_rate": (0.0, 1.0), "mutations": (1.0, None), "complexity_penalty": (0.0, None)})
+    if args.fitness not in FITNESS:
+        raise ConfigError(f"fitness: {args.fitness!r} is not allowed; allowed: {', '.join(FITNESS)}")
     allowed = "a non-empty list of env overrides over env, such as [{n_modules: 10}, {}, {n_modules: 14}]"
     if not isinstance(args.variations, (list, tuple)) or not args.variations:
         raise ConfigError(f"variations: {args.variations!r} is not allowed; allowed: {allowed}")
@@ -338,6 +362,9 @@ def main(argv=None) -> Path:
         total=args.generations, initial=generation, unit="generation", desc=ALGORITHM, disable=not args.progress_bar
     )
 
+    def episode_score(episode: list) -> float:
+        return success_score(episode) if args.fitness == "success" else episode[0]
+
     def score(candidates: list, seeds: list[int], desc: str) -> tuple[list[float], list[list]]:
         """The fitness of each candidate on the worlds of ``seeds`` in every variation, and its episodes."""
         nonlocal agent_steps
@@ -354,7 +381,7 @@ def main(argv=None) -> Path:
         per_program = len(variations) * len(seeds)
         outcomes = [episodes[c * per_program : (c + 1) * per_program] for c in range(len(candidates))]
         fitness = [
-            float(np.mean([r[0] for r in results])) - args.complexity_penalty * complexity(program)
+            float(np.mean([episode_score(r) for r in results])) - args.complexity_penalty * complexity(program)
             for program, results in zip(candidates, outcomes)
         ]
         return fitness, outcomes
