@@ -64,8 +64,7 @@ learning-results: install
 	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[chain, branch, grasp, locomotion]" --total-steps 16000000 $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[cma]" --tasks "[grasp, table, branch, chain]" --level full $(STUDY_V2)
 	$(BIN)/python -m training.study --recipes "[evolve, evolve-paper]" --tasks "[chain]" --level full $(STUDY_V3)
-	$(BIN)/python -m training.study --recipes "[evolve-paper, evolve]" --tasks "[branch]" --level full $(STUDY_V4)
-	$(BIN)/python -m training.study --recipes "[evolve-paper]" --tasks "[table, grasp]" --level full $(STUDY_V4)
+	$(BIN)/python -m training.study --recipes "[evolve-paper]" --tasks "[branch, table, grasp]" --level full $(STUDY_V4)
 	for version in v1 v2 v3 v4; do for recipe in checkpoints/$$version/*/*_*; do \
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done

@@ -155,9 +155,9 @@ def test_v3_extends_v2_with_the_program_evolution_recipes_on_chain_only():
     assert_adds_only_recipes("v2", "v3", {"chain": ["evolve-full", "evolve-paper-full"]})
 
 
-def test_v4_extends_v3_with_the_program_evolution_recipes_on_branch_table_and_grasp():
-    """v4 adds evolution from the paper's programs on branch, table and grasp, and from random
-    programs on branch, judged at v2's evolved level; everything v3 fixes stays."""
+def test_v4_extends_v3_with_evolution_from_the_paper_programs_on_branch_table_and_grasp():
+    """v4 adds evolution from the paper's programs on branch, table and grasp, judged at v2's
+    evolved level; everything v3 fixes stays."""
     assert_adds_only_recipes(
         "v3",
         "v4",
