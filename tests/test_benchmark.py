@@ -162,7 +162,7 @@ def test_v4_extends_v3_with_evolution_from_the_paper_programs_on_branch_table_an
         "v3",
         "v4",
         {
-            "branch": ["evolve-full", "evolve-paper-full"],
+            "branch": ["evolve-paper-full"],
             "table": ["evolve-paper-full"],
             "grasp": ["evolve-paper-full"],
         },
