@@ -113,7 +113,7 @@ def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = No
         ax.set_xlabel("programs scored")
         ax.set_title(panel)
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("fitness (mean return - complexity penalty)")
+    axes[0].set_ylabel("fitness (mean episode score - complexity penalty)")
     axes[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
