@@ -46,7 +46,7 @@ eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
 # The study under benchmark protocols v1 to v4 (configs/benchmark/, docs/guides/benchmark.md),
-# about 165 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
+# about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
 # docs/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
 # parameters; v3: evolved chain programs; v4: evolved branch, table and grasp programs), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
