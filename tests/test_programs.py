@@ -151,7 +151,9 @@ def test_the_paper_branch_program_grows_two_levels_on_most_worlds():
 
 def test_the_paper_table_program_restabilises_on_some_worlds():
     env = proteo_env.make("table-v1", **TABLE_BENCHMARK)
-    results = [run_episode(env, make_policy("program", env, program="table", seed=s), seed=s) for s in range(1000, 1020)]
+    results = [
+        run_episode(env, make_policy("program", env, program="table", seed=s), seed=s) for s in range(1000, 1020)
+    ]
     assert sum(r.success for r in results) >= 2
     assert all(r.metrics["leg_creations"] >= 2 for r in results)
 
