@@ -232,3 +232,46 @@ def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
     )
     learned = [r for r in rows if r.kind == "learned"]
     assert len(learned) == 1 and learned[0].level == "move" and learned[0].n == 2
+
+
+class _RayWhoseFirstLedgerIsDead:
+    """Enough of the ``ray`` module for :func:`training.distributed._ledger`: the kept ledger of
+    the first name has died (clearing it raises Ray's actor error), a ledger of another name is alive."""
+
+    exceptions = ray.exceptions
+
+    def __init__(self):
+        self.names = []
+
+    def get_runtime_context(self):
+        return type("Context", (), {"get_job_id": lambda _: "01000000"})()
+
+    def remote(self, num_cpus):
+        outer = self
+
+        class Actor:
+            def __init__(self, name):
+                self.name = name
+                self.clear = type("Method", (), {"remote": lambda _: name})()
+
+        class Options:
+            def options(self, name, get_if_exists):
+                outer.names.append(name)
+                return type("Handle", (), {"remote": lambda _: Actor(name)})()
+
+        return lambda cls: Options()
+
+    def get(self, name):
+        if name == "proteo-ledger-01000000":
+            raise ray.exceptions.ActorDiedError()
+        return None
+
+
+def test_a_dead_kept_ledger_is_replaced_by_one_of_a_new_name():
+    """Ray can hand back the driver's kept ledger after its process died (CI saw ActorDiedError when
+    a second run cleared it); the run then starts a new ledger instead of failing."""
+    from training.distributed import _ledger
+
+    fake = _RayWhoseFirstLedgerIsDead()
+    ledger = _ledger(fake)
+    assert fake.names == ["proteo-ledger-01000000", "proteo-ledger-01000000-1"] and ledger.name == fake.names[-1]

@@ -228,13 +228,29 @@ class _Ledger:
         self.attempts.clear()
 
 
+def _ledger(ray):
+    """The driver's ledger actor, started and empty.
+
+    One ledger per driver, kept between runs: an actor is a process of its own, and starting one
+    per run costs about a second of CPU, which two cores feel. A kept ledger whose process has
+    died since (Ray reports it when the next run clears it) is replaced by a new one under a new
+    name; the ledger only counts retries, so no result depends on it.
+    """
+    job = ray.get_runtime_context().get_job_id()
+    for attempt in range(3):
+        name = f"proteo-ledger-{job}" + (f"-{attempt}" if attempt else "")
+        ledger = ray.remote(num_cpus=0)(_Ledger).options(name=name, get_if_exists=True).remote()
+        try:
+            ray.get(ledger.clear.remote())  # started, and empty, before any task needs it
+            return ledger
+        except ray.exceptions.RayActorError:
+            continue
+    raise RuntimeError("Ray could not start the ledger actor three times; see Ray's logs (ray status)")
+
+
 def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int) -> None:
     ray = connect(**options)
-    # one ledger per driver, kept between runs: an actor is a process of its own, and starting
-    # one per run costs about a second of CPU, which two cores feel
-    name = f"proteo-ledger-{ray.get_runtime_context().get_job_id()}"
-    ledger = ray.remote(num_cpus=0)(_Ledger).options(name=name, get_if_exists=True).remote()
-    ray.get(ledger.clear.remote())  # started, and empty, before any task needs it
+    ledger = _ledger(ray)
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=False)(_attempt)
     slots = options.get("workers") or max(1, int(ray.cluster_resources().get("CPU", 1)))
     pending: dict = {}
@@ -260,7 +276,10 @@ def _run_on_ray(fn, jobs, keys, todo, finished, options: dict, max_retries: int)
                     ) from None
                 finished(i, result)
     finally:
-        retried = ray.get(ledger.retried.remote())
+        try:
+            retried = ray.get(ledger.retried.remote())
+        except ray.exceptions.RayActorError:  # the ledger's process died: the count is lost, not the results
+            retried = {}
         if retried:
             print(
                 f"ray: {len(retried)} task(s) retried after their worker died: "
