@@ -179,14 +179,14 @@ def program_episode(job: ProgramEpisode) -> list:
     ]
 
 
-FITNESS = ("return", "success")
-"""The episode scores ``fitness`` may name."""
-
-
 def success_score(episode: list) -> float:
     """``2 - cycles / max_cycles`` for a successful episode (``[return, success, cycles, modules,
     max_cycles]``), 0 for a failure."""
     return 2.0 - episode[2] / episode[4] if episode[1] else 0.0
+
+
+EPISODE_SCORES = {"return": lambda episode: episode[0], "success": success_score}
+"""The episode score each value of ``fitness`` names, from ``[return, success, cycles, modules, max_cycles]``."""
 
 
 def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: int) -> list[int]:
@@ -216,8 +216,8 @@ def check_args(args: Args) -> list[str]:
         },
     )
     check_numbers(args, {"crossover_rate": (0.0, 1.0), "mutations": (1.0, None), "complexity_penalty": (0.0, None)})
-    if args.fitness not in FITNESS:
-        raise ConfigError(f"fitness: {args.fitness!r} is not allowed; allowed: {', '.join(FITNESS)}")
+    if args.fitness not in EPISODE_SCORES:
+        raise ConfigError(f"fitness: {args.fitness!r} is not allowed; allowed: {', '.join(EPISODE_SCORES)}")
     allowed = "a non-empty list of env overrides over env, such as [{n_modules: 10}, {}, {n_modules: 14}]"
     if not isinstance(args.variations, (list, tuple)) or not args.variations:
         raise ConfigError(f"variations: {args.variations!r} is not allowed; allowed: {allowed}")
@@ -362,8 +362,7 @@ def main(argv=None) -> Path:
         total=args.generations, initial=generation, unit="generation", desc=ALGORITHM, disable=not args.progress_bar
     )
 
-    def episode_score(episode: list) -> float:
-        return success_score(episode) if args.fitness == "success" else episode[0]
+    episode_score = EPISODE_SCORES[args.fitness]
 
     def score(candidates: list, seeds: list[int], desc: str) -> tuple[list[float], list[list]]:
         """The fitness of each candidate on the worlds of ``seeds`` in every variation, and its episodes."""
