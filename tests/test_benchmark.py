@@ -169,6 +169,18 @@ def test_v4_extends_v3_with_evolution_from_the_paper_programs_on_branch_table_an
     )
 
 
+def test_v5_extends_v4_with_evolution_from_random_programs_on_branch_table_and_grasp():
+    """v5 adds evolution from random programs on branch, table and grasp, whose configs are v4's
+    evolution from the paper's program without the seed program; everything v4 fixes stays."""
+    assert_adds_only_recipes(
+        "v4", "v5", {"branch": ["evolve-full"], "table": ["evolve-full"], "grasp": ["evolve-full"]}
+    )
+    for task in ("branch", "table", "grasp"):
+        scratch = yaml.safe_load((ROOT / f"configs/train/evolve_{task}_full.yaml").read_text())
+        paper = yaml.safe_load((ROOT / f"configs/train/evolve_paper_{task}_full.yaml").read_text())
+        assert paper.pop("seed_program") == task and scratch == paper
+
+
 def _extension(tmp_path: Path, text: str) -> Path:
     """A repository root holding configs/benchmark/v1.yaml and an extension v2.yaml of ``text``."""
     (tmp_path / "configs/benchmark").mkdir(parents=True)

@@ -1,6 +1,6 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
-    python -m training.results --benchmark v4 --publish README.md   # make results: v1 to v4 -> docs/results.md
+    python -m training.results --benchmark v5 --publish README.md   # make results: v1 to v5 -> docs/results.md
     python -m training.results --benchmark v1 --root docs/benchmark --out docs/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
