@@ -1,4 +1,4 @@
-"""SPEC section 9: every bad input gets one clear error naming the field, the value and what
+"""Bad input: every bad input gets one clear error naming the field, the value and what
 is allowed; a running environment loses no state.
 
 Config errors are :class:`proteo_env.ConfigError`, layout errors :class:`proteo_env.LayoutError`

@@ -217,7 +217,7 @@ CORRUPTIONS = ("odd_site", "outside_box", "duplicate", "on_solid", "on_object", 
 @settings(max_examples=80, **SETTINGS)
 @given(kw=worlds(min_modules=3), corruption=st.sampled_from(CORRUPTIONS), pick=st.integers(0, 2**16))
 def test_bad_layouts_get_one_clear_error(kw, corruption, pick):
-    """SPEC section 9: a bad layout is refused with a ``LayoutError`` that says what is allowed."""
+    """Bad input: a bad layout is refused with a ``LayoutError`` that says what is allowed."""
     pos = np.array(kw["positions"], dtype=np.int64)
     n = len(pos)
     m = pick % n

@@ -555,7 +555,7 @@ def observe(state, settings, geometry, is_cut, out):
 # ---------------------------------------------------------------- whole cycle, whole observation
 @kernel
 def run_cycle(state, settings, geometry, actions, moved, scratch):
-    """One cycle of one world (SPEC section 4); returns the number of modules moved.
+    """One cycle of one world (docs/model.md, "The cycle"); returns the number of modules moved.
 
     ``state`` (:class:`~.records.WorldState`), ``settings``, ``geometry``, ``actions`` and
     ``scratch`` are the records of :mod:`~proteo_env.core.records`, named or plain tuples in

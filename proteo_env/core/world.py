@@ -18,7 +18,7 @@ array          shape        meaning
 Modules ``0 .. n_agents - 1`` are agents; the rest are passive board modules that keep their
 mode and play a fixed scent role (``passive_role``).
 
-One call of :meth:`World.step` is the paper's cycle (SPEC section 4), given every agent's
+One call of :meth:`World.step` is the paper's cycle (docs/model.md, "The cycle"), given every agent's
 action: (1) modes are set; (2) messages are delivered, in agent order, to the module in the
 target direction now; (3) requested moves are shuffled with the world's own xorshift64
 generator (Fisher-Yates, ``j = rng_below(i + 1)`` for ``i = M-1 .. 1``) and tried one at a
@@ -105,7 +105,7 @@ class Physics:
     """How the lattice behaves; the same for every task.
 
     Attributes:
-        motion_model: ``rhombic``, ``rounded``, ``sphere`` or ``minimal`` (SPEC section 2). The
+        motion_model: ``rhombic``, ``rounded``, ``sphere`` or ``minimal`` (docs/model.md, "Motion"). The
             default, ``minimal``, is the only model under which all four paper behaviours
             succeed: under the others no table leg reaches the floor (``docs/model.md``).
         keep_connected: deny a move that would disconnect the other modules.
