@@ -3,11 +3,10 @@
 :class:`ReferenceWorld` takes the same inputs as :class:`proteo_env.core.world.World` and runs
 the same cycle (docs/model.md, from "Lattice and world" to "Scents") with nothing but plain
 Python: a dict from site to module, lists of modes, scents and messages, and the xorshift64
-state as a Python ``int``. It shares no
-code with the kernels; the only engine pieces it reads are the direction order
-(:data:`~proteo_env.core.lattice.DIRECTIONS`, which defines the action encoding) and the
-swept-cell tables (:func:`~proteo_env.core.motion.swept_cells`, derived from geometry and
-checked by ``tests/test_motion_geometry.py``). NumPy appears only where inputs are read and
+state as a Python ``int``. It shares no code with the kernels; the only engine pieces it reads
+are the direction order (:data:`~proteo_env.core.lattice.DIRECTIONS`, which defines the
+action encoding) and the swept-cell tables (:func:`~proteo_env.core.motion.swept_cells`,
+derived from geometry and checked by ``tests/test_motion_geometry.py``). NumPy appears only where inputs are read and
 outputs returned.
 
 Model, as implemented here:

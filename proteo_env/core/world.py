@@ -105,9 +105,9 @@ class Physics:
     """How the lattice behaves; the same for every task.
 
     Attributes:
-        motion_model: ``rhombic``, ``rounded``, ``sphere`` or ``minimal`` (docs/model.md, "Motion"). The
-            default, ``minimal``, is the only model under which all four paper behaviours
-            succeed: under the others no table leg reaches the floor (``docs/model.md``).
+        motion_model: ``rhombic``, ``rounded``, ``sphere`` or ``minimal`` (docs/model.md,
+            "Motion"). The default, ``minimal``, is the only model under which all four paper
+            behaviours succeed: under the others no table leg reaches the floor (``docs/model.md``).
         keep_connected: deny a move that would disconnect the other modules.
         scent_sweeps: relaxation sweeps per cycle (1: the paper's slow propagation).
         exact_scent: compute true hop distances every cycle instead of sweeping.
