@@ -348,8 +348,8 @@ def worlds_rule(rule):
     """The kernel that runs ``rule`` (a :attr:`KernelPolicy.rule`) once per world:
     ``act_worlds(seen, n_agents, slots, memories, rules, rngs, actions)``, where ``seen`` is an
     :class:`Observed` of ``B * A`` rows (world-major, ``A = n_agents``), ``slots`` (A,) the
-    memory slot of each of a world's rows, ``memories`` and ``rngs`` ``B`` memory tuples and
-    generators (numba typed lists), ``rules`` the rule's parameters and ``actions`` ``(B * A, L)``.
+    memory slot of each of a world's rows, ``memories``, ``rules`` and ``rngs`` ``B`` memory
+    tuples, rule parameters and generators (numba typed lists) and ``actions`` ``(B * A, L)``.
     World ``b`` gets exactly the call its own policy's :meth:`KernelPolicy.act_arrays` would make."""
 
     @generated_kernel
@@ -368,16 +368,9 @@ def worlds_rule(rule):
                 hint=seen.hint[lo:hi],
                 action_mask=seen.action_mask[lo:hi],
             )
-            rule(world, slots, memories[b], rules, rngs[b], actions[lo:hi])
+            rule(world, slots, memories[b], rules[b], rngs[b], actions[lo:hi])
 
     return act_worlds
-
-
-def _equal(a, b) -> bool:
-    """Whether two rule parameters (nested tuples of numbers and arrays) are equal."""
-    if isinstance(a, tuple):
-        return isinstance(b, tuple) and len(a) == len(b) and all(_equal(x, y) for x, y in zip(a, b))
-    return bool(np.array_equal(a, b))
 
 
 @kernel
@@ -408,17 +401,18 @@ def _kernel_list(items):
 
 
 class PolicyBatch:
-    """``B`` kernel policies of one class and rule parameters, one per world, acting on all the
-    worlds' rows in one kernel call (:func:`worlds_rule`).
+    """``B`` kernel policies of one class, one per world, acting on all the worlds' rows in one
+    kernel call (:func:`worlds_rule`); each world's policy keeps its own rule parameters (the
+    programs of a population, say).
 
     The policies stay the owners of their state: each keeps its memory (keyed by row, as in
     :meth:`KernelPolicy.act_arrays`) and its generator, and :meth:`KernelPolicy.reset` resets
     one world's policy as before. :meth:`act_arrays` gives exactly what concatenating
     ``policies[b].act_arrays(rows of world b)`` gives, draw for draw, without the per-world
-    Python of that loop.
+    Python of that loop. :meth:`replace` puts another policy of the class in a world's place.
 
     Args:
-        policies: ``B >= 1`` :class:`KernelPolicy` of the same class with equal ``rule_params``.
+        policies: ``B >= 1`` :class:`KernelPolicy` of one class.
     """
 
     def __init__(self, policies):
@@ -427,16 +421,26 @@ class PolicyBatch:
             raise ValueError("policies=[] is not allowed; allowed: one policy per world, at least one")
         first = self.policies[0]
         for p in self.policies:
-            if type(p) is not type(first) or not _equal(p.rule_params, first.rule_params):
-                raise ValueError(
-                    f"policy {type(p).__name__} with {p.rule_params} is not allowed in a batch of "
-                    f"{type(first).__name__} with {first.rule_params}; allowed: one class and one set of rule parameters"
-                )
-        self.rules = first.rule_params
+            self._check(p)
         self.kernel = worlds_rule(first.rule)
-        self._rngs = self._memories = None
+        self._rngs = self._memories = self._rules = None
         self._synced: list[tuple] = []
         """Per world: the generator, memory and memory version that the typed lists hold."""
+
+    def _check(self, policy) -> None:
+        first = self.policies[0]
+        if type(policy) is not type(first):
+            raise ValueError(
+                f"policy {type(policy).__name__} is not allowed in a batch of {type(first).__name__}; "
+                "allowed: policies of one class"
+            )
+
+    def replace(self, b: int, policy) -> None:
+        """Make ``policy`` (of the batch's class) world ``b``'s policy from the next call on."""
+        self._check(policy)
+        self.policies[b] = policy
+        if self._rules is not None:
+            _put(self._rules, b, policy.rule_params)
 
     def act_arrays(self, buffers) -> np.ndarray:
         """``(B * A, F)`` actions (``F`` as :meth:`KernelPolicy.act_arrays` gives) from ``buffers``,
@@ -454,7 +458,7 @@ class PolicyBatch:
         actions = np.empty((n_agents * n_worlds, first.action_layout.length), dtype=np.int64)
         seen = Observed(*stacked_fields(lambda f: getattr(buffers, f), Observed._fields))
         # every world's rows are slots 0 .. A-1 of its own memory: the slots act_arrays keeps
-        self.kernel(seen, n_agents, first._row_slots, self._memories, self.rules, self._rngs, actions)
+        self.kernel(seen, n_agents, first._row_slots, self._memories, self._rules, self._rngs, actions)
         return actions[:, : first.n_fields]
 
     def _sync(self, n_agents: int) -> None:
@@ -464,6 +468,7 @@ class PolicyBatch:
             if p._keyed_by != "row" or len(p._row_slots) != n_agents:
                 p._memory_slots("row", range(n_agents))
         if self._rngs is None:
+            self._rules = _kernel_list(p.rule_params for p in self.policies)
             self._rngs = _kernel_list(p.rng for p in self.policies)
             self._memories = _kernel_list(p.memory.arrays() for p in self.policies)
             self._synced = [(p.rng, p.memory, p.memory.version) for p in self.policies]

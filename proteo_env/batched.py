@@ -213,11 +213,12 @@ class BatchedEnv:
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         return self.observe_arrays()
 
-    def reset_worlds(self, which) -> ObservationBuffers:
+    def reset_worlds(self, which, *, world_seeds=None) -> ObservationBuffers:
         """New episodes in the worlds ``which`` (``(B,)`` bool or world indices); the others run on.
 
         World ``b``'s new episode is drawn from its own generator, as a single env's ``reset()``
-        without a seed would draw it. A start layout larger than the batch's grid moves every
+        without a seed would draw it; with ``world_seeds`` (one seed per world of ``which``, in
+        order) it is seeded instead exactly as a single env reset with that seed. A start layout larger than the batch's grid moves every
         running world onto a larger grid first (:meth:`~proteo_env.core.world.World.regrid`;
         their trajectories do not change). Returns fresh observations of every world: when the
         current cycle was observed already, only the restarted worlds are observed anew (into a
@@ -232,6 +233,19 @@ class BatchedEnv:
                 f"world {int(rows.max() if rows.max() >= self.n_envs else rows.min())} is not "
                 f"allowed; allowed: 0..{self.n_envs - 1}"
             )
+        if world_seeds is not None:
+            if (
+                not hasattr(world_seeds, "__len__")
+                or isinstance(world_seeds, (str, bytes))
+                or len(world_seeds) != len(rows)
+            ):
+                raise ConfigError(
+                    f"world_seeds={world_seeds!r} is not allowed; allowed: a list of {len(rows)} seeds "
+                    "(one per world restarted)"
+                )
+            seeded = [np.random.default_rng(check_seed(s, f"world_seeds[{i}]")) for i, s in enumerate(world_seeds)]
+            for b, rng in zip(rows.tolist(), seeded):
+                self._rngs[b] = rng
         layouts = {int(b): self._build_layout(int(b)) for b in rows}
         starts = {b: self._start_region(layout) for b, layout in layouts.items()}
         extent = self.worlds[0].shape.extent

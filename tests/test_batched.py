@@ -9,7 +9,7 @@ import pytest
 from conftest import SMALL_OVERRIDES, task_params
 
 import proteo_env
-from proteo_env.config import world_seeds
+from proteo_env.config import ConfigError, world_seeds
 from proteo_env.spaces import ObservationBuffers
 
 N_ENVS = 3
@@ -165,3 +165,15 @@ def test_the_step_result_sums_the_terms_and_says_how_each_world_ended():
         assert result.terminated.tolist() == batched.success().tolist()
         assert result.truncated.tolist() == [cycle == 4 and not s for s in result.terminated]
         assert result.done.tolist() == (result.terminated | result.truncated).tolist()
+
+
+def test_reset_worlds_with_seeds_starts_each_as_a_single_env_reset_with_its_seed():
+    env = proteo_env.make_batched("chain-v1", 3, n_modules=12)
+    env.reset(seed=0)
+    env.reset_worlds([2, 0], world_seeds=[41, 7])
+    for b, seed in ((2, 41), (0, 7)):
+        alone = proteo_env.make("chain-v1", n_modules=12)
+        alone.reset(seed=seed)
+        np.testing.assert_array_equal(env.worlds[b].positions, alone.engine.positions)
+    with pytest.raises(ConfigError, match="world_seeds=\\[1\\] is not allowed; allowed: a list of 2 seeds"):
+        env.reset_worlds([0, 1], world_seeds=[1])

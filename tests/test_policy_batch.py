@@ -79,10 +79,25 @@ def test_the_teachers_label_each_group_of_worlds_in_one_call():
     assert sorted(teachers._batches) == [0, N_WORLDS]
 
 
+def test_each_world_acts_with_its_own_rule_parameters_also_after_a_replacement():
+    env = proteo_env.make_batched("chain-v1", N_WORLDS, **small_overrides("chain-v1"))
+    params = [{}, {"p_random": 0.5}, {"p_random": 0.9}]
+    together = [make_policy("chain", env, seed=b, **p) for b, p in enumerate(params)]
+    alone = [make_policy("chain", env, seed=b, **p) for b, p in enumerate(params)]
+    batch, a = PolicyBatch(together), env.n_agents
+    buffers = env.reset(seed=3)
+    for cycle in range(30):
+        if cycle == 15:  # world 0 gets another policy mid-run, with other parameters
+            together[0], alone[0] = (make_policy("chain", env, seed=9, p_random=0.7) for _ in range(2))
+            batch.replace(0, together[0])
+        actions = batch.act_arrays(buffers)
+        expected = np.concatenate([p.act_arrays(buffers.rows(b * a, (b + 1) * a)) for b, p in enumerate(alone)])
+        np.testing.assert_array_equal(actions, expected)
+        buffers = env.step_arrays(actions.reshape(N_WORLDS, a, -1)) and env.observe_arrays()
+
+
 def test_a_batch_refuses_mixed_policies_and_rows_that_do_not_split():
     env = proteo_env.make_batched("chain-v1", 2, **small_overrides("chain-v1"))
-    with pytest.raises(ValueError, match="one class and one set of rule parameters"):
-        PolicyBatch([make_policy("chain", env), make_policy("chain", env, p_random=0.5)])
     with pytest.raises(ValueError, match="one class"):
         PolicyBatch([make_policy("chain", env), make_policy("branch", proteo_env.make_batched("branch-v0", 1))])
     with pytest.raises(ValueError, match="policies=\\[\\] is not allowed"):

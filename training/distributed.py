@@ -4,7 +4,8 @@
 *jobs* (small picklable descriptions of one episode) and a module-level function that runs
 one job and returns a small picklable result. :func:`run_jobs` runs them:
 
-- serially in this process (the default), or
+- serially in this process (the default),
+- on a pool of local worker processes (``workers``), or
 - as Ray tasks (``--ray``), each asking for one CPU, on a local Ray instance with
   ``--workers`` CPUs or on a running cluster (``--address``). Ray is imported only then.
 
@@ -22,10 +23,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import os
 import socket
 import sys
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from proteo_env.config import ConfigError
@@ -150,12 +153,14 @@ def run_jobs(
     keys: Sequence[str],
     *,
     ray: dict | None = None,
+    workers: int | None = None,
     journal: Journal | None = None,
     desc: str = "episodes",
     progress: bool = True,
     max_retries: int = DEFAULT_MAX_RETRIES,
+    sizes: Sequence[int] | None = None,
 ) -> list:
-    """``[fn(job) for job in jobs]``, serially or as Ray tasks; results in job order.
+    """``[fn(job) for job in jobs]``, serially, on local worker processes or as Ray tasks; results in job order.
 
     Args:
         fn: a module-level function ``fn(job) -> result`` (picklable by reference; the result
@@ -163,9 +168,13 @@ def run_jobs(
         jobs: the jobs, ``len(jobs) == len(keys)``.
         keys: a unique, stable name per job (the journal's key).
         ray: ``None`` (serial) or ``{"address", "workers"}`` (see :func:`ray_options`).
+        workers: without ``ray``, run the jobs on this many local processes (:func:`local_pool`;
+            ``None`` or 1: in this process).
         journal: finished jobs are skipped and new ones recorded in it as they arrive.
         progress: a tqdm bar counting finished jobs.
         max_retries: Ray retries of a task whose worker died.
+        sizes: what each job counts for on the progress bar (default 1 each; a batch of
+            episodes counts its episodes).
 
     Returns:
         the results, one per job, in the order of ``jobs``.
@@ -177,20 +186,31 @@ def run_jobs(
     done = dict(journal.done) if journal is not None else {}
     todo = [i for i, k in enumerate(keys) if k not in done]
     results: dict[int, object] = {i: done[k] for i, k in enumerate(keys) if k in done}
+    sizes = [1] * len(jobs) if sizes is None else list(sizes)
     bar = tqdm(
-        total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="episode", leave=False, disable=not progress
+        total=sum(sizes),
+        initial=sum(sizes) - sum(sizes[i] for i in todo),
+        desc=desc,
+        unit="episode",
+        leave=False,
+        disable=not progress,
     )
 
     def finished(i: int, result) -> None:
         results[i] = result
         if journal is not None:
             journal.add(keys[i], result)
-        bar.update(1)
+        bar.update(sizes[i])
 
     if journal is not None and journal.resumed and len(todo) < len(jobs):
         print(f"resuming {journal.path}: {len(jobs) - len(todo)} of {len(jobs)} {desc} already done", file=sys.stderr)
     try:
-        if ray is None:
+        if ray is None and (workers or 1) > 1 and len(todo) > 1:
+            pool = local_pool(workers)
+            pending = {pool.submit(fn, jobs[i]): i for i in todo}
+            for future in as_completed(pending):
+                finished(pending[future], future.result())
+        elif ray is None:
             for i in todo:
                 finished(i, fn(jobs[i]))
         else:
@@ -198,6 +218,18 @@ def run_jobs(
     finally:
         bar.close()
     return [results[i] for i in range(len(jobs))]
+
+
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+
+
+def local_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` processes, started once per process and kept (its workers keep
+    their imports and compiled kernels from one call to the next). Workers are spawned, not
+    forked: a fork would copy this process's thread pools (numba's, torch's) mid-state."""
+    if workers not in _POOLS:
+        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    return _POOLS[workers]
 
 
 def _attempt(fn, job, key: str, ledger):
@@ -326,8 +358,10 @@ def _check_reachable(address: str) -> None:
 def connect(address: str | None = None, workers: int | None = None):
     """Connect to Ray (once per process) and check that every node can run the project.
 
-    ``address=None`` starts a local instance with ``workers`` CPUs (default: all); an address
-    joins a running cluster. An already initialised Ray (a test's cluster) is used as it is.
+    ``address=None`` starts a local instance of this process's own with ``workers`` CPUs (default:
+    all), never joining one that another process started on the machine (``ray start``, another
+    run); an address joins a running cluster. An already initialised Ray (a test's cluster) is
+    used as it is.
     Returns the ``ray`` module.
     """
     ray = require_ray()
@@ -343,7 +377,7 @@ def connect(address: str | None = None, workers: int | None = None):
                     f"({ray.__version__})"
                 ) from None
         else:
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
         check_cluster()
     return ray
 

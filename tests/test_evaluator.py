@@ -1,0 +1,178 @@
+"""The batched evaluator (``training.evaluator``) gives what ``run_episode`` gives, episode by
+episode, for every task and every compiled controller kind; its results do not depend on the
+batch size or the number of worker processes; bad input is refused before any episode runs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import small_overrides, task_params
+
+import proteo_env
+from baselines import make_policy
+from baselines.program import PROGRAMS_DIR
+from proteo_env.config import ConfigError
+from proteo_env.rollout import run_episode
+from training.evaluator import Controller, Episode, evaluate, run_episodes, settings_json
+
+SEEDS = [3, 11, 4, 27, 8]
+
+
+def _alone(task_id, overrides, level, controller, seed):
+    """The episode as ``run_episode`` runs it, through the per-agent dict API."""
+    env = proteo_env.make(task_id, **overrides, **({} if level == "full" else {"control": level}))
+    policy = make_policy(controller.policy, env, seed=seed, **dict(controller.params))
+    return run_episode(env, policy, seed=seed)
+
+
+def _same(alone, batched) -> bool:
+    return (alone.cycles, alone.success, alone.total_reward, alone.metrics) == (
+        batched.cycles,
+        batched.success,
+        batched.total_reward,
+        batched.metrics,
+    )
+
+
+def _controllers(task_id) -> list[Controller]:
+    """The task's rules, the same rules with other parameters where they have some, random, and
+    the task's program where it has one."""
+    name = proteo_env.TASKS[task_id].name
+    out = [Controller.rules("random")]
+    if name in ("sandbox",):
+        return out
+    out.append(Controller.rules(name))
+    if name == "chain":
+        out.append(Controller.rules(name, p_random=0.3))
+    if (PROGRAMS_DIR / f"{name}.yaml").is_file():
+        out.append(Controller.program(name))
+    return out
+
+
+@pytest.mark.parametrize("task_id", task_params())
+def test_every_episode_is_the_one_run_episode_gives(task_id):
+    overrides = small_overrides(task_id, max_cycles=60)
+    controllers = _controllers(task_id)
+    # batch_size 2 < episodes per controller: rows end at different cycles and start new episodes
+    results = evaluate(task_id, controllers, SEEDS, env=overrides, workers=1, batch_size=2)
+    for controller, row in zip(controllers, results, strict=True):
+        for seed, batched in zip(SEEDS, row, strict=True):
+            alone = _alone(task_id, overrides, "full", controller, seed)
+            assert _same(alone, batched), (controller.policy, seed, alone, batched)
+
+
+@pytest.mark.parametrize("level", ["move", "move+mode"])
+def test_every_episode_is_the_one_run_episode_gives_below_full(level):
+    overrides = small_overrides("chain-v1", max_cycles=80)
+    controllers = [Controller.rules("chain"), Controller.rules("random")]
+    results = evaluate("chain-v1", controllers, SEEDS, env=overrides, level=level, workers=1, batch_size=3)
+    for controller, row in zip(controllers, results):
+        for seed, batched in zip(SEEDS, row):
+            assert _same(_alone("chain-v1", overrides, level, controller, seed), batched)
+
+
+def test_programs_of_a_population_share_one_batch_with_their_own_tables():
+    """Different programs in the rows of one batch: each row acts with its own program."""
+    from training.program_variation import ProgramSpace, random_program
+
+    overrides = small_overrides("chain-v1", max_cycles=150)
+    env = proteo_env.make("chain-v1", **overrides)
+    rng = np.random.default_rng(5)
+    space = ProgramSpace.for_env(env)
+    from baselines.program import format_program
+
+    texts = [format_program(random_program(space, rng, "chain")) for _ in range(4)] + ["chain"]
+    controllers = [Controller.program(t) for t in texts]
+    results = evaluate("chain-v1", controllers, SEEDS[:3], env=overrides, workers=1, batch_size=4)
+    for controller, row in zip(controllers, results):
+        for seed, batched in zip(SEEDS[:3], row):
+            assert _same(_alone("chain-v1", overrides, "full", controller, seed), batched)
+    assert len({r.total_reward for row in results for r in row}) > 3, "the programs behave differently"
+    assert len({r.cycles for row in results for r in row}) > 1, "rows restart while others run on"
+
+
+def test_results_do_not_depend_on_batch_size_workers_or_order():
+    overrides = small_overrides("grasp-v0", max_cycles=50)
+    controllers = [Controller.rules("grasp"), Controller.program("grasp")]
+    reference = evaluate("grasp-v0", controllers, SEEDS, env=overrides, workers=1, batch_size=64)
+    assert evaluate("grasp-v0", controllers, SEEDS, env=overrides, workers=1, batch_size=1) == reference
+    assert evaluate("grasp-v0", controllers, SEEDS, env=overrides, workers=2, batch_size=2) == reference
+    reversed_seeds = evaluate("grasp-v0", controllers[::-1], SEEDS[::-1], env=overrides, workers=1, batch_size=3)
+    assert [row[::-1] for row in reversed_seeds[::-1]] == reference
+
+
+def test_episodes_of_several_settings_and_tasks_in_one_call():
+    chain, grasp = small_overrides("chain-v1", max_cycles=40), small_overrides("grasp-v0", max_cycles=40)
+    episodes = [
+        Episode("chain-v1", settings_json(chain), "full", Controller.rules("chain"), 1),
+        Episode("grasp-v0", settings_json(grasp), "full", Controller.rules("grasp"), 1),
+        Episode("chain-v1", settings_json({**chain, "n_modules": 10}), "full", Controller.rules("chain"), 2),
+    ]
+    results = run_episodes(episodes, workers=1)
+    for e, batched in zip(episodes, results):
+        assert _same(_alone(e.task, json.loads(e.overrides), e.level, e.controller, e.seed), batched)
+
+
+def test_a_network_checkpoint_agrees_with_run_episode(tmp_path):
+    """A network acts in one forward pass over every world: same episodes as one world at a
+    time (a 16-unit NumPy MLP's batched arithmetic is exact here)."""
+    from proteo_env.adapters.flatten import ObservationEncoder
+    from training.checkpoints import load_policy
+    from training.common import write_checkpoint_meta
+    from training.policies import NumpyMLP
+
+    overrides = small_overrides("chain-v1", max_cycles=40)
+    env = proteo_env.make("chain-v1", **overrides)
+    encoder = ObservationEncoder.for_env(env)
+    net = NumpyMLP(encoder.size, int(env.action_layout.nvec.sum()), (16,))
+    genome = net.init_genome(np.random.default_rng(0))
+    np.save(tmp_path / "genome.npy", genome * 10)  # large enough that the network's choices matter
+    write_checkpoint_meta(
+        tmp_path,
+        algorithm="cma-neural",
+        task=env.task.task_id(),
+        env_overrides=overrides,
+        encoder_spec=encoder.spec(),
+        nvec=env.action_layout.nvec,
+        agent_steps=0,
+        seed=0,
+        extra={"hidden": [16]},
+    )
+    controller = Controller.from_checkpoint(tmp_path)
+    results = evaluate("chain-v1", [controller], SEEDS, env=overrides, workers=1, batch_size=5)[0]
+    for seed, batched in zip(SEEDS, results):
+        assert _same(run_episode(env, load_policy(tmp_path, env, seed=seed), seed=seed), batched)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"seeds": [1, "2"]}, "seed='2' is not allowed; allowed: an integer >= 0"),
+        ({"seeds": [-1]}, "seed=-1 is not allowed"),
+        ({"seeds": []}, "seeds=\\[\\] is not allowed"),
+        ({"controllers": []}, "controllers=\\[\\] is not allowed"),
+        ({"workers": 0}, "workers=0 is not allowed; allowed: an integer >= 1"),
+        ({"batch_size": 0}, "batch_size=0 is not allowed"),
+        ({"controllers": [Controller.rules("branch")]}, "controller='branch' is not allowed on task 'chain-v1'"),
+    ],
+)
+def test_bad_input_is_refused_before_any_episode(change, message, monkeypatch):
+    from training import evaluator
+
+    monkeypatch.setattr(evaluator, "run_batch", lambda *a, **k: pytest.fail("an episode ran"))
+    args = {"controllers": [Controller.rules("chain")], "seeds": [0], "workers": 1, "batch_size": 4, **change}
+    with pytest.raises(ConfigError, match=message):
+        evaluate(
+            "chain-v1",
+            args["controllers"],
+            args["seeds"],
+            env=small_overrides("chain-v1"),
+            **{k: args[k] for k in ("workers", "batch_size")},
+        )
+
+
+def test_a_program_that_fails_its_checks_is_refused_before_any_episode():
+    with pytest.raises(ConfigError):
+        evaluate("chain-v1", [Controller.program("modes: {NOPE: []}")], [0], env=small_overrides("chain-v1"), workers=1)

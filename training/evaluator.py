@@ -1,0 +1,384 @@
+"""Many episodes at the engine's speed: every (controller, world) episode of a list in batches of worlds.
+
+:func:`run_episodes` takes :class:`Episode` records (task, settings, control level, a
+:class:`Controller`, a world seed) and returns one :class:`~proteo_env.rollout.EpisodeResult`
+per record (``history`` left empty): the same cycles, success, return and final metrics, bit for
+bit, as :func:`~proteo_env.rollout.run_episode` gives for that controller on that seed
+(``tests/test_evaluator.py`` holds the two to each other on every task).
+
+How: the episodes of one task, settings and level run as rows of one batched environment
+(:func:`proteo_env.make_batched`, ``batch_size`` worlds); a row whose episode ends starts the
+next episode of the queue on its own seed (:meth:`~proteo_env.batched.BatchedEnv.reset_worlds`),
+so the batch stays full. Each cycle the controllers of every row act together:
+
+- kernel policies (the hand-coded rules with any parameters, programs) in one kernel call over
+  every world, each world with its own rule parameters (:class:`~baselines.base.PolicyBatch`);
+- a network checkpoint without memory in one forward pass over every agent of every world, then
+  each world's actions drawn from its own episode's generator (the forward pass over ``B * A``
+  rows can differ from one over ``A`` rows in the last bits of a logit, and so, rarely, in a
+  sampled action: ``docs/guides/evaluator.md`` gives the agreement measured);
+- anything else (random, networks with memory) world by world, with the policy's own ``act``.
+
+The batches are spread over ``workers`` processes (default: every core), or over a Ray cluster
+(``ray``); each episode depends only on its own record, so the results do not depend on the
+number of workers, the batch size or the order of the records.
+
+Example::
+
+    from training.evaluator import Controller, evaluate
+
+    programs = [Controller.program(text) for text in texts]
+    results = evaluate("chain-v1", programs, seeds=range(100), env={"n_modules": 12})
+    successes = [[r.success for r in row] for row in results]  # one row per controller
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from proteo_env.config import ConfigError
+from proteo_env.rollout import EpisodeResult
+
+DEFAULT_BATCH = 64
+"""Worlds stepped together in one process (``tests`` and ``benchmarks/research_loop.py``
+measure the choice)."""
+
+
+@dataclass(frozen=True)
+class Controller:
+    """What acts in an episode (picklable; the same record on every worker).
+
+    Attributes:
+        policy: a registered policy name (``"chain"``, ``"program"``, ``"random"``...) or, with
+            ``checkpoint``, a checkpoint's path.
+        params: the policy's keyword parameters as ``(name, value)`` pairs (a program's text as
+            ``("program", text)``; evolved rule parameters).
+        checkpoint: ``policy`` is a checkpoint (:func:`training.checkpoints.load_policy`).
+        deterministic: a network checkpoint takes each field's arg-max.
+    """
+
+    policy: str
+    params: tuple = ()
+    checkpoint: bool = False
+    deterministic: bool = False
+
+    @classmethod
+    def rules(cls, name: str, **params) -> Controller:
+        """A registered policy (a task's hand-coded rules, ``random``) with keyword parameters."""
+        return cls(name, tuple(sorted(params.items())))
+
+    @classmethod
+    def program(cls, text: str) -> Controller:
+        """A program of the paper's primitives (:mod:`baselines.program`), by its text, name or path."""
+        return cls("program", (("program", text),))
+
+    @classmethod
+    def from_checkpoint(cls, path, *, deterministic: bool = False) -> Controller:
+        return cls(str(path), checkpoint=True, deterministic=deterministic)
+
+    def build(self, env, seed: int):
+        """This controller's policy for ``env`` (an env of the episode's task, settings and level), reset with ``seed``."""
+        if self.checkpoint:
+            from training.checkpoints import load_policy
+
+            policy = load_policy(self.policy, env, seed=seed, deterministic=self.deterministic)
+        else:
+            from baselines import make_policy
+
+            policy = make_policy(self.policy, env, seed=seed, **dict(self.params))
+        policy.reset(seed)
+        return policy
+
+    @property
+    def group(self) -> str:
+        """Controllers of one group share a batch: one kernel policy class (a task's rules with
+        any parameters, programs), or one network."""
+        return f"{self.policy}|{self.deterministic}" if self.checkpoint else self.policy
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One episode: everything its result depends on.
+
+    Attributes:
+        task: a registered task id.
+        overrides: the JSON of the :func:`proteo_env.make` settings (sorted keys).
+        level: the control level (``full``, ``move+mode``, ``move``).
+        controller: what acts.
+        seed: the world seed; the controller's policy is reset with it too, as
+            :func:`~proteo_env.rollout.run_episode` does.
+    """
+
+    task: str
+    overrides: str
+    level: str
+    controller: Controller
+    seed: int
+
+
+def settings_json(overrides: dict) -> str:
+    """The canonical JSON of env overrides (the :attr:`Episode.overrides` form)."""
+    return json.dumps(dict(overrides), sort_keys=True)
+
+
+# ---------------------------------------------------------------------- checking
+_CHECKED: dict = {}
+
+
+def _template(task: str, overrides: str, level: str):
+    """A single env of these settings (cached per process), for building policies and checking them."""
+    key = (task, overrides, level)
+    if key not in _CHECKED:
+        import proteo_env
+
+        _CHECKED[key] = proteo_env.make(
+            task, **json.loads(overrides), **({} if level == "full" else {"control": level})
+        )
+    return _CHECKED[key]
+
+
+def check_episodes(episodes, *, workers=None, batch_size: int = DEFAULT_BATCH) -> None:
+    """Refuse what cannot run, before any episode runs: one ``ConfigError`` (or the controller's own
+    ``ValueError``/``CheckpointError``) naming the field, the value and what is allowed."""
+    episodes = list(episodes) if not isinstance(episodes, list) else episodes
+    if not episodes:
+        raise ConfigError("episodes=[] is not allowed; allowed: at least one (controller, world) episode")
+    for name, value in (("workers", workers), ("batch_size", batch_size)):
+        if value is None and name == "workers":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= 1")
+    from baselines.base import KernelPolicy
+
+    built = set()
+    for i, e in enumerate(episodes):
+        if isinstance(e.seed, bool) or not isinstance(e.seed, (int, np.integer)) or e.seed < 0:
+            raise ConfigError(f"episodes[{i}].seed={e.seed!r} is not allowed; allowed: an integer >= 0 (a world seed)")
+        if not isinstance(e.controller, Controller):
+            raise ConfigError(f"episodes[{i}].controller={e.controller!r} is not allowed; allowed: a Controller")
+        key = (e.task, e.overrides, e.level, e.controller)
+        if key in built:
+            continue
+        env = _template(e.task, e.overrides, e.level)
+        policy = e.controller.build(env, 0)
+        if isinstance(policy, KernelPolicy) and not policy.runs_on(env.task):
+            raise ConfigError(
+                f"episodes[{i}].controller={e.controller.policy!r} is not allowed on task {e.task!r}; "
+                f"allowed: a controller written for {env.task.name!r} (its rules, a program for it, random, "
+                "a checkpoint of it)"
+            )
+        built.add(key)
+
+
+# ---------------------------------------------------------------------- one batch
+class _Actors:
+    """The policies of a batch's rows acting together (kernel policies in one call, a network in one forward pass)."""
+
+    def __init__(self, policies: list, n_agents: int):
+        from baselines.base import KernelPolicy
+        from training.policies import LogitsPolicy
+
+        self.policies, self.n_agents = policies, n_agents
+        first = policies[0]
+        self.kernels = type(first).batch(policies) if isinstance(first, KernelPolicy) else None
+        self.network = isinstance(first, LogitsPolicy) and first.memory == "none"
+
+    def replace(self, b: int, policy) -> None:
+        self.policies[b] = policy
+        if self.kernels is not None:
+            self.kernels.replace(b, policy)
+
+    def act(self, buffers) -> np.ndarray:
+        """``(B * A, F)`` actions of every row's agents."""
+        a = self.n_agents
+        if self.kernels is not None:
+            return self.kernels.act_arrays(buffers)
+        if self.network:
+            from training.policies import sample_actions
+
+            first = self.policies[0]
+            logits = first.logits_fn(first.encoder.encode_buffers(buffers))
+            return np.concatenate(
+                [
+                    sample_actions(
+                        logits[b * a : (b + 1) * a],
+                        p.nvec,
+                        buffers.action_mask[b * a : (b + 1) * a],
+                        p.rng,
+                        deterministic=p.deterministic,
+                        sampled=p.sampled,
+                    )
+                    for b, p in enumerate(self.policies)
+                ]
+            )
+        names = [f"module_{i}" for i in range(a)]
+        out = []
+        for b, p in enumerate(self.policies):
+            actions = p.act(buffers.rows(b * a, (b + 1) * a).per_agent(names))
+            out.append(np.stack([np.asarray(actions[name]).reshape(-1) for name in names]))
+        return np.concatenate(out)
+
+
+def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[list]:
+    """Every episode of ``episodes`` (one task, settings, level and controller group) in one
+    batched env of up to ``batch_size`` worlds: ``[return, success, cycles, metrics]`` each, in order."""
+    import proteo_env
+    from training.common import limit_threads
+
+    limit_threads(1)
+    first = episodes[0]
+    env = _template(first.task, first.overrides, first.level)
+    rows = min(batch_size, len(episodes))
+    control = {} if first.level == "full" else {"control": first.level}
+    batch = proteo_env.make_batched(first.task, rows, **json.loads(first.overrides), **control)
+    a = batch.n_agents
+    buffers = batch.reset(world_seeds=[e.seed for e in episodes[:rows]])
+    actors = _Actors([e.controller.build(env, e.seed) for e in episodes[:rows]], a)
+    playing = list(range(rows))
+    """The episode each row plays (-1: none left)."""
+    returns = np.zeros(rows)
+    out: list = [None] * len(episodes)
+    following = rows
+    while any(i >= 0 for i in playing):
+        actions = actors.act(buffers)
+        result = batch.step_arrays(actions.reshape(rows, a, -1))
+        returns += result.reward
+        ended = np.flatnonzero(result.terminated | result.truncated)
+        restart, seeds = [], []
+        for b in ended.tolist():
+            i = playing[b]
+            if i < 0:
+                continue
+            metrics = batch.tasks[b].metrics(batch.worlds[b])
+            out[i] = [
+                float(returns[b]),
+                bool(result.terminated[b]),
+                int(batch.cycles[b]),
+                {k: float(v) for k, v in metrics.items()},
+            ]
+            returns[b] = 0.0
+            if following < len(episodes):
+                e = episodes[following]
+                playing[b] = following
+                following += 1
+                actors.replace(b, e.controller.build(env, e.seed))
+                restart.append(b)
+                seeds.append(e.seed)
+            else:
+                playing[b] = -1
+        if restart:
+            buffers = batch.reset_worlds(np.array(restart, dtype=np.int64), world_seeds=seeds)
+        else:
+            buffers = batch.observe_arrays()
+    return out
+
+
+def _run_chunk(chunk: tuple) -> list[list]:
+    """A worker's job: ``(episodes, batch_size)`` run as one batch."""
+    episodes, batch_size = chunk
+    return run_batch(list(episodes), batch_size)
+
+
+# ---------------------------------------------------------------------- many batches
+def default_workers() -> int:
+    """Every core this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def run_episodes(
+    episodes,
+    *,
+    workers: int | None = None,
+    batch_size: int = DEFAULT_BATCH,
+    ray: dict | None = None,
+    journal=None,
+    desc: str = "episodes",
+    progress: bool = False,
+) -> list[EpisodeResult]:
+    """The result of every episode, in order (see the module's docstring).
+
+    Args:
+        episodes: :class:`Episode` records (at least one).
+        workers: processes (default: every core; 1: this process); with ``ray``, the Ray CPUs.
+        batch_size: worlds stepped together in one process.
+        ray: ``None`` (local) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`):
+            each batch a Ray task.
+        journal: a :class:`training.distributed.Journal`: finished batches are kept and skipped on a rerun.
+        desc, progress: a progress bar counting episodes.
+
+    Raises:
+        ConfigError: no episodes, a seed that is not an integer >= 0, a controller of another
+            task, ``workers`` or ``batch_size`` < 1; a program that fails its checks raises its
+            own error. All before any episode runs.
+    """
+    from training.distributed import run_jobs
+
+    episodes = list(episodes)
+    check_episodes(episodes, workers=workers, batch_size=batch_size)
+    workers = default_workers() if workers is None else int(workers)
+    groups: dict = {}
+    for i, e in enumerate(episodes):
+        groups.setdefault((e.task, e.overrides, e.level, e.controller.group), []).append(i)
+    # Enough chunks to keep every worker busy, each large enough to keep its batch full.
+    per_chunk = max(batch_size, math.ceil(len(episodes) / (4 * workers))) if workers > 1 or ray else len(episodes)
+    chunks, members = [], []
+    for indices in groups.values():
+        n = math.ceil(len(indices) / per_chunk)
+        for part in np.array_split(np.array(indices), n):
+            members.append(part.tolist())
+            chunks.append((tuple(episodes[i] for i in part), batch_size))
+    keys = [_chunk_key(chunk[0]) for chunk in chunks]
+    results = run_jobs(
+        _run_chunk,
+        chunks,
+        keys,
+        ray=ray,
+        workers=None if ray else workers,
+        journal=journal,
+        desc=desc,
+        progress=progress,
+        sizes=[len(m) for m in members],
+    )
+    out: list = [None] * len(episodes)
+    for part, chunk_results in zip(members, results):
+        for i, (total, success, cycles, metrics) in zip(part, chunk_results):
+            out[i] = EpisodeResult(cycles=cycles, success=success, total_reward=total, metrics=metrics)
+    return out
+
+
+def _chunk_key(episodes) -> str:
+    """A stable name of a batch: a hash of its episodes."""
+    text = "\n".join(repr(e) for e in episodes)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def evaluate(
+    task: str,
+    controllers,
+    seeds,
+    *,
+    env: dict | None = None,
+    level: str = "full",
+    workers: int | None = None,
+    batch_size: int = DEFAULT_BATCH,
+    progress: bool = False,
+) -> list[list[EpisodeResult]]:
+    """Every controller on every world seed of ``task`` (settings ``env``, control ``level``):
+    ``results[c][s]`` for ``controllers[c]`` on ``seeds[s]`` (see :func:`run_episodes`)."""
+    controllers, seeds = list(controllers), list(seeds)
+    for name, value in (("controllers", controllers), ("seeds", seeds)):
+        if not value:
+            raise ConfigError(f"{name}=[] is not allowed; allowed: a non-empty list")
+    overrides = settings_json(env or {})
+    episodes = [Episode(task, overrides, level, c, s) for c in controllers for s in seeds]
+    results = run_episodes(episodes, workers=workers, batch_size=batch_size, progress=progress)
+    return [results[c * len(seeds) : (c + 1) * len(seeds)] for c in range(len(controllers))]
+
+
+__all__ = ["Controller", "Episode", "check_episodes", "evaluate", "run_batch", "run_episodes", "settings_json"]
