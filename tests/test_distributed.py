@@ -70,66 +70,71 @@ class Interrupt(Exception):
 
 
 def _interrupting(fn, after: int, calls: list):
-    def wrapped(job):
+    """``fn`` (the evaluator's ``run_batch``), raising :class:`Interrupt` at its call ``after + 1``;
+    ``calls`` gets the episodes of each batch that ran."""
+
+    def wrapped(episodes, *args, **kwargs):
         if len(calls) == after:
             raise Interrupt
-        calls.append(job)
-        return fn(job)
+        calls.append(len(episodes))
+        return fn(episodes, *args, **kwargs)
 
     return wrapped
 
 
-# ---------------------------------------------------------------------- resume (serial)
+# ---------------------------------------------------------------------- resume (one process)
 def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path, monkeypatch):
-    from training import episodes
     from training import evaluate as ev
+    from training import evaluator
 
     config = _eval_config(tmp_path)
-    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "whole", progress=False, plots=False)
-    original, calls = episodes.run_episode_job, []
-    monkeypatch.setattr(episodes, "run_episode_job", _interrupting(original, 7, calls))
+    run = {"config": config, "tasks": TASKS, "progress": False, "plots": False, "workers": 1}
+    ev.evaluate(**run, out=tmp_path / "whole")
+    original, calls = evaluator.run_batch, []
+    monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 2, calls))  # 4 batches: 2 tasks x 2 policies
     with pytest.raises(Interrupt):
-        ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
+        ev.evaluate(**run, out=tmp_path / "cut")
     assert not (tmp_path / "cut" / "results.md").exists()  # no partial table
     with (tmp_path / "cut" / "episodes.jsonl").open("a") as fh:
         fh.write('{"key": "torn')  # the driver died while writing
     with pytest.raises(ConfigError, match="unfinished evaluation with other settings.*seeds"):
-        ev.evaluate(config=config, tasks=TASKS, seeds=2, out=tmp_path / "cut", progress=False, plots=False)
+        ev.evaluate(**{**run, "seeds": 2}, out=tmp_path / "cut")
     calls.clear()
-    monkeypatch.setattr(episodes, "run_episode_job", _interrupting(original, 10**6, calls))
-    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
+    monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 10**6, calls))
+    ev.evaluate(**run, out=tmp_path / "cut")
     total = len(_episodes(tmp_path / "whole")) * 3
-    assert len(calls) == total - 7  # only the missing episodes ran
+    assert sum(calls) == total - 6  # only the missing episodes ran
     assert _episodes(tmp_path / "cut") == _episodes(tmp_path / "whole")
     calls.clear()
-    ev.evaluate(config=config, tasks=TASKS, out=tmp_path / "cut", progress=False, plots=False)
-    assert len(calls) == total  # a finished evaluation runs anew
+    ev.evaluate(**run, out=tmp_path / "cut")
+    assert sum(calls) == total  # a finished evaluation runs anew
 
 
-def test_interrupted_cma_es_resumes_mid_generation(tmp_path, monkeypatch):
-    from training import cma_es
+def test_interrupted_cma_es_resumes_the_interrupted_generation(tmp_path, monkeypatch):
+    from training import cma_es, evaluator
 
-    cma_es.main([*CMA, "--run-dir", str(tmp_path / "whole")])
-    original, calls = cma_es.candidate_episode, []
-    monkeypatch.setattr(cma_es, "candidate_episode", _interrupting(original, 11, calls))  # 8 per generation
+    cma = [*CMA, "--workers", "1"]
+    cma_es.main([*cma, "--run-dir", str(tmp_path / "whole")])
+    original, calls = evaluator.run_batch, []
+    monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 1, calls))  # one batch per generation
     with pytest.raises(Interrupt):
-        cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
+        cma_es.main([*cma, "--run-dir", str(tmp_path / "cut")])
     calls.clear()
-    monkeypatch.setattr(cma_es, "candidate_episode", _interrupting(original, 10**6, calls))
-    cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
-    assert len(calls) == 16 - 11
+    monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 10**6, calls))
+    cma_es.main([*cma, "--run-dir", str(tmp_path / "cut")])
+    assert calls == [8]  # generation 2 only: 4 candidates x 2 worlds
     assert _progress(tmp_path / "cut") == _progress(tmp_path / "whole")
     with pytest.raises(ConfigError, match="not empty"):  # a finished run is not resumed by accident
-        cma_es.main([*CMA, "--run-dir", str(tmp_path / "cut")])
+        cma_es.main([*cma, "--run-dir", str(tmp_path / "cut")])
 
 
-# ---------------------------------------------------------------------- Ray == serial
+# ---------------------------------------------------------------------- Ray == one process
 def test_eval_on_ray_equals_serial(tmp_path, local_ray, capsys):
     from training.cli import main
 
     config = _eval_config(tmp_path)
     flags = ["eval", "--config", str(config), "--tasks", ",".join(TASKS), "--no-plots"]
-    assert main([*flags, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*flags, "--out", str(tmp_path / "serial"), "--workers", "1"]) == 0
     assert main([*flags, "--out", str(tmp_path / "ray"), "--ray", "--workers", "2"]) == 0
     assert _episodes(tmp_path / "ray") == _episodes(tmp_path / "serial")
     assert [len(r["returns"]) for r in _episodes(tmp_path / "ray")] == [3] * 4  # 2 tasks x hand-coded, random

@@ -99,7 +99,8 @@ def test_resume_gives_the_same_run(tmp_path):
 def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
     """With ``final_episodes_per_variation`` the survivors are re-scored on new worlds after the
     last generation; the checkpoint is the best of them there, with that fitness."""
-    from training.evolve import ProgramEpisode, generation_seeds, program_episode
+    from training.evaluator import run_episodes
+    from training.evolve import generation_seeds, program_episodes
 
     final = evolve([*SMALL, *QUIET, "--generations", "2", "--final-episodes-per-variation", "2"]
                    + ["--run-dir", str(tmp_path / "run")])  # fmt: skip
@@ -112,7 +113,7 @@ def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
     env = proteo_env.make("chain-v1", **meta["args"]["env"])
 
     def fitness(text: str) -> float:
-        returns = [program_episode(ProgramEpisode("chain-v1", w, text, seed))[0] for w in worlds for seed in seeds]
+        returns = [r.total_reward for r in run_episodes(program_episodes("chain-v1", worlds, [text], seeds), workers=1)]
         return float(np.mean(returns)) - 0.001 * complexity(load_program(text, env))
 
     scores = [fitness(text) for text in survivors]
@@ -137,8 +138,11 @@ def test_bad_config_is_one_error_before_anything_is_written(tmp_path, config, na
 
 
 def test_the_success_score_ranks_every_success_above_every_failure_and_faster_above_slower():
+    from proteo_env.rollout import EpisodeResult
     from training.evolve import success_score
 
-    fast, slow, failed = [0.5, True, 50, 12, 300], [0.5, True, 299, 12, 300], [9.0, False, 300, 12, 300]
-    assert success_score(fast) > success_score(slow) > success_score(failed) == 0.0
-    assert 1.0 < success_score(slow) and success_score(fast) <= 2.0
+    fast, slow, failed = (
+        EpisodeResult(c, s, r, {}) for c, s, r in ((50, True, 0.5), (299, True, 0.5), (300, False, 9.0))
+    )
+    assert success_score(fast, 300) > success_score(slow, 300) > success_score(failed, 300) == 0.0
+    assert 1.0 < success_score(slow, 300) and success_score(fast, 300) <= 2.0

@@ -541,6 +541,7 @@ def judge(
     tasks=None,
     out="out/benchmark",
     ray: dict | None = None,
+    workers: int | None = None,
     worlds_cap: int | None = None,
     fresh: bool = False,
     progress: bool = True,
@@ -554,7 +555,8 @@ def judge(
         checkpoints: the training seeds of one recipe (checkpoint folders), or
         policy: ``"rules"`` or ``"random"`` (every task of the protocol, or ``tasks``), at every
             level the protocol judges it at, or at ``level``.
-        ray: ``None`` (serial) or ``{"address", "workers"}``.
+        ray: ``None`` (this machine) or ``{"address", "workers"}``.
+        workers: processes on this machine (default: every core; the results do not depend on it).
         worlds_cap: judge on at most this many worlds per split and training seed (the first
             ones). For quick checks only: the file records it and is not ``complete``.
         fresh: discard the episodes of an interrupted run in ``out`` instead of resuming it.
@@ -649,7 +651,7 @@ def judge(
     }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="benchmark run")
     started = time.perf_counter()
-    run_episodes(results, jobs, out_dir, ray=ray, journal=journal, progress=progress)
+    run_episodes(results, jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
     seconds = time.perf_counter() - started
 
     from training.report import GroupResult
@@ -775,6 +777,7 @@ def main(args) -> int:
         tasks=args.tasks.split(",") if args.tasks else None,
         out=args.out,
         ray=ray_options(args),
+        workers=None if args.ray else args.workers,
         worlds_cap=args.worlds_cap,
         fresh=args.fresh,
     )

@@ -96,7 +96,8 @@ class Args:
     address: str | None = None
     """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
     workers: int | None = None
-    """CPUs of the local Ray instance, or tasks at once on a cluster (with ``ray``)."""
+    """Worker processes (default: every core); with ``ray``, CPUs of the local Ray instance or
+    tasks at once on a cluster. The results do not depend on it."""
 
 
 # ---------------------------------------------------------------------- the rules' parameter space
@@ -206,10 +207,10 @@ def distribution_mean(es) -> np.ndarray:
 # ---------------------------------------------------------------------- fitness
 @dataclass(frozen=True)
 class CandidateEpisode:
-    """One episode of one candidate (picklable; a Ray task when ``--ray``).
+    """One episode of one neural candidate (picklable; a Ray task when ``--ray``); the rules'
+    candidates run through :func:`rules_episodes`.
 
-    ``genome`` is the candidate ``x`` (``(n,)`` floats: the unit cube for rules, weights for
-    neural); ``params`` the rules' parameter space (empty for neural).
+    ``genome`` is the candidate ``x`` (``(n,)`` weights); ``params`` is empty.
     """
 
     task: str
@@ -247,14 +248,8 @@ def _env(task: str, overrides: str):
 
 
 def build_policy(job: CandidateEpisode):
-    """The candidate's policy in this process's environment (``ValueError``: parameters rejected)."""
+    """The neural candidate's policy in this process's environment."""
     env, encoder = _env(job.task, job.env)
-    if job.controller == "rules":
-        from baselines import make_policy
-
-        return env, make_policy(
-            job.policy, env, seed=job.seed, **{p.name: p.decode(v) for p, v in zip(job.params, job.genome)}
-        )
     from training.policies import LogitsPolicy, NumpyMLP
 
     nvec = env.action_layout.nvec
@@ -270,25 +265,56 @@ def build_policy(job: CandidateEpisode):
     )
 
 
-def candidate_episode(job: CandidateEpisode) -> list | None:
-    """``[return, success, cycles]`` of the episode, or ``None`` when the policy rejects the parameters."""
-    try:
-        env, policy = build_policy(job)
-    except ValueError:  # parameters the policy rejects (e.g. f_min > f_max): scored below
-        return None
+def candidate_episode(job: CandidateEpisode) -> list:
+    """``[return, success, cycles]`` of a neural candidate's episode (through the array API)."""
+    env, policy = build_policy(job)
     total, success, cycles = episode_return(env, policy, job.seed)
     return [float(total), bool(success), int(cycles)]
 
 
+def rules_episodes(args, policy_name: str, env, decoded: list[dict], seeds: list[int], ray, journal) -> list:
+    """``[return, success, cycles]`` of every candidate's episode on every seed (candidate-major),
+    ``None`` for a candidate whose parameters the policy rejects: the accepted candidates' episodes
+    in batches of worlds on every core (:mod:`training.evaluator`)."""
+    from baselines import make_policy
+    from training.evaluator import Controller, Episode, run_episodes, settings_json
+
+    accepted = []
+    for params in decoded:
+        try:
+            make_policy(policy_name, env, **params)
+            accepted.append(True)
+        except ValueError:  # parameters the policy rejects (e.g. f_min > f_max): scored below
+            accepted.append(False)
+    overrides = settings_json(args.env)
+    episodes = [
+        Episode(args.task, overrides, "full", Controller.rules(policy_name, **params), s)
+        for params, ok in zip(decoded, accepted)
+        if ok
+        for s in seeds
+    ]
+    results = iter(
+        run_episodes(
+            episodes,
+            workers=args.workers if ray is None else None,
+            ray=ray,
+            journal=journal,
+            desc="generation",
+            progress=args.progress_bar,
+        )
+        if episodes
+        else []
+    )
+    out = []
+    for ok in accepted:
+        for _ in seeds:
+            r = next(results) if ok else None
+            out.append(None if r is None else [float(r.total_reward), bool(r.success), int(r.cycles)])
+    return out
+
+
 def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
-    """Return, success and cycles of one episode (array API for neural controllers)."""
-    from training.policies import LogitsPolicy
-
-    if not isinstance(policy, LogitsPolicy):
-        from proteo_env.rollout import run_episode
-
-        result = run_episode(env, policy, seed=seed)
-        return result.total_reward, result.success, result.cycles
+    """Return, success and cycles of one episode of a neural controller, through the array API."""
     env.reset(seed=seed)
     policy.reset(seed)
     total = 0.0
@@ -456,29 +482,33 @@ def main(argv=None) -> Path:
     while es.countiter < args.generations:
         seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
         candidates = es.ask()
-        jobs = [
-            CandidateEpisode(
-                task=args.task,
-                env=overrides,
-                controller=args.controller,
-                policy=policy_name,
-                params=params,
-                hidden=tuple(args.hidden),
-                genome=tuple(float(v) for v in x),
-                seed=s,
+        if args.controller == "rules":
+            episodes = rules_episodes(args, policy_name, env, [decode(x) for x in candidates], seeds, ray, journal)
+        else:
+            jobs = [
+                CandidateEpisode(
+                    task=args.task,
+                    env=overrides,
+                    controller=args.controller,
+                    policy=policy_name,
+                    params=params,
+                    hidden=tuple(args.hidden),
+                    genome=tuple(float(v) for v in x),
+                    seed=s,
+                )
+                for x in candidates
+                for s in seeds
+            ]
+            episodes = run_jobs(
+                candidate_episode,
+                jobs,
+                [j.key for j in jobs],
+                ray=ray,
+                workers=args.workers if ray is None else None,
+                journal=journal,
+                desc=f"generation {es.countiter + 1}",
+                progress=args.progress_bar,
             )
-            for x in candidates
-            for s in seeds
-        ]
-        episodes = run_jobs(
-            candidate_episode,
-            jobs,
-            [j.key for j in jobs],
-            ray=ray,
-            journal=journal,
-            desc=f"generation {es.countiter + 1}",
-            progress=args.progress_bar,
-        )
         fitness, outcomes = [], []
         for c in range(len(candidates)):
             results = episodes[c * len(seeds) : (c + 1) * len(seeds)]

@@ -48,16 +48,15 @@ class ClusterError(ConfigError):
 def ray_options(args) -> dict | None:
     """``{"address", "workers"}`` from parsed ``--ray/--address/--workers`` flags, or ``None`` (serial).
 
-    ``--address`` or ``--workers`` without ``--ray`` is an error, so that a cluster run never
-    silently runs serially.
+    ``--address`` without ``--ray`` is an error, so that a cluster run never silently runs
+    locally; ``--workers`` without ``--ray`` is the number of local worker processes (where the
+    command runs its episodes in batches, :mod:`training.evaluator`).
     """
     use = bool(getattr(args, "ray", False))
     address, workers = getattr(args, "address", None), getattr(args, "workers", None)
-    if not use and (address is not None or workers is not None):
-        flag = "--address" if address is not None else "--workers"
+    if not use and address is not None:
         raise ConfigError(
-            f"{flag} {address if address is not None else workers!r} needs --ray; allowed: "
-            f"--ray {flag} ... (or neither, to run serially)"
+            f"--address {address!r} needs --ray; allowed: --ray --address ... (or neither, to run on this machine)"
         )
     if workers is not None and int(workers) < 1:
         raise ConfigError(f"--workers {workers!r} is not allowed; allowed: an integer >= 1")
@@ -78,7 +77,8 @@ def add_ray_flags(parser) -> None:
         "--workers",
         type=int,
         default=None,
-        help="CPUs of the local Ray instance, or at most this many tasks at once on a cluster (default: all CPUs)",
+        help="worker processes on this machine (default: all cores); with --ray, CPUs of the local Ray "
+        "instance, or at most this many tasks at once on a cluster",
     )
 
 
@@ -159,6 +159,7 @@ def run_jobs(
     progress: bool = True,
     max_retries: int = DEFAULT_MAX_RETRIES,
     sizes: Sequence[int] | None = None,
+    on_result: Callable[[int, object], None] | None = None,
 ) -> list:
     """``[fn(job) for job in jobs]``, serially, on local worker processes or as Ray tasks; results in job order.
 
@@ -175,6 +176,7 @@ def run_jobs(
         max_retries: Ray retries of a task whose worker died.
         sizes: what each job counts for on the progress bar (default 1 each; a batch of
             episodes counts its episodes).
+        on_result: called as ``on_result(i, result)`` when job ``i`` finishes (after the journal).
 
     Returns:
         the results, one per job, in the order of ``jobs``.
@@ -200,6 +202,8 @@ def run_jobs(
         results[i] = result
         if journal is not None:
             journal.add(keys[i], result)
+        if on_result is not None:
+            on_result(i, result)
         bar.update(sizes[i])
 
     if journal is not None and journal.resumed and len(todo) < len(jobs):

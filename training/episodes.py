@@ -106,22 +106,64 @@ def run_episode_job(job: EpisodeJob) -> dict:
     return out
 
 
-def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool) -> None:
-    """Run the planned ``jobs`` (serially or on Ray, recorded in ``journal``) and add each
-    episode to its row of ``results``; pictures go to ``out_dir/pictures``."""
+def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
+    """Run the planned ``jobs`` and add each episode to its row of ``results``; pictures go to
+    ``out_dir/pictures``.
+
+    The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`, on
+    ``workers`` processes, default every core, or on Ray); a job with a picture runs on its own
+    (:func:`run_episode_job`), since its world is drawn at its end. Each finished episode is
+    recorded in ``journal`` under its job's key. An episode's ``seconds`` is its batch's
+    wall-clock time shared equally among its episodes.
+    """
     import base64
 
     from training.distributed import run_jobs
+    from training.evaluator import Controller, Episode
+    from training.evaluator import run_episodes as run_batched
 
-    episodes = run_jobs(
-        run_episode_job,
-        [j for _, j in jobs],
-        [j.key for _, j in jobs],
-        ray=ray,
-        journal=journal,
-        desc="episodes",
-        progress=progress,
-    )
+    pictured = [i for i, (_, j) in enumerate(jobs) if j.picture]
+    plain = [i for i, (_, j) in enumerate(jobs) if not j.picture]
+    episodes: list = [None] * len(jobs)
+    if pictured:
+        for i, episode in zip(
+            pictured,
+            run_jobs(
+                run_episode_job,
+                [jobs[i][1] for i in pictured],
+                [jobs[i][1].key for i in pictured],
+                ray=ray,
+                journal=journal,
+                desc="pictured episodes",
+                progress=progress,
+            ),
+        ):
+            episodes[i] = episode
+    if plain:
+        started = time.perf_counter()
+        batched = run_batched(
+            [
+                Episode(
+                    j.task_id, j.overrides, j.level, Controller(j.policy, (), j.checkpoint, j.deterministic), j.seed
+                )
+                for _, j in (jobs[i] for i in plain)
+            ],
+            keys=[jobs[i][1].key for i in plain],
+            ray=ray,
+            workers=workers,
+            journal=journal,
+            progress=progress,
+        )
+        seconds = (time.perf_counter() - started) / len(plain)
+        for i, r in zip(plain, batched):
+            episodes[i] = {
+                "return": float(r.total_reward),
+                "success": bool(r.success),
+                "cycles": int(r.cycles),
+                "metrics": {k: float(v) for k, v in r.metrics.items()},
+                "seconds": seconds,
+                "picture": None,
+            }
     for (row, job), episode in zip(jobs, episodes):
         result = results[row]
         result.returns.append(episode["return"])

@@ -209,12 +209,13 @@ def evaluate(
     plots: bool = True,
     pictures: bool = False,
     ray: dict | None = None,
+    workers: int | None = None,
     fresh: bool = False,
 ) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
-    Every episode is one :class:`~training.episodes.EpisodeJob`, run serially or as a Ray task (``ray``), and
-    recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
+    Every episode is one :class:`~training.episodes.EpisodeJob`, run in batches of worlds on
+    ``workers`` processes (default: every core) or as Ray tasks (``ray``), and recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
     the same settings resumes it (see :class:`training.distributed.Journal`). The tables are
     written only when every episode has finished.
 
@@ -228,7 +229,8 @@ def evaluate(
         deterministic: learned and evolved neural policies take arg-max actions.
         pictures: draw the end of each policy's first episode (what it builds) into
             ``out/pictures/<task>_<policy>.png`` (the first run of a training-seed group).
-        ray: ``None`` (serial) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`).
+        ray: ``None`` (this machine) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`).
+        workers: processes on this machine (default: every core; the results do not depend on it).
         fresh: discard the episodes of an unfinished earlier run in ``out`` instead of resuming it.
 
     Returns:
@@ -280,7 +282,7 @@ def evaluate(
         "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
     }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
-    run_episodes(results, jobs, out_dir, ray=ray, journal=journal, progress=progress)
+    run_episodes(results, jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
     rows = write_results(
         results, out_dir, seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots
     )
@@ -401,6 +403,7 @@ def main(args) -> int:
         plots=not args.no_plots,
         pictures=args.pictures,
         ray=ray_options(args),
+        workers=None if args.ray else args.workers,
         fresh=args.fresh,
     )
     if args.publish:

@@ -34,6 +34,7 @@ Example::
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -95,6 +96,19 @@ class Controller:
         policy.reset(seed)
         return policy
 
+    def fresh(self, env, key, seed: int):
+        """:meth:`build`, from a policy built once per process and ``key`` (the env's settings) and
+        copied: a program is parsed and a checkpoint read once, not once per episode."""
+        from training.policies import LogitsPolicy
+
+        if (key, self) not in _BUILT:
+            _BUILT[(key, self)] = self.build(env, 0)
+        prototype = _BUILT[(key, self)]
+        # a network is shared, not copied (its reset makes the generator and memory its own)
+        policy = copy.copy(prototype) if isinstance(prototype, LogitsPolicy) else copy.deepcopy(prototype)
+        policy.reset(seed)
+        return policy
+
     @property
     def group(self) -> str:
         """Controllers of one group share a batch: one kernel policy class (a task's rules with
@@ -129,6 +143,9 @@ def settings_json(overrides: dict) -> str:
 
 # ---------------------------------------------------------------------- checking
 _CHECKED: dict = {}
+"""A single env per (task, settings, level), built once per process."""
+_BUILT: dict = {}
+"""A policy per ((task, settings, level), controller), built once per process (:meth:`Controller.fresh`)."""
 
 
 def _template(task: str, overrides: str, level: str):
@@ -166,8 +183,9 @@ def check_episodes(episodes, *, workers=None, batch_size: int = DEFAULT_BATCH) -
         if key in built:
             continue
         env = _template(e.task, e.overrides, e.level)
-        policy = e.controller.build(env, 0)
-        if isinstance(policy, KernelPolicy) and not policy.runs_on(env.task):
+        policy = e.controller.fresh(env, key[:3], 0)
+        # (a checkpoint is checked against the env when it loads)
+        if not e.controller.checkpoint and isinstance(policy, KernelPolicy) and not policy.runs_on(env.task):
             raise ConfigError(
                 f"episodes[{i}].controller={e.controller.policy!r} is not allowed on task {e.task!r}; "
                 f"allowed: a controller written for {env.task.name!r} (its rules, a program for it, random, "
@@ -225,9 +243,10 @@ class _Actors:
         return np.concatenate(out)
 
 
-def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[list]:
+def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[dict]:
     """Every episode of ``episodes`` (one task, settings, level and controller group) in one
-    batched env of up to ``batch_size`` worlds: ``[return, success, cycles, metrics]`` each, in order."""
+    batched env of up to ``batch_size`` worlds: ``{"return", "success", "cycles", "metrics"}`` each
+    (JSON-ready), in order."""
     import proteo_env
     from training.common import limit_threads
 
@@ -239,7 +258,8 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     batch = proteo_env.make_batched(first.task, rows, **json.loads(first.overrides), **control)
     a = batch.n_agents
     buffers = batch.reset(world_seeds=[e.seed for e in episodes[:rows]])
-    actors = _Actors([e.controller.build(env, e.seed) for e in episodes[:rows]], a)
+    key = (first.task, first.overrides, first.level)
+    actors = _Actors([e.controller.fresh(env, key, e.seed) for e in episodes[:rows]], a)
     playing = list(range(rows))
     """The episode each row plays (-1: none left)."""
     returns = np.zeros(rows)
@@ -256,18 +276,18 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
             if i < 0:
                 continue
             metrics = batch.tasks[b].metrics(batch.worlds[b])
-            out[i] = [
-                float(returns[b]),
-                bool(result.terminated[b]),
-                int(batch.cycles[b]),
-                {k: float(v) for k, v in metrics.items()},
-            ]
+            out[i] = {
+                "return": float(returns[b]),
+                "success": bool(result.terminated[b]),
+                "cycles": int(batch.cycles[b]),
+                "metrics": {k: float(v) for k, v in metrics.items()},
+            }
             returns[b] = 0.0
             if following < len(episodes):
                 e = episodes[following]
                 playing[b] = following
                 following += 1
-                actors.replace(b, e.controller.build(env, e.seed))
+                actors.replace(b, e.controller.fresh(env, key, e.seed))
                 restart.append(b)
                 seeds.append(e.seed)
             else:
@@ -279,7 +299,7 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     return out
 
 
-def _run_chunk(chunk: tuple) -> list[list]:
+def _run_chunk(chunk: tuple) -> list[dict]:
     """A worker's job: ``(episodes, batch_size)`` run as one batch."""
     episodes, batch_size = chunk
     return run_batch(list(episodes), batch_size)
@@ -298,6 +318,7 @@ def run_episodes(
     batch_size: int = DEFAULT_BATCH,
     ray: dict | None = None,
     journal=None,
+    keys=None,
     desc: str = "episodes",
     progress: bool = False,
 ) -> list[EpisodeResult]:
@@ -309,7 +330,9 @@ def run_episodes(
         batch_size: worlds stepped together in one process.
         ray: ``None`` (local) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`):
             each batch a Ray task.
-        journal: a :class:`training.distributed.Journal`: finished batches are kept and skipped on a rerun.
+        journal: a :class:`training.distributed.Journal`: each finished episode is recorded
+            under its key as its batch lands, and the episodes it holds already are not run again.
+        keys: the episodes' names in the journal (default: :func:`episode_key`).
         desc, progress: a progress bar counting episodes.
 
     Raises:
@@ -317,39 +340,70 @@ def run_episodes(
             task, ``workers`` or ``batch_size`` < 1; a program that fails its checks raises its
             own error. All before any episode runs.
     """
+    import sys
+
     from training.distributed import run_jobs
 
     episodes = list(episodes)
     check_episodes(episodes, workers=workers, batch_size=batch_size)
     workers = default_workers() if workers is None else int(workers)
+    keys = [episode_key(e) for e in episodes] if keys is None else list(keys)
+    if len(set(keys)) != len(keys):
+        raise ValueError("run_episodes: episode keys must be unique")
+    out: list = [None] * len(episodes)
+
+    def land(i: int, result: dict) -> None:
+        out[i] = EpisodeResult(
+            cycles=result["cycles"], success=result["success"], total_reward=result["return"], metrics=result["metrics"]
+        )
+
+    done = journal.done if journal is not None else {}
+    todo = [i for i, k in enumerate(keys) if k not in done]
+    for i, k in enumerate(keys):
+        if k in done:
+            land(i, done[k])
+    if journal is not None and journal.resumed and len(todo) < len(episodes):
+        print(
+            f"resuming {journal.path}: {len(episodes) - len(todo)} of {len(episodes)} {desc} already done",
+            file=sys.stderr,
+        )
     groups: dict = {}
-    for i, e in enumerate(episodes):
+    for i in todo:
+        e = episodes[i]
         groups.setdefault((e.task, e.overrides, e.level, e.controller.group), []).append(i)
     # Enough chunks to keep every worker busy, each large enough to keep its batch full.
-    per_chunk = max(batch_size, math.ceil(len(episodes) / (4 * workers))) if workers > 1 or ray else len(episodes)
+    per_chunk = max(batch_size, math.ceil(len(todo) / (4 * workers))) if workers > 1 or ray else len(todo)
     chunks, members = [], []
     for indices in groups.values():
-        n = math.ceil(len(indices) / per_chunk)
-        for part in np.array_split(np.array(indices), n):
+        for part in np.array_split(np.array(indices), math.ceil(len(indices) / per_chunk)):
             members.append(part.tolist())
             chunks.append((tuple(episodes[i] for i in part), batch_size))
-    keys = [_chunk_key(chunk[0]) for chunk in chunks]
-    results = run_jobs(
-        _run_chunk,
-        chunks,
-        keys,
-        ray=ray,
-        workers=None if ray else workers,
-        journal=journal,
-        desc=desc,
-        progress=progress,
-        sizes=[len(m) for m in members],
-    )
-    out: list = [None] * len(episodes)
-    for part, chunk_results in zip(members, results):
-        for i, (total, success, cycles, metrics) in zip(part, chunk_results):
-            out[i] = EpisodeResult(cycles=cycles, success=success, total_reward=total, metrics=metrics)
+
+    def landed(c: int, results: list) -> None:
+        for i, result in zip(members[c], results):
+            if journal is not None:
+                journal.add(keys[i], result)
+            land(i, result)
+
+    if chunks:
+        run_jobs(
+            _run_chunk,
+            chunks,
+            [_chunk_key(chunk[0]) for chunk in chunks],
+            ray=ray,
+            workers=None if ray else workers,
+            desc=desc,
+            progress=progress,
+            sizes=[len(m) for m in members],
+            on_result=landed,
+        )
     return out
+
+
+def episode_key(episode: Episode) -> str:
+    """An episode's stable name: a hash of its controller and settings, and its seed."""
+    what = repr((episode.task, episode.overrides, episode.level, episode.controller))
+    return f"{hashlib.sha256(what.encode()).hexdigest()[:16]}|{episode.seed}"
 
 
 def _chunk_key(episodes) -> str:
@@ -381,4 +435,13 @@ def evaluate(
     return [results[c * len(seeds) : (c + 1) * len(seeds)] for c in range(len(controllers))]
 
 
-__all__ = ["Controller", "Episode", "check_episodes", "evaluate", "run_batch", "run_episodes", "settings_json"]
+__all__ = [
+    "Controller",
+    "Episode",
+    "check_episodes",
+    "episode_key",
+    "evaluate",
+    "run_batch",
+    "run_episodes",
+    "settings_json",
+]

@@ -25,6 +25,10 @@ A generation's best is chosen on few worlds, so it is partly luck. With
 generation, on that many new worlds per variation (a third stream of the run seed), and the
 best there is the final checkpoint; its ``proteo.json`` records that fitness.
 
+Every generation's episodes run as one list through :mod:`training.evaluator`: the programs
+of the population in the rows of batched worlds, on every core (``workers``), or as Ray tasks
+of one batch each (``ray``); the results do not depend on how they are spread.
+
 The best program of each generation is the checkpoint: ``program.yaml`` beside ``proteo.json``
 (algorithm ``program-evolution``), loaded by ``proteo eval --checkpoint`` and
 :func:`training.load_controller`. ``progress.csv`` and TensorBoard log the best and median
@@ -37,8 +41,6 @@ an interruption, or ``--resume CHECKPOINT --generations N`` to go on from a chec
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import json
 import os
 import pickle
@@ -111,11 +113,12 @@ class Args:
     tensorboard: bool = True
     progress_bar: bool = True
     ray: bool = False
-    """Run the episodes as Ray tasks (same results as serially)."""
+    """Run the batches of episodes as Ray tasks (same results as locally)."""
     address: str | None = None
     """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
     workers: int | None = None
-    """CPUs of the local Ray instance, or tasks at once on a cluster (with ``ray``)."""
+    """Worker processes (default: every core); with ``ray``, CPUs of the local Ray instance or
+    tasks at once on a cluster. The results do not depend on it."""
 
 
 RESUME_INDEPENDENT = (
@@ -136,57 +139,27 @@ RESUME_INDEPENDENT = (
 
 
 # ---------------------------------------------------------------------- episodes
-@dataclass(frozen=True)
-class ProgramEpisode:
-    """One episode of one program in one variation (picklable; a Ray task when ``--ray``)."""
+def program_episodes(task: str, variations: list[str], programs: list[str], seeds: list[int]) -> list:
+    """The :class:`~training.evaluator.Episode` of every program (text) on every world: program-major,
+    then variation (its overrides as JSON), then seed."""
+    from training.evaluator import Controller, Episode
 
-    task: str
-    env: str
-    """The JSON of the ``proteo_env.make`` overrides (``env`` and the variation's)."""
-    program: str
-    """The program's text."""
-    seed: int
-
-    @property
-    def key(self) -> str:
-        """The journal key: a hash of the program and the world."""
-        return hashlib.sha256(f"{self.program}|{self.env}".encode()).hexdigest()[:16] + f"|{self.seed}"
-
-
-@functools.cache
-def _environment(task: str, overrides: str):
-    """The environment of ``(task, overrides)``, built once per process."""
-    import proteo_env
-    from training.common import limit_threads
-
-    limit_threads(1)
-    return proteo_env.make(task, **json.loads(overrides))
-
-
-def program_episode(job: ProgramEpisode) -> list:
-    """``[return, success, cycles, modules, max_cycles]`` of the program's episode."""
-    from baselines import make_policy
-    from proteo_env.rollout import run_episode
-
-    env = _environment(job.task, job.env)
-    result = run_episode(env, make_policy("program", env, program=job.program, seed=job.seed), seed=job.seed)
     return [
-        float(result.total_reward),
-        bool(result.success),
-        int(result.cycles),
-        len(env.possible_agents),
-        int(env.max_cycles),
+        Episode(task, overrides, "full", Controller.program(text), seed)
+        for text in programs
+        for overrides in variations
+        for seed in seeds
     ]
 
 
-def success_score(episode: list) -> float:
-    """``2 - cycles / max_cycles`` for a successful episode (``[return, success, cycles, modules,
-    max_cycles]``), 0 for a failure."""
-    return 2.0 - episode[2] / episode[4] if episode[1] else 0.0
+def success_score(episode, max_cycles: int) -> float:
+    """``2 - cycles / max_cycles`` for a successful episode (an :class:`~proteo_env.rollout.EpisodeResult`),
+    0 for a failure."""
+    return 2.0 - episode.cycles / max_cycles if episode.success else 0.0
 
 
-EPISODE_SCORES = {"return": lambda episode: episode[0], "success": success_score}
-"""The episode score each value of ``fitness`` names, from ``[return, success, cycles, modules, max_cycles]``."""
+EPISODE_SCORES = {"return": lambda episode, max_cycles: episode.total_reward, "success": success_score}
+"""The episode score each value of ``fitness`` names, from an episode's result and its cycle limit."""
 
 
 def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: int) -> list[int]:
@@ -256,7 +229,8 @@ def breed(population: list, space, rng: np.random.Generator, args: Args) -> list
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     from proteo_env.config import ConfigError
-    from training.distributed import Journal, ray_options, run_jobs
+    from training.distributed import Journal, ray_options
+    from training.evaluator import run_episodes
 
     variations = check_args(args)
     ray = ray_options(args)
@@ -265,7 +239,6 @@ def main(argv=None) -> Path:
     import proteo_env
     from baselines.program import format_program, load_program
     from training.checkpoints import read_meta
-    from training.evolve import program_episode as episode  # by reference under python -m too (Ray workers)
     from training.program_variation import ProgramSpace, complexity, mutate, random_program
 
     env = proteo_env.make(args.task, **args.env)
@@ -364,23 +337,28 @@ def main(argv=None) -> Path:
 
     episode_score = EPISODE_SCORES[args.fitness]
 
+    limits_of = [proteo_env.make(args.task, **json.loads(v)) for v in variations]
+    modules, max_cycles = [len(e.possible_agents) for e in limits_of], [e.max_cycles for e in limits_of]
+
     def score(candidates: list, seeds: list[int], desc: str) -> tuple[list[float], list[list]]:
         """The fitness of each candidate on the worlds of ``seeds`` in every variation, and its episodes."""
         nonlocal agent_steps
-        jobs = [
-            ProgramEpisode(args.task, overrides, format_program(program), seed)
-            for program in candidates
-            for overrides in variations
-            for seed in seeds
-        ]
-        episodes = run_jobs(
-            episode, jobs, [j.key for j in jobs], ray=ray, journal=journal, desc=desc, progress=args.progress_bar
+        texts = [format_program(program) for program in candidates]
+        episodes = run_episodes(
+            program_episodes(args.task, variations, texts, seeds),
+            workers=args.workers if ray is None else None,
+            ray=ray,
+            journal=journal,
+            desc=desc,
+            progress=args.progress_bar,
         )
-        agent_steps += sum(r[2] * r[3] for r in episodes)
         per_program = len(variations) * len(seeds)
         outcomes = [episodes[c * per_program : (c + 1) * per_program] for c in range(len(candidates))]
+        variation_of = [v for v in range(len(variations)) for _ in seeds]
+        agent_steps += sum(r.cycles * modules[v] for results in outcomes for r, v in zip(results, variation_of))
         fitness = [
-            float(np.mean([episode_score(r) for r in results])) - args.complexity_penalty * complexity(program)
+            float(np.mean([episode_score(r, max_cycles[v]) for r, v in zip(results, variation_of)]))
+            - args.complexity_penalty * complexity(program)
             for program, results in zip(candidates, outcomes)
         ]
         return fitness, outcomes
@@ -400,9 +378,9 @@ def main(argv=None) -> Path:
             {
                 "fitness/best": best_fitness,
                 "fitness/median": float(np.median(fitness)),
-                "episode/return": float(np.mean([r[0] for r in outcomes[best]])),
-                "episode/success": float(np.mean([r[1] for r in outcomes[best]])),
-                "episode/cycles": float(np.mean([r[2] for r in outcomes[best]])),
+                "episode/return": float(np.mean([r.total_reward for r in outcomes[best]])),
+                "episode/success": float(np.mean([r.success for r in outcomes[best]])),
+                "episode/cycles": float(np.mean([r.cycles for r in outcomes[best]])),
                 "program/complexity": float(complexity(candidates[best])),
                 "evolve/candidates": float(len(candidates)),
                 "evolve/generation": float(generation),

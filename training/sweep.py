@@ -16,8 +16,8 @@ A sweep config (YAML, every key checked; see ``configs/sweeps/``)::
     sample_seed: 0
     plot: {x: n_modules, y: cycles_to_success, hue: motion_model}
 
-Each episode is one :class:`~training.episodes.EpisodeJob` (serially or as Ray tasks with
-``--ray``; the same results either way), journaled in ``OUT/episodes.jsonl`` as it finishes so
+Each episode is one :class:`~training.episodes.EpisodeJob` (serially, on ``--workers`` local
+processes, or as Ray tasks with ``--ray``; the same results either way), journaled in ``OUT/episodes.jsonl`` as it finishes so
 that an interrupted sweep resumes. Every point of the grid is checked (an environment is
 built) before any episode runs. Written into ``--out`` when every episode has finished:
 
@@ -140,7 +140,9 @@ def load_sweep(path) -> SweepConfig:
     return cfg
 
 
-def sweep(config, *, out, ray: dict | None = None, progress: bool = True, fresh: bool = False) -> list[dict]:
+def sweep(
+    config, *, out, ray: dict | None = None, workers: int | None = None, progress: bool = True, fresh: bool = False
+) -> list[dict]:
     """Run the sweep in ``config`` (a path) and write its tables and plot into ``out``.
 
     Returns:
@@ -188,6 +190,7 @@ def sweep(config, *, out, ray: dict | None = None, progress: bool = True, fresh:
         [j for _, _, j in jobs],
         [j.key for _, _, j in jobs],
         ray=ray,
+        workers=workers,
         journal=journal,
         desc="episodes",
         progress=progress,
@@ -294,6 +297,8 @@ def main(args) -> int:
     from training.distributed import ray_options
 
     out = args.out or str(Path("out/sweeps") / Path(args.config).stem)
-    summary = sweep(args.config, out=out, ray=ray_options(args), fresh=args.fresh)
+    summary = sweep(
+        args.config, out=out, ray=ray_options(args), workers=None if args.ray else args.workers, fresh=args.fresh
+    )
     print(f"{len(summary)} rows; tables: {Path(out).resolve()}/summary.csv, episodes.csv")
     return 0
