@@ -36,9 +36,12 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import importlib
+import importlib.util
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -300,9 +303,44 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
 
 
 def _run_chunk(chunk: tuple) -> list[dict]:
-    """A worker's job: ``(episodes, batch_size)`` run as one batch."""
-    episodes, batch_size = chunk
+    """A worker's job: ``(episodes, batch_size, plugins)`` run as one batch, after importing the
+    modules that registered tasks or policies from outside the project (:func:`plugin_modules`)."""
+    episodes, batch_size, plugins = chunk
+    import_plugins(plugins)
     return run_batch(list(episodes), batch_size)
+
+
+PROJECT_PACKAGES = ("proteo_env", "baselines", "training")
+
+
+def plugin_modules() -> tuple[tuple[str, str], ...]:
+    """``(module name, file)`` of every module outside the project that registered a task or a
+    policy in this process (a behaviour of one's own, ``docs/guides/adding_a_behaviour.md``):
+    a worker process imports them before it runs a batch, so that it knows them too."""
+    from baselines import POLICIES
+    from proteo_env import TASKS
+
+    out = set()
+    for cls in [*TASKS.values(), *POLICIES.values()]:
+        module = sys.modules.get(cls.__module__)
+        if cls.__module__.split(".")[0] not in PROJECT_PACKAGES and getattr(module, "__file__", None):
+            out.add((cls.__module__, module.__file__))
+    return tuple(sorted(out))
+
+
+def import_plugins(plugins) -> None:
+    """Import each ``(name, file)`` of :func:`plugin_modules` not imported yet: by name where this
+    process can, else from its file."""
+    for name, file in plugins:
+        if name in sys.modules:
+            continue
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            spec = importlib.util.spec_from_file_location(name, file)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            spec.loader.exec_module(module)
 
 
 # ---------------------------------------------------------------------- many batches
@@ -340,8 +378,6 @@ def run_episodes(
             task, ``workers`` or ``batch_size`` < 1; a program that fails its checks raises its
             own error. All before any episode runs.
     """
-    import sys
-
     from training.distributed import run_jobs
 
     episodes = list(episodes)
@@ -367,6 +403,7 @@ def run_episodes(
             f"resuming {journal.path}: {len(episodes) - len(todo)} of {len(episodes)} {desc} already done",
             file=sys.stderr,
         )
+    plugins = plugin_modules()
     groups: dict = {}
     for i in todo:
         e = episodes[i]
@@ -377,7 +414,7 @@ def run_episodes(
     for indices in groups.values():
         for part in np.array_split(np.array(indices), math.ceil(len(indices) / per_chunk)):
             members.append(part.tolist())
-            chunks.append((tuple(episodes[i] for i in part), batch_size))
+            chunks.append((tuple(episodes[i] for i in part), batch_size, plugins))
 
     def landed(c: int, results: list) -> None:
         for i, result in zip(members[c], results):
