@@ -176,3 +176,15 @@ def test_bad_input_is_refused_before_any_episode(change, message, monkeypatch):
 def test_a_program_that_fails_its_checks_is_refused_before_any_episode():
     with pytest.raises(ConfigError):
         evaluate("chain-v1", [Controller.program("modes: {NOPE: []}")], [0], env=small_overrides("chain-v1"), workers=1)
+
+
+def test_an_episode_listed_twice_runs_once_and_gives_both_places_its_result(monkeypatch):
+    from training import evaluator
+
+    ran = []
+    original = evaluator.run_batch
+    monkeypatch.setattr(evaluator, "run_batch", lambda episodes, *a: ran.extend(episodes) or original(episodes, *a))
+    overrides = small_overrides("chain-v1", max_cycles=40)
+    twice = evaluate("chain-v1", [Controller.rules("chain")] * 2, [5, 5, 6], env=overrides, workers=1)
+    assert len(ran) == 2
+    assert twice[0] == twice[1] and twice[0][0] == twice[0][1] != twice[0][2]

@@ -225,18 +225,17 @@ class _Actors:
 
             first = self.policies[0]
             logits = first.logits_fn(first.encoder.encode_buffers(buffers))
-            return np.concatenate(
-                [
-                    sample_actions(
-                        logits[b * a : (b + 1) * a],
-                        p.nvec,
-                        buffers.action_mask[b * a : (b + 1) * a],
-                        p.rng,
-                        deterministic=p.deterministic,
-                        sampled=p.sampled,
-                    )
-                    for b, p in enumerate(self.policies)
-                ]
+            noise = None
+            if not first.deterministic:  # each world's draws from its own episode's generator
+                noise = np.concatenate([p.rng.gumbel(size=(a, logits.shape[1])) for p in self.policies])
+            return sample_actions(
+                logits,
+                first.nvec,
+                buffers.action_mask,
+                None,
+                deterministic=first.deterministic,
+                sampled=first.sampled,
+                noise=noise,
             )
         names = [f"module_{i}" for i in range(a)]
         out = []
@@ -384,8 +383,9 @@ def run_episodes(
     check_episodes(episodes, workers=workers, batch_size=batch_size)
     workers = default_workers() if workers is None else int(workers)
     keys = [episode_key(e) for e in episodes] if keys is None else list(keys)
-    if len(set(keys)) != len(keys):
-        raise ValueError("run_episodes: episode keys must be unique")
+    first_of: dict = {}  # an episode listed twice runs once
+    for i, k in enumerate(keys):
+        first_of.setdefault(k, i)
     out: list = [None] * len(episodes)
 
     def land(i: int, result: dict) -> None:
@@ -394,10 +394,7 @@ def run_episodes(
         )
 
     done = journal.done if journal is not None else {}
-    todo = [i for i, k in enumerate(keys) if k not in done]
-    for i, k in enumerate(keys):
-        if k in done:
-            land(i, done[k])
+    todo = [i for k, i in first_of.items() if k not in done]
     if journal is not None and journal.resumed and len(todo) < len(episodes):
         print(
             f"resuming {journal.path}: {len(episodes) - len(todo)} of {len(episodes)} {desc} already done",
@@ -434,6 +431,12 @@ def run_episodes(
             sizes=[len(m) for m in members],
             on_result=landed,
         )
+    for i, k in enumerate(keys):  # from the journal, or a repeat of an episode listed before
+        if out[i] is None:
+            if k in done:
+                land(i, done[k])
+            else:
+                out[i] = out[first_of[k]]
     return out
 
 

@@ -82,14 +82,19 @@ def sample_actions(
     *,
     deterministic: bool = False,
     sampled: str = "all",
+    noise: np.ndarray | None = None,
 ) -> np.ndarray:
     """``(B, len(nvec))`` actions from concatenated logits ``(B, sum(nvec))``; moves limited to
     ``move_mask``. ``sampled="move"``: fields after the move take their arg-max (the generator
-    is drawn from the same either way)."""
+    is drawn from the same either way). ``noise``: the Gumbel draws ``(B, sum(nvec))`` when the
+    caller drew them already (several generators' rows at once); ``rng`` is then not read."""
     logits = np.array(logits, dtype=np.float64, copy=True)
     logits[:, :N_MOVES] = np.where(np.asarray(move_mask, dtype=bool), logits[:, :N_MOVES], -np.inf)
     if not deterministic:
-        noise = rng.gumbel(size=logits.shape)  # Gumbel-max: a sample from each softmax
+        if noise is None:
+            noise = rng.gumbel(size=logits.shape)  # Gumbel-max: a sample from each softmax
+        else:
+            noise = np.array(noise, dtype=np.float64, copy=True)
         if sampled == "move":
             noise[:, N_MOVES:] = 0.0
         logits = logits + noise
