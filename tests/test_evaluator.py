@@ -115,35 +115,48 @@ def test_episodes_of_several_settings_and_tasks_in_one_call():
         assert _same(_alone(e.task, json.loads(e.overrides), e.level, e.controller, e.seed), batched)
 
 
-def test_a_network_checkpoint_agrees_with_run_episode(tmp_path):
-    """A network acts in one forward pass over every world: same episodes as one world at a
-    time (a 16-unit NumPy MLP's batched arithmetic is exact here)."""
+def _network_checkpoint(folder, env, overrides, seed: int):
+    """A checkpoint of a 16-unit NumPy MLP (CMA-ES's neural controller) with random weights."""
     from proteo_env.adapters.flatten import ObservationEncoder
-    from training.checkpoints import load_policy
     from training.common import write_checkpoint_meta
     from training.policies import NumpyMLP
 
-    overrides = small_overrides("chain-v1", max_cycles=40)
-    env = proteo_env.make("chain-v1", **overrides)
     encoder = ObservationEncoder.for_env(env)
     net = NumpyMLP(encoder.size, int(env.action_layout.nvec.sum()), (16,))
-    genome = net.init_genome(np.random.default_rng(0))
-    np.save(tmp_path / "genome.npy", genome * 10)  # large enough that the network's choices matter
+    folder.mkdir()
+    np.save(folder / "genome.npy", net.init_genome(np.random.default_rng(seed)) * 10)  # its choices matter
     write_checkpoint_meta(
-        tmp_path,
+        folder,
         algorithm="cma-neural",
         task=env.task.task_id(),
         env_overrides=overrides,
         encoder_spec=encoder.spec(),
         nvec=env.action_layout.nvec,
         agent_steps=0,
-        seed=0,
+        seed=seed,
         extra={"hidden": [16]},
     )
-    controller = Controller.from_checkpoint(tmp_path)
-    results = evaluate("chain-v1", [controller], SEEDS, env=overrides, workers=1, batch_size=5)[0]
-    for seed, batched in zip(SEEDS, results):
-        assert _same(run_episode(env, load_policy(tmp_path, env, seed=seed), seed=seed), batched)
+    return folder
+
+
+def test_network_checkpoints_share_a_batch_and_agree_with_run_episode(tmp_path):
+    """Networks act in one forward pass per network over the worlds each plays, sampled or
+    arg-max: the same episodes as one world at a time (a 16-unit NumPy MLP's batched arithmetic
+    is exact here)."""
+    from training.checkpoints import load_policy
+
+    overrides = small_overrides("chain-v1", max_cycles=40)
+    env = proteo_env.make("chain-v1", **overrides)
+    paths = [_network_checkpoint(tmp_path / f"net{s}", env, overrides, s) for s in range(2)]
+    controllers = [Controller.from_checkpoint(p) for p in paths] + [
+        Controller.from_checkpoint(paths[0], deterministic=True)
+    ]
+    results = evaluate("chain-v1", controllers, SEEDS, env=overrides, workers=1, batch_size=4)
+    for controller, row in zip(controllers, results):
+        for seed, batched in zip(SEEDS, row):
+            policy = load_policy(controller.policy, env, seed=seed, deterministic=controller.deterministic)
+            assert _same(run_episode(env, policy, seed=seed), batched)
+    assert results[0] != results[1] and results[0] != results[2]
 
 
 @pytest.mark.parametrize(

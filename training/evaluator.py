@@ -112,12 +112,6 @@ class Controller:
         policy.reset(seed)
         return policy
 
-    @property
-    def group(self) -> str:
-        """Controllers of one group share a batch: one kernel policy class (a task's rules with
-        any parameters, programs), or one network."""
-        return f"{self.policy}|{self.deterministic}" if self.checkpoint else self.policy
-
 
 @dataclass(frozen=True)
 class Episode:
@@ -198,17 +192,28 @@ def check_episodes(episodes, *, workers=None, batch_size: int = DEFAULT_BATCH) -
 
 
 # ---------------------------------------------------------------------- one batch
+def batch_kind(policy) -> str:
+    """How ``policy`` acts in a batch: ``kernel:<class>`` (its rule kernel, over every world in
+    one call), ``network`` (a network without memory: one forward pass per network and cycle) or
+    ``alone`` (its own ``act``, world by world). Policies of one kind share a batch."""
+    from baselines.base import KernelPolicy
+    from training.policies import LogitsPolicy
+
+    if isinstance(policy, KernelPolicy):
+        return f"kernel:{type(policy).__qualname__}"
+    if isinstance(policy, LogitsPolicy) and policy.memory == "none":
+        return "network"
+    return "alone"
+
+
 class _Actors:
-    """The policies of a batch's rows acting together (kernel policies in one call, a network in one forward pass)."""
+    """The policies of a batch's rows acting together (see :func:`batch_kind`)."""
 
     def __init__(self, policies: list, n_agents: int):
-        from baselines.base import KernelPolicy
-        from training.policies import LogitsPolicy
-
         self.policies, self.n_agents = policies, n_agents
-        first = policies[0]
-        self.kernels = type(first).batch(policies) if isinstance(first, KernelPolicy) else None
-        self.network = isinstance(first, LogitsPolicy) and first.memory == "none"
+        kinds = {batch_kind(p) for p in policies}
+        self.kind = kinds.pop() if len(kinds) == 1 else "alone"
+        self.kernels = type(policies[0]).batch(policies) if self.kind.startswith("kernel:") else None
 
     def replace(self, b: int, policy) -> None:
         self.policies[b] = policy
@@ -220,23 +225,8 @@ class _Actors:
         a = self.n_agents
         if self.kernels is not None:
             return self.kernels.act_arrays(buffers)
-        if self.network:
-            from training.policies import sample_actions
-
-            first = self.policies[0]
-            logits = first.logits_fn(first.encoder.encode_buffers(buffers))
-            noise = None
-            if not first.deterministic:  # each world's draws from its own episode's generator
-                noise = np.concatenate([p.rng.gumbel(size=(a, logits.shape[1])) for p in self.policies])
-            return sample_actions(
-                logits,
-                first.nvec,
-                buffers.action_mask,
-                None,
-                deterministic=first.deterministic,
-                sampled=first.sampled,
-                noise=noise,
-            )
+        if self.kind == "network":
+            return self._sample(buffers)
         names = [f"module_{i}" for i in range(a)]
         out = []
         for b, p in enumerate(self.policies):
@@ -244,9 +234,35 @@ class _Actors:
             out.append(np.stack([np.asarray(actions[name]).reshape(-1) for name in names]))
         return np.concatenate(out)
 
+    def _sample(self, buffers) -> np.ndarray:
+        """Each network's forward pass over the rows of the worlds it plays, then every world's
+        actions drawn with its own generator (Gumbel-max, as :func:`~training.policies.sample_actions`
+        draws them for one world)."""
+        from training.policies import N_MOVES, sample_actions
+
+        a, first = self.n_agents, self.policies[0]
+        features = first.encoder.encode_buffers(buffers)
+        networks: dict = {}
+        for b, p in enumerate(self.policies):
+            networks.setdefault(id(p.logits_fn), (p.logits_fn, []))[1].append(b)
+        logits = None
+        for logits_fn, worlds in networks.values():
+            rows = (np.asarray(worlds)[:, None] * a + np.arange(a)).reshape(-1)
+            part = logits_fn(features[rows] if len(worlds) < len(self.policies) else features)
+            if logits is None:
+                logits = np.empty((len(features), part.shape[1]), dtype=part.dtype)
+            logits[rows] = part
+        noise = np.zeros(logits.shape)
+        for b, p in enumerate(self.policies):
+            if not p.deterministic:
+                noise[b * a : (b + 1) * a] = p.rng.gumbel(size=(a, logits.shape[1]))
+                if p.sampled == "move":
+                    noise[b * a : (b + 1) * a, N_MOVES:] = 0.0
+        return sample_actions(logits, first.nvec, buffers.action_mask, None, noise=noise)
+
 
 def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[dict]:
-    """Every episode of ``episodes`` (one task, settings, level and controller group) in one
+    """Every episode of ``episodes`` (one task, settings and level; controllers of one :func:`batch_kind`) in one
     batched env of up to ``batch_size`` worlds: ``{"return", "success", "cycles", "metrics"}`` each
     (JSON-ready), in order."""
     import proteo_env
@@ -404,7 +420,8 @@ def run_episodes(
     groups: dict = {}
     for i in todo:
         e = episodes[i]
-        groups.setdefault((e.task, e.overrides, e.level, e.controller.group), []).append(i)
+        kind = batch_kind(_BUILT[((e.task, e.overrides, e.level), e.controller)])
+        groups.setdefault((e.task, e.overrides, e.level, kind), []).append(i)
     # Enough chunks to keep every worker busy, each large enough to keep its batch full.
     per_chunk = max(batch_size, math.ceil(len(todo) / (4 * workers))) if workers > 1 or ray else len(todo)
     chunks, members = [], []
