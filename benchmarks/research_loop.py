@@ -16,8 +16,8 @@ Rows (module-cycles per second: the cycles of every episode times its modules, o
 * ``evolution, evaluator (W workers)``: the same episodes through :func:`training.evaluator.run_episodes`
   (after a first call that starts the worker processes and compiles); the results are checked
   equal to the per-episode ones, episode by episode.
-* ``judge, per episode`` and ``judge, evaluator``: ``proteo eval --benchmark VERSION`` of one recipe
-  (``--recipe``, every training seed, every split), with its episodes run one by one
+* ``judge, per episode`` and ``judge, evaluator``: ``proteo eval --benchmark VERSION`` of each recipe
+  of ``--recipes`` (every training seed, every split), with its episodes run one by one
   (:func:`training.episodes.run_episode_job`, what the judge ran before) and through the
   evaluator; the two benchmark files are compared row by row (networks: the batched forward
   pass can differ in the last bits of a logit).
@@ -152,8 +152,13 @@ def main(argv=None) -> int:
     parser.add_argument("--worlds", type=int, default=10, help="worlds per variation and program (default 10)")
     parser.add_argument("--cycles", type=int, default=300, help="cycles of the engine row (default 300)")
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="worker counts (default 1 2)")
-    parser.add_argument("--benchmark", default="v1", help="protocol of the judge rows (default v1)")
-    parser.add_argument("--recipe", default="checkpoints/v1/grasp/kickstart_move", help="the judged recipe")
+    parser.add_argument(
+        "--recipes",
+        nargs="+",
+        default=["v1:checkpoints/v1/grasp/kickstart_move", "v4:checkpoints/v4/grasp/evolve-paper_full"],
+        help="judged recipes as PROTOCOL:FOLDER (default: grasp's kickstart networks under v1 and its "
+        "programs evolved from the paper's under v4)",
+    )
     parser.add_argument("--out", default=None, help="write <out>.json and <out>.md")
     args = parser.parse_args(argv)
     from training.evaluator import run_episodes
@@ -207,27 +212,26 @@ def main(argv=None) -> int:
             flush=True,
         )
 
-    recipe = Path(args.recipe)
-    with tempfile.TemporaryDirectory() as tmp:
-        before, reference_doc = judge_once(args.benchmark, recipe, Path(tmp) / "before", True, 1)
-        rows.append({"loop": f"judge, per episode ({recipe}, 1 core)", "seconds": before})
-        print(f"{rows[-1]['loop']}: {before:.1f} s", flush=True)
-        for w in args.workers:
-            judge_once(args.benchmark, recipe, Path(tmp) / f"warm{w}", False, w)
-            after, document = judge_once(args.benchmark, recipe, Path(tmp) / f"after{w}", False, w)
-            equal = sum(a == b for a, b in zip(rows_of(reference_doc), rows_of(document)))
-            rows.append(
-                {
-                    "loop": f"judge, evaluator ({w} worker{'s' if w > 1 else ''})",
-                    "seconds": after,
-                    "speedup": before / after,
-                    "identical_rows": f"{equal}/{len(document['rows'])}",
-                }
-            )
-            print(
-                f"{rows[-1]['loop']}: {after:.1f} s ({before / after:.1f}x), rows identical {equal}/{len(document['rows'])}",
-                flush=True,
-            )
+    for spec in args.recipes:
+        version, _, folder = spec.partition(":")
+        recipe = Path(folder)
+        with tempfile.TemporaryDirectory() as tmp:
+            before, reference_doc = judge_once(version, recipe, Path(tmp) / "before", True, 1)
+            rows.append({"loop": f"judge {version}, per episode ({recipe}, 1 core)", "seconds": before})
+            print(f"{rows[-1]['loop']}: {before:.1f} s", flush=True)
+            for w in args.workers:
+                judge_once(version, recipe, Path(tmp) / f"warm{w}", False, w)
+                after, document = judge_once(version, recipe, Path(tmp) / f"after{w}", False, w)
+                equal = sum(a == b for a, b in zip(rows_of(reference_doc), rows_of(document)))
+                rows.append(
+                    {
+                        "loop": f"judge {version}, evaluator ({recipe.name}, {w} worker{'s' if w > 1 else ''})",
+                        "seconds": after,
+                        "speedup": before / after,
+                        "identical_rows": f"{equal}/{len(document['rows'])}",
+                    }
+                )
+                print(f"{rows[-1]['loop']}: {after:.1f} s ({before / after:.1f}x), rows identical {equal}", flush=True)
     for row in rows:
         if "module_cycles_per_s" in row:
             row["of_engine"] = row["module_cycles_per_s"] / engine
@@ -243,6 +247,13 @@ def main(argv=None) -> int:
 
 def markdown(rows: list, info: dict) -> str:
     lines = [
+        "# The research loop against the engine",
+        "",
+        "`NUMBA_NUM_THREADS=1 python benchmarks/research_loop.py --out docs/speed/research_loop` (what each row "
+        "runs: the script's docstring). Module-cycles per second: the episodes' cycles times their modules "
+        "over wall-clock; *of the engine*: over the faster engine row of the same run; *identical*: episodes "
+        "(evolution) or judged rows (every training seed's episodes of a split) equal to the per-episode path's.",
+        "",
         f"Machine: {info['cpu']}, {info['cores']} cores, load average {info['load_average_1min']} at the end; "
         f"numba {info['numba']}.",
         "",

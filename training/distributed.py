@@ -132,13 +132,20 @@ class Journal:
 
     def add(self, key: str, result) -> None:
         """Record one finished job (ignored when its key is already recorded)."""
-        if key in self.done:
-            return
-        self.done[key] = result
-        with self.path.open("a") as fh:
-            fh.write(json.dumps({"key": key, "result": result}, default=float) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
+        self.add_many([(key, result)])
+
+    def add_many(self, records) -> None:
+        """Record finished jobs ``(key, result)`` with one write to disk (those already recorded are ignored)."""
+        lines = []
+        for key, result in records:
+            if key not in self.done:
+                self.done[key] = result
+                lines.append(json.dumps({"key": key, "result": result}, default=float) + "\n")
+        if lines:
+            with self.path.open("a") as fh:
+                fh.write("".join(lines))
+                fh.flush()
+                os.fsync(fh.fileno())
 
     def complete(self) -> None:
         """Mark the run finished: the next run with this journal starts anew."""

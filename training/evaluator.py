@@ -431,9 +431,9 @@ def run_episodes(
             chunks.append((tuple(episodes[i] for i in part), batch_size, plugins))
 
     def landed(c: int, results: list) -> None:
+        if journal is not None:
+            journal.add_many((keys[i], result) for i, result in zip(members[c], results))
         for i, result in zip(members[c], results):
-            if journal is not None:
-                journal.add(keys[i], result)
             land(i, result)
 
     if chunks:
