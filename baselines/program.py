@@ -274,14 +274,15 @@ class _Loader:
 
     def __init__(self, text: str, where: str, task):
         self.data = parse_yaml(text, where)
-        self.lines = _line_numbers(text)
+        self.text = text
         self.where = where
         self.task = task
         self.channels: tuple[str, ...] = ()
         self.parameters: dict[str, float] = {}
 
     def fail(self, path: tuple, value, allowed: str, why: str = ""):
-        line = next((self.lines[path[:n]] for n in range(len(path), -1, -1) if path[:n] in self.lines), None)
+        lines = _line_numbers(self.text)  # read again only to name the line of an error
+        line = next((lines[path[:n]] for n in range(len(path), -1, -1) if path[:n] in lines), None)
         field = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".") or "the program"
         at = f", line {line}" if line is not None else ""
         because = f" ({why})" if why else ""
