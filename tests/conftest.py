@@ -17,6 +17,10 @@ import pytest
 
 import proteo_env
 
+# The tests run on every core already (pytest -n 2): the batched evaluator of each test runs in
+# its own process unless a test asks for workers (training.evaluator.default_workers).
+os.environ.setdefault("PROTEO_WORKERS", "1")
+
 SMALL_OVERRIDES: dict[str, dict] = {
     "sandbox": {"n_modules": 12},
     "chain": {"n_modules": 12},

@@ -201,3 +201,13 @@ def test_an_episode_listed_twice_runs_once_and_gives_both_places_its_result(monk
     twice = evaluate("chain-v1", [Controller.rules("chain")] * 2, [5, 5, 6], env=overrides, workers=1)
     assert len(ran) == 2
     assert twice[0] == twice[1] and twice[0][0] == twice[0][1] != twice[0][2]
+
+
+def test_the_default_workers_come_from_proteo_workers_when_set(monkeypatch):
+    from training.evaluator import default_workers
+
+    monkeypatch.setenv("PROTEO_WORKERS", "3")
+    assert default_workers() == 3
+    monkeypatch.setenv("PROTEO_WORKERS", "0")
+    with pytest.raises(ConfigError, match="PROTEO_WORKERS='0' is not allowed; allowed: an integer >= 1"):
+        evaluate("chain-v1", [Controller.rules("chain")], [0], env=small_overrides("chain-v1"))

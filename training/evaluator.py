@@ -359,8 +359,18 @@ def import_plugins(plugins) -> None:
 
 
 # ---------------------------------------------------------------------- many batches
+WORKERS_VARIABLE = "PROTEO_WORKERS"
+"""An environment variable that sets the default number of worker processes (a test runner that
+runs tests in parallel already sets it to 1)."""
+
+
 def default_workers() -> int:
-    """Every core this process may use."""
+    """``$PROTEO_WORKERS`` when set (an integer >= 1), else every core this process may use."""
+    value = os.environ.get(WORKERS_VARIABLE)
+    if value is not None:
+        if not value.isdigit() or int(value) < 1:
+            raise ConfigError(f"{WORKERS_VARIABLE}={value!r} is not allowed; allowed: an integer >= 1")
+        return int(value)
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
@@ -379,7 +389,8 @@ def run_episodes(
 
     Args:
         episodes: :class:`Episode` records (at least one).
-        workers: processes (default: every core; 1: this process); with ``ray``, the Ray CPUs.
+        workers: processes (default: :func:`default_workers`, every core; 1: this process); with
+            ``ray``, the Ray CPUs.
         batch_size: worlds stepped together in one process.
         ray: ``None`` (local) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`):
             each batch a Ray task.
