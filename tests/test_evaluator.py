@@ -73,8 +73,12 @@ def test_every_episode_is_the_one_run_episode_gives_below_full(level):
             assert _same(_alone("chain-v1", overrides, level, controller, seed), batched)
 
 
-def test_programs_of_a_population_share_one_batch_with_their_own_tables():
+@pytest.mark.parametrize("one_call_after", [0, 10**9])  # from the start in one kernel call, or world by world
+def test_programs_of_a_population_share_one_batch_with_their_own_tables(one_call_after, monkeypatch):
     """Different programs in the rows of one batch: each row acts with its own program."""
+    from proteo_env import batched as batched_env
+
+    monkeypatch.setattr(batched_env, "ONE_CALL_AFTER", one_call_after)
     from training.program_variation import ProgramSpace, random_program
 
     overrides = small_overrides("chain-v1", max_cycles=150)

@@ -206,14 +206,24 @@ def batch_kind(policy) -> str:
     return "alone"
 
 
+_KERNEL_WORLD_CYCLES: dict = {}
+"""World-cycles this process has run with each kernel policy class world by world."""
+
+
 class _Actors:
-    """The policies of a batch's rows acting together (see :func:`batch_kind`)."""
+    """The policies of a batch's rows acting together (see :func:`batch_kind`).
+
+    Kernel policies act world by world (each policy's own cached kernel) until this process has
+    run :data:`proteo_env.batched.ONE_CALL_AFTER` world-cycles with their class, then in one
+    call over every world (:class:`~baselines.base.PolicyBatch`, the same actions, draw for
+    draw): the one call compiles once per process and class (seconds), which only longer
+    evaluations win back."""
 
     def __init__(self, policies: list, n_agents: int):
         self.policies, self.n_agents = policies, n_agents
         kinds = {batch_kind(p) for p in policies}
         self.kind = kinds.pop() if len(kinds) == 1 else "alone"
-        self.kernels = type(policies[0]).batch(policies) if self.kind.startswith("kernel:") else None
+        self.kernels = None
 
     def replace(self, b: int, policy) -> None:
         self.policies[b] = policy
@@ -222,9 +232,16 @@ class _Actors:
 
     def act(self, buffers) -> np.ndarray:
         """``(B * A, F)`` actions of every row's agents."""
+        from proteo_env import batched
+
         a = self.n_agents
-        if self.kernels is not None:
-            return self.kernels.act_arrays(buffers)
+        if self.kind.startswith("kernel:"):
+            if self.kernels is None and _KERNEL_WORLD_CYCLES.get(self.kind, 0) >= batched.ONE_CALL_AFTER:
+                self.kernels = type(self.policies[0]).batch(self.policies)
+            if self.kernels is not None:
+                return self.kernels.act_arrays(buffers)
+            _KERNEL_WORLD_CYCLES[self.kind] = _KERNEL_WORLD_CYCLES.get(self.kind, 0) + len(self.policies)
+            return np.concatenate([p.act_arrays(buffers.rows(b * a, (b + 1) * a)) for b, p in enumerate(self.policies)])
         if self.kind == "network":
             return self._sample(buffers)
         names = [f"module_{i}" for i in range(a)]
