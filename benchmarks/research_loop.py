@@ -119,13 +119,7 @@ def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, wo
             for (row, job), episode in zip(
                 jobs, run_jobs(episodes.run_episode_job, [j for _, j in jobs], [j.key for _, j in jobs], progress=False)
             ):
-                r = results[row]
-                r.returns.append(episode["return"])
-                r.successes.append(episode["success"])
-                r.cycles.append(episode["cycles"])
-                r.seeds.append(job.seed)
-                r.metrics.append(episode["metrics"])
-                r.seconds += episode["seconds"]
+                episodes.add_episode(results[row], job, episode)
 
         episodes.run_episodes = one_by_one
     try:

@@ -106,6 +106,17 @@ def run_episode_job(job: EpisodeJob) -> dict:
     return out
 
 
+def add_episode(result, job: EpisodeJob, episode: dict) -> None:
+    """Add one finished episode (what :func:`run_episode_job` returns) to its row's ``result``
+    (a :class:`~training.report.PolicyResult`)."""
+    result.returns.append(episode["return"])
+    result.successes.append(episode["success"])
+    result.cycles.append(episode["cycles"])
+    result.seeds.append(job.seed)
+    result.metrics.append(episode["metrics"])
+    result.seconds += episode["seconds"]
+
+
 def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
     """Run the planned ``jobs`` and add each episode to its row of ``results``; pictures go to
     ``out_dir/pictures``.
@@ -166,12 +177,7 @@ def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, prog
             }
     for (row, job), episode in zip(jobs, episodes):
         result = results[row]
-        result.returns.append(episode["return"])
-        result.successes.append(episode["success"])
-        result.cycles.append(episode["cycles"])
-        result.seeds.append(job.seed)
-        result.metrics.append(episode["metrics"])
-        result.seconds += episode["seconds"]
+        add_episode(result, job, episode)
         if episode["picture"]:
             file = (
                 out_dir

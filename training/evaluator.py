@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from proteo_env import batched
 from proteo_env.config import ConfigError
 from proteo_env.rollout import EpisodeResult
 
@@ -232,8 +233,6 @@ class _Actors:
 
     def act(self, buffers) -> np.ndarray:
         """``(B * A, F)`` actions of every row's agents."""
-        from proteo_env import batched
-
         a = self.n_agents
         if self.kind.startswith("kernel:"):
             if self.kernels is None and _KERNEL_WORLD_CYCLES.get(self.kind, 0) >= batched.ONE_CALL_AFTER:
