@@ -128,6 +128,7 @@ def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
         ("variations: [{n_modules: 0}]", "variations[0]"),
         ("seed_program: no_such_program", "no_such_program"),
         ("fitness: reward", "fitness"),
+        ("fitness: progress", "progress"),  # the default task, chain, has no partial credit
     ],
 )
 def test_bad_config_is_one_error_before_anything_is_written(tmp_path, config, named):
@@ -144,5 +145,55 @@ def test_the_success_score_ranks_every_success_above_every_failure_and_faster_ab
     fast, slow, failed = (
         EpisodeResult(c, s, r, {}) for c, s, r in ((50, True, 0.5), (299, True, 0.5), (300, False, 9.0))
     )
-    assert success_score(fast, 300) > success_score(slow, 300) > success_score(failed, 300) == 0.0
-    assert 1.0 < success_score(slow, 300) and success_score(fast, 300) <= 2.0
+    env = proteo_env.make("chain-v1", max_cycles=300)
+    assert success_score(fast, env) > success_score(slow, env) > success_score(failed, env) == 0.0
+    assert 1.0 < success_score(slow, env) and success_score(fast, env) <= 2.0
+
+
+def test_table_progress_pays_the_legs_that_moved_for_a_shift_not_a_table_that_stands_still():
+    """A table that restabilised after every shift by moving its legs (the rules) scores above one
+    whose legs stood still after forming (``restabilise_k == 0``), success or not; a failure that
+    moved for two shifts scores above a static success's progress."""
+    from proteo_env.rollout import EpisodeResult
+    from training.evolve import progress_score, success_score
+
+    env = proteo_env.make("table-v1", max_cycles=600)  # the paper's schedule: three entries
+    moved = EpisodeResult(400, True, 1.0, {"restabilise_0": 40.0, "restabilise_1": 30.0, "restabilise_2": 20.0})
+    static = EpisodeResult(400, True, 1.0, {"restabilise_0": 40.0, "restabilise_1": 0.0, "restabilise_2": 0.0})
+    half = EpisodeResult(600, False, 1.0, {"restabilise_0": 40.0, "restabilise_1": 30.0, "restabilise_2": -1.0})
+    assert progress_score(moved, env) == pytest.approx(success_score(moved, env)) == pytest.approx(2 - 400 / 600)
+    assert progress_score(static, env) == pytest.approx(1 / 3 + 1 - 400 / 600)
+    assert progress_score(half, env) == pytest.approx(2 / 3)
+    assert progress_score(half, env) > progress_score(static, env) - (1 - 400 / 600)  # its progress alone
+
+
+def test_branch_progress_pays_levels_of_a_tree_only():
+    """Branch's partial credit is the share of ``target_levels`` a tree reached; a structure with
+    cycles or without a real branching point earns nothing; at success it is the success score."""
+    from proteo_env.rollout import EpisodeResult
+    from training.evolve import progress_score, success_score
+
+    env = proteo_env.make("branch-v0", n_modules=40, max_cycles=200)  # target_levels 2
+    one = EpisodeResult(200, False, 0.0, {"tree": 1.0, "levels": 1.0})
+    cyclic = EpisodeResult(200, False, 0.0, {"tree": 0.0, "levels": 2.0})
+    chain = EpisodeResult(200, False, 0.0, {"tree": 1.0, "levels": 0.0})
+    done = EpisodeResult(120, True, 0.0, {"tree": 1.0, "levels": 2.0})
+    assert progress_score(one, env) == 0.5 and progress_score(cyclic, env) == progress_score(chain, env) == 0.0
+    assert progress_score(done, env) == pytest.approx(success_score(done, env))
+
+
+def test_progress_of_real_episodes_ranks_the_rules_above_a_table_that_stands_still():
+    """On the benchmark's table worlds the rules' legs move after each shift (progress 1 wherever
+    they succeed), while a program evolved under ``fitness: success`` that grows a leg under every
+    root and never disbands (benchmark v4, seed 1) earns at most 1/3, success or not."""
+    from training.evaluator import Controller, evaluate
+    from training.evolve import TASK_PROGRESS
+
+    settings = {"board_size": 9, "depth": 2, "n_spares": 16, "schedule": [[0, 8, 2], [150, 2, 8], [300, 5, 5]],
+                "stable_window": 50, "motion_model": "minimal", "max_cycles": 600}  # fmt: skip
+    params = proteo_env.make("table-v1", **settings).task.params
+    static = Controller.from_checkpoint("checkpoints/v4/table/evolve-paper_full/seed_1")
+    rules, legs = evaluate("table-v1", [Controller.rules("table"), static], [1000, 1001, 1007], env=settings, workers=1)
+    assert all(r.success and TASK_PROGRESS["table"](r.metrics, params) == 1.0 for r in rules)
+    assert sum(r.success for r in legs) >= 2
+    assert all(TASK_PROGRESS["table"](r.metrics, params) <= 1 / 3 for r in legs)

@@ -15,7 +15,10 @@ Fitness of a program: the mean episode score over ``variations`` (env overrides 
 ``episodes_per_variation`` worlds, minus ``complexity_penalty`` times its rules + conditions +
 actions. An episode's score is its return (``fitness: return``) or, for a task whose reward a
 program can collect without succeeding, ``2 - cycles / max_cycles`` for a success and 0 for a
-failure (``fitness: success``: success first, then speed). The worlds are common random
+failure (``fitness: success``: success first, then speed), or, on branch and table, a partial
+credit only the behaviour earns plus the success's speed (``fitness: progress``,
+:func:`progress_score`: branching levels of a tree; weight shifts the legs moved for and
+restabilised after). The worlds are common random
 numbers: the same for every program of a generation, new each generation, their seeds drawn
 from a ``numpy.random.SeedSequence`` child of the run seed (generation ``g`` uses the child's
 child ``g``). Policy seeds equal world seeds.
@@ -90,8 +93,9 @@ class Args:
     complexity_penalty: float = 0.001
     """Subtracted from the fitness per rule, condition and action."""
     fitness: str = "return"
-    """An episode's score: ``return`` (the task's reward) or ``success`` (``2 - cycles /
-    max_cycles`` for a success, 0 for a failure)."""
+    """An episode's score: ``return`` (the task's reward), ``success`` (``2 - cycles /
+    max_cycles`` for a success, 0 for a failure) or ``progress`` (branch and table: the
+    behaviour's partial credit in [0, 1], plus ``1 - cycles / max_cycles`` for a success)."""
     max_rules: int = 4
     """Rules per mode."""
     max_conditions: int = 3
@@ -152,14 +156,45 @@ def program_episodes(task: str, variations: list[str], programs: list[str], seed
     ]
 
 
-def success_score(episode, max_cycles: int) -> float:
-    """``2 - cycles / max_cycles`` for a successful episode (an :class:`~proteo_env.rollout.EpisodeResult`),
-    0 for a failure."""
-    return 2.0 - episode.cycles / max_cycles if episode.success else 0.0
+def success_score(episode, env) -> float:
+    """``2 - cycles / max_cycles`` for a successful episode (an :class:`~proteo_env.rollout.EpisodeResult`
+    of ``env``), 0 for a failure."""
+    return 2.0 - episode.cycles / env.max_cycles if episode.success else 0.0
 
 
-EPISODE_SCORES = {"return": lambda episode, max_cycles: episode.total_reward, "success": success_score}
-"""The episode score each value of ``fitness`` names, from an episode's result and its cycle limit."""
+def branch_progress(metrics: dict, params) -> float:
+    """The branching levels the grown structure reached, as a share of ``target_levels``, when it is
+    a tree (0 when it has cycles): no credit for growing without branching."""
+    return metrics["tree"] * min(metrics["levels"], params.target_levels) / params.target_levels
+
+
+def table_progress(metrics: dict, params) -> float:
+    """The share of the weight schedule's entries whose stable configuration the table reached by
+    moving its legs (``restabilise_k > 0``: the signature changed after the entry's shift, then held
+    for the stable window); a table whose legs stand still after the first entry earns ``1 / K``."""
+    return sum(metrics[f"restabilise_{k}"] > 0 for k in range(len(params.schedule))) / len(params.schedule)
+
+
+TASK_PROGRESS = {"branch": branch_progress, "table": table_progress}
+"""Tasks with a partial credit for ``fitness: progress``: task name -> progress in [0, 1] from an
+episode's final metrics and the task's parameters, earned only by doing the task's behaviour."""
+
+
+def progress_score(episode, env) -> float:
+    """The task's progress (:data:`TASK_PROGRESS`), plus ``1 - cycles / max_cycles`` for a success:
+    at success (progress 1 on branch) it equals :func:`success_score`."""
+    task = env.task
+    progress = TASK_PROGRESS[task.name](episode.metrics, task.params)
+    return progress + (1.0 - episode.cycles / env.max_cycles if episode.success else 0.0)
+
+
+EPISODE_SCORES = {
+    "return": lambda episode, env: episode.total_reward,
+    "success": success_score,
+    "progress": progress_score,
+}
+"""The episode score each value of ``fitness`` names, from an episode's result and its env (which
+gives the cycle limit and the task's parameters)."""
 
 
 def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: int) -> list[int]:
@@ -204,6 +239,11 @@ def check_args(args: Args) -> list[str]:
         except ConfigError as err:
             raise ConfigError(f"variations[{i}]: {variation!r} is not allowed: {err}") from None
         overrides.append(json.dumps(merged, sort_keys=True))
+    if args.fitness == "progress" and proteo_env.make(args.task, **args.env).task.name not in TASK_PROGRESS:
+        raise ConfigError(
+            f"fitness: 'progress' is not allowed on task {args.task!r}; allowed: return or success "
+            f"(progress is defined on {', '.join(TASK_PROGRESS)})"
+        )
     return overrides
 
 
@@ -338,7 +378,7 @@ def main(argv=None) -> Path:
     episode_score = EPISODE_SCORES[args.fitness]
 
     limits_of = [proteo_env.make(args.task, **json.loads(v)) for v in variations]
-    modules, max_cycles = [len(e.possible_agents) for e in limits_of], [e.max_cycles for e in limits_of]
+    modules = [len(e.possible_agents) for e in limits_of]
 
     def score(candidates: list, seeds: list[int], desc: str) -> tuple[list[float], list[list]]:
         """The fitness of each candidate on the worlds of ``seeds`` in every variation, and its episodes."""
@@ -357,7 +397,7 @@ def main(argv=None) -> Path:
         variation_of = [v for v in range(len(variations)) for _ in seeds]
         agent_steps += sum(r.cycles * modules[v] for results in outcomes for r, v in zip(results, variation_of))
         fitness = [
-            float(np.mean([episode_score(r, max_cycles[v]) for r, v in zip(results, variation_of)]))
+            float(np.mean([episode_score(r, limits_of[v]) for r, v in zip(results, variation_of)]))
             - args.complexity_penalty * complexity(program)
             for program, results in zip(candidates, outcomes)
         ]

@@ -28,6 +28,10 @@ recipe           script                   config
 ``evolve-paper`` ``training/evolve.py``   ``configs/train/evolve_paper_<task>_full.yaml``: the
                                           same from the paper's program
                                           (``baselines/programs/<task>.yaml``)
+``evolve-large`` ``training/evolve.py``   ``configs/train/evolve_large_<task>_full.yaml``:
+                                          ``evolve`` with ten times the episodes per generation
+``evolve-large-  ``training/evolve.py``   ``configs/train/evolve_large_paper_<task>_full.yaml``:
+paper``                                   ``evolve-paper`` with ten times the episodes
 ================ ======================== ====================================================
 
 For each recipe, task and seed it trains the config with ``--seed S`` (PPO recipes for
@@ -71,6 +75,8 @@ RECIPES = {
     "cma": ("training.cma_es", "cma_rules", 0),
     "evolve": ("training.evolve", "evolve", 0),
     "evolve-paper": ("training.evolve", "evolve_paper", 0),
+    "evolve-large": ("training.evolve", "evolve_large", 0),
+    "evolve-large-paper": ("training.evolve", "evolve_large_paper", 0),
 }
 """Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
 unless ``total_steps`` says otherwise; 0: the config's)."""
@@ -85,7 +91,7 @@ class Args:
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     recipes: tuple[str, ...] = ("ppo",)
     """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit, cma, evolve,
-    evolve-paper); see the module docstring."""
+    evolve-paper, evolve-large, evolve-large-paper); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
@@ -132,6 +138,8 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
     ]
     if module in ("training.ppo", "training.cma_es", "training.evolve"):
         cmd += ["--time-limit-minutes", str(args.minutes)]
+    if module in ("training.cma_es", "training.evolve"):
+        cmd += ["--workers", "1"]  # one process per run: the study runs ``parallel`` of them
     if module == "training.ppo":
         steps = args.total_steps or RECIPES[recipe][2]
         cmd += ["--total-steps", str(steps)] if steps else []
