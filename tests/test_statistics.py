@@ -126,3 +126,42 @@ def test_performance_profiles_with_bands():
     assert (lo <= profile + 1e-12).all() and (profile <= hi + 1e-12).all()
     assert lo[0] == hi[0] == 1.0 and lo[-1] == hi[-1] == 0.0
     assert profile.shape == lo.shape == hi.shape == (5,)
+
+
+def test_the_paired_difference_of_identical_and_shifted_controllers():
+    reference = np.array([1.0, 0.0, 1.0, 1.0])
+    same = st.paired_difference(np.tile(reference, (3, 1)), reference)
+    assert (same["difference"], same["lo"], same["hi"], same["p"], same["pairs"]) == (0.0, 0.0, 0.0, 1.0, 12)
+    worse = st.paired_difference(np.tile(reference - 1.0, (3, 1)), reference)
+    assert (worse["difference"], worse["lo"], worse["hi"], worse["p"]) == (-1.0, -1.0, -1.0, 0.0)
+
+
+def test_the_paired_bootstrap_draws_training_seeds_as_well_as_worlds():
+    """One seed always succeeds and one always fails where the reference succeeds on half the
+    worlds: the mean difference is 0, but a new training seed could be either, so the interval
+    spans most of -0.5 to 0.5 (a bootstrap of worlds alone would give 0 to 0)."""
+    reference = np.array([1.0, 0.0] * 10)
+    x = np.stack([np.ones(20), np.zeros(20)])
+    d = st.paired_difference(x, reference)
+    assert d["difference"] == 0.0 and d["lo"] <= -0.4 and d["hi"] >= 0.4 and d["p"] > 0.5
+
+
+def test_the_paired_difference_keeps_only_the_masked_pairs():
+    """Cycles compared where both succeeded: the pairs the mask drops do not count, and a
+    resample that draws none of the kept pairs is left out."""
+    x = np.array([[50.0, 300.0, 80.0], [60.0, 300.0, 70.0]])
+    reference = np.array([70.0, 90.0, 300.0])
+    keep = np.array([[True, False, False], [True, False, False]])
+    d = st.paired_difference(x, reference, keep)
+    assert d["pairs"] == 2 and d["difference"] == pytest.approx(-15.0)
+    assert -20.0 <= d["lo"] <= d["hi"] <= -10.0
+    none = st.paired_difference(x, reference, np.zeros_like(keep))
+    assert none["pairs"] == 0 and np.isnan(none["difference"])
+
+
+@pytest.mark.parametrize(
+    "x, reference", [(np.ones(3), np.ones(3)), (np.ones((2, 3)), np.ones(4)), (np.ones((0, 3)), np.ones(3))]
+)
+def test_the_paired_difference_refuses_shapes_that_do_not_pair(x, reference):
+    with pytest.raises(ValueError, match="paired_difference"):
+        st.paired_difference(x, reference)

@@ -9,9 +9,12 @@ progress of the protocol's learned runs (``ROOT/VERSION/learning/progress/<recip
 written by ``python -m training.study --keep-dir checkpoints/VERSION --docs-dir ROOT/VERSION/learning``),
 and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``results/``:
 
-- a short answer at the top, in sentences that say only what the intervals support: a
-  difference is claimed only where two 95 % intervals do not overlap, otherwise "no detectable
-  difference";
+- a short answer at the top, in sentences that say only what a paired comparison supports:
+  each recipe against the rules at its own control level (``rules-move`` for ``move``) on the
+  same worlds (:func:`paired`), the difference in success rate with the 95 % interval of a
+  bootstrap over training seeds and worlds jointly; a difference is claimed only where that
+  interval excludes 0, otherwise "no detectable difference" with the interval; cycles are
+  compared on the worlds where both succeeded;
 - per task, one table: a row per policy, a column per split, each cell the successes with the
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
@@ -42,6 +45,8 @@ from training import statistics as st
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
+REFERENCE_NAMES = {RULES: "the rules", RULES_MOVE: "the rules at move"}
+"""How a sentence names each reference."""
 
 
 @dataclass
@@ -56,6 +61,8 @@ class Row:
     world_seeds: list
     runs: list
     summary: dict
+    max_cycles: int
+    """The split's cycle limit: a failure's time in :func:`paired`."""
 
     @property
     def rates(self) -> np.ndarray:
@@ -101,6 +108,7 @@ def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
                     world_seeds=r["world_seeds"],
                     runs=r["runs"],
                     summary=r["summary"],
+                    max_cycles=int(r["env"]["max_cycles"]),
                 )
             )
     return rows, headers
@@ -119,42 +127,90 @@ def cell(row: Row) -> str:
     return text
 
 
-def overlap(a: dict, b: dict, low: str = "success_lo", high: str = "success_hi") -> bool:
-    """Whether two summaries' intervals overlap (no detectable difference)."""
-    return not (a[high] < b[low] or b[high] < a[low])
+def reference_of(row: Row, by_key: dict) -> Row | None:
+    """The rules at ``row``'s control level on its task and split: ``rules-move`` for a
+    controller at ``move`` where it was judged, else the rules (``full``); None without one."""
+    for name in (RULES_MOVE, RULES) if row.level == "move" else (RULES,):
+        if (row.task, row.split, name) in by_key:
+            return by_key[(row.task, row.split, name)]
+    return None
 
 
-def compare(name: str, row: Row, rules: Row) -> str:
-    """One sentence comparing a learned or evolved recipe with the rules on a split, as the intervals allow."""
-    a, b = row.summary, rules.summary
-    rate = f"{a['success_rate']:.2f} ({_interval(a['success_lo'], a['success_hi'])})"
-    ref = f"{b['success_rate']:.2f} ({_interval(b['success_lo'], b['success_hi'])})"
-    if not overlap(a, b):
-        verdict = "above the rules" if a["success_rate"] > b["success_rate"] else "below the rules"
-        return f"{name} succeeds {verdict}: {rate} against {ref}"
-    text = f"{name}: no detectable difference in success from the rules, {rate} against {ref}"
-    if a["successes"] >= 2 and b["successes"] >= 2 and not overlap(a, b, "cycles_lo", "cycles_hi"):
-        faster = "fewer" if a["cycles_to_success"] < b["cycles_to_success"] else "more"
-        text += (
-            f", in {faster} cycles ({a['cycles_to_success']:.0f}, {_interval(a['cycles_lo'], a['cycles_hi'], 0)}, "
-            f"against {b['cycles_to_success']:.0f}, {_interval(b['cycles_lo'], b['cycles_hi'], 0)})"
-        )
+def paired(row: Row, reference: Row) -> dict | None:
+    """``row`` against ``reference`` on the worlds both played (each training seed of ``row`` on
+    the same worlds; the reference judged once, on those and more): ``{"success", "cycles",
+    "time", "worlds", "rate", "reference_rate"}``, each of the first three a
+    :func:`training.statistics.paired_difference` (bootstrap over training seeds and worlds
+    jointly): the success rate; cycles to success on the pairs where both succeeded; and the time
+    to success counting a failure at the cycle limit. None when ``row`` played a world the
+    reference did not."""
+    column = {seed: i for i, seed in enumerate(reference.world_seeds)}
+    if any(seed not in column for seed in row.world_seeds):
+        return None
+    at = [column[seed] for seed in row.world_seeds]
+    n = len(at)
+    won = np.array([run["successes"][:n] for run in row.runs], dtype=bool)
+    cycles = np.array([run["cycles"][:n] for run in row.runs], dtype=float)
+    won_ref = np.asarray(reference.runs[0]["successes"], dtype=bool)[at]
+    cycles_ref = np.asarray(reference.runs[0]["cycles"], dtype=float)[at]
+    return {
+        "success": st.paired_difference(won, won_ref),
+        "cycles": st.paired_difference(cycles, cycles_ref, won & won_ref[None, :]),
+        "time": st.paired_difference(
+            np.where(won, cycles, row.max_cycles), np.where(won_ref, cycles_ref, reference.max_cycles)
+        ),
+        "worlds": n,
+        "rate": float(won.mean()),
+        "reference_rate": float(won_ref.mean()),
+    }
+
+
+def _difference(d: dict, digits: int = 2) -> str:
+    return f"{d['difference']:+.{digits}f} ({d['lo']:+.{digits}f} to {d['hi']:+.{digits}f})"
+
+
+def detectable(d: dict) -> bool:
+    """Whether a :func:`~training.statistics.paired_difference`'s interval excludes 0."""
+    return bool(d["pairs"]) and (d["lo"] > 0 or d["hi"] < 0)
+
+
+def compare(name: str, row: Row, reference: Row) -> str:
+    """One sentence comparing a learned or evolved recipe with the rules at its level on a split,
+    from the paired differences (:func:`paired`)."""
+    pair = paired(row, reference)
+    if pair is None:
+        return f"{name}: not judged on the reference's worlds"
+    against = f"{REFERENCE_NAMES.get(reference.policy, reference.policy)} on the same {pair['worlds']} worlds"
+    rates = f"{pair['rate']:.2f} against {pair['reference_rate']:.2f}"
+    success = pair["success"]
+    if detectable(success):
+        verdict = "above" if success["difference"] > 0 else "below"
+        text = f"{name} succeeds {verdict} {against}: {rates}, difference {_difference(success)}"
+    else:
+        text = f"{name}: no detectable difference in success from {against}: {rates}, difference {_difference(success)}"
+    cycles = pair["cycles"]
+    if cycles["pairs"] >= 2 and detectable(cycles):
+        faster = "fewer" if cycles["difference"] < 0 else "more"
+        text += f"; in {faster} cycles where both succeed, {_difference(cycles, 0)}"
     return text
 
 
 def verdicts(task: str, recipe: str, by_key: dict, splits: list[str]) -> str:
-    """Where a recipe's success interval lies above or below the rules' on ``splits``, and where
-    the two overlap (no detectable difference), in a few words."""
+    """Where a recipe's success lies detectably above or below the rules' at its level on
+    ``splits`` (paired, :func:`paired`), and where no difference is detectable, in a few words."""
     above, below, same = [], [], []
     for split in splits:
-        if (task, split, recipe) not in by_key or (task, split, RULES) not in by_key:
+        row = by_key.get((task, split, recipe))
+        reference = reference_of(row, by_key) if row is not None else None
+        pair = paired(row, reference) if reference is not None else None
+        if pair is None:
             continue
-        a, b = by_key[(task, split, recipe)].summary, by_key[(task, split, RULES)].summary
-        pair = f"{split} ({a['success_rate']:.2f} against {b['success_rate']:.2f})"
-        if overlap(a, b):
-            same.append(split)
+        success = pair["success"]
+        if detectable(success):
+            text = f"{split} ({success['difference']:+.2f}, {success['lo']:+.2f} to {success['hi']:+.2f})"
+            (above if success["difference"] > 0 else below).append(text)
         else:
-            (above if a["success_rate"] > b["success_rate"] else below).append(pair)
+            same.append(split)
     parts = [f"above the rules on {', '.join(above)}"] if above else []
     parts += [f"below them on {', '.join(below)}"] if below else []
     parts += [f"no detectable difference on {', '.join(same)}"] if same else []
@@ -288,24 +344,27 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         )
     for task in tasks:
         for recipe in sorted({r.policy for r in rows if r.task == task and r.kind in ("learned", "evolved")}):
-            if (task, "heldout", recipe) in by_key and (task, "heldout", RULES) in by_key:
-                mine, rules = by_key[(task, "heldout", recipe)].summary, by_key[(task, "heldout", RULES)].summary
-                if not overlap(mine, rules):
-                    (above if mine["success_rate"] > rules["success_rate"] else below).append(f"{task} {recipe}")
-                others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]])
-                details.append(
-                    f"- {task}, held-out worlds: "
-                    + compare(recipe, by_key[(task, "heldout", recipe)], by_key[(task, "heldout", RULES)])
-                    + (f"; on the other splits {others}" if others else "")
-                    + "."
-                )
+            row = by_key.get((task, "heldout", recipe))
+            reference = reference_of(row, by_key) if row is not None else None
+            if reference is None:
+                continue
+            pair = paired(row, reference)
+            if pair is not None and detectable(pair["success"]):
+                (above if pair["success"]["difference"] > 0 else below).append(f"{task} {recipe}")
+            others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]])
+            details.append(
+                f"- {task}, held-out worlds: "
+                + compare(recipe, row, reference)
+                + (f"; on the other splits {others}" if others else "")
+                + "."
+            )
     if details:
         answer.append(
             "- On the held-out worlds, success detectably above the rules: "
             + (", ".join(above) or "none")
             + "; below them: "
             + (", ".join(below) or "none")
-            + "; every other recipe and task: no detectable difference (per split below)."
+            + "; every other recipe and task: no detectable difference (each with its interval below)."
         )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
     files = " extended by ".join(
@@ -325,7 +384,10 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         "",
         *(answer or ["- No learned or evolved recipe has been judged under this protocol yet."]),
         "",
-        "A difference is stated only where the two intervals do not overlap.",
+        "Each recipe is compared with the rules at its own control level (`rules-move` for `move`, the rules "
+        "at `full` otherwise) on the same worlds: the difference in success rate (recipe minus rules) with the "
+        "95 % interval of a bootstrap that draws training seeds and worlds jointly; a difference is stated "
+        "where that interval excludes 0, and cycles are compared on the worlds where both succeeded.",
         "",
         *(["## Against the rules, task by task", "", *details, ""] if details else []),
     ]

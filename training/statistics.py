@@ -11,6 +11,12 @@ One run (one policy, or one checkpoint, over ``n`` episodes):
 - :func:`mean_ci`: a mean and the half-width of its Student t interval
   (``scipy.stats.t.ppf``), for returns and cycles to success.
 
+A controller against a reference on the same worlds: :func:`paired_difference`, the mean
+difference of a per-episode measure over the pairs (training seed, world) that a mask keeps,
+with a bootstrap that draws training seeds and worlds jointly (each resample draws the seeds
+with replacement and the worlds with replacement, and every drawn seed plays every drawn
+world, as the seeds did), its percentile interval, and the bootstrap's two-sided p-value.
+
 A group of training seeds (one configuration trained with several seeds, each run evaluated on
 its episodes): :func:`group_bootstrap`, a stratified two-level bootstrap. Each resample draws
 the training seeds with replacement, then, within each drawn seed, that seed's episodes with
@@ -232,6 +238,59 @@ def iqm_ci(
     boot = _resample_runs(s, np.random.default_rng(seed), resamples).reshape(resamples, -1)
     lo, hi = _percentiles(trim_mean(boot, 0.25, axis=1), confidence)
     return iqm(s), lo, hi
+
+
+def paired_difference(
+    x,
+    reference,
+    keep=None,
+    *,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+    confidence: float = 0.95,
+) -> dict:
+    """How much a controller's per-episode measure exceeds a reference's on the same worlds.
+
+    Args:
+        x: ``(training seeds, worlds)``: the controller's measure on each world, each training
+            seed on the same worlds (success as 0/1, cycles, ...).
+        reference: ``(worlds,)``: the reference's measure on those worlds, in the same order.
+        keep: optional ``(training seeds, worlds)`` booleans: the pairs that count (for example
+            the worlds where both succeeded, to compare cycles); every pair without it.
+        resamples: bootstrap resamples; seed: the generator's seed; confidence: the level.
+
+    Returns:
+        ``{"difference", "lo", "hi", "p", "pairs"}``: the mean of ``x - reference`` over the kept
+        pairs, the percentile interval of that mean over ``resamples`` joint resamples (training
+        seeds and worlds drawn with replacement; a resample without a kept pair is left out),
+        the two-sided bootstrap p-value ``min(1, 2 min(P(d* <= 0), P(d* >= 0)))`` of "no
+        difference", and the number of kept pairs. ``nan`` everywhere without a kept pair.
+    """
+    xs = np.asarray(x, dtype=float)
+    ref = np.asarray(reference, dtype=float)
+    if xs.ndim != 2 or ref.shape != xs.shape[1:] or xs.size == 0:
+        raise ValueError(
+            f"paired_difference: x of shape (training seeds, worlds) and a reference of shape (worlds,) are "
+            f"needed; got {xs.shape} and {ref.shape}"
+        )
+    mask = np.ones(xs.shape, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    if mask.shape != xs.shape:
+        raise ValueError(f"paired_difference: keep has shape {mask.shape}, x {xs.shape}")
+    delta = np.where(mask, xs - ref[None, :], 0.0)
+    pairs = int(mask.sum())
+    if pairs == 0:
+        return {"difference": float("nan"), "lo": float("nan"), "hi": float("nan"), "p": float("nan"), "pairs": 0}
+    rng = np.random.default_rng(seed)
+    n_seeds, n_worlds = xs.shape
+    seeds = rng.integers(0, n_seeds, size=(resamples, n_seeds))[:, :, None]
+    worlds = rng.integers(0, n_worlds, size=(resamples, n_worlds))[:, None, :]
+    kept = mask[seeds, worlds].sum(axis=(1, 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        samples = delta[seeds, worlds].sum(axis=(1, 2)) / kept
+    samples = samples[kept > 0]
+    lo, hi = _percentiles(samples, confidence)
+    p = min(1.0, 2.0 * min(float((samples <= 0).mean()), float((samples >= 0).mean())))
+    return {"difference": float(delta.sum() / pairs), "lo": lo, "hi": hi, "p": p, "pairs": pairs}
 
 
 def _improvement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
