@@ -181,6 +181,81 @@ def test_v5_extends_v4_with_evolution_from_random_programs_on_branch_table_and_g
         assert paper.pop("seed_program") == task and scratch == paper
 
 
+def test_v6_extends_v5_with_evolution_of_ten_times_the_episodes_per_generation():
+    """v6 adds evolve-large-full and evolve-large-paper-full on chain, branch, table and grasp: v3
+    to v5's evolution configs with 80 parents and 160 children a generation, and on branch and
+    table the fitness with partial credit; nothing else differs."""
+    added = ["evolve-large-full", "evolve-large-paper-full"]
+    assert_adds_only_recipes("v5", "v6", {task: added for task in ("chain", "branch", "table", "grasp")})
+    for task in ("chain", "branch", "table", "grasp"):
+        for start in ("", "paper_"):
+            large = yaml.safe_load((ROOT / f"configs/train/evolve_large_{start}{task}_full.yaml").read_text())
+            small = yaml.safe_load((ROOT / f"configs/train/evolve_{start}{task}_full.yaml").read_text())
+            assert (large.pop("population"), large.pop("offspring")) == (80, 160)
+            assert (small.pop("population"), small.pop("offspring")) == (8, 16)
+            if task in ("branch", "table"):
+                assert large.pop("fitness") == "progress"
+                small.pop("fitness", None)
+            assert large == small
+
+
+def _recipe_checkpoint(tmp_path: Path, source: str, folder: str, **changes) -> str:
+    """A copy of the published checkpoint ``source`` in ``tmp_path/<folder>/seed_0`` with its
+    ``proteo.json`` changed (``args`` entries under ``args``)."""
+    import shutil
+
+    target = tmp_path / folder / "seed_0"
+    shutil.copytree(ROOT / source, target)
+    meta = json.loads((target / "proteo.json").read_text())
+    meta["args"].update(changes.pop("args", {}))
+    meta.update(changes)
+    (target / "proteo.json").write_text(json.dumps(meta))
+    return str(target)
+
+
+@pytest.mark.parametrize(
+    "source, folder, changes, named",
+    [
+        (
+            "checkpoints/v1/grasp/kickstart_move/seed_0",
+            "kickstart_move",
+            {"agent_steps": 604160},
+            "agent_steps = 604160",
+        ),
+        (
+            "checkpoints/v1/grasp/kickstart_move/seed_0",
+            "kickstart_move",
+            {"agent_steps": 12083200},
+            "6000000 to 6300000",
+        ),
+        ("checkpoints/v1/grasp/kickstart_move/seed_0", "kickstart_move", {"seed": 7}, "training seed = 7"),
+        (
+            "checkpoints/v1/grasp/kickstart_move/seed_0",
+            "kickstart_move",
+            {"args": {"learning_rate": 0.1}},
+            "learning_rate = 0.1",
+        ),
+        ("checkpoints/v5/grasp/evolve_full/seed_0", "evolve_full", {"generation": 12}, "12 generations"),
+        ("checkpoints/v1/grasp/imitation_move/seed_0", "imitation_move", {"last_round": {"round": 1}}, "1 rounds"),
+    ],
+)
+def test_a_recipe_checkpoint_off_the_protocol_is_refused(tmp_path, source, folder, changes, named):
+    """A checkpoint judged as a protocol recipe must be one of its training seeds, trained by its
+    config, for its budget: relabelled with a tenth of the steps, trained twice as long, with
+    seed 7 (train ten, submit the best five), another setting, or stopped early, it is refused."""
+    path = _recipe_checkpoint(tmp_path, source, folder, **changes)
+    with pytest.raises(ConfigError, match=named):
+        benchmark.entrants(load_protocol("v6"), checkpoints=[path])
+
+
+def test_every_published_recipe_checkpoint_is_a_run_of_its_recipe():
+    protocol = load_protocol("v6")
+    for folder in sorted(ROOT.glob("checkpoints/v[1-9]/*/*_*")):
+        seeds = sorted(str(p) for p in folder.glob("seed_*"))
+        (entrant,) = benchmark.entrants(protocol, checkpoints=seeds)
+        assert entrant.recipe is not None and len(entrant.checkpoints) == protocol.training_seeds
+
+
 def _extension(tmp_path: Path, text: str) -> Path:
     """A repository root holding configs/benchmark/v1.yaml and an extension v2.yaml of ``text``."""
     (tmp_path / "configs/benchmark").mkdir(parents=True)

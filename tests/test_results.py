@@ -58,7 +58,14 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
         )
     out = folder / task / policy
     out.mkdir(parents=True)
-    document = {"protocol": protocol, "protocol_sha256": load_protocol(protocol).sha256, "commit": "abc", "rows": rows}
+    document = {
+        "protocol": protocol,
+        "protocol_sha256": load_protocol(protocol).sha256,
+        "commit": "abc",
+        "complete": True,
+        "worlds_cap": None,
+        "rows": rows,
+    }
     (out / "benchmark.json").write_text(json.dumps(document))
 
 
@@ -191,3 +198,22 @@ def test_publish_to_a_page_without_markers_is_refused_before_anything_is_written
     with pytest.raises(ConfigError, match="no file with the"):
         results.main(["--root", str(folder.parent), "--out", str(out), "--publish", str(page)])
     assert not out.exists() and page.read_text() == "no markers\n"
+
+
+@pytest.mark.parametrize(
+    "change, named",
+    [
+        ({"complete": False, "notes": ["grasp / clone: 1 training seed(s)"]}, "1 training seed"),
+        ({"worlds_cap": 2}, "worlds_cap = 2"),
+    ],
+)
+def test_an_incomplete_or_capped_result_is_refused_before_anything_is_published(tmp_path, change, named):
+    folder = _bench(tmp_path, 0.3)
+    file = folder / "grasp" / "clone" / "benchmark.json"
+    file.write_text(json.dumps({**json.loads(file.read_text()), **change}))
+    page = tmp_path / "README.md"
+    page.write_text(f"{results.PUBLISH_BEGIN}\nold\n{results.PUBLISH_END}\n")
+    out = tmp_path / "results.md"
+    with pytest.raises(ConfigError, match=named):
+        results.main(["--benchmark", "v1", "--root", str(folder.parent), "--out", str(out), "--publish", str(page)])
+    assert not out.exists() and "old" in page.read_text()

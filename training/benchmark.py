@@ -415,6 +415,63 @@ class Entrant:
     recipe: str | None = None
 
 
+RUN_OPTIONS = frozenset(
+    {"seed", "run_dir", "resume", "init", "time_limit_minutes", "checkpoint_every", "progress_bar", "tensorboard",
+     "threads", "workers", "ray", "address", "device", "total_steps"}
+)  # fmt: skip
+"""Config keys that say how a run ran, not what it trained (``total_steps``: the budget is the
+protocol's ``agent_steps``)."""
+BUDGET_OVERSHOOT = 0.05
+"""A run may end past its ``agent_steps`` by its last batch: at most this share."""
+
+
+def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: str, meta: dict) -> None:
+    """That the checkpoint at ``path`` is a run of ``recipe`` as ``protocol`` fixes it, else one
+    :class:`ConfigError`: a training seed among the protocol's (``0 .. training_seeds - 1``); the
+    recipe config's settings (every key the checkpoint recorded as well, except
+    :data:`RUN_OPTIONS`); and the budget: ``agent_steps`` from the protocol's up to
+    :data:`BUDGET_OVERSHOOT` more, or, where the protocol leaves the budget to the config
+    (``agent_steps`` null), every generation or round the config asks for."""
+    import yaml
+
+    where = f"--checkpoint {path!r} ({task.name} / {recipe})"
+    seed = meta.get("seed")
+    if seed not in range(protocol.training_seeds):
+        raise ConfigError(
+            f"{where}: training seed = {seed!r} is not allowed; allowed: the training seeds benchmark "
+            f"{protocol.version} fixes, 0 to {protocol.training_seeds - 1}"
+        )
+    entry = task.recipes[recipe]
+    config = yaml.safe_load((protocol.path.parents[2] / entry["config"]).read_text()) or {}
+    recorded = meta.get("args") or {}
+    for key, value in config.items():
+        if key in RUN_OPTIONS or key not in recorded:
+            continue
+        if json.dumps(recorded[key], sort_keys=True) != json.dumps(value, sort_keys=True):
+            raise ConfigError(
+                f"{where}: {key} = {recorded[key]!r} is not allowed; allowed: {value!r}, as the recipe's config "
+                f"{entry['config']} sets it"
+            )
+    steps = meta.get("agent_steps")
+    if entry["agent_steps"] is not None:
+        budget = entry["agent_steps"]
+        if not isinstance(steps, int) or not budget <= steps <= budget * (1 + BUDGET_OVERSHOOT):
+            raise ConfigError(
+                f"{where}: agent_steps = {steps!r} is not allowed; allowed: the protocol's budget, {budget} to "
+                f"{int(budget * (1 + BUDGET_OVERSHOOT))} (the last batch may overshoot)"
+            )
+        return
+    for done, asked, unit in (
+        (meta.get("generation"), recorded.get("generations"), "generations"),
+        ((meta.get("last_round") or {}).get("round"), recorded.get("rounds"), "rounds"),
+    ):
+        if asked is not None and done is not None and done != asked:
+            raise ConfigError(
+                f"{where}: {done} {unit} is not allowed; allowed: the {asked} {unit} of its config (a run stopped "
+                "early, by its time limit for example, is not the recipe)"
+            )
+
+
 def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
     """The :class:`Entrant` of ``paths`` (the training seeds of one recipe), checked."""
     from training.checkpoints import read_meta
@@ -472,6 +529,9 @@ def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
     if folder.startswith("seed_"):
         folder = Path(paths[0]).resolve().parent.name
     recipe = folder.replace("_", "-") if folder.replace("_", "-") in task.recipes else None
+    if recipe is not None:
+        for path, meta in zip(paths, metas):
+            check_recipe_run(protocol, task, recipe, str(path), meta)
     return Entrant(
         task=task,
         label=recipe or folder,

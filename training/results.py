@@ -78,7 +78,9 @@ def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
     """Every row of every ``benchmark.json`` below ``root/<version>`` for each ``(version,
     sha256)`` of a protocol's :attr:`~training.benchmark.Protocol.lineage`, and each file's
     header. A file judged under another protocol, or under a protocol file that has changed
-    since (its ``protocol_sha256``), is a :class:`ConfigError`."""
+    since (its ``protocol_sha256``), or one that is not complete (fewer training seeds or worlds
+    than the protocol asks, a ``--worlds-cap``), is a :class:`ConfigError`: nothing is published
+    from it."""
     rows, headers = [], []
     shas = dict(lineage)
     files = [f for version in shas for f in sorted((root / version).rglob("benchmark.json"))]
@@ -95,6 +97,12 @@ def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
                 f"{file}: protocol {judged_by[0]!r} with sha256 {str(judged_by[1])[:12]} is not allowed; allowed: "
                 + ", ".join(f"{v} with sha256 {h[:12]}" for v, h in shas.items())
                 + " (the protocol files as they are now: judge it again)"
+            )
+        if data.get("complete") is not True or data.get("worlds_cap") is not None:
+            raise ConfigError(
+                f"{file}: complete = {data.get('complete')!r}, worlds_cap = {data.get('worlds_cap')!r} is not allowed; "
+                "allowed: a complete judgement (every training seed the protocol asks for, on every world, no "
+                f"--worlds-cap; its notes: {'; '.join(data.get('notes') or []) or 'none'})"
             )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
         for r in data["rows"]:
