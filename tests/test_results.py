@@ -146,10 +146,29 @@ def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
     """Every seed at 0.85 against rules 0.9 and random 0: every score 0.85 / 0.9, so the IQM is
     that; the rules' first 20 worlds are all successes, so no seed beats them."""
     rows, _ = results.read_rows(_bench(tmp_path, 0.85).parent, load_protocol("v1").lineage)
-    agg = results.aggregate(rows, per_training_seed=20)["clone"]
-    assert agg["scores"].shape == (5, 2)
+    agg = results.aggregate(rows, per_training_seed=20)[("clone", "grasp")]
+    assert agg["scores"].shape == (5, 2) and agg["splits"] == ["heldout", "larger"]
     assert agg["iqm"][0] == pytest.approx(0.85 / 0.9)
-    assert agg["improvement"][0] == pytest.approx(0.0)
+    assert agg["improvement"][0] == pytest.approx(0.0) and agg["ties"] == pytest.approx(0.0)
+
+
+def test_the_aggregate_is_per_task_and_reports_ties_apart(tmp_path):
+    """A recipe judged on two tasks gets one aggregate per task, never one over its own mix of
+    tasks; a seed that equals the rules on the same worlds is a tie, not half a win."""
+    folder = _bench(tmp_path, 1.0)
+    _write(folder, "chain", "rules", "hand-coded", "full", {"heldout": [[True] * 100], "larger": [[True] * 100]})
+    _write(folder, "chain", "random", "random", "move", {"heldout": [[False] * 100], "larger": [[False] * 100]})
+    seeds = [[True] * 10 + [False] * 10 for _ in range(5)]
+    _write(folder, "chain", "clone", "learned", "move", {"heldout": seeds, "larger": seeds})
+    rows, headers = results.read_rows(folder.parent, load_protocol("v1").lineage)
+    agg = results.aggregate(rows, per_training_seed=20)
+    assert set(agg) == {("clone", "grasp"), ("clone", "chain")}
+    grasp, chain = agg[("clone", "grasp")], agg[("clone", "chain")]
+    assert grasp["improvement"][0] == 0.0 and grasp["ties"] == 1.0  # 20/20 against the rules' 20/20
+    assert chain["iqm"][0] == pytest.approx(0.5) and chain["ties"] == 0.0
+    text = results.render(rows, headers, "v1", folder.parent, tmp_path / "results.md", load_protocol("v1"))
+    assert "IQM normalised score over each task's splits (rules = 1) chain 0.50 (0.50-0.50), grasp" in text
+    assert "**grasp**" in text and "**chain**" in text
 
 
 def test_a_folder_without_results_is_one_clear_error(tmp_path):

@@ -165,3 +165,20 @@ def test_the_paired_difference_keeps_only_the_masked_pairs():
 def test_the_paired_difference_refuses_shapes_that_do_not_pair(x, reference):
     with pytest.raises(ValueError, match="paired_difference"):
         st.paired_difference(x, reference)
+
+
+def test_ties_can_be_counted_apart_and_whole_runs_resampled_together():
+    same = np.array([[0.5, 1.0], [0.5, 1.0]])
+    assert st.probability_of_improvement(same, same) == 0.5
+    assert st.probability_of_improvement(same, same, ties=0.0) == 0.0
+    assert st.probability_of_improvement(same, same, ties=1.0) == 1.0
+    # splits that share each training seed's checkpoint: a joint resample keeps a seed's row whole
+    rows = np.array([[0.0, 0.0], [1.0, 1.0]])
+    boot = st._resample_runs(rows, np.random.default_rng(0), 200, joint=True)
+    assert (boot[..., 0] == boot[..., 1]).all()
+    apart = st._resample_runs(rows, np.random.default_rng(0), 200)
+    assert (apart[..., 0] != apart[..., 1]).any()
+    # so the interval of the IQM of two perfectly correlated splits is at least as wide jointly
+    _, lo_joint, hi_joint = st.iqm_ci(np.repeat(np.array([[0.0], [0.4], [0.6], [1.0]]), 3, axis=1), joint=True)
+    _, lo_apart, hi_apart = st.iqm_ci(np.repeat(np.array([[0.0], [0.4], [0.6], [1.0]]), 3, axis=1))
+    assert hi_joint - lo_joint >= hi_apart - lo_apart

@@ -19,11 +19,13 @@ and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``resul
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
   learned recipe: :mod:`training.statistics`);
-- the aggregate over tasks and splits, after rliable: the interquartile mean of the normalised
-  score (rules at ``full`` = 1, random = 0, on the 100 reference worlds) over training seeds x
-  (task, split) with its bootstrap interval; the probability that a training seed of a recipe
-  beats the rules on the same worlds (its first ``per_training_seed`` worlds), with its
-  interval; performance profiles (``results/profiles.png``);
+- the aggregate per task (every recipe of a task over the same splits; never over a recipe's
+  own mix of tasks), after rliable: the interquartile mean of the normalised score (rules at
+  ``full`` = 1, random = 0, on the 100 reference worlds) over training seeds x splits with its
+  bootstrap interval; the probability that a training seed beats the rules at its level on the
+  same worlds (its first ``per_training_seed`` worlds), ties reported apart; performance
+  profiles per task (``results/profiles.png``); the bootstraps draw whole training seeds, since
+  a seed's splits share its checkpoint;
 - learning curves: the training success rate against agent-steps, the mean over training seeds
   with a 95 % t band (``results/curves_<task>.png``).
 
@@ -123,7 +125,9 @@ def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
 
 
 def _interval(lo: float, hi: float, digits: int = 2) -> str:
-    return f"{lo:.{digits}f}-{hi:.{digits}f}" if np.isfinite(lo) and np.isfinite(hi) else "-"
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "-"
+    return f"{lo:.{digits}f}{' to ' if lo < 0 else '-'}{hi:.{digits}f}"
 
 
 def cell(row: Row) -> str:
@@ -225,52 +229,63 @@ def verdicts(task: str, recipe: str, by_key: dict, splits: list[str]) -> str:
     return "; ".join(parts)
 
 
-def aggregate(rows: list[Row], per_training_seed: int) -> dict[str, dict]:
-    """Per learned or evolved recipe: normalised scores ``(training seeds, task-splits)`` and the aggregate
-    statistics (IQM, probability of improvement over the rules, the task-splits used)."""
+def aggregate(rows: list[Row], per_training_seed: int) -> dict[tuple[str, str], dict]:
+    """Per learned or evolved recipe and task, over the task's splits (which every recipe of the
+    task is judged on, so recipes of one task are compared over the same set): normalised scores
+    ``(training seeds, splits)``, their IQM, and the probability that a training seed beats the
+    rules at its level on the same worlds (its first ``per_training_seed``), ties apart. The
+    bootstraps draw whole training seeds (a seed's splits share its checkpoint)."""
     by_key = {(r.task, r.split, r.policy): r for r in rows}
-    recipes = sorted({r.policy for r in rows if r.kind in ("learned", "evolved")})
     out = {}
-    for recipe in recipes:
-        pairs = sorted({(r.task, r.split) for r in rows if r.policy == recipe})
-        pairs = [p for p in pairs if (*p, RULES) in by_key and (*p, RANDOM) in by_key]
-        if not pairs:
-            continue
-        learned = [by_key[(*p, recipe)] for p in pairs]
-        n_runs = min(len(r.runs) for r in learned)
-        rates = np.stack([r.rates[:n_runs] for r in learned], axis=1)  # (runs, task-splits)
-        rules = np.array([by_key[(*p, RULES)].rates[0] for p in pairs])
-        random = np.array([by_key[(*p, RANDOM)].rates[0] for p in pairs])
-        scores = st.normalized_score(rates, random, rules)
-        same_worlds = np.array([by_key[(*p, RULES)].rates_on_first(per_training_seed)[0] for p in pairs])[None, :]
-        entry = {"pairs": pairs, "scores": scores, "training_seeds": n_runs}
-        try:
-            entry["iqm"] = st.iqm_ci(scores)
-            entry["improvement"] = st.probability_of_improvement_ci(rates, same_worlds)
-        except ValueError as error:  # no task-split where the rules and random differ
-            entry["error"] = str(error)
-        out[recipe] = entry
+    for recipe in sorted({r.policy for r in rows if r.kind in ("learned", "evolved")}):
+        for task in dict.fromkeys(r.task for r in rows if r.policy == recipe):
+            splits = [r.split for r in rows if r.task == task and r.policy == recipe]
+            splits = [s for s in splits if (task, s, RULES) in by_key and (task, s, RANDOM) in by_key]
+            if not splits:
+                continue
+            learned = [by_key[(task, s, recipe)] for s in splits]
+            references = [reference_of(row, by_key) for row in learned]
+            n_runs = min(len(r.runs) for r in learned)
+            rates = np.stack([r.rates[:n_runs] for r in learned], axis=1)  # (runs, splits)
+            rules = np.array([by_key[(task, s, RULES)].rates[0] for s in splits])
+            random = np.array([by_key[(task, s, RANDOM)].rates[0] for s in splits])
+            same_worlds = np.array([r.rates_on_first(per_training_seed)[0] for r in references])[None, :]
+            entry = {
+                "splits": splits,
+                "scores": st.normalized_score(rates, random, rules),
+                "training_seeds": n_runs,
+                "reference": references[0].policy,
+            }
+            try:
+                entry["iqm"] = st.iqm_ci(entry["scores"], joint=True)
+                entry["improvement"] = st.probability_of_improvement_ci(rates, same_worlds, ties=0.0, joint=True)
+                entry["ties"] = st.probability_of_improvement(rates, same_worlds, ties=1.0) - entry["improvement"][0]
+            except ValueError as error:  # no split where the rules and random differ
+                entry["error"] = str(error)
+            out[(recipe, task)] = entry
     return out
 
 
-def _profiles(agg: dict, path: Path) -> None:
+def _profiles(agg: dict, tasks: list[str], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     taus = np.linspace(-0.25, 1.5, 71)
-    fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    for recipe, entry in agg.items():
-        if "error" in entry:
-            continue
-        profile, lo, hi = st.performance_profile(entry["scores"], taus)
-        ax.plot(taus, profile, label=recipe)
-        ax.fill_between(taus, lo, hi, alpha=0.2)
-    ax.axvline(1.0, color="grey", linestyle="--", linewidth=0.8)
-    ax.set_xlabel("normalised score tau (random = 0, rules = 1)")
-    ax.set_ylabel("fraction of runs x splits above tau")
-    ax.legend(fontsize=8)
+    fig, axes = plt.subplots(1, len(tasks), figsize=(3.2 * len(tasks), 3.4), sharey=True, squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        for (recipe, of), entry in agg.items():
+            if of != task:
+                continue
+            profile, lo, hi = st.performance_profile(entry["scores"], taus, joint=True)
+            ax.plot(taus, profile, label=recipe)
+            ax.fill_between(taus, lo, hi, alpha=0.2)
+        ax.axvline(1.0, color="grey", linestyle="--", linewidth=0.8)
+        ax.set_title(task)
+        ax.set_xlabel("normalised score tau")
+        ax.legend(fontsize=6)
+    axes[0][0].set_ylabel("fraction of seeds x splits above tau")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -339,16 +354,14 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     agg = aggregate(rows, protocol.per_training_seed)
 
     answer, details, above, below = [], [], [], []
-    for recipe, entry in agg.items():
-        if "error" in entry:
-            continue
-        m, lo, hi = entry["iqm"]
-        p, plo, phi = entry["improvement"]
-        tasks_of = sorted({t for t, _ in entry["pairs"]})
+    usable = {k: v for k, v in agg.items() if "error" not in v}
+    for recipe in sorted({recipe for recipe, _ in usable}):
+        per_task = [(task, usable[(recipe, task)]) for task in tasks if (recipe, task) in usable]
+        seeds = min(entry["training_seeds"] for _, entry in per_task)
         answer.append(
-            f"- **{recipe}** ({entry['training_seeds']} training seeds; {', '.join(tasks_of)}): IQM normalised score "
-            f"{m:.2f} ({lo:.2f}-{hi:.2f}), rules = 1; P(a training seed beats the rules on the same worlds) "
-            f"{p:.2f} ({plo:.2f}-{phi:.2f})."
+            f"- **{recipe}** ({seeds} training seeds): IQM normalised score over each task's splits (rules = 1) "
+            + ", ".join(f"{task} {e['iqm'][0]:.2f} ({_interval(*e['iqm'][1:])})" for task, e in per_task)
+            + "."
         )
     for task in tasks:
         for recipe in sorted({r.policy for r in rows if r.task == task and r.kind in ("learned", "evolved")}):
@@ -427,28 +440,37 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
                 f"![Training success of {task}: mean over training seeds with a 95 % band](results/{picture.name})",
                 "",
             ]
-    usable = {k: v for k, v in agg.items() if "error" not in v}
     if usable:
-        _profiles(usable, figures / "profiles.png")
+        with_scores = [t for t in tasks if any(task == t for _, task in usable)]
+        _profiles(usable, with_scores, figures / "profiles.png")
         lines += [
-            "## Aggregate",
+            "## Aggregate, task by task",
             "",
-            "Normalised score per training seed and task-split: (rate - random) / (rules - random) on the "
-            "reference worlds; IQM: the mean of the middle half of runs x task-splits; P(improvement): the "
-            "probability that a training seed's success on the first worlds of a split exceeds the rules' on "
-            "the same worlds (ties count half), averaged over task-splits. Stratified bootstrap intervals.",
+            "Normalised score per training seed and split: (rate - random) / (rules - random) on the "
+            "reference worlds; IQM: the mean of the middle half of training seeds x splits of the task (every "
+            "recipe of a task over the same splits); P(beats): the probability that a training seed's success on "
+            "the first worlds of a split exceeds that of the rules at its level on the same worlds, averaged over "
+            "splits, ties apart (P(tie)). Bootstrap intervals that draw whole training seeds.",
             "",
-            "| recipe | training seeds | task-splits | IQM (95 % interval) | P(beats the rules) (95 % interval) |",
-            "|---|---|---|---|---|",
         ]
-        for recipe, entry in usable.items():
-            m, lo, hi = entry["iqm"]
-            p, plo, phi = entry["improvement"]
-            lines.append(
-                f"| {recipe} | {entry['training_seeds']} | {len(entry['pairs'])} | {m:.2f} ({lo:.2f}-{hi:.2f}) | "
-                f"{p:.2f} ({plo:.2f}-{phi:.2f}) |"
-            )
-        lines += ["", "![Performance profiles with bootstrap bands](results/profiles.png)", ""]
+        for task in with_scores:
+            lines += [
+                f"**{task}**",
+                "",
+                "| recipe | training seeds | IQM (95 % interval) | P(beats the rules) (95 % interval) | P(tie) |",
+                "|---|---|---|---|---|",
+            ]
+            for (recipe, of), entry in usable.items():
+                if of != task:
+                    continue
+                m, lo, hi = entry["iqm"]
+                p, plo, phi = entry["improvement"]
+                lines.append(
+                    f"| {recipe} (against {entry['reference']}) | {entry['training_seeds']} | {m:.2f} ({_interval(lo, hi)}) "
+                    f"| {p:.2f} ({_interval(plo, phi)}) | {entry['ties']:.2f} |"
+                )
+            lines.append("")
+        lines += ["![Performance profiles per task with bootstrap bands](results/profiles.png)", ""]
     lines += [f"Judged by commit(s): {', '.join(c[:10] for c in commits)}.", ""]
     return "\n".join(lines)
 

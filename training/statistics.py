@@ -212,10 +212,13 @@ def _tasks(scores, name: str = "scores") -> np.ndarray:
     return s
 
 
-def _resample_runs(scores: np.ndarray, rng, resamples: int) -> np.ndarray:
-    """``(resamples, runs, tasks)``: each task's runs drawn with replacement, independently per task."""
+def _resample_runs(scores: np.ndarray, rng, resamples: int, joint: bool = False) -> np.ndarray:
+    """``(resamples, runs, tasks)``: each task's runs drawn with replacement, independently per
+    task, or with ``joint`` the same runs for every task (when the tasks are splits that share
+    each run's checkpoint, so that a run's scores on them are not independent)."""
     runs, tasks = scores.shape
-    idx = rng.integers(0, runs, size=(resamples, runs, tasks))
+    idx = rng.integers(0, runs, size=(resamples, runs, 1 if joint else tasks))
+    idx = np.broadcast_to(idx, (resamples, runs, tasks))
     return np.take_along_axis(np.broadcast_to(scores, (resamples, runs, tasks)), idx, axis=1)
 
 
@@ -228,14 +231,19 @@ def iqm(scores) -> float:
 
 
 def iqm_ci(
-    scores, *, resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED, confidence: float = 0.95
+    scores,
+    *,
+    joint: bool = False,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+    confidence: float = 0.95,
 ) -> tuple[float, float, float]:
     """``(iqm, low, high)``: :func:`iqm` and its stratified-bootstrap percentile interval (each
-    task's runs resampled with replacement)."""
+    task's runs resampled with replacement; with ``joint`` whole runs, see :func:`_resample_runs`)."""
     from scipy.stats import trim_mean
 
     s = _tasks(scores)
-    boot = _resample_runs(s, np.random.default_rng(seed), resamples).reshape(resamples, -1)
+    boot = _resample_runs(s, np.random.default_rng(seed), resamples, joint).reshape(resamples, -1)
     lo, hi = _percentiles(trim_mean(boot, 0.25, axis=1), confidence)
     return iqm(s), lo, hi
 
@@ -293,58 +301,74 @@ def paired_difference(
     return {"difference": float(delta.sum() / pairs), "lo": lo, "hi": hi, "p": p, "pairs": pairs}
 
 
-def _improvement(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """P(X > Y) + P(X == Y) / 2 per task, over the leading axes ``(..., n, tasks)`` and
+def _improvement(x: np.ndarray, y: np.ndarray, ties: float = 0.5) -> np.ndarray:
+    """P(X > Y) + ``ties`` P(X == Y) per task, over the leading axes ``(..., n, tasks)`` and
     ``(..., m, tasks)``: shape ``(..., tasks)``."""
     a, b = x[..., :, None, :], y[..., None, :, :]
-    return (a > b).mean(axis=(-3, -2)) + 0.5 * (a == b).mean(axis=(-3, -2))
+    return (a > b).mean(axis=(-3, -2)) + ties * (a == b).mean(axis=(-3, -2))
 
 
-def probability_of_improvement(x, y) -> float:
+def probability_of_improvement(x, y, *, ties: float = 0.5) -> float:
     """P(X > Y): the probability that a run of ``x`` beats a run of ``y`` on a task, averaged
     over tasks. ``x`` has shape ``(n, tasks)``, ``y`` ``(m, tasks)`` (the same tasks); per task
-    it is the Mann-Whitney U statistic over ``n * m`` with ties counted half. A task with a NaN
-    score in either is left out. 1: every run of ``x`` beats every run of ``y``; 0.5: no
-    difference."""
+    it is the Mann-Whitney U statistic over ``n * m`` with ties counted ``ties`` (a half, as
+    rliable does; 0 for the strict probability, and the difference of the two is P(X == Y)). A
+    task with a NaN score in either is left out. 1: every run of ``x`` beats every run of ``y``;
+    0.5: no difference."""
     xs, ys = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
     xs, ys = (s[:, None] if s.ndim == 1 else s for s in (xs, ys))
     if xs.shape[1:] != ys.shape[1:]:
         raise ValueError(f"probability_of_improvement: x has {xs.shape[1]} tasks, y {ys.shape[1]}")
     keep = ~(np.isnan(xs).any(axis=0) | np.isnan(ys).any(axis=0))
     xs, ys = _tasks(xs[:, keep], "x"), _tasks(ys[:, keep], "y")
-    return float(_improvement(xs, ys).mean())
+    return float(_improvement(xs, ys, ties).mean())
 
 
 def probability_of_improvement_ci(
-    x, y, *, resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED, confidence: float = 0.95
+    x,
+    y,
+    *,
+    ties: float = 0.5,
+    joint: bool = False,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+    confidence: float = 0.95,
 ) -> tuple[float, float, float]:
-    """``(P(X > Y), low, high)``: :func:`probability_of_improvement` and its stratified-bootstrap
-    percentile interval (the runs of ``x`` and of ``y`` resampled within each task)."""
+    """``(P(X > Y), low, high)``: :func:`probability_of_improvement` (ties counted ``ties``) and
+    its stratified-bootstrap percentile interval (the runs of ``x`` and of ``y`` resampled within
+    each task; with ``joint`` whole runs, see :func:`_resample_runs`)."""
     xs, ys = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
     xs, ys = (s[:, None] if s.ndim == 1 else s for s in (xs, ys))
-    point = probability_of_improvement(xs, ys)
+    point = probability_of_improvement(xs, ys, ties=ties)
     keep = ~(np.isnan(xs).any(axis=0) | np.isnan(ys).any(axis=0))
     xs, ys = xs[:, keep], ys[:, keep]
     rng = np.random.default_rng(seed)
-    bx, by = _resample_runs(xs, rng, resamples), _resample_runs(ys, rng, resamples)
-    lo, hi = _percentiles(_improvement(bx, by).mean(axis=-1), confidence)
+    bx, by = _resample_runs(xs, rng, resamples, joint), _resample_runs(ys, rng, resamples, joint)
+    lo, hi = _percentiles(_improvement(bx, by, ties).mean(axis=-1), confidence)
     return point, lo, hi
 
 
 def performance_profile(
-    scores, taus, *, resamples: int = DEFAULT_RESAMPLES, seed: int = DEFAULT_SEED, confidence: float = 0.95
+    scores,
+    taus,
+    *,
+    joint: bool = False,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+    confidence: float = 0.95,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The score distribution: for each ``tau`` of ``taus`` (1-D), the fraction of runs x tasks
     of ``scores`` (shape ``(runs, tasks)``) whose score exceeds ``tau``, with its bootstrap band.
 
     Returns:
         ``(profile, low, high)``, each of shape ``(len(taus),)``: the fractions, and the pointwise
-        percentile band over stratified resamples (each task's runs resampled with replacement).
+        percentile band over stratified resamples (each task's runs resampled with replacement;
+        with ``joint`` whole runs, see :func:`_resample_runs`).
     """
     s = _tasks(scores)
     t = np.asarray(taus, dtype=float).ravel()
     profile = (s.ravel()[None, :] > t[:, None]).mean(axis=1)
-    boot = _resample_runs(s, np.random.default_rng(seed), resamples).reshape(resamples, -1)
+    boot = _resample_runs(s, np.random.default_rng(seed), resamples, joint).reshape(resamples, -1)
     fractions = (boot[:, None, :] > t[None, :, None]).mean(axis=2)  # (resamples, taus)
     lo, hi = np.percentile(fractions, [50.0 * (1.0 - confidence), 50.0 * (1.0 + confidence)], axis=0)
     return profile, lo, hi
