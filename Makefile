@@ -40,7 +40,7 @@ bench: install
 # (docs/benchmark/v1 to v5, written by proteo eval --benchmark v1|v2|v3|v4|v5;
 # docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
 results: install
-	$(BIN)/python -m training.results --benchmark v5 --publish README.md
+	$(BIN)/python -m training.results --benchmark v5 --publish README.md --marl-eval docs/results/marl_eval.json
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md

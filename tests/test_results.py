@@ -41,7 +41,14 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
     rows = []
     for split, runs in per_split.items():
         run_dicts = [
-            {"successes": s, "cycles": [50 if ok else 300 for ok in s], "returns": [0.0] * len(s)} for s in runs
+            {
+                "successes": s,
+                "cycles": [50 if ok else 300 for ok in s],
+                "returns": [0.0] * len(s),
+                "training_seed": k if kind in ("learned", "evolved") else None,
+                "agent_steps": 1000 if kind in ("learned", "evolved") else None,
+            }
+            for k, s in enumerate(runs)
         ]
         rows.append(
             {
@@ -236,3 +243,36 @@ def test_an_incomplete_or_capped_result_is_refused_before_anything_is_published(
     with pytest.raises(ConfigError, match=named):
         results.main(["--benchmark", "v1", "--root", str(folder.parent), "--out", str(out), "--publish", str(page)])
     assert not out.exists() and "old" in page.read_text()
+
+
+def test_the_marl_eval_file_has_the_raw_data_layout_marl_eval_reads(tmp_path):
+    """marl-eval's data_process_pipeline and create_matrices_for_rliable assume, per environment,
+    the same algorithms on every task, the same runs and steps for each, ``absolute_metrics`` as a
+    run's last key and a ``step_count`` in every step; every metric is a list of numbers."""
+    folder = _bench(tmp_path, 0.3)
+    _write(folder, "chain", "rules", "hand-coded", "full", {"heldout": [[True] * 100], "larger": [[True] * 100]})
+    _write(folder, "chain", "random", "random", "move", {"heldout": [[False] * 100], "larger": [[False] * 100]})
+    _write(folder, "chain", "clone", "learned", "move", {"heldout": [[True] * 20] * 5, "larger": [[True] * 20] * 5})
+    page, out = tmp_path / "results.md", tmp_path / "marl_eval.json"
+    assert (
+        results.main(["--benchmark", "v1", "--root", str(folder.parent), "--out", str(page), "--marl-eval", str(out)])
+        == 0
+    )
+    data = json.loads(out.read_text())
+    assert set(data) == {"proteo-grasp", "proteo-chain"}
+    for tasks in data.values():
+        assert set(tasks) == {"heldout", "larger"}
+        algorithms = {tuple(sorted(algos)) for algos in tasks.values()}
+        assert algorithms == {("clone",)}  # the references (one run each) are left out
+        for algos in tasks.values():
+            for runs in algos.values():
+                assert list(runs) == [f"run_{k}" for k in range(5)]
+                for run in runs.values():
+                    assert list(run) == ["step_1", "absolute_metrics"]
+                    assert run["step_1"]["step_count"] == 1000
+                    for metrics in (run["step_1"], run["absolute_metrics"]):
+                        lists = {k: v for k, v in metrics.items() if k != "step_count"}
+                        assert set(lists) == {"success_rate", "cycles", "return"}
+                        assert all(len(v) == 20 and all(isinstance(x, (int, float)) for x in v) for v in lists.values())
+    grasp_seed = data["proteo-grasp"]["heldout"]["clone"]["run_0"]["absolute_metrics"]
+    assert sum(grasp_seed["success_rate"]) == 6.0  # 0.3 of 20 worlds

@@ -1,6 +1,6 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
-    python -m training.results --benchmark v5 --publish README.md   # make results: v1 to v5 -> docs/results.md
+    python -m training.results --benchmark v5 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
     python -m training.results --benchmark v1 --root docs/benchmark --out docs/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
@@ -475,6 +475,34 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     return "\n".join(lines)
 
 
+def marl_eval_layout(rows: list[Row]) -> dict:
+    """The learned and evolved recipes' episodes in the raw-data layout of InstaDeep's marl-eval
+    (Gorsane et al. 2022): ``{environment: {task: {algorithm: {"run_<training seed>": {"step_1":
+    {"step_count": agent-steps, metric: [one value per world]}, "absolute_metrics": {metric:
+    [...]}}}}}}``. An environment is a proteo task (``proteo-chain``), a marl-eval task one of its
+    splits, an algorithm a recipe; every recipe of a task has the same splits and training seeds,
+    as marl-eval requires. The one evaluation step is the final checkpoint on the protocol's worlds,
+    which is also the absolute metric (proteo judges only the final checkpoint). Metrics:
+    ``success_rate`` (1 or 0 per world), ``cycles``, ``return`` (to 4 decimals); the rules and random, judged as one
+    run, are left out (they are in ``benchmark.json``)."""
+    out: dict = {}
+    for row in rows:
+        if row.kind not in ("learned", "evolved"):
+            continue
+        runs = out.setdefault(f"proteo-{row.task}", {}).setdefault(row.split, {}).setdefault(row.policy, {})
+        for run in row.runs:
+            metrics = {
+                "success_rate": [int(v) for v in run["successes"]],
+                "cycles": [int(v) for v in run["cycles"]],
+                "return": [round(float(v), 4) for v in run["returns"]],
+            }
+            runs[f"run_{run['training_seed']}"] = {
+                "step_1": {"step_count": int(run["agent_steps"] or 0), **metrics},
+                "absolute_metrics": metrics,
+            }
+    return out
+
+
 PUBLISH_BEGIN = "<!-- make results: the held-out table -->"
 PUBLISH_END = "<!-- end of the results table -->"
 """The markers between which ``--publish FILE`` writes :func:`heldout_table` (the README's)."""
@@ -520,6 +548,9 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--publish", action="append", default=[], help="also write the held-out table between its markers in FILE"
     )
+    parser.add_argument(
+        "--marl-eval", default="", help="also write the recipes' episodes in marl-eval's raw-data JSON layout to FILE"
+    )
     args = parser.parse_args(argv)
     protocol = load_protocol(args.benchmark)
     root, out = Path(args.root), Path(args.out)
@@ -530,7 +561,11 @@ def main(argv=None) -> int:
     out.write_text(text)
     for page in args.publish:
         publish(Path(page), heldout_table(rows, protocol))
-    print(f"wrote {out}" + "".join(f", {page}" for page in args.publish))
+    if args.marl_eval:
+        Path(args.marl_eval).write_text(json.dumps(marl_eval_layout(rows), separators=(",", ":")) + "\n")
+    print(
+        f"wrote {out}" + "".join(f", {page}" for page in [*args.publish, *([args.marl_eval] if args.marl_eval else [])])
+    )
     return 0
 
 
