@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import task_params
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
@@ -110,16 +111,98 @@ def test_sb3_env_checker_and_vecenv():
     assert finished >= 2  # each copy reported its episode once
 
 
-def test_torchrl_check_env_specs():
+def _levels_of(task_id: str) -> list[str]:
+    """The control levels ``task_id`` has: move and move+mode need its hand-coded rules."""
+    from proteo_env.config import ConfigError
+    from proteo_env.control import autopilot_factory
+
+    try:
+        autopilot_factory(task_name(task_id))
+    except ConfigError:
+        return ["full"]
+    return ["move", "move+mode", "full"]
+
+
+@pytest.mark.parametrize(
+    "task_id, level",
+    [
+        pytest.param(p.values[0], level, marks=p.marks, id=f"{p.id}-{level}")
+        for p in task_params()
+        for level in _levels_of(p.values[0])
+    ],
+)
+def test_torchrl_env_specs_hold_on_every_task_at_every_control_level(task_id, level):
+    """The TorchRL env's specs are the level's own: at ``move`` a ``Categorical(13)`` per module
+    with its 13-wide move mask, else ``MultiCategorical(control_nvec)`` with the flat mask; TorchRL's
+    ``check_env_specs`` passes and a rollout runs past an episode's end (auto-reset)."""
     pytest.importorskip("torchrl")
+    from conftest import SMALL_OVERRIDES
     from torchrl.envs.utils import check_env_specs
 
     from proteo_env.adapters.torchrl import ProteoTorchRLEnv
 
-    env = ProteoTorchRLEnv("chain-v0", n_copies=2, seed=0, **TINY)
+    settings = {**SMALL_OVERRIDES.get(task_name(task_id), {}), "max_cycles": 4, "control": level}
+    env = ProteoTorchRLEnv(task_id, n_copies=2, seed=0, **settings)
     check_env_specs(env, seed=0)
-    td = env.rollout(TINY["max_cycles"] + 3, break_when_any_done=False)  # auto-reset inside rollout
-    assert td["agents", "observation"].shape[-2:] == (6, env.encoder.size)
+    n = env.n_agents
+    action = env.action_spec["agents", "action"]
+    if level == "move":
+        assert action.shape == (2, n) and action.space.n == 13
+        assert env.observation_spec["agents", "action_mask"].shape == (2, n, 13)
+    else:
+        assert action.shape == (2, n, len(env.nvec)) and list(env.nvec) == list(
+            proteo_env.make(task_id, **settings).control_nvec
+        )
+        assert env.observation_spec["agents", "action_mask"].shape == (2, n, int(env.nvec.sum()))
+    td = env.rollout(7, break_when_any_done=False)
+    assert td["agents", "observation"].shape[:3] == (2, 7, n)
+
+
+def test_torchrl_env_at_move_steps_the_same_world_as_the_env_with_the_same_moves():
+    """At ``move`` the adapter's action (one index per module) is the env's ``(A, 1)`` action: a
+    copy seeded like a plain env and given the same legal moves (the first allowed by the mask)
+    follows the same trajectory, and its mask is the env's move mask."""
+    pytest.importorskip("torchrl")
+    import torch
+
+    from proteo_env.adapters.torchrl import ProteoTorchRLEnv
+    from proteo_env.config import world_seeds
+
+    env = ProteoTorchRLEnv("chain-v1", n_copies=1, seed=3, control="move", n_modules=8, max_cycles=20)
+    plain = proteo_env.make("chain-v1", control="move", n_modules=8, max_cycles=20)
+    td = env.reset()
+    plain.reset(seed=world_seeds(3, 1)[0])
+    for _ in range(10):
+        mask = td["agents", "action_mask"][0].numpy()
+        assert (mask == plain.observe_arrays().action_mask).all()
+        moves = mask.argmax(axis=-1)  # the first legal move of each module (0, stay, when none other)
+        td = env.step(td.set(("agents", "action"), torch.as_tensor(moves[None])))["next"]
+        result = plain.step_arrays(moves[:, None])
+        assert (env.envs[0].world.positions == plain.world.positions).all()
+        assert td["agents", "reward"][0, 0, 0].item() == pytest.approx(float(result.reward[0]))
+
+
+def test_torchrl_ppo_trains_at_move_and_its_checkpoint_plays_at_move(tmp_path):
+    """training/torchrl_ppo.py at ``control: move``: the actor picks one masked move per module;
+    the checkpoint records the level and its 13 moves, loads, and plays episodes at ``move`` (the
+    same results through the batched evaluator as through the env, one world at a time)."""
+    pytest.importorskip("torchrl")
+    from proteo_env.rollout import run_episode
+    from training import load_controller, torchrl_ppo
+    from training.evaluator import Controller, evaluate
+
+    final = torchrl_ppo.main(
+        ["--config", "configs/train/torchrl_ippo_chain_move.yaml", "--total-steps", "600", "--n-envs", "2"]
+        + ["--n-steps", "8", "--env", TINY_FLAG, "--run-dir", str(tmp_path / "run"), "--tensorboard", "false"]
+        + ["--progress-bar", "false", "--time-limit-minutes", "0"]
+    )  # fmt: skip
+    meta = json.loads((final / "proteo.json").read_text())
+    assert (meta["control"], meta["nvec"], meta["algorithm"]) == ("move", [13], "torchrl-ppo")
+    env, policy = load_controller(str(final))
+    assert env.control == "move"
+    alone = [run_episode(env, policy, seed=s) for s in (0, 1)]
+    (batched,) = evaluate("chain-v1", [Controller.from_checkpoint(str(final))], [0, 1], env=TINY, level="move")
+    assert [(e.success, e.cycles) for e in batched] == [(e.success, e.cycles) for e in alone]
 
 
 # ---------------------------------------------------------------------- training scripts -> checkpoints -> eval

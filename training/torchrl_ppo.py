@@ -1,9 +1,10 @@
-"""IPPO or MAPPO with TorchRL: one actor shared by every module, masked multi-discrete actions.
+"""IPPO or MAPPO with TorchRL: one actor shared by every module, masked actions at any control level.
 
 The environment is :class:`~proteo_env.adapters.torchrl.ProteoTorchRLEnv`, a native TorchRL
 ``EnvBase`` over the array API (``n_envs`` worlds batched, the modules of a world form the
 group ``"agents"``). The actor maps one module's flattened observation to logits of every
-action field; :class:`MaskedMultiCategorical` masks illegal moves. The critic is TorchRL's
+action field of the control level (``control``): at ``move`` TorchRL's ``MaskedCategorical`` over
+the 13 moves, otherwise :class:`MaskedMultiCategorical`; both mask illegal moves. The critic is TorchRL's
 ``MultiAgentMLP``: per module (``variant: ippo``) or over all modules' observations
 (``variant: mappo``, centralised). Losses: TorchRL's ``ClipPPOLoss`` with GAE.
 ``total_steps`` counts agent-steps (module-cycles).
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from proteo_env.control import check_level
 from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
@@ -47,6 +49,9 @@ class Args:
     task: str = "chain-v0"
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make``."""
+    control: str = "full"
+    """Control level (``move``, ``move+mode``, ``full``): at ``move`` the actor picks one masked
+    move per module (TorchRL's ``MaskedCategorical``) and the rules' autopilot does the rest."""
     variant: str = "ippo"
     """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the world)."""
     seed: int = 0
@@ -120,6 +125,7 @@ def main(argv=None) -> Path:
         from proteo_env.config import ConfigError
 
         raise ConfigError(f"variant={args.variant!r} is not allowed; allowed: ippo, mappo")
+    check_level(args.control)
     seed_everything(args.seed, threads=args.threads)
 
     import torch
@@ -127,7 +133,7 @@ def main(argv=None) -> Path:
     from torchrl.collectors import Collector
     from torchrl.data import LazyTensorStorage, ReplayBuffer
     from torchrl.data.replay_buffers.samplers import SamplerWithoutReplacement
-    from torchrl.modules import MultiAgentMLP, ProbabilisticActor
+    from torchrl.modules import MaskedCategorical, MultiAgentMLP, ProbabilisticActor
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
     from proteo_env.adapters.torchrl import ProteoTorchRLEnv
@@ -142,7 +148,7 @@ def main(argv=None) -> Path:
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)
-    env = ProteoTorchRLEnv(args.task, n_copies=args.n_envs, seed=args.seed, **args.env)
+    env = ProteoTorchRLEnv(args.task, n_copies=args.n_envs, seed=args.seed, control=args.control, **args.env)
     n_agents, obs_size, nvec = env.n_agents, env.encoder.size, env.nvec
 
     # ------------------------------------------------------------------ actor and critic
@@ -151,7 +157,7 @@ def main(argv=None) -> Path:
         TensorDictModule(actor_net, in_keys=[("agents", "observation")], out_keys=[("agents", "logits")]),
         in_keys={"logits": ("agents", "logits"), "mask": ("agents", "action_mask")},
         out_keys=[("agents", "action")],
-        distribution_class=make_distribution_class(nvec),
+        distribution_class=MaskedCategorical if env.single else make_distribution_class(nvec),
         return_log_prob=True,
         log_prob_key=("agents", "sample_log_prob"),
     )
@@ -213,6 +219,7 @@ def main(argv=None) -> Path:
             agent_steps=agent_steps,
             seed=args.seed,
             extra={
+                "control": args.control,
                 "label": f"torchrl-{args.variant}",
                 "hidden": list(args.hidden),
                 "run_dir": str(run_dir),

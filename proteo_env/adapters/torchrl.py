@@ -4,19 +4,29 @@ TorchRL's ``PettingZooWrapper`` works on :class:`~proteo_env.env.ProteoEnv` too,
 through per-agent dicts every cycle; this env reads ``env.observe_arrays()`` and calls
 ``env.step_arrays()`` directly (docs/journal/learning-first-round.md compares the two).
 
-Batch size ``(n_copies,)``; the ``A`` modules of a copy form the agent group ``"agents"``:
+Batch size ``(n_copies,)``; the ``A`` modules of a copy form the agent group ``"agents"``. The
+action is the control level's (``control`` among the overrides, default ``full``; ``nvec`` is the
+level's ``control_nvec``): at ``move`` one ``Categorical(13)`` per module with its 13-wide move
+mask (the form of TorchRL's ``MaskedCategorical`` and of BenchMARL's masked IPPO and MAPPO); at
+``move+mode`` and ``full`` a ``MultiCategorical(nvec)`` of the level's ``L`` fields with one flat
+mask over their concatenated choices (moves masked, every other choice allowed: the layout of
+sb3-contrib's ``MaskablePPO``; :func:`training.torchrl_ppo.make_distribution_class` samples it):
 
-==================================== ===================== ===============================================
-key                                  shape                 meaning
-==================================== ===================== ===============================================
-``("agents", "observation")``        (n_copies, A, D)      float32, :class:`~.flatten.ObservationEncoder`
-``("agents", "action_mask")``        (n_copies, A, sum(nvec)) bool, move mask then all-ones
-``("agents", "action")``             (n_copies, A, L)      int64 ``MultiCategorical(nvec)``, the env's action
-``("agents", "reward")``             (n_copies, A, 1)      float32, the team reward (same for every module)
-``"done"``, ``"terminated"``,        (n_copies, 1)         bool: terminated = task success, truncated =
-``"truncated"``                                            ``max_cycles`` reached, done = either
-``"state"``                          (n_copies, S)         float32 global state (``env.state()``), for MAPPO
-==================================== ===================== ===============================================
+==================================== ========================= ==============================================
+key                                  shape                     meaning
+==================================== ========================= ==============================================
+``("agents", "observation")``        (n_copies, A, D)          float32, :class:`~.flatten.ObservationEncoder`
+``("agents", "action_mask")``        (n_copies, A, 13) at      bool, the legal moves (``move``), or the move
+                                     ``move``, else            mask then all-ones
+                                     (n_copies, A, sum(nvec))
+``("agents", "action")``             (n_copies, A) at          int64 ``Categorical(13)`` (``move``), else
+                                     ``move``, else            ``MultiCategorical(nvec)``
+                                     (n_copies, A, L)
+``("agents", "reward")``             (n_copies, A, 1)          float32, the team reward (same for every module)
+``"done"``, ``"terminated"``,        (n_copies, 1)             bool: terminated = task success, truncated =
+``"truncated"``                                                ``max_cycles`` reached, done = either
+``"state"``                          (n_copies, S)             float32 global state (``env.state()``), for MAPPO
+==================================== ========================= ==============================================
 
 A partial reset (``"_reset"`` in the reset tensordict, as TorchRL's collectors send when
 some copies are done) resets only those copies. ``set_seed(s)`` seeds copy ``c`` with child
@@ -44,7 +54,7 @@ class ProteoTorchRLEnv(EnvBase):
         task_id: a registered task id (``"chain-v0"``).
         n_copies: copies stepped one after another (the batch dimension).
         seed: copy ``c`` is seeded with child ``c`` of ``SeedSequence(seed)`` at the first reset (``None``: random).
-        **overrides: passed to :func:`proteo_env.make`.
+        **overrides: passed to :func:`proteo_env.make` (``control="move"`` chooses the level).
     """
 
     def __init__(self, task_id: str, *, n_copies: int = 1, seed: int | None = None, device="cpu", **overrides):
@@ -57,11 +67,16 @@ class ProteoTorchRLEnv(EnvBase):
         self.n_agents = len(first.possible_agents)
         self.n_copies = n_copies
         self.encoder = ObservationEncoder.for_env(first)
-        self.nvec = first.action_layout.nvec
+        self.control = first.control
+        self.nvec = np.asarray(first.control_nvec)
+        """The level's action fields' sizes (``[13]`` at ``move``)."""
+        self.single = self.control == "move"
+        """One categorical per module (``move``), else one field per column."""
         self._seeds: list = [None] * n_copies
         if seed is not None:
             self._set_seed(seed)
-        b, a, d, n = n_copies, self.n_agents, self.encoder.size, int(self.nvec.sum())
+        b, a, d = n_copies, self.n_agents, self.encoder.size
+        n = int(self.nvec[0]) if self.single else int(self.nvec.sum())
         self.state_size = first.state_space.shape[0]
         self.observation_spec = Composite(
             agents=Composite(
@@ -72,15 +87,13 @@ class ProteoTorchRLEnv(EnvBase):
             state=Unbounded(shape=(b, self.state_size), dtype=torch.float32, device=device),
             shape=(b,),
         )
-        self.action_spec = Composite(
-            agents=Composite(
-                action=MultiCategorical(
-                    nvec=torch.as_tensor(self.nvec), shape=(b, a, len(self.nvec)), dtype=torch.int64, device=device
-                ),
-                shape=(b, a),
-            ),
-            shape=(b,),
-        )
+        if self.single:
+            action = Categorical(n, shape=(b, a), dtype=torch.int64, device=device)
+        else:
+            action = MultiCategorical(
+                nvec=torch.as_tensor(self.nvec), shape=(b, a, len(self.nvec)), dtype=torch.int64, device=device
+            )
+        self.action_spec = Composite(agents=Composite(action=action, shape=(b, a)), shape=(b,))
         self.reward_spec = Composite(
             agents=Composite(reward=Unbounded(shape=(b, a, 1), dtype=torch.float32, device=device), shape=(b, a)),
             shape=(b,),
@@ -101,7 +114,7 @@ class ProteoTorchRLEnv(EnvBase):
         env = self.envs[c]
         buffers = env.observe_arrays()
         self._obs[c] = self.encoder.encode_buffers(buffers)
-        self._mask[c] = flat_action_mask(buffers.action_mask, self.nvec)
+        self._mask[c] = buffers.action_mask if self.single else flat_action_mask(buffers.action_mask, self.nvec)
         self._state[c] = env.state()
 
     def _observation_td(self, reward: np.ndarray | None = None) -> dict:
@@ -135,6 +148,8 @@ class ProteoTorchRLEnv(EnvBase):
 
         started = time.perf_counter()
         actions = tensordict.get(("agents", "action")).cpu().numpy().astype(np.int64)
+        if self.single:
+            actions = actions[..., None]  # (n_copies, A) -> the level's (n_copies, A, 1)
         reward = np.zeros((self.n_copies, self.n_agents, 1), dtype=np.float32)
         terminated = np.zeros((self.n_copies, 1), dtype=bool)
         truncated = np.zeros((self.n_copies, 1), dtype=bool)
