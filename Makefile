@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint results bench eval learning-results benchmark-references
+.PHONY: install install-distributed demo test test-all lint results bench eval learning-results benchmark-references benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -26,6 +26,19 @@ test: install-distributed
 
 test-all: install-distributed
 	$(BIN)/python -m pytest -n 2
+
+# BenchMARL in its own environment, .venv-benchmarl (BenchMARL 1.5 needs torchrl < 0.12, the train
+# extra pins 0.14): proteo with the versions of constraints-benchmarl.txt; test-benchmarl runs
+# BenchMARL's MAPPO and IPPO on proteo there (tests/test_benchmarl.py; CI runs it after test-all).
+.venv-benchmarl/bin/python:
+	$(PY) -m venv .venv-benchmarl
+
+benchmarl: .venv-benchmarl/bin/python
+	.venv-benchmarl/bin/pip install -q -c constraints-benchmarl.txt torch==2.13.0
+	.venv-benchmarl/bin/pip install -q -c constraints-benchmarl.txt -e . benchmarl pytest hypothesis
+
+test-benchmarl: benchmarl
+	PROTEO_NEEDS=benchmarl .venv-benchmarl/bin/python -m pytest -p no:cacheprovider tests/test_benchmarl.py
 
 # Format, lint and import order (configured in pyproject.toml); CI runs it before the tests.
 lint: install
