@@ -18,17 +18,16 @@ else:
     pytest.importorskip("benchmarl")
 
 import proteo_env  # noqa: E402
-from proteo_env.adapters.benchmarl import ProteoTask, experiment_config  # noqa: E402
+from proteo_env.adapters.benchmarl import ProteoTask, experiment, experiment_config  # noqa: E402
 
 TINY = {"n_modules": 6, "max_cycles": 16}
 
 
 def _experiment(tmp_path, algorithm: str):
-    from benchmarl.algorithms import IppoConfig, MappoConfig
-    from benchmarl.experiment import Experiment
-    from benchmarl.models import MlpConfig
-
-    config = experiment_config(
+    return experiment(
+        ProteoTask.CHAIN_V1,
+        algorithm,
+        settings=TINY,
         max_n_iters=2,
         on_policy_collected_frames_per_batch=64,
         on_policy_n_envs_per_worker=2,
@@ -39,15 +38,6 @@ def _experiment(tmp_path, algorithm: str):
         loggers=[],
         render=False,
         save_folder=str(tmp_path),
-    )
-    algorithms = {"mappo": MappoConfig, "ippo": IppoConfig}
-    return Experiment(
-        task=ProteoTask.CHAIN_V1.get_task(TINY),
-        algorithm_config=algorithms[algorithm].get_from_yaml(),
-        model_config=MlpConfig.get_from_yaml(),
-        critic_model_config=MlpConfig.get_from_yaml(),
-        seed=0,
-        config=config,
     )
 
 
@@ -61,6 +51,10 @@ def test_every_registered_task_is_a_member_with_its_settings_over_the_move_level
     assert task.action_spec(env)["agents", "action"].shape == (20,)  # one Categorical(13) per module
     assert task.action_mask_spec(env)["agents", "action_mask"].shape == (20, 13)
     assert experiment_config().evaluation_deterministic_actions is False
+    with pytest.raises(ValueError, match="algorithm='ppo' is not allowed; allowed: .*mappo"):
+        experiment(ProteoTask.CHAIN_V1, "ppo")
+    with pytest.raises(ValueError, match="max_frames=5 is not allowed"):
+        experiment_config(max_frames=5)
 
 
 @pytest.mark.parametrize("algorithm", ["mappo", "ippo"])

@@ -1,13 +1,11 @@
 """proteo's tasks as BenchMARL tasks: IPPO, MAPPO and the rest of BenchMARL on any registered task.
 
-    from benchmarl.algorithms import MappoConfig
-    from benchmarl.experiment import Experiment
-    from benchmarl.models import MlpConfig
-    from proteo_env.adapters.benchmarl import ProteoTask, experiment_config
+    from proteo_env.adapters.benchmarl import ProteoTask, experiment
 
-    Experiment(task=ProteoTask.CHAIN_V1.get_task(), algorithm_config=MappoConfig.get_from_yaml(),
-               model_config=MlpConfig.get_from_yaml(), critic_model_config=MlpConfig.get_from_yaml(),
-               seed=0, config=experiment_config()).run()
+    experiment(ProteoTask.CHAIN_V1, "mappo", settings={"n_modules": 12}).run()
+
+or with BenchMARL's own pieces (``Experiment(task=ProteoTask.CHAIN_V1.get_task(), algorithm_config=
+MappoConfig.get_from_yaml(), model_config=..., config=experiment_config(), ...)``).
 
 :class:`ProteoTask` has one member per task registered when this module is imported (``chain-v1``
 is ``CHAIN_V1``). A member's ``get_task(config)`` gives the BenchMARL task: ``config`` holds the
@@ -121,6 +119,29 @@ class _ProteoTasks(Task):
 
 ProteoTask = _ProteoTasks("ProteoTask", {name: None for name in TASK_IDS})
 """One member per registered task (``ProteoTask.CHAIN_V1``, ``ProteoTask.GRASP_V0``, ...)."""
+
+
+def experiment(task: ProteoTask, algorithm: str = "mappo", *, settings: dict | None = None, seed: int = 0, **changes):
+    """A BenchMARL ``Experiment`` of ``algorithm`` (a name of BenchMARL's registry: ``mappo``,
+    ``ippo``, ``qmix``, ...) on ``task`` with ``settings`` (:meth:`_ProteoTasks.get_task`), an MLP
+    actor and critic as BenchMARL configures them by default, and :func:`experiment_config`
+    with ``changes``."""
+    from benchmarl.algorithms import algorithm_config_registry
+    from benchmarl.experiment import Experiment
+    from benchmarl.models import MlpConfig
+
+    if algorithm not in algorithm_config_registry:
+        raise ValueError(
+            f"algorithm={algorithm!r} is not allowed; allowed: {', '.join(sorted(algorithm_config_registry))}"
+        )
+    return Experiment(
+        task=task.get_task(settings),
+        algorithm_config=algorithm_config_registry[algorithm].get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=seed,
+        config=experiment_config(**changes),
+    )
 
 
 def experiment_config(**changes) -> ExperimentConfig:
