@@ -39,6 +39,33 @@ META_FILE = "proteo.json"
 
 
 # ---------------------------------------------------------------------- args
+def field_docs(args_cls) -> dict[str, str]:
+    """The docstring written under each field of the dataclass ``args_cls`` (and its bases), by
+    field name, whitespace folded: what ``--help`` says about each option."""
+    import ast
+    import inspect
+
+    docs: dict[str, str] = {}
+    for cls in reversed(args_cls.__mro__):
+        if not dataclasses.is_dataclass(cls):
+            continue
+        try:
+            tree = ast.parse(inspect.cleandoc("\n" + inspect.getsource(cls)))
+        except (OSError, TypeError, SyntaxError):
+            continue
+        body = tree.body[0].body
+        for statement, following in zip(body, body[1:]):
+            if (
+                isinstance(statement, ast.AnnAssign)
+                and isinstance(statement.target, ast.Name)
+                and isinstance(following, ast.Expr)
+                and isinstance(following.value, ast.Constant)
+                and isinstance(following.value.value, str)
+            ):
+                docs[statement.target.id] = " ".join(following.value.value.split())
+    return docs
+
+
 def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | None = None, saved_args: bool = False):
     """Build ``args_cls`` (a frozen dataclass) from ``--config FILE.yaml`` and ``--<field> VALUE`` flags.
 
@@ -53,14 +80,16 @@ def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | No
     parser = argparse.ArgumentParser(description=description or args_cls.__doc__.splitlines()[0])
     parser.add_argument("--config", help="YAML file of arguments (see configs/train/)")
     hints = typing.get_type_hints(args_cls)
+    docs = field_docs(args_cls)
     for f in dataclasses.fields(args_cls):
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        kind = f"{getattr(hints[f.name], '__name__', hints[f.name])}, default: {default!r}"
         parser.add_argument(
             f"--{f.name.replace('_', '-')}",
             dest=f.name,
             default=None,
             metavar="VALUE",
-            help=f"{getattr(hints[f.name], '__name__', hints[f.name])} (default: {default!r})",
+            help=(f"{docs[f.name]} ({kind})" if f.name in docs else kind).replace("%", "%%"),
         )
     ns = parser.parse_args(argv)
     if saved_args and ns.resume and not ns.config:
