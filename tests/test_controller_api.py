@@ -239,7 +239,9 @@ def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     out = capsys.readouterr().out
     assert out.startswith("usage: proteo train ppo") and "--total-steps" in out
     # each option's docstring reaches the user, with its type and default
-    assert " ".join(out.split()).count("Agent-steps (module-cycles used for learning) to train for. (int, default:") == 1
+    assert (
+        " ".join(out.split()).count("Agent-steps (module-cycles used for learning) to train for. (int, default:") == 1
+    )
 
 
 def test_proteo_train_passes_bad_flags_to_the_trainer_and_refuses_unknown_names(capsys):
