@@ -508,15 +508,21 @@ PUBLISH_END = "<!-- end of the results table -->"
 """The markers between which ``--publish FILE`` writes :func:`heldout_table` (the README's)."""
 
 
+def short_cell(row: Row) -> str:
+    """``k/n (lo-hi), c``: successes with the interval of the rate, and mean cycles to success."""
+    s = row.summary
+    text = f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
+    return text + (f", {s['cycles_to_success']:.0f}" if s["successes"] else "")
+
+
 def heldout_table(rows: list[Row], protocol) -> str:
-    """One row per task, one column per policy: each policy's ``heldout`` cell (:func:`cell`)."""
+    """One row per policy, one column per task: each policy's ``heldout`` cell (:func:`short_cell`)."""
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
-    policies = _policy_order({r.policy for r in rows})
-    lines = ["| task | " + " | ".join(policies) + " |", "|---|" + "---|" * len(policies)]
-    for task in tasks:
-        cells = [cell(by_key[(task, "heldout", p)]) if (task, "heldout", p) in by_key else "-" for p in policies]
-        lines.append(f"| {protocol.tasks[task].task_id} | " + " | ".join(cells) + " |")
+    lines = ["| policy | " + " | ".join(protocol.tasks[t].task_id for t in tasks) + " |", "|---|" + "---|" * len(tasks)]
+    for policy in _policy_order({r.policy for r in rows}):
+        cells = [short_cell(by_key[(t, "heldout", policy)]) if (t, "heldout", policy) in by_key else "-" for t in tasks]
+        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
