@@ -49,19 +49,20 @@ bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
 
-# docs/results.md: every controller judged under benchmark protocol v5, which extends v4 to v1
-# (docs/benchmark/v1 to v5, written by proteo eval --benchmark v1|v2|v3|v4|v5;
+# docs/results.md: every controller judged under benchmark protocol v6, which extends v5 to v1
+# (docs/benchmark/v1 to v6, written by proteo eval --benchmark v1|v2|v3|v4|v5|v6;
 # docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
 results: install
-	$(BIN)/python -m training.results --benchmark v5 --publish README.md --marl-eval docs/results/marl_eval.json
+	$(BIN)/python -m training.results --benchmark v6 --publish README.md --marl-eval docs/results/marl_eval.json
 
 eval: install
 	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
 
-# The study under benchmark protocols v1 to v5 (configs/benchmark/, docs/guides/benchmark.md),
+# The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
 # docs/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
-# parameters; v3: evolved chain programs; v4 and v5: evolved branch, table and grasp programs, from the paper's and from random ones), each recipe judged on every split of its task (proteo eval
+# parameters; v3: evolved chain programs; v4 and v5: evolved branch, table and grasp programs, from the paper's and from random ones;
+# v6: evolution with ten times the episodes per generation on all four), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
 # judged once per protocol: make benchmark-references (about 25 minutes).
 # The former three-seed study (docs/journal/learning-study-move.md) is reproduced from its own
@@ -72,6 +73,7 @@ STUDY_V2 := $(STUDY) --keep-dir checkpoints/v2 --docs-dir docs/benchmark/v2/lear
 STUDY_V3 := $(STUDY) --keep-dir checkpoints/v3 --docs-dir docs/benchmark/v3/learning --runs-dir runs/v3
 STUDY_V4 := $(STUDY) --keep-dir checkpoints/v4 --docs-dir docs/benchmark/v4/learning --runs-dir runs/v4
 STUDY_V5 := $(STUDY) --keep-dir checkpoints/v5 --docs-dir docs/benchmark/v5/learning --runs-dir runs/v5
+STUDY_V6 := $(STUDY) --keep-dir checkpoints/v6 --docs-dir docs/benchmark/v6/learning --runs-dir runs/v6
 learning-results: install
 	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
 	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
@@ -80,7 +82,8 @@ learning-results: install
 	$(BIN)/python -m training.study --recipes "[evolve, evolve-paper]" --tasks "[chain]" --level full $(STUDY_V3)
 	$(BIN)/python -m training.study --recipes "[evolve-paper]" --tasks "[branch, table, grasp]" --level full $(STUDY_V4)
 	$(BIN)/python -m training.study --recipes "[evolve]" --tasks "[branch, table, grasp]" --level full $(STUDY_V5)
-	for version in v1 v2 v3 v4 v5; do for recipe in checkpoints/$$version/*/*_*; do \
+	$(BIN)/python -m training.study --recipes "[evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V6)
+	for version in v1 v2 v3 v4 v5 v6; do for recipe in checkpoints/$$version/*/*_*; do \
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done
 	$(MAKE) results
