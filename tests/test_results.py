@@ -134,6 +134,8 @@ def test_the_paired_test_finds_a_difference_that_overlapping_intervals_hide(tmp_
     assert not (clone["success_hi"] < rule["success_lo"])  # the intervals overlap
     text = results.render(rows, headers, "v1", folder.parent, tmp_path / "results.md", load_protocol("v1"))
     assert "clone succeeds below the rules on the same 20 worlds: 0.65 against 0.90, difference -0.25 (" in text
+    # the cycles of the five extra failures count at the limit (300 against the rules' 50)
+    assert "done later counting a failure at the cycle limit, +62 (" in text
     assert "success detectably above the rules: none; below them: grasp clone" in text
 
 

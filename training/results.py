@@ -204,6 +204,10 @@ def compare(name: str, row: Row, reference: Row) -> str:
     if cycles["pairs"] >= 2 and detectable(cycles):
         faster = "fewer" if cycles["difference"] < 0 else "more"
         text += f"; in {faster} cycles where both succeed, {_difference(cycles, 0)}"
+    time = pair["time"]
+    if detectable(time):
+        sooner = "sooner" if time["difference"] < 0 else "later"
+        text += f"; done {sooner} counting a failure at the cycle limit, {_difference(time, 0)} cycles"
     return text
 
 
