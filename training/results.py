@@ -130,10 +130,15 @@ def _interval(lo: float, hi: float, digits: int = 2) -> str:
     return f"{lo:.{digits}f}{' to ' if lo < 0 else '-'}{hi:.{digits}f}"
 
 
+def _successes(s: dict) -> str:
+    """``k/n (lo-hi)``: a summary's successes with the interval of the rate."""
+    return f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
+
+
 def cell(row: Row) -> str:
     """``k/n (lo-hi), c (lo-hi)``: successes with the interval of the rate, cycles with theirs."""
     s = row.summary
-    text = f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
+    text = _successes(s)
     if s["successes"]:
         text += f", {s['cycles_to_success']:.0f} ({_interval(s['cycles_lo'], s['cycles_hi'], 0)})"
     return text
@@ -515,8 +520,7 @@ PUBLISH_END = "<!-- end of the results table -->"
 def short_cell(row: Row) -> str:
     """``k/n (lo-hi), c``: successes with the interval of the rate, and mean cycles to success."""
     s = row.summary
-    text = f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
-    return text + (f", {s['cycles_to_success']:.0f}" if s["successes"] else "")
+    return _successes(s) + (f", {s['cycles_to_success']:.0f}" if s["successes"] else "")
 
 
 def heldout_table(rows: list[Row], protocol) -> str:
