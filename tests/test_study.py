@@ -41,6 +41,25 @@ def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path)
     assert (docs / "curves_ppo_chain_move.png").stat().st_size > 0
 
 
+@pytest.mark.slow  # one training seed
+def test_a_study_run_again_keeps_its_finished_runs_without_training_them_again(tmp_path, monkeypatch):
+    keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
+    argv = ["--tasks", "[chain]", "--seeds", "[0]", "--minutes", "0.02", "--runs-dir", str(tmp_path / "runs")]
+    argv += ["--keep-dir", str(keep), "--docs-dir", str(docs)]
+    study.main(argv)
+    trained = read_meta(keep / "chain" / "ppo_move" / "seed_0")
+    (keep / "chain").rename(tmp_path / "first")  # the kept copy goes; the run folder stays
+
+    def no_training(cmd, *a, **k):
+        raise AssertionError(f"trained again: {cmd}")
+
+    monkeypatch.setattr(study.subprocess, "Popen", no_training)
+    study.main(argv)
+    assert read_meta(keep / "chain" / "ppo_move" / "seed_0") == trained
+    [run] = json.loads((docs / "study_move.json").read_text())
+    assert run["seed"] == 0 and run["agent_steps"] == trained["agent_steps"] and run["wall_clock_minutes"] > 0
+
+
 @pytest.mark.slow  # several training seeds
 def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
     keep, docs = tmp_path / "checkpoints", tmp_path / "docs"

@@ -47,6 +47,9 @@ thread each; a kickstart run waits for its clone), then keeps:
 - ``docs/learning/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
   checkpoint (runs of other recipes, tasks or seeds already recorded there are kept).
 
+A run whose folder already holds a final checkpoint (an earlier study of the same ``runs_dir``
+that stopped part way) is kept as it is, not trained again; delete its folder to retrain it.
+
 Then ``proteo eval --benchmark v1 --checkpoint ... --out docs/benchmark/v1/<task>/<recipe>`` judges
 each recipe's seeds on every split of the benchmark protocol and ``make results`` writes
 docs/results.md (``make learning-results`` runs all three for the published recipes, with
@@ -55,6 +58,7 @@ docs/results.md (``make learning-results`` runs all three for the published reci
 
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 import subprocess
@@ -148,6 +152,13 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
     return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
 
 
+def _run_seconds(run_dir: Path) -> float:
+    """Training seconds of a finished run, from the last row of its ``progress.csv``."""
+    with open(run_dir / "progress.csv") as f:
+        rows = list(csv.DictReader(f))
+    return float(rows[-1]["seconds"]) if rows else 0.0
+
+
 def main(argv=None) -> int:
     args = parse_args(Args, argv)
     level = args.level.replace("+", "-")
@@ -174,19 +185,26 @@ def main(argv=None) -> int:
                 continue
             pending.remove(job)
             run_dir = Path(args.runs_dir) / f"{recipe}_{task}_{level}_s{seed}"
+            if (run_dir / "final" / "proteo.json").is_file():  # trained by an earlier study: kept, not retrained
+                print(f"already trained {recipe} {task} seed {seed}: {run_dir}", flush=True)
+                running.append((recipe, task, seed, run_dir, None, None))
+                continue
             cmd = _command(args, recipe, task, seed, run_dir, kept("imitation", task, seed))
             print(f"started {recipe} {task} seed {seed}: {' '.join(cmd)}", flush=True)
             running.append((recipe, task, seed, run_dir, time.perf_counter(), subprocess.Popen(cmd)))
         time.sleep(1.0)
-        for job in [j for j in running if j[5].poll() is not None]:
+        for job in [j for j in running if j[5] is None or j[5].poll() is not None]:
             running.remove(job)
             recipe, task, seed, run_dir, started, proc = job
-            if proc.returncode != 0:
+            if proc is None:
+                seconds = _run_seconds(run_dir)
+            elif proc.returncode != 0:
                 raise RuntimeError(
                     f"training {recipe} {task} seed {seed} failed (exit {proc.returncode}); see {run_dir}"
                 )
-            seconds = time.perf_counter() - started
-            print(f"finished {recipe} {task} seed {seed} in {seconds / 60:.1f} min", flush=True)
+            else:
+                seconds = time.perf_counter() - started
+                print(f"finished {recipe} {task} seed {seed} in {seconds / 60:.1f} min", flush=True)
             keep = kept(recipe, task, seed)
             if keep.exists():
                 shutil.rmtree(keep)
