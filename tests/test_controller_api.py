@@ -17,9 +17,9 @@ import proteo_env
 from proteo_env.config import ConfigError
 from proteo_env.env import ProteoEnv
 from proteo_env.rollout import run_episode
-from training.cli import TRAINERS
 from training.cli import main as cli_main
 from training.common import read_meta, write_checkpoint_meta
+from training.trainers import ALGORITHMS, TRAINERS, loader
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED = ROOT / "checkpoints" / "chain" / "ppo_move" / "seed_0"  # 12 modules, 300 cycles, control move
@@ -231,8 +231,8 @@ def test_bad_sources_get_one_clear_error(source, named):
 def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     import importlib
 
-    for name in TRAINERS:  # every name is a module with a main(argv)
-        assert callable(importlib.import_module(f"training.{name}").main)
+    for trainer in TRAINERS:  # every name is a module with a main(argv)
+        assert callable(importlib.import_module(f"training.{trainer.name}").main)
     with pytest.raises(SystemExit) as done:
         cli_main(["train", "ppo", "--help"])
     assert done.value.code == 0
@@ -242,6 +242,14 @@ def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     assert (
         " ".join(out.split()).count("Agent-steps (module-cycles used for learning) to train for. (int, default:") == 1
     )
+
+
+def test_every_checkpoint_algorithm_has_one_trainer_and_a_loader():
+    for algorithm in ALGORITHMS:
+        assert callable(loader(algorithm))
+        assert sum(algorithm in t.algorithms for t in TRAINERS) == 1
+    for trainer in TRAINERS:
+        assert bool(trainer.algorithms) == bool(trainer.loader)
 
 
 def test_proteo_train_passes_bad_flags_to_the_trainer_and_refuses_unknown_names(capsys):

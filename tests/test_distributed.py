@@ -128,6 +128,38 @@ def test_interrupted_cma_es_resumes_the_interrupted_generation(tmp_path, monkeyp
         cma_es.main([*cma, "--run-dir", str(tmp_path / "cut")])
 
 
+def test_cma_es_resumed_from_a_checkpoint_goes_on_as_the_whole_run_and_refuses_other_arguments(tmp_path):
+    """The run base (training/runs.py) gives CMA-ES what evolution has: ``--resume CHECKPOINT``
+    restores the search and its world stream, and arguments the results depend on must match."""
+    from training import cma_es
+
+    cma = [*CMA[:2], *CMA[4:], "--workers", "1", "--checkpoint-every", "1"]
+    whole = cma_es.main([*cma, "--generations", "2", "--run-dir", str(tmp_path / "whole")])
+    cma_es.main([*cma, "--generations", "1", "--run-dir", str(tmp_path / "cut")])
+    resumed = cma_es.main(
+        [*cma, "--generations", "2", "--run-dir", str(tmp_path / "on"), "--resume", str(tmp_path / "cut")]
+    )
+    assert (
+        json.loads((resumed / "proteo.json").read_text())["params"]
+        == json.loads((whole / "proteo.json").read_text())["params"]
+    )
+    assert _progress(tmp_path / "on")[-1:] == _progress(tmp_path / "whole")[-1:]
+    with pytest.raises(ConfigError, match=r"other arguments \(differing: sigma0\)"):
+        cma_es.main(
+            [
+                *cma,
+                "--generations",
+                "2",
+                "--sigma0",
+                "0.3",
+                "--run-dir",
+                str(tmp_path / "no"),
+                "--resume",
+                str(tmp_path / "cut"),
+            ]
+        )
+
+
 # ---------------------------------------------------------------------- Ray == one process
 def test_eval_on_ray_equals_serial(tmp_path, local_ray, capsys):
     from training.cli import main

@@ -129,3 +129,13 @@ def test_the_evolution_recipes_run_their_config_for_its_generations(tmp_path, re
     cmd = study._command(args, recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("-m") + 1] == "training.evolve" and cmd[cmd.index("--config") + 1] == config
     assert cmd[cmd.index("--time-limit-minutes") + 1] == "0.0" and cmd[cmd.index("--seed") + 1] == "2"
+
+
+def test_every_recipe_names_a_registered_trainer_and_its_configs_exist():
+    from pathlib import Path
+
+    from training.trainers import trainer
+
+    for name, prefix, _ in study.RECIPES.values():
+        assert trainer(name).algorithms  # a trainer that writes checkpoints
+        assert list(Path("configs/train").glob(f"{prefix}_*.yaml"))

@@ -72,55 +72,74 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
 
 
 def load_policy(path, env, *, seed: int | None = None, deterministic: bool = False):
-    """The policy stored at ``path``, ready to act in ``env`` (same task and observation encoding)."""
-    meta = read_meta(path)
-    folder = Path(meta["dir"])
-    algorithm = meta["algorithm"]
-    if algorithm == "cma-rules":
-        from baselines import POLICIES, make_policy
-        from baselines.base import constructor_parameters
+    """The policy stored at ``path``, ready to act in ``env`` (same task and observation encoding):
+    built by the loader its trainer registered (:mod:`training.trainers`)."""
+    from training.trainers import loader
 
-        if meta.get("policy") not in POLICIES:
-            raise CheckpointError(
-                f"checkpoint {str(folder)!r}: policy {meta.get('policy')!r} is not registered; "
-                f"allowed: {', '.join(sorted(POLICIES))}"
-            )
-        accepted = set(constructor_parameters(POLICIES[meta["policy"]]))
-        params = dict(meta.get("params", {}))
-        dropped = sorted(set(params) - accepted)
-        if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name
-            warnings.warn(
-                f"checkpoint {str(folder)!r}: evolved parameters {dropped} are no longer parameters of "
-                f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py",
-                stacklevel=2,
-            )
-            params = {k: v for k, v in params.items() if k not in dropped}
-        try:
-            policy = make_policy(meta["policy"], env, seed=seed, **params)
-        except (KeyError, TypeError, ValueError) as err:
-            raise CheckpointError(f"checkpoint {str(folder)!r}: cannot build the evolved rules: {err}") from None
-        policy.name = f"{meta['policy']} (cma-rules{'; ignored: ' + ', '.join(dropped) if dropped else ''})"
-        return policy
-    if algorithm == "program-evolution":
-        return _evolved_program(folder, env, seed)
+    meta = read_meta(path)
+    return loader(meta["algorithm"])(meta, env, seed=seed, deterministic=deterministic)
+
+
+def cma_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
+    """The hand-coded policy with evolved parameters (``cma-rules``), or the evolved network
+    (``cma-neural``, ``genome.npy``)."""
+    if meta["algorithm"] == "cma-neural":
+        return network_policy(meta, env, seed, deterministic, _numpy_logits)
+    from baselines import POLICIES, make_policy
+    from baselines.base import constructor_parameters
+
+    folder = meta["dir"]
+    if meta.get("policy") not in POLICIES:
+        raise CheckpointError(
+            f"checkpoint {folder!r}: policy {meta.get('policy')!r} is not registered; "
+            f"allowed: {', '.join(sorted(POLICIES))}"
+        )
+    accepted = set(constructor_parameters(POLICIES[meta["policy"]]))
+    params = dict(meta.get("params", {}))
+    dropped = sorted(set(params) - accepted)
+    if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name
+        warnings.warn(
+            f"checkpoint {folder!r}: evolved parameters {dropped} are no longer parameters of "
+            f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py",
+            stacklevel=3,
+        )
+        params = {k: v for k, v in params.items() if k not in dropped}
+    try:
+        policy = make_policy(meta["policy"], env, seed=seed, **params)
+    except (KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f"checkpoint {folder!r}: cannot build the evolved rules: {err}") from None
+    policy.name = f"{meta['policy']} (cma-rules{'; ignored: ' + ', '.join(dropped) if dropped else ''})"
+    return policy
+
+
+def ppo_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
+    """The network of training/ppo.py or training/imitate.py (``policy.pt``)."""
+    return network_policy(meta, env, seed, deterministic, _ppo_logits)
+
+
+def mlp_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
+    """The policy MLP of training/torchrl_ppo.py or training/rllib_ppo.py (``policy.pt``)."""
+    return network_policy(meta, env, seed, deterministic, _torch_logits)
+
+
+def sb3_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
+    """The MaskablePPO policy of training/sb3_ppo.py (``model.zip``)."""
+    return network_policy(meta, env, seed, deterministic, lambda folder, meta, encoder: _sb3_logits(folder, encoder))
+
+
+def network_policy(meta: dict, env, seed: int | None, deterministic: bool, logits_of):
+    """A :class:`~training.policies.LogitsPolicy` over the network of a checkpoint, after checking it
+    was made for ``env``'s task, control level and observation encoding; ``logits_of(folder, meta,
+    encoder)`` loads the network as a function from features ``(N, F)`` to logits ``(N, sum(nvec))``."""
     encoder = _check_compatible(meta, env)
-    label = meta.get("label", algorithm)
-    if algorithm == "sb3-maskable-ppo":
-        logits_fn = _sb3_logits(folder / "model.zip", encoder)
-    elif algorithm in ("torchrl-ppo", "rllib-ppo"):
-        logits_fn = _torch_logits(folder / "policy.pt", meta, encoder)
-    elif algorithm in ("ppo", "imitation"):
-        logits_fn = _ppo_logits(folder / "policy.pt", meta, encoder)
-    else:
-        logits_fn = _numpy_logits(folder / "genome.npy", meta, encoder)
     return LogitsPolicy(
         env.action_layout,
         env.task.modes,
         scent_max=env.config.physics.scent_max,
         seed=seed,
         encoder=encoder,
-        logits_fn=logits_fn,
-        label=label,
+        logits_fn=logits_of(Path(meta["dir"]), meta, encoder),
+        label=meta.get("label", meta["algorithm"]),
         deterministic=deterministic,
         nvec=meta["nvec"],
         memory=meta.get("memory", "none"),
@@ -188,11 +207,12 @@ def load_controller(source, *, seed: int | None = 0, **env_overrides):
     return env, make_policy(env.task.default_policy if name == RULES else name, env, seed=seed)
 
 
-def _evolved_program(folder: Path, env, seed: int | None):
+def program_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
     """The program policy of an evolved program's checkpoint (``program.yaml``; a program of
     another task than ``env``'s is a :class:`CheckpointError`)."""
     from baselines import make_policy
 
+    folder = Path(meta["dir"])
     try:
         policy = make_policy("program", env, program=str(_need(folder / "program.yaml")), seed=seed)
     except ConfigError as err:
@@ -207,7 +227,8 @@ def _need(file: Path) -> Path:
     return file
 
 
-def _sb3_logits(file: Path, encoder: ObservationEncoder):
+def _sb3_logits(folder: Path, encoder: ObservationEncoder):
+    file = folder / "model.zip"
     import torch
     from sb3_contrib import MaskablePPO
 
@@ -235,7 +256,8 @@ def _sb3_logits(file: Path, encoder: ObservationEncoder):
     return logits_fn
 
 
-def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+def _torch_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
+    file = folder / "policy.pt"
     import torch
 
     try:
@@ -258,7 +280,8 @@ def _torch_logits(file: Path, meta: dict, encoder: ObservationEncoder):
     return logits_fn
 
 
-def _ppo_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
+    file = folder / "policy.pt"
     import torch
 
     from training.networks import ARCHS, ActorCritic
@@ -317,7 +340,8 @@ def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, wh
     return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
 
 
-def _numpy_logits(file: Path, meta: dict, encoder: ObservationEncoder):
+def _numpy_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
+    file = folder / "genome.npy"
     net = NumpyMLP(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
     try:
         genome = np.load(_need(file), allow_pickle=False)

@@ -32,26 +32,13 @@ def sweep(args) -> int:
     return sweep_main(args)
 
 
-TRAINERS = {
-    "ppo": "native PPO over the array API (training/ppo.py)",
-    "imitate": "clone the rules: behaviour cloning + DAgger (training/imitate.py)",
-    "cma_es": "CMA-ES on the rules' parameters or a small network (training/cma_es.py)",
-    "evolve": "evolution of programs of the paper's primitives (training/evolve.py)",
-    "sb3_ppo": "MaskablePPO, Stable-Baselines3 (training/sb3_ppo.py)",
-    "torchrl_ppo": "IPPO / MAPPO, TorchRL (training/torchrl_ppo.py)",
-    "rllib_ppo": "RLlib's PPO (training/rllib_ppo.py; the distributed extra)",
-    "study": "recipes x tasks x seeds, kept in checkpoints/ (training/study.py)",
-}
-"""The trainers ``proteo train`` runs: the ``training.<name>`` modules with a ``main(argv)``."""
-
-
 def train(args) -> int:
     """``proteo train NAME FLAGS...``: ``python -m training.NAME FLAGS...`` (the flags unchanged)."""
     import importlib
 
-    name = args.trainer.replace("-", "_")
-    if name not in TRAINERS:
-        raise ValueError(f"trainer {args.trainer!r} is not allowed; allowed: {', '.join(TRAINERS)}")
+    from training.trainers import trainer
+
+    name = trainer(args.trainer).name
     flags = list(args.flags)
     if flags[:1] == ["--"]:
         flags = flags[1:]
@@ -113,6 +100,7 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 def main(argv=None) -> int:
     from training.distributed import add_ray_flags
     from training.playback import demo, replay, run, view
+    from training.trainers import TRAINERS
 
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     parser.add_argument("--version", action="version", version=f"proteo {version()}")
@@ -242,9 +230,9 @@ def main(argv=None) -> int:
         help="train a controller: proteo train TRAINER [flags] runs python -m training.TRAINER [flags]",
         description="Run a trainer of training/ with the flags that follow, unchanged "
         "(see docs/guides/training.md; 'proteo train ppo --help' lists ppo's). Trainers: "
-        + "; ".join(f"{name}: {what}" for name, what in TRAINERS.items()),
+        + "; ".join(f"{t.name}: {t.summary}" for t in TRAINERS),
     )
-    p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(TRAINERS)}")
+    p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(t.name for t in TRAINERS)}")
     p.add_argument("flags", nargs=argparse.REMAINDER, help="the trainer's flags, e.g. --config FILE.yaml")
     p.set_defaults(func=train)
     args = parser.parse_args(argv)

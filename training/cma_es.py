@@ -21,9 +21,9 @@ modules, with separable CMA-ES (diagonal covariance) since it has thousands of w
 Fitness of a candidate: the mean episode return over ``episodes_per_candidate`` seeds, the
 same seeds for every candidate of a generation (common random numbers), new seeds each
 generation. The checkpoint holds the distribution's mean (CMA-ES's best estimate under noise);
-``progress.csv`` logs the generation's mean and best return. (Checkpoints written before
-the mean was mapped into the bounds, see :func:`distribution_mean`, hold clipped parameters;
-``--resume CHECKPOINT --generations <its generation>`` writes them again, corrected.)
+``progress.csv`` logs the generation's mean and best return. The run folder, resume (rerun the
+same command after an interruption, or ``--resume CHECKPOINT``), the journal of finished
+episodes, logs and time limit are :class:`training.runs.GenerationalRun`'s.
 
     python -m training.cma_es --config configs/train/cma_rules_chain_full.yaml
     python -m training.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
@@ -34,29 +34,19 @@ from __future__ import annotations
 
 import inspect
 import json
-import os
-import pickle
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from baselines.base import constructor_parameters
 from proteo_env.registry import task_name
-from training.common import (
-    ProgressLog,
-    checkpoint_folder,
-    make_run_dir,
-    parse_args,
-    save_args,
-    seed_everything,
-    write_checkpoint_meta,
-)
+from training.common import parse_args, seed_everything
+from training.runs import GenerationalArgs, GenerationalRun
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(GenerationalArgs):
     """CMA-ES over hand-coded rule parameters or a neural controller (arguments of training/cma_es.py)."""
 
     task: str = "chain-v0"
@@ -76,28 +66,13 @@ class Args:
     """Parameters left at their defaults (rules)."""
     hidden: tuple[int, ...] = (16,)
     """Hidden layer sizes (neural)."""
-    seed: int = 0
     generations: int = 100
     popsize: int = 12
+    """Candidates sampled each generation."""
     sigma0: float = 0.2
     """Initial step size (unit cube for rules, weight scale for neural)."""
     episodes_per_candidate: int = 3
-    checkpoint_every: int = 10
-    """Generations between checkpoints."""
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    run_dir: str | None = None
-    resume: str | None = None
-    threads: int = 1
-    tensorboard: bool = True
-    progress_bar: bool = True
-    ray: bool = False
-    """Evaluate the population's episodes as Ray tasks (same results as serially)."""
-    address: str | None = None
-    """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
-    workers: int | None = None
-    """Worker processes (default: every core); with ``ray``, CPUs of the local Ray instance or
-    tasks at once on a cluster. The results do not depend on it."""
+    """Worlds each candidate plays per generation (the same for every candidate of a generation)."""
 
 
 # ---------------------------------------------------------------------- the rules' parameter space
@@ -210,15 +185,13 @@ class CandidateEpisode:
     """One episode of one neural candidate (picklable; a Ray task when ``--ray``); the rules'
     candidates run through :func:`rules_episodes`.
 
-    ``genome`` is the candidate ``x`` (``(n,)`` weights); ``params`` is empty.
+    ``genome`` is the candidate ``x`` (``(n,)`` weights of a :class:`~training.policies.NumpyMLP`
+    with ``hidden`` layers).
     """
 
     task: str
     env: str
     """The JSON of the ``proteo_env.make`` overrides."""
-    controller: str
-    policy: str
-    params: tuple
     hidden: tuple
     genome: tuple
     seed: int
@@ -327,26 +300,10 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
             return total, bool(result.terminated[0]), env.cycle
 
 
-RESUME_INDEPENDENT = (
-    "generations",
-    "time_limit_minutes",
-    "checkpoint_every",
-    "run_dir",
-    "resume",
-    "threads",
-    "tensorboard",
-    "progress_bar",
-    "ray",
-    "address",
-    "workers",
-)
-"""Arguments that may change when an interrupted run is rerun (the others must stay)."""
-
-
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     from proteo_env.config import ConfigError
-    from training.distributed import Journal, ray_options, run_jobs
+    from training.distributed import ray_options, run_jobs
 
     if args.controller not in ("rules", "neural"):
         raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
@@ -358,33 +315,19 @@ def main(argv=None) -> Path:
     import proteo_env
     from baselines import POLICIES, make_policy
     from proteo_env.adapters.flatten import ObservationEncoder
-    from training.checkpoints import read_meta
     from training.policies import NumpyMLP
 
     env = proteo_env.make(args.task, **args.env)
     encoder = ObservationEncoder.for_env(env)
     nvec = env.action_layout.nvec
     algorithm = f"cma-{args.controller}"
-    resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = Path(
-        args.run_dir
-        or (resume_meta or {}).get("run_dir")
-        or Path("runs") / f"cma_{args.controller}_{task_name(args.task)}_s{args.seed}"
+    run = GenerationalRun(
+        args,
+        algorithm=algorithm,
+        name=f"cma_{args.controller}_{task_name(args.task)}_s{args.seed}",
+        what="CMA-ES run",
+        counter="cma/generation",
     )
-    state_file = run_dir / "state.pkl"
-    """The state after the last finished generation; an interrupted run (no final/) resumes from it."""
-    interrupted = state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
-    run_dir = make_run_dir(str(run_dir), run_dir.name, resume=resume_meta is not None or interrupted)
-    fingerprint = {k: v for k, v in asdict(args).items() if k not in RESUME_INDEPENDENT}
-    if interrupted:
-        state = pickle.loads(state_file.read_bytes())
-        if state["fingerprint"] != fingerprint:
-            diff = sorted(k for k in fingerprint if state["fingerprint"].get(k) != fingerprint[k])
-            raise ConfigError(
-                f"run_dir {str(run_dir)!r} holds an interrupted run with other arguments (differing: "
-                f"{', '.join(diff)}); allowed: the same arguments to resume it, or another run_dir"
-            )
-    save_args(args, run_dir)
 
     # Two independent streams of the run's seed (numpy.random.SeedSequence children): the episodes'
     # world seeds, and CMA-ES's own sampling (cma seeds numpy's legacy generator with an integer;
@@ -413,85 +356,53 @@ def main(argv=None) -> Path:
 
     rng = np.random.default_rng(episode_stream)
     agent_steps = 0
-    if interrupted:
-        es, agent_steps = state["es"], state["agent_steps"]
-        rng.bit_generator.state = state["rng"]
-        np.random.set_state(state["np_random"])  # CMA-ES samples its candidates from numpy's global generator
-        print(f"resuming the interrupted run in {run_dir} after generation {es.countiter}")
-    elif resume_meta is not None:
-        es = pickle.loads((Path(resume_meta["dir"]) / "es.pkl").read_bytes())
-        agent_steps = int(resume_meta["agent_steps"])
+    if run.resumed is not None:
+        es, agent_steps = run.resumed["es"], run.resumed["agent_steps"]
+        rng.bit_generator.state = run.resumed["rng"]
+        np.random.set_state(run.resumed["np_random"])  # CMA-ES samples its candidates from numpy's global generator
     else:
         es = cma.CMAEvolutionStrategy(x0, args.sigma0, options)
-    if es.N != len(x0):
-        evolved = sorted((resume_meta or {}).get("params", {}))
-        raise ConfigError(
-            f"resume={args.resume!r}: the checkpoint evolved {es.N} values"
-            f"{' (' + ', '.join(evolved) + ')' if evolved else ''}, these arguments give "
-            f"{len(x0)}; allowed: the same controller, hidden sizes and params as the run"
-        )
 
-    def save(folder: Path) -> None:
-        folder.mkdir(parents=True, exist_ok=True)
+    def state_now() -> dict:
+        return {
+            "es": es,
+            "agent_steps": agent_steps,
+            "rng": rng.bit_generator.state,
+            "np_random": np.random.get_state(),
+        }
+
+    def write(folder: Path, steps: int) -> None:
         mean = distribution_mean(es)
-        (folder / "es.pkl").write_bytes(pickle.dumps(es))  # for --resume only
-        extra = {"label": algorithm, "run_dir": str(run_dir), "generation": int(es.countiter), "args": asdict(args)}
         if args.controller == "rules":
-            extra.update(policy=policy_name, params=decode(mean))
+            extra = {"policy": policy_name, "params": decode(mean)}
         else:
             np.save(folder / "genome.npy", mean.astype(np.float32))
-            extra.update(hidden=list(args.hidden))
-        write_checkpoint_meta(
+            extra = {"hidden": list(args.hidden)}
+        run.write_meta(
             folder,
-            algorithm=algorithm,
             task=env.task.task_id(),
             env_overrides=dict(args.env),
             encoder_spec=encoder.spec() if args.controller == "neural" else None,
             nvec=nvec,
-            agent_steps=agent_steps,
-            seed=args.seed,
+            agent_steps=steps,
+            generation=int(es.countiter),
             extra=extra,
         )
 
-    def save_state() -> None:
-        tmp = state_file.with_suffix(".tmp")
-        tmp.write_bytes(
-            pickle.dumps(
-                {
-                    "es": es,
-                    "agent_steps": agent_steps,
-                    "rng": rng.bit_generator.state,
-                    "np_random": np.random.get_state(),
-                    "fingerprint": fingerprint,
-                }
-            )
-        )
-        os.replace(tmp, state_file)
-
     # ------------------------------------------------------------------ evolve
-    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
-    if interrupted:
-        log.drop_after("cma/generation", es.countiter)
-    journal = Journal(run_dir / "episodes.jsonl", fingerprint, what="CMA-ES run")
-    """Every finished episode of this run (by candidate and seed): an interrupted generation resumes."""
     n_agents = len(env.possible_agents)
-    bar = tqdm(
-        total=args.generations, initial=es.countiter, unit="generation", desc=algorithm, disable=not args.progress_bar
-    )
     overrides = json.dumps(args.env, sort_keys=True)
+    run.start(es.countiter)
     while es.countiter < args.generations:
         seeds = [int(s) for s in rng.integers(2**31, size=args.episodes_per_candidate)]
         candidates = es.ask()
         if args.controller == "rules":
-            episodes = rules_episodes(args, policy_name, env, [decode(x) for x in candidates], seeds, ray, journal)
+            episodes = rules_episodes(args, policy_name, env, [decode(x) for x in candidates], seeds, ray, run.journal)
         else:
             jobs = [
                 CandidateEpisode(
                     task=args.task,
                     env=overrides,
-                    controller=args.controller,
-                    policy=policy_name,
-                    params=params,
                     hidden=tuple(args.hidden),
                     genome=tuple(float(v) for v in x),
                     seed=s,
@@ -505,7 +416,7 @@ def main(argv=None) -> Path:
                 [j.key for j in jobs],
                 ray=ray,
                 workers=args.workers if ray is None else None,
-                journal=journal,
+                journal=run.journal,
                 desc=f"generation {es.countiter + 1}",
                 progress=args.progress_bar,
             )
@@ -526,7 +437,6 @@ def main(argv=None) -> Path:
             )
         worst = min(valid) - 1.0
         es.tell(candidates, [-(worst if f is None else f) for f in fitness])  # CMA-ES minimises
-        bar.update(1)
         values = {
             "episode/return": float(np.mean(valid)),
             "episode/best_candidate_return": max(valid),
@@ -540,21 +450,13 @@ def main(argv=None) -> Path:
             values.update(
                 {f"param/{k}": float(v) for k, v in decode(distribution_mean(es)).items() if not isinstance(v, str)}
             )
-        log.log(agent_steps, values)
-        if es.countiter % args.checkpoint_every == 0:
-            save(checkpoint_folder(run_dir, agent_steps))
-        save_state()
-        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+        if run.end_generation(es.countiter, agent_steps, values, state_now(), write):
             break
-    bar.close()
-    save(run_dir / "final")
-    journal.complete()
-    log.close()
+    final = run.finish(agent_steps, state_now(), write)
     print(
-        f"final checkpoint: {run_dir / 'final'}  ({es.countiter} generations, {agent_steps} agent-steps, "
-        f"{log.seconds:.0f} s)"
+        f"final checkpoint: {final}  ({es.countiter} generations, {agent_steps} agent-steps, {run.log.seconds:.0f} s)"
     )
-    return run_dir / "final"
+    return final
 
 
 if __name__ == "__main__":

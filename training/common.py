@@ -81,7 +81,9 @@ def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | No
     parser.add_argument("--config", help="YAML file of arguments (see configs/train/)")
     hints = typing.get_type_hints(args_cls)
     docs = field_docs(args_cls)
-    for f in dataclasses.fields(args_cls):
+    own = vars(args_cls).get("__annotations__", {})
+    fields = dataclasses.fields(args_cls)
+    for f in [f for f in fields if f.name in own] + [f for f in fields if f.name not in own]:  # its own first
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
         kind = f"{getattr(hints[f.name], '__name__', hints[f.name])}, default: {default!r}"
         parser.add_argument(
@@ -282,24 +284,12 @@ class ProgressLog:
 
 
 # ---------------------------------------------------------------------- checkpoints
-ALGORITHMS = (
-    "sb3-maskable-ppo",
-    "torchrl-ppo",
-    "cma-neural",
-    "cma-rules",
-    "ppo",
-    "rllib-ppo",
-    "imitation",
-    "program-evolution",
-)
-EVOLVED_ALGORITHMS = ("cma-neural", "cma-rules", "program-evolution")
-"""The algorithms of :data:`ALGORITHMS` that evolve a controller (their checkpoints are
-``"evolved"`` in tables, the rest ``"learned"``: :func:`checkpoint_kind`)."""
-
-
 def checkpoint_kind(meta: dict) -> str:
-    """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds."""
-    return "evolved" if meta["algorithm"] in EVOLVED_ALGORITHMS else "learned"
+    """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds (its
+    trainer's registration, :mod:`training.trainers`)."""
+    from training.trainers import ALGORITHMS
+
+    return "evolved" if ALGORITHMS[meta["algorithm"]].evolved else "learned"
 
 
 class CheckpointError(ValueError):
@@ -342,6 +332,8 @@ def read_meta(path) -> dict:
         raise CheckpointError(
             f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}"
         )
+    from training.trainers import ALGORITHMS
+
     if meta.get("algorithm") not in ALGORITHMS:
         raise CheckpointError(
             f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "

@@ -45,33 +45,21 @@ an interruption, or ``--resume CHECKPOINT --generations N`` to go on from a chec
 from __future__ import annotations
 
 import json
-import os
-import pickle
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from proteo_env.registry import task_name
-from training.common import (
-    ProgressLog,
-    check_integers,
-    check_numbers,
-    checkpoint_folder,
-    make_run_dir,
-    parse_args,
-    save_args,
-    seed_everything,
-    write_checkpoint_meta,
-)
+from training.common import check_integers, check_numbers, parse_args, seed_everything
+from training.runs import GenerationalArgs, GenerationalRun
 
 ALGORITHM = "program-evolution"
 """The ``algorithm`` of an evolved program's checkpoint."""
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(GenerationalArgs):
     """Evolution of programs of the paper's primitives (arguments of training/evolve.py)."""
 
     task: str = "chain-v1"
@@ -105,41 +93,11 @@ class Args:
     final_episodes_per_variation: int = 0
     """Episodes per variation on which the survivors are scored after the last generation to
     choose the final checkpoint (0: the last generation's best)."""
-    seed: int = 0
-    generations: int = 50
-    checkpoint_every: int = 10
-    """Generations between checkpoints."""
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    run_dir: str | None = None
-    resume: str | None = None
-    threads: int = 1
-    tensorboard: bool = True
-    progress_bar: bool = True
-    ray: bool = False
-    """Run the batches of episodes as Ray tasks (same results as locally)."""
-    address: str | None = None
-    """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
-    workers: int | None = None
-    """Worker processes (default: every core); with ``ray``, CPUs of the local Ray instance or
-    tasks at once on a cluster. The results do not depend on it."""
 
 
-RESUME_INDEPENDENT = (
-    "generations",
-    "final_episodes_per_variation",
-    "time_limit_minutes",
-    "checkpoint_every",
-    "run_dir",
-    "resume",
-    "threads",
-    "tensorboard",
-    "progress_bar",
-    "ray",
-    "address",
-    "workers",
-)
-"""Arguments that may change when an interrupted run is rerun (the others must stay)."""
+INDEPENDENT = ("final_episodes_per_variation",)
+"""Options beside :data:`training.runs.RUN_INDEPENDENT` a resumed run may change (the final choice
+comes after the generations)."""
 
 
 # ---------------------------------------------------------------------- episodes
@@ -268,8 +226,7 @@ def breed(population: list, space, rng: np.random.Generator, args: Args) -> list
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    from proteo_env.config import ConfigError
-    from training.distributed import Journal, ray_options
+    from training.distributed import ray_options
     from training.evaluator import run_episodes
 
     variations = check_args(args)
@@ -278,7 +235,6 @@ def main(argv=None) -> Path:
 
     import proteo_env
     from baselines.program import format_program, load_program
-    from training.checkpoints import read_meta
     from training.program_variation import ProgramSpace, complexity, mutate, random_program
 
     env = proteo_env.make(args.task, **args.env)
@@ -288,39 +244,24 @@ def main(argv=None) -> Path:
         space = ProgramSpace.for_env(env, **limits)
     else:
         space = ProgramSpace.for_program(seed_program, type(env.task), **limits)
-    resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = Path(
-        args.run_dir
-        or (resume_meta or {}).get("run_dir")
-        or Path("runs") / f"evolve_{task_name(args.task)}_s{args.seed}"
+    run = GenerationalRun(
+        args,
+        algorithm=ALGORITHM,
+        name=f"evolve_{task_name(args.task)}_s{args.seed}",
+        what="evolution run",
+        counter="evolve/generation",
+        independent=INDEPENDENT,
     )
-    state_file = run_dir / "state.pkl"
-    """The state after the last finished generation; an interrupted run (no final/) resumes from it."""
-    interrupted = state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
-    fingerprint = {k: v for k, v in asdict(args).items() if k not in RESUME_INDEPENDENT}
-    if interrupted or resume_meta is not None:
-        state = pickle.loads((state_file if interrupted else Path(resume_meta["dir"]) / "state.pkl").read_bytes())
-        if state["fingerprint"] != fingerprint:
-            diff = sorted(k for k in fingerprint if state["fingerprint"].get(k) != fingerprint[k])
-            where = (
-                f"run_dir {str(run_dir)!r} holds an interrupted run" if interrupted else f"resume={args.resume!r} is"
-            )
-            raise ConfigError(
-                f"{where} with other arguments (differing: {', '.join(diff)}); allowed: the same arguments "
-                "to resume it, or another run_dir"
-            )
-    run_dir = make_run_dir(str(run_dir), run_dir.name, resume=resume_meta is not None or interrupted)
-    save_args(args, run_dir)
 
     # Independent streams of the run's seed: the generations' worlds, the variation operators'
     # draws, and the worlds of the final choice.
     world_stream, variation_stream, final_stream = np.random.SeedSequence(args.seed).spawn(3)
     rng = np.random.default_rng(variation_stream)
-    if interrupted or resume_meta is not None:
+    if run.resumed is not None:
+        state = run.resumed
         population = [load_program(text, env) for text in state["population"]]
         generation, agent_steps, best_fitness = state["generation"], state["agent_steps"], state["best_fitness"]
         rng.bit_generator.state = state["rng"]
-        print(f"resuming the run in {run_dir} after generation {generation}")
     else:
         if seed_program is None:
             population = [random_program(space, rng, env.task.name) for _ in range(args.population)]
@@ -335,48 +276,22 @@ def main(argv=None) -> Path:
             "agent_steps": agent_steps,
             "best_fitness": best_fitness,
             "rng": rng.bit_generator.state,
-            "fingerprint": fingerprint,
         }
 
-    def save(folder: Path) -> None:
-        folder.mkdir(parents=True, exist_ok=True)
+    def write(folder: Path, steps: int) -> None:
         (folder / "program.yaml").write_text(format_program(population[0]))
-        (folder / "state.pkl").write_bytes(pickle.dumps(state_now()))  # for --resume only
-        write_checkpoint_meta(
+        run.write_meta(
             folder,
-            algorithm=ALGORITHM,
             task=env.task.task_id(),
             env_overrides=dict(args.env),
             encoder_spec=None,
             nvec=env.action_layout.nvec,
-            agent_steps=agent_steps,
-            seed=args.seed,
-            extra={
-                "label": ALGORITHM,
-                "run_dir": str(run_dir),
-                "generation": generation,
-                "fitness": best_fitness,
-                "complexity": complexity(population[0]),
-                "args": asdict(args),
-            },
+            agent_steps=steps,
+            generation=generation,
+            extra={"fitness": best_fitness, "complexity": complexity(population[0])},
         )
 
-    def save_state() -> None:
-        tmp = state_file.with_suffix(".tmp")
-        tmp.write_bytes(pickle.dumps(state_now()))
-        os.replace(tmp, state_file)
-
-    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
-    if interrupted:
-        log.drop_after("evolve/generation", generation)
-    journal = Journal(run_dir / "episodes.jsonl", fingerprint, what="evolution run")
-    """Every finished episode of this run (by program and world): an interrupted generation resumes."""
-    bar = tqdm(
-        total=args.generations, initial=generation, unit="generation", desc=ALGORITHM, disable=not args.progress_bar
-    )
-
     episode_score = EPISODE_SCORES[args.fitness]
-
     limits_of = [proteo_env.make(args.task, **json.loads(v)) for v in variations]
     modules = [len(e.possible_agents) for e in limits_of]
 
@@ -388,7 +303,7 @@ def main(argv=None) -> Path:
             program_episodes(args.task, variations, texts, seeds),
             workers=args.workers if ray is None else None,
             ray=ray,
-            journal=journal,
+            journal=run.journal,
             desc=desc,
             progress=args.progress_bar,
         )
@@ -403,6 +318,7 @@ def main(argv=None) -> Path:
         ]
         return fitness, outcomes
 
+    run.start(generation)
     while generation < args.generations:
         seeds = generation_seeds(world_stream, generation, args.episodes_per_variation)
         candidates = list({format_program(p): p for p in population + breed(population, space, rng, args)}.values())
@@ -412,40 +328,29 @@ def main(argv=None) -> Path:
         best = order[0]
         best_fitness = fitness[best]
         generation += 1
-        bar.update(1)
-        log.log(
-            agent_steps,
-            {
-                "fitness/best": best_fitness,
-                "fitness/median": float(np.median(fitness)),
-                "episode/return": float(np.mean([r.total_reward for r in outcomes[best]])),
-                "episode/success": float(np.mean([r.success for r in outcomes[best]])),
-                "episode/cycles": float(np.mean([r.cycles for r in outcomes[best]])),
-                "program/complexity": float(complexity(candidates[best])),
-                "evolve/candidates": float(len(candidates)),
-                "evolve/generation": float(generation),
-            },
-        )
-        if generation % args.checkpoint_every == 0:
-            save(checkpoint_folder(run_dir, agent_steps))
-        save_state()
-        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+        values = {
+            "fitness/best": best_fitness,
+            "fitness/median": float(np.median(fitness)),
+            "episode/return": float(np.mean([r.total_reward for r in outcomes[best]])),
+            "episode/success": float(np.mean([r.success for r in outcomes[best]])),
+            "episode/cycles": float(np.mean([r.cycles for r in outcomes[best]])),
+            "program/complexity": float(complexity(candidates[best])),
+            "evolve/candidates": float(len(candidates)),
+        }
+        if run.end_generation(generation, agent_steps, values, state_now(), write):
             break
-    bar.close()
     if args.final_episodes_per_variation:
         seeds = generation_seeds(final_stream, generation, args.final_episodes_per_variation)
         fitness, _ = score(population, seeds, "final choice")
         order = sorted(range(len(population)), key=lambda c: -fitness[c])
         population, best_fitness = [population[c] for c in order], fitness[order[0]]
         print(f"final choice on {len(seeds) * len(variations)} worlds: survivor {order[0] + 1}, fitness {best_fitness}")
-    save(run_dir / "final")
-    journal.complete()
-    log.close()
+    final = run.finish(agent_steps, state_now(), write)
     print(
-        f"final checkpoint: {run_dir / 'final'}  ({generation} generations, best fitness {best_fitness}, "
-        f"{agent_steps} agent-steps, {log.seconds:.0f} s)"
+        f"final checkpoint: {final}  ({generation} generations, best fitness {best_fitness}, "
+        f"{agent_steps} agent-steps, {run.log.seconds:.0f} s)"
     )
-    return run_dir / "final"
+    return final
 
 
 if __name__ == "__main__":

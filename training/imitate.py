@@ -70,6 +70,7 @@ from training.networks import (
     teacher_cross_entropy,
 )
 from training.policies import check_memory, check_sampled
+from training.runs import RunArgs
 from training.teachers import DEFAULT_TEACHER, Teachers
 from training.worlds import TrainingEnvs
 
@@ -77,7 +78,7 @@ ALGORITHM = "imitation"
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(RunArgs):
     """Behaviour cloning with DAgger from the hand-coded rules (arguments of training/imitate.py)."""
 
     task: str = "chain-v0"
@@ -88,7 +89,6 @@ class Args:
     teacher: str = DEFAULT_TEACHER
     """The policy imitated: ``rules`` (the task's hand-coded policy), the task's name, or a checkpoint of
     the task at this control level (training/teachers.py)."""
-    seed: int = 0
     n_envs: int = 16
     """Worlds stepped together."""
     rounds: int = 4
@@ -115,12 +115,8 @@ class Args:
     sampled: str = "move"
     """Which fields the clone samples when it acts, here and in ``proteo eval``: move (the others take
     their arg-max, as the rules' mode, roles and messages are deterministic) or all."""
-    run_dir: str | None = None
-    threads: int = 1
     device: str = "cpu"
     """Where the network runs: cpu (the default), cuda, cuda:N or mps; the worlds stay on the CPU."""
-    tensorboard: bool = True
-    progress_bar: bool = True
 
     def __post_init__(self):
         check_integers(
@@ -273,6 +269,8 @@ def train(args: Args) -> Path:
         }
         log.log(agent_steps, measured)
         bar.set_postfix(agreement=f"{held_out[0]:.3f}", success=measured["episode/success"])
+        if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
+            break  # the network trained on every round collected so far
     bar.close()
     final = run_dir / "final"
     save_network_checkpoint(

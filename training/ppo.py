@@ -69,6 +69,7 @@ from training.networks import (
     teacher_cross_entropy,
 )
 from training.policies import check_memory, check_sampled
+from training.runs import RunArgs
 from training.worlds import JOIN_FROM, TrainingEnvs
 
 ALGORITHM = "ppo"
@@ -79,7 +80,7 @@ they went still resume; see :func:`training.common.parse_args`)."""
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(RunArgs):
     """Native PPO with parameter sharing over all modules (arguments of training/ppo.py)."""
 
     task: str = "chain-v0"
@@ -87,7 +88,6 @@ class Args:
     """Control level: move, move+mode or full (the fields the policy chooses)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
-    seed: int = 0
     total_steps: int = 10_000_000
     """Agent-steps (module-cycles used for learning) to train for."""
     n_envs: int = 64
@@ -116,17 +116,10 @@ class Args:
     sampled: str = "all"
     """Which fields the rollouts draw at random: all, or move (the others take their arg-max)."""
     checkpoint_every: int = 1_000_000
-    run_dir: str | None = None
     resume: str | None = None
     """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    threads: int = 1
-    """Threads for torch and numba."""
     device: str = "cpu"
     """Where the network runs: cpu, cuda, cuda:N or mps; the worlds stay on the CPU."""
-    tensorboard: bool = True
-    progress_bar: bool = True
     init: str | None = None
     """Start from this checkpoint's network (training/imitate.py or training/ppo.py, the same shape)."""
     teacher: str = "rules"

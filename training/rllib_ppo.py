@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from proteo_env.registry import task_name
 from training.common import (
@@ -44,13 +45,14 @@ from training.common import (
     seed_everything,
     write_checkpoint_meta,
 )
+from training.runs import RunArgs
 
 SHARED = "shared"
 """The one policy (RLModule id) every module maps to."""
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(RunArgs):
     """RLlib PPO with one shared action-masked policy at control level move (training/rllib_ppo.py)."""
 
     task: str = "chain-v1"
@@ -58,7 +60,6 @@ class Args:
     """Overrides passed to ``proteo_env.make`` (``control`` is always ``move``)."""
     control: str = "move"
     """The control level the policy acts at (only ``move``: one Discrete(13) action per module)."""
-    seed: int = 0
     iterations: int = 50
     """PPO iterations (each samples ``train_batch_size`` cycles, then updates)."""
     env_runners: int = 2
@@ -71,12 +72,8 @@ class Args:
     gamma: float = 0.99
     hidden: tuple[int, ...] = (64, 64)
     checkpoint_every: int = 10
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    run_dir: str | None = None
     address: str | None = None
     """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance."""
-    tensorboard: bool = True
 
 
 def _rllib_env_class():
@@ -257,7 +254,7 @@ def main(argv=None) -> Path:
             f"env_runners={args.env_runners!r}, iterations={args.iterations!r} are not allowed; "
             "allowed: env_runners >= 0, iterations >= 1"
         )
-    seed_everything(args.seed, threads=1)
+    seed_everything(args.seed, threads=args.threads)
     run_dir = make_run_dir(args.run_dir, f"rllib_ppo_{task_name(args.task)}_s{args.seed}", resume=False)
     save_args(args, run_dir)
     import ray
@@ -269,10 +266,12 @@ def main(argv=None) -> Path:
     n_agents = len(_rllib_env_class()({"task": args.task, "env": dict(args.env)}).possible_agents)
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)
     agent_steps, iteration = 0, 0
+    bar = tqdm(total=args.iterations, unit="iteration", desc="rllib-ppo", disable=not args.progress_bar)
     try:
         while iteration < args.iterations:
             result = algo.train()
             iteration += 1
+            bar.update(1)
             runners = result.get("env_runners", {})
             agent_steps = int(sum(runners.get("num_agent_steps_sampled_lifetime", {}).values()))
             learner = result.get("learners", {}).get(SHARED, {})
@@ -302,6 +301,7 @@ def main(argv=None) -> Path:
             algo, args, run_dir / "final", run_dir=run_dir, agent_steps=agent_steps, iteration=iteration, rllib=True
         )
     finally:
+        bar.close()
         algo.stop()
         log.close()
         if started_ray:

@@ -35,18 +35,18 @@ from training.common import (
     torch_device,
     write_checkpoint_meta,
 )
+from training.runs import RunArgs
 
 ALGORITHM = "sb3-maskable-ppo"
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(RunArgs):
     """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py)."""
 
     task: str = "chain-v0"
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make`` (size, cycle limit, physics, task parameters)."""
-    seed: int = 0
     total_steps: int = 200_000
     """Agent-steps (module-cycles) to train for, counted across all worlds."""
     n_envs: int = 4
@@ -64,17 +64,10 @@ class Args:
     vf_coef: float = 0.5
     hidden: tuple[int, ...] = (64, 64)
     checkpoint_every: int = 50_000
-    run_dir: str | None = None
     resume: str | None = None
     """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    threads: int = 1
-    """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
     device: str = "cpu"
     """Where the networks run: cpu (the default), cuda, cuda:N or mps."""
-    tensorboard: bool = True
-    progress_bar: bool = True
 
 
 def main(argv=None) -> Path:

@@ -70,20 +70,20 @@ from pathlib import Path
 from training.common import parse_args
 
 RECIPES = {
-    "ppo": ("training.ppo", "ppo", 0),
-    "ppo48": ("training.ppo", "ppo", 48_000_000),
-    "imitation": ("training.imitate", "bc", 0),
-    "kickstart": ("training.ppo", "kickstart", 0),
-    "curriculum": ("training.ppo", "curriculum", 0),
-    "credit": ("training.ppo", "credit", 0),
-    "cma": ("training.cma_es", "cma_rules", 0),
-    "evolve": ("training.evolve", "evolve", 0),
-    "evolve-paper": ("training.evolve", "evolve_paper", 0),
-    "evolve-large": ("training.evolve", "evolve_large", 0),
-    "evolve-large-paper": ("training.evolve", "evolve_large_paper", 0),
+    "ppo": ("ppo", "ppo", 0),
+    "ppo48": ("ppo", "ppo", 48_000_000),
+    "imitation": ("imitate", "bc", 0),
+    "kickstart": ("ppo", "kickstart", 0),
+    "curriculum": ("ppo", "curriculum", 0),
+    "credit": ("ppo", "credit", 0),
+    "cma": ("cma_es", "cma_rules", 0),
+    "evolve": ("evolve", "evolve", 0),
+    "evolve-paper": ("evolve", "evolve_paper", 0),
+    "evolve-large": ("evolve", "evolve_large", 0),
+    "evolve-large-paper": ("evolve", "evolve_large_paper", 0),
 }
-"""Recipe name: (script module, prefix of its configs in configs/train, agent-steps of a PPO run
-unless ``total_steps`` says otherwise; 0: the config's)."""
+"""Recipe name: (its trainer's name in :mod:`training.trainers`, prefix of its configs in
+configs/train, agent-steps of a PPO run unless ``total_steps`` says otherwise; 0: the config's)."""
 FROM_CLONE = ("kickstart", "credit")
 """Recipes whose runs start from the kept clone of the same task and seed (``--init``)."""
 
@@ -126,11 +126,11 @@ def _config(recipe: str, task: str, level: str) -> Path:
 
 
 def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone: Path) -> list[str]:
-    module = RECIPES[recipe][0]
+    trainer = RECIPES[recipe][0]
     cmd = [
         sys.executable,
         "-m",
-        module,
+        f"training.{trainer}",
         "--config",
         str(_config(recipe, task, args.level)),
         "--seed",
@@ -140,11 +140,11 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
         "--progress-bar",
         "false",
     ]
-    if module in ("training.ppo", "training.cma_es", "training.evolve"):
+    if trainer in ("ppo", "cma_es", "evolve"):
         cmd += ["--time-limit-minutes", str(args.minutes)]
-    if module in ("training.cma_es", "training.evolve"):
+    if trainer in ("cma_es", "evolve"):
         cmd += ["--workers", "1"]  # one process per run: the study runs ``parallel`` of them
-    if module == "training.ppo":
+    if trainer == "ppo":
         steps = args.total_steps or RECIPES[recipe][2]
         cmd += ["--total-steps", str(steps)] if steps else []
     if recipe in FROM_CLONE:
@@ -239,7 +239,7 @@ def main(argv=None) -> int:
             plot_runs(
                 runs,
                 docs / f"curves_{recipe}_{task}_{level}.png",
-                title=f"{recipe} ({RECIPES[recipe][0].replace('.', '/')}.py) on {task} at {args.level}",
+                title=f"{recipe} (training/{RECIPES[recipe][0]}.py) on {task} at {args.level}",
             )
     print(json.dumps(summary, indent=1))
     return 0

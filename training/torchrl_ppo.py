@@ -38,12 +38,13 @@ from training.common import (
     seed_everything,
     write_checkpoint_meta,
 )
+from training.runs import RunArgs
 
 ALGORITHM = "torchrl-ppo"
 
 
 @dataclass(frozen=True)
-class Args:
+class Args(RunArgs):
     """IPPO/MAPPO with TorchRL (arguments of training/torchrl_ppo.py)."""
 
     task: str = "chain-v0"
@@ -54,7 +55,6 @@ class Args:
     move per module (TorchRL's ``MaskedCategorical``) and the rules' autopilot does the rest."""
     variant: str = "ippo"
     """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the world)."""
-    seed: int = 0
     total_steps: int = 200_000
     """Agent-steps (module-cycles) to train for."""
     n_envs: int = 4
@@ -72,14 +72,7 @@ class Args:
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (64, 64)
     checkpoint_every: int = 50_000
-    time_limit_minutes: float = 0.0
-    """Stop early (with a final checkpoint) after this much wall-clock time; 0: no limit."""
-    run_dir: str | None = None
     resume: str | None = None
-    threads: int = 1
-    """Threads for torch and numba (1 is fastest on a busy 2-core machine)."""
-    tensorboard: bool = True
-    progress_bar: bool = True
 
 
 def make_distribution_class(nvec):

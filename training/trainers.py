@@ -1,0 +1,103 @@
+"""The registry of trainers: each registers once what the command line, checkpoint loading, the
+tables and the study need to know of it.
+
+``proteo train NAME`` runs ``training.NAME``'s ``main(argv)``; a checkpoint whose ``proteo.json``
+says ``algorithm: A`` is loaded by the ``loader`` of the trainer that lists ``A``
+(:func:`training.checkpoints.load_policy`) and is shown as ``evolved`` or ``learned`` in tables.
+docs/guides/adding_a_trainer.md walks through adding one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Trainer:
+    """One trainer script and the checkpoints it writes.
+
+    Attributes:
+        name: ``proteo train NAME``; the script is ``training/NAME.py`` with ``main(argv)``.
+        summary: one line for ``proteo train --help``.
+        algorithms: the ``algorithm`` values its checkpoints record (none: it writes no
+            checkpoint of its own, as the study).
+        evolved: its controllers are evolved (a population scored on episodes), not learned.
+        loader: ``"module:function"`` that builds the policy of one of its checkpoints,
+            ``function(meta, env, *, seed, deterministic) -> Policy`` (``meta``: the checked
+            ``proteo.json`` with ``"dir"``).
+    """
+
+    name: str
+    summary: str
+    algorithms: tuple[str, ...] = ()
+    evolved: bool = False
+    loader: str = ""
+
+
+TRAINERS = (
+    Trainer(
+        "ppo",
+        "native PPO over the array API (training/ppo.py)",
+        ("ppo",),
+        loader="training.checkpoints:ppo_policy",
+    ),
+    Trainer(
+        "imitate",
+        "clone the rules: behaviour cloning + DAgger (training/imitate.py)",
+        ("imitation",),
+        loader="training.checkpoints:ppo_policy",
+    ),
+    Trainer(
+        "cma_es",
+        "CMA-ES on the rules' parameters or a small network (training/cma_es.py)",
+        ("cma-rules", "cma-neural"),
+        evolved=True,
+        loader="training.checkpoints:cma_policy",
+    ),
+    Trainer(
+        "evolve",
+        "evolution of programs of the paper's primitives (training/evolve.py)",
+        ("program-evolution",),
+        evolved=True,
+        loader="training.checkpoints:program_policy",
+    ),
+    Trainer(
+        "sb3_ppo",
+        "MaskablePPO, Stable-Baselines3 (training/sb3_ppo.py)",
+        ("sb3-maskable-ppo",),
+        loader="training.checkpoints:sb3_policy",
+    ),
+    Trainer(
+        "torchrl_ppo",
+        "IPPO / MAPPO, TorchRL (training/torchrl_ppo.py)",
+        ("torchrl-ppo",),
+        loader="training.checkpoints:mlp_policy",
+    ),
+    Trainer(
+        "rllib_ppo",
+        "RLlib's PPO (training/rllib_ppo.py; the distributed extra)",
+        ("rllib-ppo",),
+        loader="training.checkpoints:mlp_policy",
+    ),
+    Trainer("study", "recipes x tasks x seeds, kept in checkpoints/ (training/study.py)"),
+)
+"""Every trainer, in the order ``proteo train --help`` lists them."""
+
+ALGORITHMS = {algorithm: trainer for trainer in TRAINERS for algorithm in trainer.algorithms}
+"""The trainer of each checkpoint ``algorithm``."""
+
+
+def trainer(name: str) -> Trainer:
+    """The registered trainer ``name`` (``-`` read as ``_``); a ``ValueError`` naming the allowed ones."""
+    for t in TRAINERS:
+        if t.name == name.replace("-", "_"):
+            return t
+    raise ValueError(f"trainer {name!r} is not allowed; allowed: {', '.join(t.name for t in TRAINERS)}")
+
+
+def loader(algorithm: str):
+    """The function that loads a checkpoint of ``algorithm`` (a registered one)."""
+    import importlib
+
+    module, _, function = ALGORITHMS[algorithm].loader.partition(":")
+    return getattr(importlib.import_module(module), function)
