@@ -126,7 +126,6 @@ class GenerationalRun:
     def __init__(self, args, *, algorithm: str, name: str, what: str, counter: str, independent: tuple = ()):
         from training.common import ProgressLog
         from training.distributed import Journal
-
         from training.trainers import ALGORITHMS
 
         self.args, self.algorithm, self.counter = args, algorithm, counter
