@@ -229,7 +229,7 @@ def main(argv=None) -> int:
         "train",
         help="train a controller: proteo train TRAINER [flags] runs python -m training.TRAINER [flags]",
         description="Run a trainer of training/ with the flags that follow, unchanged "
-        "(see docs/guides/training.md; 'proteo train ppo --help' lists ppo's). Trainers: "
+        "(see docs/guides/learning.md; 'proteo train ppo --help' lists ppo's). Trainers: "
         + "; ".join(f"{t.name}: {t.summary}" for t in TRAINERS),
     )
     p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(t.name for t in TRAINERS)}")
