@@ -64,10 +64,16 @@ def _protocol_copy(tmp_path: Path, edit) -> Path:
     return tmp_path
 
 
+def test_a_protocol_fixes_an_equivalence_margin_or_makes_no_equivalence_claims(tmp_path):
+    assert load_protocol("v1").equivalence_margin is None
+    root = _protocol_copy(tmp_path, lambda d: d.update(equivalence_margin=0.05))
+    assert load_protocol("v1", root=root).equivalence_margin == 0.05
+
+
 @pytest.mark.parametrize(
     "edit, names",
     [
-        (lambda d: d.update(extra=1), ["top level", "'extra'", "version, worlds, tasks"]),
+        (lambda d: d.update(extra=1), ["top level", "'extra'", "version, worlds, equivalence_margin, tasks"]),
         (lambda d: d["worlds"].update(world=5), ["worlds", "'world'", "first_seed"]),
         (lambda d: d["tasks"]["chain"].update(budget=1), ["tasks.chain", "'budget'", "recipes"]),
         (lambda d: d["tasks"]["grasp"]["levels"].update(evolve=["move"]), ["tasks.grasp.levels", "'evolve'"]),
@@ -88,6 +94,7 @@ def _protocol_copy(tmp_path: Path, edit) -> Path:
         (lambda d: d["worlds"].update(training_seeds=1), ["worlds.training_seeds", "1", ">= 5"]),
         (lambda d: d["tasks"]["grasp"]["splits"].pop("larger"), ["tasks.grasp.splits", "larger"]),
         (lambda d: d.update(version="v2"), ["version", "'v2'", "'v1'"]),
+        (lambda d: d.update(equivalence_margin=5), ["equivalence_margin", "5", "between 0 and 1"]),
     ],
 )
 def test_bad_protocol_file_is_one_config_error_naming_the_field(tmp_path, edit, names):

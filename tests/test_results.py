@@ -280,3 +280,33 @@ def test_the_marl_eval_file_has_the_raw_data_layout_marl_eval_reads(tmp_path):
                         assert all(len(v) == 20 and all(isinstance(x, (int, float)) for x in v) for v in lists.values())
     grasp_seed = data["proteo-grasp"]["heldout"]["clone"]["run_0"]["absolute_metrics"]
     assert sum(grasp_seed["success_rate"]) == 6.0  # 0.3 of 20 worlds
+
+
+def test_matches_is_said_only_within_the_protocol_s_equivalence_margin(tmp_path):
+    """Every seed succeeds on exactly the rules' worlds: without a margin (v1) it is "no detectable
+    difference"; with the protocol's margin the two one-sided tests say it matches."""
+    from dataclasses import replace
+
+    folder = tmp_path / "bench" / "v1"
+    _write(folder, "grasp", "rules", "hand-coded", "full", {"heldout": [[True] * 90 + [False] * 10]})
+    _write(folder, "grasp", "random", "random", "move", {"heldout": [[False] * 100]})
+    _write(folder, "grasp", "clone", "learned", "move", {"heldout": [[True] * 20] * 5})
+    rows, headers = results.read_rows(folder.parent, load_protocol("v1").lineage)
+    by_key = {(r.task, r.split, r.policy): r for r in rows}
+    clone = by_key[("grasp", "heldout", "clone")]
+    rules = by_key[("grasp", "heldout", "rules")]
+    assert "no detectable difference" in results.compare("clone", clone, rules)
+    said = results.compare("clone", clone, rules, margin=0.05)
+    assert said.startswith(
+        "clone matches the success of the rules on the same 20 worlds within the protocol's margin of 0.05"
+    )
+    assert "90 % interval +0.00 to +0.00 (two one-sided tests)" in said
+    page = results.render(
+        rows,
+        headers,
+        "v1",
+        folder.parent,
+        tmp_path / "results.md",
+        replace(load_protocol("v1"), equivalence_margin=0.05),
+    )
+    assert "clone matches the success of the rules" in page

@@ -182,3 +182,23 @@ def test_ties_can_be_counted_apart_and_whole_runs_resampled_together():
     _, lo_joint, hi_joint = st.iqm_ci(np.repeat(np.array([[0.0], [0.4], [0.6], [1.0]]), 3, axis=1), joint=True)
     _, lo_apart, hi_apart = st.iqm_ci(np.repeat(np.array([[0.0], [0.4], [0.6], [1.0]]), 3, axis=1))
     assert hi_joint - lo_joint >= hi_apart - lo_apart
+
+
+def test_equivalence_needs_the_90_percent_interval_inside_the_margin():
+    """Two one-sided tests: the same successes on 100 worlds x 10 seeds are within 0.05; a shift
+    of 0.2 is not; and 2 seeds on 10 noisy worlds are neither detectably different nor shown
+    equivalent (the interval is too wide to say either)."""
+    rng = np.random.default_rng(3)
+    reference = (rng.random(100) < 0.8).astype(float)
+    same = st.equivalence(np.tile(reference, (10, 1)), reference, 0.05)
+    assert same["equivalent"] and same["lo"] == same["hi"] == 0.0 and same["margin"] == 0.05
+    shifted = np.tile(reference, (10, 1))
+    shifted[:, :20] = 0.0  # 20 of the worlds lost
+    assert not st.equivalence(shifted, reference, 0.05)["equivalent"]
+    noisy = (rng.random((2, 10)) < 0.8).astype(float)
+    test = st.equivalence(noisy, reference[:10], 0.05)
+    assert not test["equivalent"] and test["hi"] - test["lo"] > 0.1
+    wide = st.paired_difference(noisy, reference[:10])  # its 95 % interval holds the 90 % one
+    assert wide["lo"] <= test["lo"] and test["hi"] <= wide["hi"]
+    with pytest.raises(ValueError, match="margin"):
+        st.equivalence(noisy, reference[:10], 0.0)

@@ -95,7 +95,7 @@ MIN_WORLDS_PER_TRAINING_SEED = 20
 MIN_TRAINING_SEEDS = 5
 """A learned or evolved recipe is judged with at least this many training seeds."""
 
-PROTOCOL_KEYS = ("version", "worlds", "tasks")
+PROTOCOL_KEYS = ("version", "worlds", "equivalence_margin", "tasks")
 EXTENSION_KEYS = ("version", "extends", "tasks")
 """The keys of a protocol that extends another: it only adds levels and recipes to its tasks."""
 WORLDS_KEYS = ("first_seed", "reference", "per_training_seed", "training_seeds")
@@ -154,6 +154,9 @@ class Protocol:
     training_seeds: int
     tasks: dict
     """``{task name: TaskProtocol}``."""
+    equivalence_margin: float | None = None
+    """The margin within which a controller's success rate "matches" the rules' on the same worlds
+    (two one-sided tests, :func:`training.statistics.equivalence`); ``None``: no "matches" claim."""
 
     def world_seeds(self, n: int) -> list[int]:
         """The first ``n`` world seeds: every policy judged on ``n`` worlds gets these."""
@@ -305,6 +308,15 @@ def load_protocol(version: str, root=None) -> Protocol:
             raise ConfigError(f"{where}: worlds.{key} is missing; allowed: an integer >= {least[key][0]}")
         counts[key] = _integer(where, f"worlds.{key}", worlds[key], *least[key])
 
+    margin = data.get("equivalence_margin")
+    if margin is not None and (
+        not isinstance(margin, (int, float)) or isinstance(margin, bool) or not 0.0 < margin < 1.0
+    ):
+        raise ConfigError(
+            f"{where}: equivalence_margin = {margin!r} is not allowed; allowed: a success-rate difference "
+            "between 0 and 1 (0.05: within five points), or no key (no equivalence claims)"
+        )
+
     tasks_raw = data.get("tasks")
     names = sorted({cls.name for cls in TASKS.values()} - {"sandbox"})
     tasks_raw = _mapping(where, "tasks", tasks_raw, names)
@@ -397,6 +409,7 @@ def load_protocol(version: str, root=None) -> Protocol:
         per_training_seed=counts["per_training_seed"],
         training_seeds=counts["training_seeds"],
         tasks=tasks,
+        equivalence_margin=None if margin is None else float(margin),
     )
 
 

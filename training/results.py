@@ -153,14 +153,16 @@ def reference_of(row: Row, by_key: dict) -> Row | None:
     return None
 
 
-def paired(row: Row, reference: Row) -> dict | None:
+def paired(row: Row, reference: Row, margin: float | None = None) -> dict | None:
     """``row`` against ``reference`` on the worlds both played (each training seed of ``row`` on
     the same worlds; the reference judged once, on those and more): ``{"success", "cycles",
     "time", "worlds", "rate", "reference_rate"}``, each of the first three a
     :func:`training.statistics.paired_difference` (bootstrap over training seeds and worlds
     jointly): the success rate; cycles to success on the pairs where both succeeded; and the time
-    to success counting a failure at the cycle limit. None when ``row`` played a world the
-    reference did not."""
+    to success counting a failure at the cycle limit. With a ``margin`` (the protocol's
+    ``equivalence_margin``) also ``"equivalence"``: two one-sided tests that the success rates
+    differ by less than it (:func:`training.statistics.equivalence`). None when ``row`` played a
+    world the reference did not."""
     column = {seed: i for i, seed in enumerate(reference.world_seeds)}
     if any(seed not in column for seed in row.world_seeds):
         return None
@@ -171,6 +173,7 @@ def paired(row: Row, reference: Row) -> dict | None:
     won_ref = np.asarray(reference.runs[0]["successes"], dtype=bool)[at]
     cycles_ref = np.asarray(reference.runs[0]["cycles"], dtype=float)[at]
     return {
+        "equivalence": None if margin is None else st.equivalence(won, won_ref, margin),
         "success": st.paired_difference(won, won_ref),
         "cycles": st.paired_difference(cycles, cycles_ref, won & won_ref[None, :]),
         "time": st.paired_difference(
@@ -191,10 +194,16 @@ def detectable(d: dict) -> bool:
     return bool(d["pairs"]) and (d["lo"] > 0 or d["hi"] < 0)
 
 
-def compare(name: str, row: Row, reference: Row) -> str:
+def matches(pair: dict) -> bool:
+    """Whether the two one-sided tests of a :func:`paired` comparison say the success rates match."""
+    return pair["equivalence"] is not None and pair["equivalence"]["equivalent"]
+
+
+def compare(name: str, row: Row, reference: Row, margin: float | None = None) -> str:
     """One sentence comparing a learned or evolved recipe with the rules at its level on a split,
-    from the paired differences (:func:`paired`)."""
-    pair = paired(row, reference)
+    from the paired differences (:func:`paired`; "matches" only within the protocol's
+    equivalence ``margin``)."""
+    pair = paired(row, reference, margin)
     if pair is None:
         return f"{name}: not judged on the reference's worlds"
     against = f"{REFERENCE_NAMES.get(reference.policy, reference.policy)} on the same {pair['worlds']} worlds"
@@ -203,6 +212,13 @@ def compare(name: str, row: Row, reference: Row) -> str:
     if detectable(success):
         verdict = "above" if success["difference"] > 0 else "below"
         text = f"{name} succeeds {verdict} {against}: {rates}, difference {_difference(success)}"
+    elif matches(pair):
+        tost = pair["equivalence"]
+        text = (
+            f"{name} matches the success of {against} within the protocol's margin of {margin:.2f}: {rates}, "
+            f"difference {_difference(success)}; 90 % interval {tost['lo']:+.2f} to {tost['hi']:+.2f} "
+            "(two one-sided tests)"
+        )
     else:
         text = f"{name}: no detectable difference in success from {against}: {rates}, difference {_difference(success)}"
     cycles = pair["cycles"]
@@ -216,24 +232,28 @@ def compare(name: str, row: Row, reference: Row) -> str:
     return text
 
 
-def verdicts(task: str, recipe: str, by_key: dict, splits: list[str]) -> str:
+def verdicts(task: str, recipe: str, by_key: dict, splits: list[str], margin: float | None = None) -> str:
     """Where a recipe's success lies detectably above or below the rules' at its level on
-    ``splits`` (paired, :func:`paired`), and where no difference is detectable, in a few words."""
-    above, below, same = [], [], []
+    ``splits`` (paired, :func:`paired`), where it matches them within the equivalence ``margin``,
+    and where no difference is detectable, in a few words."""
+    above, below, match, same = [], [], [], []
     for split in splits:
         row = by_key.get((task, split, recipe))
         reference = reference_of(row, by_key) if row is not None else None
-        pair = paired(row, reference) if reference is not None else None
+        pair = paired(row, reference, margin) if reference is not None else None
         if pair is None:
             continue
         success = pair["success"]
         if detectable(success):
             text = f"{split} ({success['difference']:+.2f}, {success['lo']:+.2f} to {success['hi']:+.2f})"
             (above if success["difference"] > 0 else below).append(text)
+        elif matches(pair):
+            match.append(split)
         else:
             same.append(split)
     parts = [f"above the rules on {', '.join(above)}"] if above else []
     parts += [f"below them on {', '.join(below)}"] if below else []
+    parts += [f"matching them within {margin:.2f} on {', '.join(match)}"] if match else []
     parts += [f"no detectable difference on {', '.join(same)}"] if same else []
     return "; ".join(parts)
 
@@ -381,10 +401,11 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
             pair = paired(row, reference)
             if pair is not None and detectable(pair["success"]):
                 (above if pair["success"]["difference"] > 0 else below).append(f"{task} {recipe}")
-            others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]])
+            margin = protocol.equivalence_margin
+            others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]], margin)
             details.append(
                 f"- {task}, held-out worlds: "
-                + compare(recipe, row, reference)
+                + compare(recipe, row, reference, margin)
                 + (f"; on the other splits {others}" if others else "")
                 + "."
             )
@@ -394,7 +415,9 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
             + (", ".join(above) or "none")
             + "; below them: "
             + (", ".join(below) or "none")
-            + "; every other recipe and task: no detectable difference (each with its interval below)."
+            + "; every other recipe and task: no detectable difference"
+            + (" (matching them within the protocol's margin where said)" if protocol.equivalence_margin else "")
+            + " (each with its interval below)."
         )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
     files = " extended by ".join(

@@ -15,7 +15,8 @@ A controller against a reference on the same worlds: :func:`paired_difference`, 
 difference of a per-episode measure over the pairs (training seed, world) that a mask keeps,
 with a bootstrap that draws training seeds and worlds jointly (each resample draws the seeds
 with replacement and the worlds with replacement, and every drawn seed plays every drawn
-world, as the seeds did), its percentile interval, and the bootstrap's two-sided p-value.
+world, as the seeds did), its percentile interval, and the bootstrap's two-sided p-value;
+:func:`equivalence`, two one-sided tests that the difference lies within a fixed margin.
 
 A group of training seeds (one configuration trained with several seeds, each run evaluated on
 its episodes): :func:`group_bootstrap`, a stratified two-level bootstrap. Each resample draws
@@ -299,6 +300,34 @@ def paired_difference(
     lo, hi = _percentiles(samples, confidence)
     p = min(1.0, 2.0 * min(float((samples <= 0).mean()), float((samples >= 0).mean())))
     return {"difference": float(delta.sum() / pairs), "lo": lo, "hi": hi, "p": p, "pairs": pairs}
+
+
+def equivalence(
+    x,
+    reference,
+    margin: float,
+    keep=None,
+    *,
+    alpha: float = 0.05,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+) -> dict:
+    """Two one-sided tests (TOST) of "the controller's measure is within ``margin`` of the reference's".
+
+    Each one-sided test at level ``alpha`` rejects "the difference is at most ``-margin``" and
+    "at least ``+margin``"; together they do exactly when the ``1 - 2 alpha`` (90 %) interval of
+    :func:`paired_difference` (the same joint bootstrap over training seeds and worlds) lies
+    inside ``(-margin, +margin)``. "Not detectably different" is not this: a wide interval around
+    0 is neither.
+
+    Returns:
+        :func:`paired_difference`'s ``{"difference", "lo", "hi", "p", "pairs"}`` at ``1 - 2 alpha``,
+        with ``"margin"`` and ``"equivalent"`` (both one-sided tests reject; never without a pair).
+    """
+    if not 0.0 < margin:
+        raise ValueError(f"equivalence: margin={margin!r} is not allowed; allowed: a number > 0")
+    d = paired_difference(x, reference, keep, resamples=resamples, seed=seed, confidence=1.0 - 2.0 * alpha)
+    return {**d, "margin": margin, "equivalent": bool(d["pairs"]) and -margin < d["lo"] and d["hi"] < margin}
 
 
 def _improvement(x: np.ndarray, y: np.ndarray, ties: float = 0.5) -> np.ndarray:
