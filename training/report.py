@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from training.pages import filled
+from training.pages import publish as publish_pages
 from training.statistics import group_bootstrap, mean_ci, wilson
 
 INTERVALS = (
@@ -360,7 +362,8 @@ def rerender(path, out, *, plots: bool = True, pages=()) -> list:
     evaluation in the current format. Every page is checked before anything is written.
     Returns the rows."""
     results, context = load_results(path)
-    texts = published(grouped(results), out, pages)
+    tables = page_tables(grouped(results), out)
+    texts = {Path(f): filled(f, tables, PUBLISH_END) for f in pages}
     rows = write_results(results, Path(out), plots=plots, **context)
     for f, text in texts.items():
         f.write_text(text)
@@ -403,34 +406,18 @@ def summary_table(results: list) -> str:
 
 
 def publish(results: list, out, files) -> None:
-    """Put the results of ``proteo eval --out OUT`` into each of ``files`` (markdown pages):
-    the whole table (:func:`markdown_table`) between :data:`PUBLISH_BEGIN` and
-    :data:`PUBLISH_END`, the summary (:func:`summary_table`) between
-    :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever a page has those markers
-    (naming ``OUT``); the whole table is followed by :data:`INTERVALS`. A page with neither is an
-    error that says what to add, and nothing is written."""
-    for f, text in published(results, out, files).items():
-        f.write_text(text)
+    """Put the results of ``proteo eval --out OUT`` into each of ``files`` (markdown pages,
+    :mod:`training.pages`): the whole table (:func:`markdown_table`, followed by
+    :data:`INTERVALS`) between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END`, the summary
+    (:func:`summary_table`) between :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever
+    a page has those markers (naming ``OUT``). A page with neither is an error that says what to
+    add, and nothing is written."""
+    publish_pages(files, page_tables(results, out), PUBLISH_END)
 
 
-def published(results: list, out, files) -> dict:
-    """``{path: new text}``: what :func:`publish` writes, without writing it (``ValueError``
-    for a page without markers)."""
-    tables = {
+def page_tables(results: list, out) -> dict:
+    """``{begin marker: table}`` of the results of ``proteo eval --out OUT``."""
+    return {
         PUBLISH_BEGIN.format(out=Path(out).as_posix()): f"{markdown_table(results)}\n\n{INTERVALS}",
         PUBLISH_SUMMARY_BEGIN.format(out=Path(out).as_posix()): summary_table(results),
     }
-    texts = {}
-    for f in map(Path, files):
-        text = f.read_text() if f.is_file() else ""
-        found = [begin for begin in tables if begin in text and PUBLISH_END in text.split(begin, 1)[1]]
-        for begin in found:
-            head, rest = text.split(begin, 1)
-            text = f"{head}{begin}\n{tables[begin]}\n{PUBLISH_END}{rest.split(PUBLISH_END, 1)[1]}"
-        if not found:
-            raise ValueError(
-                f"--publish {str(f)!r}: no {' or '.join(map(repr, tables))} ... {PUBLISH_END!r} markers; "
-                "allowed: a markdown file that has them where the table goes"
-            )
-        texts[f] = text
-    return texts

@@ -44,6 +44,8 @@ import numpy as np
 
 from proteo_env.config import ConfigError
 from training import statistics as st
+from training.pages import filled
+from training.pages import publish as publish_pages
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
@@ -540,6 +542,12 @@ PUBLISH_END = "<!-- end of the results table -->"
 """The markers between which ``--publish FILE`` writes :func:`heldout_table` (the README's)."""
 
 
+def publish(path, table: str) -> None:
+    """Put ``table`` between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END` in the page ``path``
+    (:mod:`training.pages`)."""
+    publish_pages([path], {PUBLISH_BEGIN: table}, PUBLISH_END)
+
+
 def short_cell(row: Row) -> str:
     """``k/n (lo-hi), c``: successes with the interval of the rate, and mean cycles to success."""
     s = row.summary
@@ -555,24 +563,6 @@ def heldout_table(rows: list[Row], protocol) -> str:
         cells = [short_cell(by_key[(t, "heldout", policy)]) if (t, "heldout", policy) in by_key else "-" for t in tasks]
         lines.append(f"| {policy} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def published_text(path: Path) -> str:
-    """``path``'s text, or one :class:`ConfigError` unless it exists and holds both markers in order."""
-    text = path.read_text() if path.is_file() else ""
-    if PUBLISH_BEGIN not in text or PUBLISH_END not in text.split(PUBLISH_BEGIN, 1)[1]:
-        raise ConfigError(
-            f"--publish {str(path)!r} is not allowed: no file with the {PUBLISH_BEGIN!r} ... {PUBLISH_END!r} "
-            "markers; allowed: a file that has both, in that order"
-        )
-    return text
-
-
-def publish(path: Path, table: str) -> None:
-    """Replace what stands between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END` in ``path``."""
-    head, rest = published_text(path).split(PUBLISH_BEGIN, 1)
-    tail = rest.split(PUBLISH_END, 1)[1]
-    path.write_text(f"{head}{PUBLISH_BEGIN}\n{table}\n{PUBLISH_END}{tail}")
 
 
 def main(argv=None) -> int:
@@ -593,11 +583,11 @@ def main(argv=None) -> int:
     root, out = Path(args.root), Path(args.out)
     rows, headers = read_rows(root, protocol.lineage)
     for page in args.publish:  # checked before anything is written
-        published_text(Path(page))
+        filled(page, {PUBLISH_BEGIN: ""}, PUBLISH_END)
     text = render(rows, headers, args.benchmark, root, out, protocol)
     out.write_text(text)
     for page in args.publish:
-        publish(Path(page), heldout_table(rows, protocol))
+        publish(page, heldout_table(rows, protocol))
     if args.marl_eval:
         Path(args.marl_eval).write_text(json.dumps(marl_eval_layout(rows), separators=(",", ":")) + "\n")
     print(
