@@ -22,7 +22,7 @@ Ray tasks, recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes
 ``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
 protocol, the checkpoints' task and control level, the flags) before anything is written::
 
-    proteo eval --benchmark v1 --checkpoint checkpoints/grasp/kickstart_move/seed_0 --out out/bench
+    proteo eval --benchmark v1 --checkpoint checkpoints/v1/grasp/kickstart_move/seed_0 --out out/bench
     proteo eval --benchmark v1 --checkpoint runs/s0 --checkpoint runs/s1 ...   # one recipe, its training seeds
     proteo eval --benchmark v1 --policy rules --tasks chain --level full --out docs/benchmark/v1/chain/rules_full
 
@@ -47,7 +47,7 @@ protocol, the checkpoints' task and control level, the flags) before anything is
           "world_seeds": [1000, ..., 1019],    # the worlds every training seed was judged on
           "complete": true,
           "runs": [                            # one per training seed (one for the rules and random)
-            {"source": "checkpoints/grasp/kickstart_move/seed_0", "training_seed": 0,
+            {"source": "checkpoints/v1/grasp/kickstart_move/seed_0", "training_seed": 0,
              "agent_steps": 6041600,           # null for the rules and random
              "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
              "seconds": 3.1}

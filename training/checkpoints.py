@@ -21,7 +21,7 @@ and the algorithm's files:
 checkpoint's own settings, or names the hand-coded rules or the random policy of a task
 (``"rules:chain-v1"``, ``"random:grasp-v0"``)::
 
-    env, policy = load_controller("checkpoints/chain/ppo_move/seed_0")
+    env, policy = load_controller("checkpoints/v1/chain/ppo_move/seed_0")
     result = run_episode(env, policy, seed=0)   # proteo_env.rollout.run_episode
  Anything wrong (no such path, not a checkpoint, a damaged
 file, a checkpoint of another task, control level or observation encoding) raises :class:`CheckpointError`,
