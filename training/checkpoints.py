@@ -124,7 +124,7 @@ def mlp_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
 
 def sb3_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
     """The MaskablePPO policy of training/sb3_ppo.py (``model.zip``)."""
-    return network_policy(meta, env, seed, deterministic, lambda folder, meta, encoder: _sb3_logits(folder, encoder))
+    return network_policy(meta, env, seed, deterministic, _sb3_logits)
 
 
 def network_policy(meta: dict, env, seed: int | None, deterministic: bool, logits_of):
@@ -227,7 +227,7 @@ def _need(file: Path) -> Path:
     return file
 
 
-def _sb3_logits(folder: Path, encoder: ObservationEncoder):
+def _sb3_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     file = folder / "model.zip"
     import torch
     from sb3_contrib import MaskablePPO

@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
+from training.trainers import ALGORITHMS
 
 CHECKPOINT_FORMAT = "proteo-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -287,8 +288,6 @@ class ProgressLog:
 def checkpoint_kind(meta: dict) -> str:
     """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds (its
     trainer's registration, :mod:`training.trainers`)."""
-    from training.trainers import ALGORITHMS
-
     return "evolved" if ALGORITHMS[meta["algorithm"]].evolved else "learned"
 
 
@@ -332,8 +331,6 @@ def read_meta(path) -> dict:
         raise CheckpointError(
             f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}"
         )
-    from training.trainers import ALGORITHMS
-
     if meta.get("algorithm") not in ALGORITHMS:
         raise CheckpointError(
             f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "

@@ -205,7 +205,11 @@ def compare(name: str, row: Row, reference: Row, margin: float | None = None) ->
     """One sentence comparing a learned or evolved recipe with the rules at its level on a split,
     from the paired differences (:func:`paired`; "matches" only within the protocol's
     equivalence ``margin``)."""
-    pair = paired(row, reference, margin)
+    return _sentence(name, reference, paired(row, reference, margin), margin)
+
+
+def _sentence(name: str, reference: Row, pair: dict | None, margin: float | None) -> str:
+    """:func:`compare`'s sentence from the :func:`paired` comparison ``pair`` with ``reference``."""
     if pair is None:
         return f"{name}: not judged on the reference's worlds"
     against = f"{REFERENCE_NAMES.get(reference.policy, reference.policy)} on the same {pair['worlds']} worlds"
@@ -400,14 +404,14 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
             reference = reference_of(row, by_key) if row is not None else None
             if reference is None:
                 continue
-            pair = paired(row, reference)
+            margin = protocol.equivalence_margin
+            pair = paired(row, reference, margin)
             if pair is not None and detectable(pair["success"]):
                 (above if pair["success"]["difference"] > 0 else below).append(f"{task} {recipe}")
-            margin = protocol.equivalence_margin
             others = verdicts(task, recipe, by_key, [s.name for s in protocol.tasks[task].splits[1:]], margin)
             details.append(
                 f"- {task}, held-out worlds: "
-                + compare(recipe, row, reference, margin)
+                + _sentence(recipe, reference, pair, margin)
                 + (f"; on the other splits {others}" if others else "")
                 + "."
             )

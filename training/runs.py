@@ -42,12 +42,14 @@ from pathlib import Path
 
 from proteo_env.config import ConfigError
 from training.common import (
+    ProgressLog,
     checkpoint_folder,
     make_run_dir,
     read_resume,
     save_args,
     write_checkpoint_meta,
 )
+from training.trainers import ALGORITHMS
 
 
 @dataclass(frozen=True)
@@ -124,9 +126,7 @@ class GenerationalRun:
     """
 
     def __init__(self, args, *, algorithm: str, name: str, what: str, counter: str, independent: tuple = ()):
-        from training.common import ProgressLog
         from training.distributed import Journal
-        from training.trainers import ALGORITHMS
 
         self.args, self.algorithm, self.counter = args, algorithm, counter
         script = f"training/{ALGORITHMS[algorithm].name}.py"
