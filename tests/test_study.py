@@ -4,6 +4,7 @@ configs/eval_study.yaml and the docs read them (a tiny budget)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -93,6 +94,30 @@ def test_a_clone_then_ppo_from_it_in_one_study(tmp_path):
     assert clone["algorithm"] == "imitation" and kicked["algorithm"] == "ppo"
     assert kicked["args"]["init"] == str(keep / "chain" / "imitation_move" / "seed_0")
     assert (docs / "curves_imitation_chain_move.png").is_file() and (docs / "curves_kickstart_chain_move.png").is_file()
+
+
+def test_a_study_that_fails_part_way_keeps_the_record_of_every_run_it_finished(tmp_path, monkeypatch):
+    keep, docs = tmp_path / "checkpoints", tmp_path / "docs"
+
+    class Finished:  # a training process: seed 0 writes its final checkpoint, seed 1 fails
+        def __init__(self, cmd, *a, **k):
+            run_dir = Path(cmd[cmd.index("--run-dir") + 1])
+            self.returncode = int(cmd[cmd.index("--seed") + 1])
+            if self.returncode == 0:
+                (run_dir / "final").mkdir(parents=True)
+                (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123}))
+                (run_dir / "progress.csv").write_text("seconds,agent_steps\n1.0,123\n")
+
+        def poll(self):
+            return self.returncode
+
+    monkeypatch.setattr(study.subprocess, "Popen", Finished)
+    argv = ["--tasks", "[chain]", "--seeds", "[0, 1]", "--runs-dir", str(tmp_path / "runs")]
+    with pytest.raises(RuntimeError, match="training ppo chain seed 1 failed"):
+        study.main(argv + ["--keep-dir", str(keep), "--docs-dir", str(docs)])
+    [run] = json.loads((docs / "study_move.json").read_text())
+    assert (run["task"], run["seed"], run["agent_steps"]) == ("chain", 0, 123)
+    assert not list(docs.glob("*.tmp"))
 
 
 def test_the_long_ppo_recipe_trains_the_ppo_config_for_its_own_steps(tmp_path):

@@ -45,7 +45,8 @@ thread each; a kickstart run waits for its clone), then keeps:
 - its ``progress.csv`` in ``docs/learning/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
   figure of the learning curves of all seeds per task, ``docs/learning/curves_<recipe>_<task>_<level>.png``;
 - ``docs/learning/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
-  checkpoint (runs of other recipes, tasks or seeds already recorded there are kept).
+  checkpoint, recorded as each run finishes (runs of other recipes, tasks or seeds already recorded there
+  are kept).
 
 A run whose folder already holds a final checkpoint (an earlier study of the same ``runs_dir``
 that stopped part way) is kept as it is, not trained again; delete its folder to retrain it.
@@ -159,6 +160,19 @@ def _run_seconds(run_dir: Path) -> float:
     return float(rows[-1]["seconds"]) if rows else 0.0
 
 
+def _record(path: Path, run: dict) -> None:
+    """Add one finished run to the study record (replacing an earlier record of the same recipe, task and
+    seed), written whole to a temporary file and moved into place: a study stopped part way keeps every run it
+    finished, and the record is never half-written."""
+    runs = json.loads(path.read_text()) if path.is_file() else []
+    key = (run["recipe"], run["task"], run["seed"])
+    runs = [r for r in runs if (r.get("recipe", "ppo"), r["task"], r["seed"]) != key] + [run]
+    runs.sort(key=lambda r: (r.get("recipe", "ppo"), r["task"], r["seed"]))
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(runs, indent=1))
+    tmp.replace(path)
+
+
 def main(argv=None) -> int:
     args = parse_args(Args, argv)
     level = args.level.replace("+", "-")
@@ -222,14 +236,7 @@ def main(argv=None) -> int:
                     "checkpoint": str(keep),
                 }
             )
-
-    record = docs / f"study_{level}.json"
-    before = json.loads(record.read_text()) if record.is_file() else []
-    trained = {(run["recipe"], run["task"], run["seed"]) for run in summary}
-    runs = [run for run in before if (run.get("recipe", "ppo"), run["task"], run["seed"]) not in trained] + summary
-    record.write_text(
-        json.dumps(sorted(runs, key=lambda run: (run.get("recipe", "ppo"), run["task"], run["seed"])), indent=1)
-    )
+            _record(docs / f"study_{level}.json", summary[-1])
 
     from training.plots import plot_runs
 
