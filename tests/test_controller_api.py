@@ -246,6 +246,20 @@ def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     )
 
 
+def test_every_trainer_option_has_a_docstring_for_help():
+    import dataclasses
+    import importlib
+
+    from training.common import field_docs
+
+    missing = []
+    for name in dict.fromkeys([t.name for t in TRAINERS] + ["study"]):  # as proteo train imports them
+        args = importlib.import_module(f"training.{name}").Args
+        docs = field_docs(args)
+        missing += [f"training/{name}.py {f.name}" for f in dataclasses.fields(args) if not docs.get(f.name)]
+    assert not missing, "Args fields without a docstring (their --help says nothing): " + ", ".join(missing)
+
+
 def test_every_checkpoint_algorithm_has_one_trainer_and_a_loader():
     for algorithm in ALGORITHMS:
         assert callable(loader(algorithm))

@@ -50,6 +50,7 @@ class Args(GenerationalArgs):
     """CMA-ES over hand-coded rule parameters or a neural controller (arguments of training/cma_es.py)."""
 
     task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make``."""
     controller: str = "rules"

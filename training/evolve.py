@@ -63,11 +63,13 @@ class Args(GenerationalArgs):
     """Evolution of programs of the paper's primitives (arguments of training/evolve.py)."""
 
     task: str = "chain-v1"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
     """Overrides passed to ``proteo_env.make``: the world the checkpoint is for."""
     variations: tuple[dict, ...] = ({},)
     """Env overrides over ``env``, one per task variation a program is scored on (at least one)."""
     episodes_per_variation: int = 1
+    """Worlds each program plays per variation each generation (the same worlds for every program)."""
     seed_program: str | None = None
     """A program (name, path or text) the population starts from; none: random programs."""
     population: int = 8
@@ -75,7 +77,9 @@ class Args(GenerationalArgs):
     offspring: int = 16
     """Children bred each generation (lambda)."""
     tournament: int = 3
+    """Survivors drawn at random (with replacement) per tournament; the best-ranked one drawn is a parent."""
     crossover_rate: float = 0.3
+    """Probability that a child is the crossover of two tournament winners (else a copy of the first)."""
     mutations: float = 1.5
     """Mean mutations per child (at least 1)."""
     complexity_penalty: float = 0.001

@@ -82,6 +82,7 @@ class Args(RunArgs):
     """Behaviour cloning with DAgger from the hand-coded rules (arguments of training/imitate.py)."""
 
     task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     control: str = "move"
     """Control level: move, move+mode or full (the fields the network chooses and is taught)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
@@ -104,12 +105,16 @@ class Args(RunArgs):
     n_epochs: int = 4
     """Passes over the aggregate after each round."""
     minibatch_size: int = 4096
+    """Samples (a module's observation and the teacher's action) per minibatch."""
     learning_rate: float = 1e-3
+    """Adam's learning rate (constant)."""
     message_encoding: str = "compact"
     """How the features encode the messages received (proteo_env.adapters.flatten)."""
     arch: str = "shared"
     """Network: shared or mlp (training/networks.py)."""
     hidden: tuple[int, ...] = (128, 128)
+    """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
+    critic's MLP each (arch=mlp)."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
     sampled: str = "move"

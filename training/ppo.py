@@ -84,6 +84,7 @@ class Args(RunArgs):
     """Native PPO with parameter sharing over all modules (arguments of training/ppo.py)."""
 
     task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     control: str = "move"
     """Control level: move, move+mode or full (the fields the policy chooses)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
@@ -95,13 +96,21 @@ class Args(RunArgs):
     n_steps: int = 32
     """Cycles per world in one rollout."""
     minibatch_size: int = 8192
+    """Samples (agent-steps) per minibatch of the update."""
     n_epochs: int = 1
+    """Passes over each rollout's samples per update."""
     learning_rate: float = 1e-3
+    """Adam's learning rate (constant)."""
     gamma: float = 0.99
+    """Discount factor per cycle."""
     gae_lambda: float = 0.95
+    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
     clip_range: float = 0.2
+    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
     ent_coef: float = 0.01
+    """Weight of the entropy bonus (of the sampled fields) in the loss."""
     vf_coef: float = 0.5
+    """Weight of the value loss in the loss."""
     value_norm: bool = False
     """Train the critic on returns scaled by their running mean and spread (:class:`~training.networks.ReturnScale`)."""
     max_grad_norm: float = 0.5
@@ -111,11 +120,14 @@ class Args(RunArgs):
     arch: str = "shared"
     """Network: shared (one trunk for the policy and the value) or mlp (separate MLPs)."""
     hidden: tuple[int, ...] = (64, 64)
+    """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
+    critic's MLP each (arch=mlp)."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
     sampled: str = "all"
     """Which fields the rollouts draw at random: all, or move (the others take their arg-max)."""
     checkpoint_every: int = 1_000_000
+    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
     resume: str | None = None
     """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
     device: str = "cpu"

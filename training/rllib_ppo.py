@@ -56,6 +56,7 @@ class Args(RunArgs):
     """RLlib PPO with one shared action-masked policy at control level move (training/rllib_ppo.py)."""
 
     task: str = "chain-v1"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
     """Overrides passed to ``proteo_env.make`` (``control`` is always ``move``)."""
     control: str = "move"
@@ -67,11 +68,17 @@ class Args(RunArgs):
     train_batch_size: int = 1000
     """Cycles (env steps) sampled per iteration; each gives one agent-step per module."""
     minibatch_size: int = 500
+    """Agent-steps per minibatch of the update (RLlib's ``minibatch_size``)."""
     n_epochs: int = 4
+    """Passes over each iteration's train batch (RLlib's ``num_epochs``)."""
     learning_rate: float = 3e-4
+    """Adam's learning rate (constant)."""
     gamma: float = 0.99
+    """Discount factor per cycle."""
     hidden: tuple[int, ...] = (64, 64)
+    """Widths of the tanh hidden layers of the policy MLP and of the separate value MLP."""
     checkpoint_every: int = 10
+    """PPO iterations between checkpoints (checkpoints/step_<N>/ in the run folder)."""
     address: str | None = None
     """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance."""
 

@@ -45,6 +45,7 @@ class Args(RunArgs):
     """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py)."""
 
     task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
     env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
     """Overrides passed to ``proteo_env.make`` (size, cycle limit, physics, task parameters)."""
     total_steps: int = 200_000
@@ -56,14 +57,23 @@ class Args(RunArgs):
     minibatch_size: int = 1024
     """Agent-steps per minibatch (MaskablePPO's ``batch_size``)."""
     n_epochs: int = 4
+    """Passes over each rollout per update."""
     learning_rate: float = 3e-4
+    """Adam's learning rate (constant)."""
     gamma: float = 0.99
+    """Discount factor per cycle."""
     gae_lambda: float = 0.95
+    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
     clip_range: float = 0.2
+    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
     ent_coef: float = 0.01
+    """Weight of the entropy bonus in the loss."""
     vf_coef: float = 0.5
+    """Weight of the value loss in the loss."""
     hidden: tuple[int, ...] = (64, 64)
+    """Widths of the tanh hidden layers of the policy's and of the value's separate MLPs (SB3's ``net_arch``)."""
     checkpoint_every: int = 50_000
+    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
     resume: str | None = None
     """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
     device: str = "cpu"

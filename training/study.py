@@ -94,12 +94,14 @@ class Args:
     """Train several recipes on several tasks and training seeds (arguments of training/study.py)."""
 
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
+    """Task names (no version): each run trains configs/train/<prefix>_<task>_<level>.yaml."""
     recipes: tuple[str, ...] = ("ppo",)
     """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit, cma, evolve,
     evolve-paper, evolve-large, evolve-large-paper); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
     seeds: tuple[int, ...] = (0, 1, 2)
+    """Training seeds: every recipe is trained on every task once per seed (``--seed S``)."""
     total_steps: int = 0
     """Agent-steps of each PPO run (0: the config's total_steps)."""
     minutes: float = 6.0
@@ -109,8 +111,11 @@ class Args:
     flags: dict = field(default_factory=dict)
     """Extra flags of each recipe's script, e.g. ``{imitation: [--rounds, "1"]}``."""
     runs_dir: str = "runs/study"
+    """Folder of the run folders, <recipe>_<task>_<level>_s<S>; one with a final checkpoint is not retrained."""
     keep_dir: str = "checkpoints"
+    """Where the final checkpoints are kept, as <task>/<recipe>_<level>/seed_<S>/ (without trainer.pt)."""
     docs_dir: str = "docs/learning"
+    """Where the progress logs (progress/), the learning-curve figures and study_<level>.json are written."""
 
 
 def _config(recipe: str, task: str, level: str) -> Path:
