@@ -11,7 +11,8 @@ seeds 1000..1009, it runs the hand-coded policy and strategies a reward must not
 - per task: the winding chain (the MaskablePPO checkpoint that folds the blob into a winding
   path), every module switching to NODE (the branch shortcut the evolved network found), the
   table that never settles (the MaskablePPO checkpoint that keeps creating and disbanding
-  legs), the table rules that never grow a leg (``p_max = p_min = 0``), the grasp learner that
+  legs), the table rules that never grow a leg (``p_max = p_min = 0``) and those that never
+  disband one (``p_min = 0``: a static table once grown), the grasp learner that
   approaches and never wraps (MaskablePPO).
 
 and prints one markdown table per task id (every registered version of the task): mean return
@@ -81,6 +82,7 @@ def strategies(name: str, env) -> dict:
         out["rules that never grow a leg (p_max = p_min = 0)"] = lambda seed: make_policy(
             "table", env, seed=seed, p_max=0.0, p_min=0.0
         )
+        out["rules that never disband a leg (p_min = 0)"] = lambda seed: make_policy("table", env, seed=seed, p_min=0.0)
     if name == "grasp":
         out["approach, never wrap (MaskablePPO, checkpoints/grasp/sb3_ppo)"] = checkpoint("checkpoints/grasp/sb3_ppo")
     return out

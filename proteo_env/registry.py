@@ -10,10 +10,11 @@ from .tasks.grasp import Grasp
 from .tasks.locomotion import Locomotion
 from .tasks.sandbox import Sandbox
 from .tasks.snake import Snake
-from .tasks.table import Table, TableV1
+from .tasks.table import Table, TableV1, TableV2
 
 TASKS: dict[str, type[Task]] = {
-    cls.task_id(): cls for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, Branch, BranchV1, Locomotion, Snake)
+    cls.task_id(): cls
+    for cls in (Sandbox, Chain, ChainV1, Grasp, Table, TableV1, TableV2, Branch, BranchV1, Locomotion, Snake)
 }
 """Registered task classes by id ``<name>-v<version>``."""
 

@@ -30,7 +30,7 @@ SMALL_OVERRIDES: dict[str, dict] = {
 }
 
 
-REPRESENTATIVE_TASKS = ("sandbox-v0", "chain-v1", "grasp-v0", "table-v1")
+REPRESENTATIVE_TASKS = ("sandbox-v0", "chain-v1", "grasp-v0", "table-v2")
 """The task ids whose cases run in the fast tier (``make test``): the bare engine, a growing
 structure, an object and a board. Every other id runs in the slow tier (``make test-all``)."""
 

@@ -1,5 +1,5 @@
 """Rewards whose optimum is the paper's behaviour: chain-v1 pays a straight chain, table-v1 pays
-settling and asks the legs to carry the weight (docs/tasks/*.md, "Reward against degenerate
+settling and asks the legs to carry the weight, table-v2 asks them to follow it (docs/tasks/*.md, "Reward against degenerate
 strategies", measured by benchmarks/degenerate_strategies.py)."""
 
 from __future__ import annotations
@@ -27,13 +27,13 @@ TABLE = {
 
 
 def test_versions_are_registered_and_bare_names_mean_the_newest():
-    assert {"chain-v0", "chain-v1", "table-v0", "table-v1"} <= set(proteo_env.TASKS)
-    assert task_class("chain").task_id() == "chain-v1" and task_class("table").task_id() == "table-v1"
+    assert {"chain-v0", "chain-v1", "table-v0", "table-v1", "table-v2"} <= set(proteo_env.TASKS)
+    assert task_class("chain").task_id() == "chain-v1" and task_class("table").task_id() == "table-v2"
     assert set(newest_tasks()) == {
         "sandbox-v0",
         "chain-v1",
         "branch-v1",
-        "table-v1",
+        "table-v2",
         "grasp-v0",
         "locomotion-v0",
         "snake-v0",
@@ -139,3 +139,45 @@ def test_table_v1_compiled_rollout_ends_where_the_env_does():
     stepped = run_episode(env, make_policy("table", env, seed=2), seed=2)
     assert stepped.success
     assert (compiled.success, compiled.cycles) == (stepped.success, stepped.cycles)
+
+
+def test_table_v2_spares_start_under_a_point_drawn_from_the_world_seed():
+    def spares(task_id, seed):
+        env = proteo_env.make(task_id, **TABLE)
+        env.reset(seed=seed)
+        assert env.engine.n_components() == 1
+        n = TABLE["n_spares"]
+        positions = np.array(env.world.positions[:n])
+        assert (positions[:, 2] < TABLE["depth"]).all()  # under the board
+        return frozenset(map(tuple, positions))
+
+    v2 = {seed: spares("table-v2", seed) for seed in range(6)}
+    assert len(set(v2.values())) >= 4, "the start layout varies with the world seed"
+    assert spares("table-v2", 3) == v2[3]
+    assert len({spares("table-v1", seed) for seed in range(3)}) == 1, "table-v1 keeps its one layout"
+
+
+def test_table_v2_a_table_that_never_disbands_fails_where_table_v1_lets_it_succeed():
+    # The rules with p_min = 0 grow legs where the weight is and never disband one: after the shift to
+    # (2, 8) the left half keeps all 3 of its legs for a weight of 2 (f_min = 1 per leg).
+    seeds = range(1000, 1010)
+
+    def successes(task_id, **rule_params):
+        env = proteo_env.make(task_id, **TABLE)
+        return sum(run_episode(env, make_policy("table", env, seed=s, **rule_params), seed=s).success for s in seeds)
+
+    assert successes("table-v1", p_min=0.0) >= 8
+    assert successes("table-v2", p_min=0.0) == 0
+    assert successes("table-v2") >= 8, "the rules move their legs and succeed"
+
+
+def test_table_v2_success_has_a_stable_configuration_after_every_shift_without_idle_legs():
+    env = proteo_env.make("table-v2", **TABLE)
+    result = run_episode(env, make_policy("table", env, seed=4), seed=4)
+    assert result.success
+    restabilised = [result.metrics[f"restabilise_{k}"] for k in range(len(TABLE["schedule"]))]
+    assert all(r >= 0 for r in restabilised), restabilised
+    book = env.task.ledger
+    legs = np.array([(book.grounded & book.left).sum(), (book.grounded & ~book.left).sum()])
+    assert (book.weights >= env.task.params.f_min * legs).all()
+    assert result.metrics["leg_disbands"] > 0

@@ -27,6 +27,8 @@ Spare modules
     ``n_spares`` movable modules in SLEEP, the sites nearest the point under the board's
     centre (a half ball hanging from the board, straddling both halves; it reaches the floor
     when it is large). They are connected to the board, so the whole robot is one piece.
+    ``table-v2`` draws the point they hang under from the world's seed
+    (:meth:`TableV2.spares_under`).
 Agents
     The spares (``module_0`` .. ``module_{n_spares-1}``), then the roots. FIXED board
     modules are passive (not agents).
@@ -75,10 +77,12 @@ Termination
     Success: the configuration after the last scheduled shift is stable
     (``restabilise_{K-1}`` is known); ``table-v1`` also asks that, in that stable
     configuration, each region's grounded legs carry ``min(W, f_max * R)`` of its weight
-    (``R`` its roots: all of it when the roots suffice). Truncation at ``max_cycles``: set it past the last
-    shift plus the time to re-stabilise and ``stable_window``. With the default schedule the
-    hand-coded policy succeeds after 920-1120 cycles (docs/evidence/table.md), so the env's
-    default of 1000 is too short; ``configs/table.yaml`` uses 1300.
+    (``R`` its roots: all of it when the roots suffice); ``table-v2`` asks for a stable
+    configuration after every shift, each with no idle leg (:class:`TableV2`). Truncation at
+    ``max_cycles``: set it past the last shift plus the time to re-stabilise and
+    ``stable_window``. With the default schedule the hand-coded policy succeeds after 920-1120
+    cycles (docs/evidence/table.md), so the env's default of 1000 is too short;
+    ``configs/table.yaml`` uses 1300.
 Motion model
     Legs reach the floor only under ``minimal``. Under ``sphere``, ``rounded`` and
     ``rhombic`` no single roll brings a module onto a floor site below a SEED one layer up
@@ -140,6 +144,10 @@ class TableLedger(NamedTuple):
         depth, stable_window, load_cap, f_max: the task's parameters of those names.
         carry: a complete signature also needs the legs to carry the weight
             (:func:`weight_carried`; ``table-v1``); ``False`` in ``table-v0``.
+        f_min: the task's parameter of that name.
+        follow: the legs must follow the weight (``table-v2``): a complete signature also has no
+            leg the weight does not need (:func:`no_idle_legs`), and success asks for a stable
+            configuration after every shift of the schedule, not only the last.
         active: ``(R,)`` bool, the root is ROOT or AROOT (after the last cycle).
         grounded: ``(R,)`` bool, the root has a grounded leg (after the last cycle).
         signature: ``(2, R)`` bool, (active, grounded) since ``clock[SINCE]``.
@@ -168,6 +176,8 @@ class TableLedger(NamedTuple):
     stamp: np.ndarray
     f_max: float
     carry: bool
+    f_min: float
+    follow: bool
 
     def copy(self) -> TableLedger:
         """A copy whose arrays are new."""
@@ -208,6 +218,21 @@ def weight_carried(book):
                     n_grounded += 1
         weight = book.weights[region]
         if min(weight, book.f_max * n_grounded) < min(weight, book.f_max * n_roots):
+            return False
+    return True
+
+
+@kernel
+def no_idle_legs(book):
+    """Whether :class:`TableLedger` ``book``'s grounded legs are no more than the weight needs: in
+    each region ``W >= f_min * G`` (``G`` its roots with a grounded leg), the load per leg at least
+    the one below which the paper's roots disband; a region without weight has no leg."""
+    for region in range(2):
+        n_grounded = 0
+        for r in range(book.roots.shape[0]):
+            if book.left[r] == (region == 0) and book.grounded[r]:
+                n_grounded += 1
+        if book.weights[region] < book.f_min * n_grounded:
             return False
     return True
 
@@ -258,11 +283,13 @@ def grounded_legs(grid, cell, mode, anchored, book):
 def signature_complete(book):
     """The signature of :class:`TableLedger` ``book`` is complete: every active root, and no
     other root, has a grounded leg; with ``carry`` the legs also carry the weight
-    (:func:`weight_carried`)."""
+    (:func:`weight_carried`), and with ``follow`` no leg is idle (:func:`no_idle_legs`)."""
     for r in range(book.roots.shape[0]):
         if book.active[r] != book.grounded[r]:
             return False
-    return not book.carry or weight_carried(book)
+    if book.carry and not weight_carried(book):
+        return False
+    return not book.follow or no_idle_legs(book)
 
 
 @kernel
@@ -281,7 +308,10 @@ def in_stable_configuration(book):
 
 @kernel
 def restabilised(book):
-    """The table task's success: the configuration after the last scheduled shift has been stable."""
+    """The table task's success: the configuration after the last scheduled shift has been stable
+    (with ``follow``: after every shift, each before the next)."""
+    if book.follow:
+        return bool((book.restabilise >= 0).all())
     return book.restabilise[-1] >= 0
 
 
@@ -450,12 +480,14 @@ def board_sites(p: TableParams) -> tuple[np.ndarray, np.ndarray]:
     return sites[is_root], sites[~is_root]
 
 
-def spare_sites(p: TableParams) -> np.ndarray:
-    """``(n_spares, 3)``: the sites under the board nearest the point below its centre."""
+def spare_sites(p: TableParams, under: tuple[float, float] | None = None) -> np.ndarray:
+    """``(n_spares, 3)``: the sites under the board nearest the point ``(x, y, depth)`` of the board,
+    ``under = (x, y)`` (default: the board's centre)."""
     n, h = p.board_size, p.depth
     g = np.mgrid[0:n, 0:n, 0:h].reshape(3, -1).T
     g = g[g.sum(axis=1) % 2 == 0]
-    centre = np.array([(n - 1) / 2, (n - 1) / 2, h])
+    x, y = under if under is not None else ((n - 1) / 2, (n - 1) / 2)
+    centre = np.array([x, y, h])
     d2 = ((g - centre) ** 2).sum(axis=1)
     order = np.lexsort((g[:, 1], g[:, 0], -g[:, 2], d2))
     return g[order[: p.n_spares]].astype(np.int64)
@@ -477,6 +509,8 @@ class Table(Task):
     default_policy = "table"
     carry_weight = False
     """Success needs the legs to carry the weight (:func:`weight_carried`); True from v1."""
+    follow_weight = False
+    """The legs must follow the weight (``TableLedger.follow``); True from v2."""
     mode_roles = tuple((EMIT,) if m in (AROOT, SEED) else (RELAY,) for m in range(len(MODES)))
     """``move+mode``: an AROOT (a root growing a leg) and a leg's SEED emit; the rest relay."""
     plot_groups = {
@@ -489,9 +523,14 @@ class Table(Task):
     def build_layout(self, rng):
         p = self.params
         roots, fixed = board_sites(p)
+        modules = spare_sites(p, self.spares_under(rng))
         return Layout(
-            size=(p.board_size, p.board_size, p.depth + 1), modules=spare_sites(p), roots=roots, fixed=fixed, floor=True
+            size=(p.board_size, p.board_size, p.depth + 1), modules=modules, roots=roots, fixed=fixed, floor=True
         )
+
+    def spares_under(self, rng) -> tuple[float, float] | None:
+        """The point of the board the spares hang under (None: its centre, in every world)."""
+        return None
 
     def initial_modes(self, layout):
         modes = np.full(len(layout.positions), FIXED, dtype=np.int32)
@@ -524,6 +563,8 @@ class Table(Task):
             stamp=np.zeros(1, dtype=np.int64),
             f_max=float(p.f_max),
             carry=self.carry_weight,
+            f_min=float(p.f_min),
+            follow=self.follow_weight,
         )
         """The episode's bookkeeping (:class:`TableLedger`)."""
         book = self.ledger
@@ -615,3 +656,30 @@ class TableV1(Table):
         rest = self.max_cycles - int(self.ledger.clock[CYCLE])
         terms["settled"] = rest * (terms["support"] + terms["legs"]) if self.success(world) else 0.0
         return terms
+
+
+class TableV2(TableV1):
+    """``table-v2``: the legs must follow the weight, and every world starts from its own layout.
+
+    In ``table-v1`` a table that grows a leg under every root and never disbands one succeeds
+    whenever the final weights need every root (the benchmark's small board), and every world
+    starts from the same layout, so held-out worlds differ only in their random streams. Here:
+
+    - a stable configuration also has no idle leg: in each region the weight ``W`` is at least
+      ``f_min`` per grounded leg (:func:`no_idle_legs`; the load below which the paper's roots
+      disband), and success asks for a stable configuration after *every* shift of the schedule,
+      each before the next (``restabilise_k`` known for every ``k``): when the weight leaves a
+      half, its extra legs must go;
+    - the spares hang under a point drawn from the world's seed, uniformly in the middle half of
+      the board in x and in y (:meth:`spares_under`), instead of under its centre.
+
+    Dynamics, observation, actions, reward and the other tests are those of ``table-v1``.
+    """
+
+    version = 2
+    follow_weight = True
+
+    def spares_under(self, rng) -> tuple[float, float]:
+        n = self.params.board_size
+        x, y = (n - 1) / 2 + rng.uniform(-n / 4, n / 4, size=2)
+        return float(x), float(y)
