@@ -296,6 +296,24 @@ def test_parameters_reach_the_policy_and_are_checked():
         proteo_env.make("branch", B=0)
 
 
+def test_the_first_node_at_the_blob_s_edge_and_the_rules_still_grow_a_tree():
+    settings = {"n_modules": 40, "T": 4, "B": 3, "max_cycles": 200}
+    for seed in (0, 1, 2):
+        env = proteo_env.make("branch-v0", first_node="edge", **settings)
+        env.reset(seed=seed)
+        positions = np.array(env.world.positions)
+        d2 = ((positions - positions.mean(axis=0)) ** 2).sum(axis=1)
+        [node] = np.flatnonzero(np.array(env.world.modes) == NODE)
+        assert d2[node] == d2.max() > 2 * np.median(d2), "the first node is on the rim"
+        centre = proteo_env.make("branch-v0", **settings)
+        centre.reset(seed=seed)
+        assert (np.array(centre.world.positions) == positions).all(), "the same blob; only the node moves"
+        _, terminated, _, info = run(BranchPolicy, seed, first_node="edge", n=40, limit=200, T=4, B=3)
+        assert terminated and info["metric/levels"] >= 2
+    with pytest.raises(ValueError, match="first_node='middle' is not allowed; allowed: centre, edge"):
+        proteo_env.make("branch", first_node="middle")
+
+
 # ---------------------------------------------------------------------- branch-v1: growth in 3D
 def independent_neighbour_sets():
     """Every set of a site's face neighbours no two of which touch (each a possible set of a

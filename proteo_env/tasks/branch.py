@@ -257,6 +257,10 @@ def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
     return measure_branch(grid, cell, mode, dir_delta, first_node, min_gap, target_levels, scratch)[10]
 
 
+FIRST_NODES = ("centre", "edge")
+"""Where the first NODE starts (:attr:`BranchParams.first_node`)."""
+
+
 @dataclass(frozen=True)
 class BranchParams:
     """Parameters of the branch task.
@@ -271,8 +275,10 @@ class BranchParams:
         min_gap: shortest arm, in modules, that counts as a branch for the ``levels`` metric,
             and the least distance between two branching points of successive levels (so that
             a clump of modules with 3 neighbours is not a tree of many levels).
-        initial_node: start with one NODE near the blob's centre; if False every module
+        initial_node: start with one NODE (see ``first_node``); if False every module
             starts in SLEEP and the policy must start growth itself.
+        first_node: where that NODE is: ``centre``, the module nearest the blob's centre, or
+            ``edge``, the module farthest from it (the tree grows from the blob's rim).
         planar: the tree grows in the horizontal plane of the first node (the hand-coded rule
             reads it; ``branch-v0``'s only growth); False: in every direction, as the paper says
             (``branch-v1``'s default).
@@ -290,6 +296,7 @@ class BranchParams:
     target_levels: int = 2
     min_gap: int = 3
     initial_node: bool = True
+    first_node: str = "centre"
     planar: bool = True
     margin: int = 6
     time_penalty: float = 0.001
@@ -307,6 +314,8 @@ class BranchParams:
             raise ValueError(f"min_gap={self.min_gap!r} is not allowed; allowed: an integer >= 1")
         if self.margin < 1:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
+        if self.first_node not in FIRST_NODES:
+            raise ValueError(f"first_node={self.first_node!r} is not allowed; allowed: {', '.join(FIRST_NODES)}")
 
 
 class Branch(Task):
@@ -333,9 +342,10 @@ class Branch(Task):
         return Layout(size=size, modules=sites)
 
     def root_of(self, layout) -> int:
-        """The first node: the module nearest the blob's centre (lowest index on ties)."""
-        centre = layout.modules.mean(axis=0)
-        return int(np.argmin(((layout.modules - centre) ** 2).sum(axis=1)))
+        """The first node: the module nearest the blob's centre, or with ``first_node: edge`` the
+        farthest from it (lowest index on ties)."""
+        d2 = ((layout.modules - layout.modules.mean(axis=0)) ** 2).sum(axis=1)
+        return int(np.argmax(d2) if self.params.first_node == "edge" else np.argmin(d2))
 
     def initial_modes(self, layout):
         modes = np.full(len(layout.positions), SLEEP, dtype=np.int32)
