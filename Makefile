@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint results bench eval learning-results benchmark-references benchmarl test-benchmarl
+.PHONY: install install-distributed demo test test-all lint results bench learning-results benchmark-references benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -55,9 +55,6 @@ bench: install
 results: install
 	$(BIN)/python -m training.results --benchmark v6 --publish README.md --marl-eval docs/results/marl_eval.json
 
-eval: install
-	$(BIN)/proteo eval --config configs/eval.yaml --out docs/eval --publish docs/journal/learning-first-round.md
-
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
 # docs/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
@@ -65,8 +62,6 @@ eval: install
 # v6: evolution with ten times the episodes per generation on all four), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
 # judged once per protocol: make benchmark-references (about 25 minutes).
-# The former three-seed study (docs/journal/learning-study-move.md) is reproduced from its own
-# checkpoints by proteo eval --config configs/eval_study.yaml.
 STUDY := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]"
 STUDY_V1 := $(STUDY) --keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning --runs-dir runs/v1
 STUDY_V2 := $(STUDY) --keep-dir checkpoints/v2 --docs-dir docs/benchmark/v2/learning --runs-dir runs/v2

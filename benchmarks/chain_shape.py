@@ -1,6 +1,6 @@
 """What shape of chain each policy builds: straight (the paper's) or a winding snake.
 
-    python benchmarks/chain_shape.py --checkpoint checkpoints/chain/sb3_ppo --checkpoint checkpoints/chain/torchrl_ippo
+    python benchmarks/chain_shape.py --checkpoint checkpoints/exhibits/winding_chain
 
 The chain task counts any connected, one-module-thick path as success. For every policy and
 seed this prints the end-to-end span of the final structure in lattice steps (``N - 1`` for a

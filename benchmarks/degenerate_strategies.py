@@ -72,19 +72,25 @@ def strategies(name: str, env) -> dict:
         "random": lambda seed: make_policy("random", env, seed=seed),
     }
     if name == "chain":
-        out["winding chain (MaskablePPO, checkpoints/chain/sb3_ppo)"] = checkpoint("checkpoints/chain/sb3_ppo")
+        out["winding chain (MaskablePPO, checkpoints/exhibits/winding_chain)"] = checkpoint(
+            "checkpoints/exhibits/winding_chain"
+        )
     if name == "branch":
         node = env.task.mode_index("NODE")
         out["every module NODE, staying"] = fixed(mode=node)
         out["every module NODE, random moves"] = fixed(mode=node, moving=True)
     if name == "table":
-        out["never settle (MaskablePPO, checkpoints/table/sb3_ppo)"] = checkpoint("checkpoints/table/sb3_ppo")
+        out["never settle (MaskablePPO, checkpoints/exhibits/never_settling_table)"] = checkpoint(
+            "checkpoints/exhibits/never_settling_table"
+        )
         out["rules that never grow a leg (p_max = p_min = 0)"] = lambda seed: make_policy(
             "table", env, seed=seed, p_max=0.0, p_min=0.0
         )
         out["rules that never disband a leg (p_min = 0)"] = lambda seed: make_policy("table", env, seed=seed, p_min=0.0)
     if name == "grasp":
-        out["approach, never wrap (MaskablePPO, checkpoints/grasp/sb3_ppo)"] = checkpoint("checkpoints/grasp/sb3_ppo")
+        out["approach, never wrap (MaskablePPO, checkpoints/exhibits/approach_never_wrap)"] = checkpoint(
+            "checkpoints/exhibits/approach_never_wrap"
+        )
     return out
 
 

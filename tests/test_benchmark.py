@@ -16,7 +16,7 @@ from training import benchmark
 from training.benchmark import load_protocol
 
 ROOT = Path(__file__).resolve().parents[1]
-CHAIN_CHECKPOINT = "checkpoints/chain/kickstart_move/seed_0"
+CHAIN_CHECKPOINT = "checkpoints/v1/chain/kickstart_move/seed_0"
 STUDY_TASKS = {
     "chain": "chain-v1",
     "branch": "branch-v0",
@@ -310,8 +310,8 @@ def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, name
     "argv, names",
     [
         (["--benchmark", "v9", "--policy", "rules"], ["'v9'", "allowed: v1"]),
-        (["--benchmark", "v1", "--checkpoint", "checkpoints/chain/sb3_ppo"], ["'chain-v0'", "chain-v1"]),
-        (["--benchmark", "v1", "--checkpoint", "checkpoints/chain/imitation_full/seed_0"], ["'full'", "move"]),
+        (["--benchmark", "v1", "--checkpoint", "checkpoints/exhibits/winding_chain"], ["'chain-v0'", "chain-v1"]),
+        (["--benchmark", "v1", "--checkpoint", "checkpoints/v2/chain/cma_full/seed_0"], ["'full'", "move"]),
         (["--benchmark", "v1", "--policy", "ppo"], ["--policy 'ppo'", "rules, random"]),
         (["--benchmark", "v1", "--policy", "rules", "--level", "move+mode"], ["'move+mode'", "full, move"]),
         (["--benchmark", "v1", "--policy", "rules", "--worlds-cap", "0"], ["--worlds-cap = 0", ">= 1"]),
@@ -325,7 +325,7 @@ def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, name
                 "--checkpoint",
                 CHAIN_CHECKPOINT,
                 "--checkpoint",
-                "checkpoints/grasp/ppo_move/seed_0",
+                "checkpoints/v1/grasp/ppo_move/seed_0",
             ],
             ["chain, grasp", "one recipe"],
         ),
@@ -418,7 +418,7 @@ def test_rules_and_a_checkpoint_end_to_end(tmp_path, monkeypatch):
 
 
 def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_path):
-    seeds = [f"checkpoints/chain/kickstart_move/seed_{k}" for k in (0, 1)]
+    seeds = [f"checkpoints/v1/chain/kickstart_move/seed_{k}" for k in (0, 1)]
     doc = benchmark.judge(
         "v1", checkpoints=[str(ROOT / s) for s in seeds], out=tmp_path / "out", worlds_cap=2, progress=False
     )

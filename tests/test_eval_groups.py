@@ -14,7 +14,11 @@ from training.evaluate import evaluate, load_config
 from training.report import GroupResult
 from training.statistics import group_bootstrap, wilson
 
-RUNS = ["checkpoints/chain/cma_rules", "checkpoints/chain/cma_neural", "checkpoints/chain/sb3_ppo"]
+RUNS = [
+    "checkpoints/v2/chain/cma_full/seed_0",
+    "checkpoints/v1/chain/ppo_move/seed_0",
+    "checkpoints/v3/chain/evolve_full/seed_0",
+]
 
 
 def _config(tmp_path, checkpoints):

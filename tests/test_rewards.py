@@ -55,12 +55,12 @@ def _final_terms(env, policy, seed):
 def test_chain_v1_pays_a_straight_chain_more_than_a_winding_one():
     env = proteo_env.make("chain-v1", **CHAIN)
     straight = run_episode(env, make_policy("chain", env, seed=1000), seed=1000)
-    winding = run_episode(env, load_policy("checkpoints/chain/sb3_ppo", env, seed=1000), seed=1000)
+    winding = run_episode(env, load_policy("checkpoints/exhibits/winding_chain", env, seed=1000), seed=1000)
     assert straight.success and winding.success
     assert straight.metrics["straightness"] == pytest.approx(1.0)
     assert winding.metrics["straightness"] < 0.8
     v0 = proteo_env.make("chain-v0", **CHAIN)
-    winding_v0 = run_episode(v0, load_policy("checkpoints/chain/sb3_ppo", v0, seed=1000), seed=1000)
+    winding_v0 = run_episode(v0, load_policy("checkpoints/exhibits/winding_chain", v0, seed=1000), seed=1000)
     # the same trajectory; only the success bonus differs, by exactly 1 - straightness
     assert winding_v0.cycles == winding.cycles
     assert winding_v0.total_reward - winding.total_reward == pytest.approx(1 - winding.metrics["straightness"])

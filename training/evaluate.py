@@ -36,7 +36,7 @@ Settings per task and the checkpoints to compare come from a YAML file (``config
       chain:
         env: {n_modules: 12, max_cycles: 300}
         checkpoints:
-          - checkpoints/chain/sb3_ppo                       # one checkpoint
+          - checkpoints/v2/chain/cma_full/seed_0                       # one checkpoint
           - {label: ppo, runs: [runs/ppo_s0, runs/ppo_s1, runs/ppo_s2]}   # one per training seed
       branch:
         task: branch-v0      # a version of the task (default: the newest)

@@ -40,11 +40,12 @@ their generations or that limit; ``parallel`` runs at a time, one
 thread each; a kickstart run waits for its clone), then keeps:
 
 - the final checkpoint, without its optimiser state (``--resume`` reads that from the run
-  folder), in ``checkpoints/<task>/<recipe>_<level>/seed_<S>/`` (what
-  ``configs/eval_study.yaml`` names, one ``{label, runs}`` group per task and recipe);
-- its ``progress.csv`` in ``docs/learning/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
-  figure of the learning curves of all seeds per task, ``docs/learning/curves_<recipe>_<task>_<level>.png``;
-- ``docs/learning/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
+  folder), in ``<keep_dir>/<task>/<recipe>_<level>/seed_<S>/`` (the protocol's tree:
+  ``--keep-dir checkpoints/v6``; ``configs/eval.yaml`` names such folders as one ``{label, runs}``
+  group per task and recipe);
+- its ``progress.csv`` in ``<docs_dir>/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
+  figure of the learning curves of all seeds per task, ``<docs_dir>/curves_<recipe>_<task>_<level>.png``;
+- ``<docs_dir>/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
   checkpoint, recorded as each run finishes (runs of other recipes, tasks or seeds already recorded there
   are kept).
 
@@ -112,10 +113,12 @@ class Args:
     """Extra flags of each recipe's script, e.g. ``{imitation: [--rounds, "1"]}``."""
     runs_dir: str = "runs/study"
     """Folder of the run folders, <recipe>_<task>_<level>_s<S>; one with a final checkpoint is not retrained."""
-    keep_dir: str = "checkpoints"
-    """Where the final checkpoints are kept, as <task>/<recipe>_<level>/seed_<S>/ (without trainer.pt)."""
-    docs_dir: str = "docs/learning"
-    """Where the progress logs (progress/), the learning-curve figures and study_<level>.json are written."""
+    keep_dir: str = "runs/study/checkpoints"
+    """Where the final checkpoints are kept, as <task>/<recipe>_<level>/seed_<S>/ (without trainer.pt); the
+    protocol's studies keep theirs in its tree (``checkpoints/v6``, the Makefile's learning-results)."""
+    docs_dir: str = "runs/study/docs"
+    """Where the progress logs (progress/), the learning-curve figures and study_<level>.json are written (the
+    protocol's studies: ``docs/benchmark/v6/learning``)."""
 
 
 def _config(recipe: str, task: str, level: str) -> Path:
