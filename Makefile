@@ -53,7 +53,7 @@ bench: install
 # (docs/benchmark/v1 to v6, written by proteo eval --benchmark v1|v2|v3|v4|v5|v6;
 # docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
 results: install
-	$(BIN)/python -m training.results --benchmark v6 --publish README.md --marl-eval docs/results/marl_eval.json
+	$(BIN)/python -m training.judging.results --benchmark v6 --publish README.md --marl-eval docs/results/marl_eval.json
 
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in

@@ -1,6 +1,6 @@
 """What every evidence script (``benchmarks/*_evidence.py``) shares, so that each keeps only its
 episode function (one job in, one row out), its metrics and its tables: the per-seed job runner
-(:func:`run_jobs`), the cells with intervals (from :mod:`training.statistics`), the machine line
+(:func:`run_jobs`), the cells with intervals (from :mod:`training.judging.statistics`), the machine line
 (from :mod:`machine_info`) and the writing of the page, whole (:func:`publish`) or its tables
 between the ``<!-- tables -->`` markers (:func:`write_tables`).
 """
@@ -57,7 +57,7 @@ def add_workers(parser, default: int | None = None) -> None:
 def mean_cell(values) -> str:
     """``mean ± half-width`` of the 95 % Student t interval of the known values (``None`` left
     out; ``n/a`` when none is known, the mean alone for one); no decimals from 10 up, two below."""
-    from training.statistics import mean_ci
+    from training.judging.statistics import mean_ci
 
     v = [x for x in values if x is not None]
     if not v:
@@ -71,7 +71,7 @@ def mean_cell(values) -> str:
 
 def success_cell(k: int, n: int) -> str:
     """``k/n [low, high]``: successes over episodes and their 95 % Wilson interval."""
-    from training.statistics import wilson
+    from training.judging.statistics import wilson
 
     if n == 0:
         return "n/a"

@@ -26,7 +26,7 @@ def main() -> None:
 
     from training import cma_es
     from training.distributed import run_jobs
-    from training.episodes import EpisodeJob, run_episode_job
+    from training.judging.episodes import EpisodeJob, run_episode_job
 
     jobs = [
         EpisodeJob(

@@ -18,7 +18,7 @@ Rows (module-cycles per second: the cycles of every episode times its modules, o
   equal to the per-episode ones, episode by episode.
 * ``judge, per episode`` and ``judge, evaluator``: ``proteo eval --benchmark VERSION`` of each recipe
   of ``--recipes`` (every training seed, every split), with its episodes run one by one
-  (:func:`training.episodes.run_episode_job`, what the judge ran before) and through the
+  (:func:`training.judging.episodes.run_episode_job`, what the judge ran before) and through the
   evaluator; the two benchmark files are compared row by row (networks: the batched forward
   pass can differ in the last bits of a logit).
 
@@ -108,7 +108,7 @@ def same(a, b) -> bool:
 
 def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, workers: int) -> tuple[float, dict]:
     """Seconds of ``proteo eval --benchmark`` of ``recipe``'s seeds, and its document."""
-    from training import benchmark, episodes
+    from training.judging import episodes, judge
 
     original = episodes.run_episodes
     if per_episode_path:
@@ -124,7 +124,7 @@ def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, wo
         episodes.run_episodes = one_by_one
     try:
         started = time.perf_counter()
-        document = benchmark.judge(
+        document = judge.judge(
             version, checkpoints=sorted(recipe.glob("seed_*")), out=out, workers=workers, progress=False, fresh=True
         )
         return time.perf_counter() - started, document

@@ -1,4 +1,4 @@
-"""The benchmark protocol (training/benchmark.py, configs/benchmark/v1.yaml, proteo eval --benchmark):
+"""The benchmark protocol (training/judging/protocol.py and judge.py, configs/benchmark/v1.yaml, proteo eval --benchmark):
 the v1 file loads and is checked, bad input is one ConfigError before anything is written, every
 policy is judged on the same first world seeds, and a tiny end-to-end run (--worlds-cap) writes
 benchmark.json with the documented schema and the episodes a direct re-run gives."""
@@ -12,8 +12,8 @@ import pytest
 import yaml
 
 from proteo_env.config import ConfigError
-from training import benchmark
-from training.benchmark import load_protocol
+from training.judging import judge
+from training.judging.protocol import load_protocol, versions
 
 ROOT = Path(__file__).resolve().parents[1]
 CHAIN_CHECKPOINT = "checkpoints/v1/chain/kickstart_move/seed_0"
@@ -30,7 +30,7 @@ def test_v1_loads_and_fixes_the_study():
     import proteo_env
 
     p = load_protocol("v1")
-    assert p.version == "v1" and "v1" in benchmark.versions()
+    assert p.version == "v1" and "v1" in versions()
     assert {name: t.task_id for name, t in p.tasks.items()} == STUDY_TASKS
     assert p.reference >= 100 and p.per_training_seed >= 20 and p.training_seeds >= 5
     assert p.first_seed == 1000
@@ -100,7 +100,7 @@ def test_a_protocol_fixes_an_equivalence_margin_or_makes_no_equivalence_claims(t
 def test_bad_protocol_file_is_one_config_error_naming_the_field(tmp_path, edit, names):
     root = _protocol_copy(tmp_path, edit)
     with pytest.raises(ConfigError) as err:
-        benchmark.judge("v1", policy="rules", out=tmp_path / "out", root=root, progress=False)
+        judge.judge("v1", policy="rules", out=tmp_path / "out", root=root, progress=False)
     for name in names:
         assert name in str(err.value), (name, str(err.value))
     assert not (tmp_path / "out").exists()
@@ -252,14 +252,14 @@ def test_a_recipe_checkpoint_off_the_protocol_is_refused(tmp_path, source, folde
     seed 7 (train ten, submit the best five), another setting, or stopped early, it is refused."""
     path = _recipe_checkpoint(tmp_path, source, folder, **changes)
     with pytest.raises(ConfigError, match=named):
-        benchmark.entrants(load_protocol("v6"), checkpoints=[path])
+        judge.entrants(load_protocol("v6"), checkpoints=[path])
 
 
 def test_every_published_recipe_checkpoint_is_a_run_of_its_recipe():
     protocol = load_protocol("v6")
     for folder in sorted(ROOT.glob("checkpoints/v[1-9]/*/*_*")):
         seeds = sorted(str(p) for p in folder.glob("seed_*"))
-        (entrant,) = benchmark.entrants(protocol, checkpoints=seeds)
+        (entrant,) = judge.entrants(protocol, checkpoints=seeds)
         assert entrant.recipe is not None and len(entrant.checkpoints) == protocol.training_seeds
 
 
@@ -300,7 +300,7 @@ def _extension(tmp_path: Path, text: str) -> Path:
 def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, names):
     root = _extension(tmp_path, text)
     with pytest.raises(ConfigError) as err:
-        benchmark.judge("v2", policy="rules", out=tmp_path / "out", root=root, progress=False)
+        judge.judge("v2", policy="rules", out=tmp_path / "out", root=root, progress=False)
     for name in names:
         assert name in str(err.value), (name, str(err.value))
     assert not (tmp_path / "out").exists()
@@ -419,7 +419,7 @@ def test_rules_and_a_checkpoint_end_to_end(tmp_path, monkeypatch):
 
 def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_path):
     seeds = [f"checkpoints/v1/chain/kickstart_move/seed_{k}" for k in (0, 1)]
-    doc = benchmark.judge(
+    doc = judge.judge(
         "v1", checkpoints=[str(ROOT / s) for s in seeds], out=tmp_path / "out", worlds_cap=2, progress=False
     )
     _check_schema(doc)
@@ -429,3 +429,16 @@ def test_several_training_seeds_are_one_row_with_the_stratified_bootstrap(tmp_pa
         assert row["summary"]["interval"] == "stratified bootstrap" and row["summary"]["training_seeds"] == 2
         assert not row["complete"]  # 2 training seeds of the 5 the protocol asks for
     assert any("2 training seed(s)" in n for n in doc["notes"])
+
+
+def test_every_published_judgement_was_made_under_the_protocol_file_as_it_is_now():
+    # A protocol is fixed once and never changed (a comment counts): editing one strands its published rows.
+    import hashlib
+
+    published = sorted(ROOT.glob("docs/benchmark/v*/*/*/benchmark.json"))
+    assert published
+    for path in published:
+        document = json.loads(path.read_text())
+        now = hashlib.sha256((ROOT / document["protocol_file"]).read_bytes()).hexdigest()
+        assert document["protocol_sha256"] == now, f"{document['protocol_file']} changed since {path} was judged"
+

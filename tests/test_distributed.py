@@ -84,8 +84,8 @@ def _interrupting(fn, after: int, calls: list):
 
 # ---------------------------------------------------------------------- resume (one process)
 def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path, monkeypatch):
-    from training import evaluate as ev
     from training import evaluator
+    from training.judging import evaluate as ev
 
     config = _eval_config(tmp_path)
     run = {"config": config, "tasks": TASKS, "progress": False, "plots": False, "workers": 1}
@@ -231,7 +231,7 @@ def test_sweep_tables_tie_settings_and_sample_points(tmp_path):
 # ---------------------------------------------------------------------- RLlib
 def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
     from training import rllib_ppo
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     final = rllib_ppo.main(
         [

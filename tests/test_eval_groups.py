@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 from proteo_env.config import ConfigError
-from training.evaluate import evaluate, load_config
-from training.report import GroupResult
-from training.statistics import group_bootstrap, wilson
+from training.judging.evaluate import evaluate, load_config
+from training.judging.report import GroupResult
+from training.judging.statistics import group_bootstrap, wilson
 
 RUNS = [
     "checkpoints/v2/chain/cma_full/seed_0",
@@ -86,7 +86,7 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
 
 
 def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
-    from training.report import INTERVALS, PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
+    from training.judging.report import INTERVALS, PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
 
     def result(task, policy, kind, successes, cycles, level="move"):
         return PolicyResult(
@@ -136,7 +136,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
 
 
 def _run(policy, successes, cycles, group="", source="", task="grasp-v0", kind="learned", level="move"):
-    from training.report import PolicyResult
+    from training.judging.report import PolicyResult
 
     return PolicyResult(
         task=task,
@@ -164,7 +164,7 @@ def _kickstart_runs():
 
 
 def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width():
-    from training.report import grouped, markdown_table, summary_table
+    from training.judging.report import grouped, markdown_table, summary_table
 
     rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
     rows = grouped([rules, *_kickstart_runs()])
@@ -184,7 +184,7 @@ def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width()
 
 def _written(tmp_path, results, name="first"):
     """A results.json as proteo eval writes it, of ``results``, in ``tmp_path / name``."""
-    from training.report import write_results
+    from training.judging.report import write_results
 
     out = tmp_path / name
     write_results(
@@ -196,9 +196,9 @@ def _written(tmp_path, results, name="first"):
 def test_from_results_re_renders_the_tables_and_the_published_pages_without_running_episodes(tmp_path, monkeypatch):
     import json
 
-    import training.report as ev
-    from training import episodes
+    import training.judging.report as ev
     from training.cli import main
+    from training.judging import episodes
 
     rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
     results = [rules, *_kickstart_runs()]

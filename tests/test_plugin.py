@@ -76,7 +76,7 @@ def test_a_behaviour_from_outside_the_package_runs_everywhere(worm, tmp_path):
         buffers = moving.observe_arrays()
     assert (moving.world.modes != 0).any()  # the rules woke the blob (SLEEP is mode 0)
 
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 0, "tasks": {"worm": {"env": SMALL}}}))

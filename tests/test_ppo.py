@@ -16,7 +16,7 @@ import proteo_env  # noqa: E402
 from proteo_env.config import world_seeds  # noqa: E402
 from training import ppo  # noqa: E402
 from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
-from training.evaluate import evaluate  # noqa: E402
+from training.judging.evaluate import evaluate  # noqa: E402
 
 SMALL_ENV = {"n_modules": 6, "max_cycles": 40}
 

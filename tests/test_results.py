@@ -1,4 +1,4 @@
-"""The results page (training/results.py): built from benchmark.json files, it states a
+"""The results page (training/judging/results.py): built from benchmark.json files, it states a
 difference only where the paired interval (a recipe against the rules on the same worlds)
 excludes 0."""
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from proteo_env.config import ConfigError
-from training import results
-from training.benchmark import load_protocol
-from training.statistics import group_bootstrap, wilson
+from training.judging import results
+from training.judging.protocol import load_protocol
+from training.judging.statistics import group_bootstrap, wilson
 
 
 def _summary(runs: list[dict]) -> dict:

@@ -1,4 +1,4 @@
-"""training/statistics.py against known values: Wilson and Student t, the stratified bootstrap of
+"""training/judging/statistics.py against known values: Wilson and Student t, the stratified bootstrap of
 a group of training seeds, and the across-task measures (IQM, probability of improvement,
 performance profiles)."""
 
@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from training import statistics as st
+from training.judging import statistics as st
 
 
 def test_wilson_and_the_t_quantile_match_known_values():

@@ -309,7 +309,7 @@ def checkpoints(tmp_path_factory):
 
 
 def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_path):
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     for name, final in checkpoints.items():
         meta = json.loads((final / "proteo.json").read_text())
@@ -336,7 +336,7 @@ def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_pat
 def test_two_checkpoints_of_one_algorithm_get_their_folder_names(checkpoints, tmp_path):
     import shutil
 
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     other = tmp_path / "cma_neural_other"
     shutil.copytree(checkpoints["cma_neural"], other)
@@ -416,7 +416,7 @@ def test_learned_policy_is_deterministic_for_a_seed(checkpoints):
 # ---------------------------------------------------------------------- evaluation
 def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
     pytest.importorskip("yaml")
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     config = tmp_path / "eval.yaml"
     config.write_text("seeds: 3\nfirst_seed: 7\ntasks:\n  chain:\n    env: {n_modules: 6, max_cycles: 40}\n")
@@ -438,7 +438,7 @@ def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
 def test_an_eval_config_pins_a_task_version_or_names_the_allowed_ones(tmp_path):
     pytest.importorskip("yaml")
     from proteo_env.config import ConfigError
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     config = tmp_path / "eval.yaml"
     tiny = "    env: {n_modules: 12, T: 3, B: 2, max_cycles: 30}\n"
@@ -457,7 +457,7 @@ def test_an_eval_config_pins_a_task_version_or_names_the_allowed_ones(tmp_path):
 
 
 def test_eval_covers_every_task_with_a_reward():
-    from training.evaluate import EXCLUDED_TASKS
+    from training.judging.evaluate import EXCLUDED_TASKS
 
     names = {cls.name for cls in proteo_env.TASKS.values()} - set(EXCLUDED_TASKS)
     assert "chain" in names and "sandbox" not in names
@@ -609,7 +609,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     import yaml
     from conftest import SMALL_OVERRIDES
 
-    from training.evaluate import evaluate
+    from training.judging.evaluate import evaluate
 
     settings = yaml.safe_load((Path("configs/train") / config).read_text())
     task = task_name(settings["task"])
@@ -728,7 +728,7 @@ def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
     """The committed checkpoints load where ``proteo eval --config configs/<config>`` runs them."""
     pytest.importorskip("sb3_contrib")
     from training.checkpoints import load_policy, read_meta
-    from training.evaluate import load_config
+    from training.judging.evaluate import load_config
 
     for name, entry in load_config(Path("configs") / config)["tasks"].items():
         for item in entry.get("checkpoints") or []:

@@ -6,7 +6,7 @@ Stable-Baselines3), :mod:`training.torchrl_ppo` (IPPO/MAPPO, TorchRL) and :mod:`
 by path as ordinary policies with :func:`training.checkpoints.load_policy`;
 :func:`load_controller` gives the environment and the policy of a checkpoint (or of the rules
 or the random policy of a task, ``"rules:chain-v1"``) in one call;
-:mod:`training.evaluate` is ``proteo eval``. Needs the ``train`` extra (``pip install -e ".[train]"``).
+:mod:`training.judging.evaluate` is ``proteo eval``. Needs the ``train`` extra (``pip install -e ".[train]"``).
 """
 
 from __future__ import annotations

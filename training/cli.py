@@ -17,12 +17,12 @@ from pathlib import Path
 
 
 def evaluate(args) -> int:
-    from training import benchmark
-    from training.evaluate import main as evaluate_main
+    from training.judging import judge
+    from training.judging.evaluate import main as evaluate_main
 
     if args.benchmark:
-        return benchmark.main(args)
-    benchmark.check_flags(args)
+        return judge.main(args)
+    judge.check_flags(args)
     return evaluate_main(args)
 
 

@@ -80,7 +80,7 @@ def plot_runs(
 def plot_mean_band(ax, x: np.ndarray, ys: np.ndarray, label: str, *, color=None, clip=None) -> None:
     """Plot ``ys`` ``(seeds, points)`` against ``x`` ``(points,)`` as the mean over seeds with a
     95 % Student t band (with two or more seeds), the band cut to ``clip`` ``(low, high)`` if given."""
-    from training.statistics import t_quantile
+    from training.judging.statistics import t_quantile
 
     colour = {} if color is None else {"color": color}
     mean = ys.mean(axis=0)

@@ -16,7 +16,7 @@ A sweep config (YAML, every key checked; see ``configs/sweeps/``)::
     sample_seed: 0
     plot: {x: n_modules, y: cycles_to_success, hue: motion_model}
 
-Each episode is one :class:`~training.episodes.EpisodeJob` (serially, on ``--workers`` local
+Each episode is one :class:`~training.judging.episodes.EpisodeJob` (serially, on ``--workers`` local
 processes, or as Ray tasks with ``--ray``; the same results either way), journaled in ``OUT/episodes.jsonl`` as it finishes so
 that an interrupted sweep resumes. Every point of the grid is checked (an environment is
 built) before any episode runs. Written into ``--out`` when every episode has finished:
@@ -150,8 +150,8 @@ def sweep(
     """
     import proteo_env
     from training.distributed import Journal, run_jobs
-    from training.episodes import EpisodeJob, run_episode_job
-    from training.statistics import mean_ci
+    from training.judging.episodes import EpisodeJob, run_episode_job
+    from training.judging.statistics import mean_ci
 
     cfg = load_sweep(config)
     points = cfg.points()

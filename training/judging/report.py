@@ -3,11 +3,11 @@
 :class:`PolicyResult` is one policy (or checkpoint) on one task over its episodes;
 :class:`GroupResult` pools the training seeds of one configuration (:func:`grouped`). Every
 table prints a measure as ``value (low–high)``, its 95 % interval (:data:`INTERVALS` says
-which; the interval code is :mod:`training.statistics`). :func:`write_results` writes
+which; the interval code is :mod:`training.judging.statistics`). :func:`write_results` writes
 ``results.md``, ``results.json`` (every episode) and ``eval.png``; :func:`load_results` and
 :func:`rerender` read a ``results.json`` back; :func:`publish` puts the tables into a page
 between its markers (:data:`PUBLISH_BEGIN` or :data:`PUBLISH_SUMMARY_BEGIN`, then
-:data:`PUBLISH_END`). See :mod:`training.evaluate` for the command.
+:data:`PUBLISH_END`). See :mod:`training.judging.evaluate` for the command.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from training.pages import filled
-from training.pages import publish as publish_pages
-from training.statistics import group_bootstrap, mean_ci, wilson
+from training.judging.pages import filled
+from training.judging.pages import publish as publish_pages
+from training.judging.statistics import group_bootstrap, mean_ci, wilson
 
 INTERVALS = (
     "95 % intervals. One run: Wilson for success, Student t over episodes for return and cycles "
@@ -117,7 +117,7 @@ class GroupResult:
 
     def summary(self) -> dict:
         """The measures pooled over every episode of every training seed, with the intervals of
-        a stratified bootstrap (:func:`training.statistics.group_bootstrap`: training seeds, then
+        a stratified bootstrap (:func:`training.judging.statistics.group_bootstrap`: training seeds, then
         their episodes, drawn with replacement): success rate (successes over episodes; the
         interval widened to at least the pooled Wilson interval, as a percentile bootstrap
         collapses to a point where every episode agrees), mean return and mean cycles to success
@@ -407,7 +407,7 @@ def summary_table(results: list) -> str:
 
 def publish(results: list, out, files) -> None:
     """Put the results of ``proteo eval --out OUT`` into each of ``files`` (markdown pages,
-    :mod:`training.pages`): the whole table (:func:`markdown_table`, followed by
+    :mod:`training.judging.pages`): the whole table (:func:`markdown_table`, followed by
     :data:`INTERVALS`) between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END`, the summary
     (:func:`summary_table`) between :data:`PUBLISH_SUMMARY_BEGIN` and :data:`PUBLISH_END`, wherever
     a page has those markers (naming ``OUT``). A page with neither is an error that says what to

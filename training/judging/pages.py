@@ -2,7 +2,7 @@
 
 A page (the README, a guide, the journal) holds a begin marker (an HTML comment, invisible when
 rendered) and, after it, the end marker; publishing replaces what stands between them and
-nothing else. ``proteo eval --publish`` (:mod:`training.report`) and ``python -m training.results
+nothing else. ``proteo eval --publish`` (:mod:`training.judging.report`) and ``python -m training.judging.results
 --publish`` (the README's held-out table) both publish this way.
 """
 

@@ -4,7 +4,7 @@ For each registered task with a reward (every task but ``sandbox``), the task's 
 policy (``default_policy``), the random policy and every checkpoint given for that task run
 one episode per seed (the same seeds for every policy: ``env.reset(seed=s)`` and
 ``policy.reset(s)``). Reported per policy, each with a 95 % interval (the interval code is
-:mod:`training.statistics`):
+:mod:`training.judging.statistics`):
 
 - mean episode return (one run: Student t over its episodes);
 - success rate, episodes ending in task success (one run: Wilson);
@@ -14,7 +14,7 @@ one episode per seed (the same seeds for every policy: ``env.reset(seed=s)`` and
 A ``runs`` group (one configuration trained with several seeds) is one row whose measures are
 pooled over every episode of every training seed (successes over episodes, the mean return,
 the mean cycles over the successful episodes), each with the percentile interval of a
-stratified bootstrap (:func:`training.statistics.group_bootstrap`: training seeds drawn with
+stratified bootstrap (:func:`training.judging.statistics.group_bootstrap`: training seeds drawn with
 replacement, then each drawn seed's episodes with replacement; 2,000 resamples, generator seed
 0, so a table is reproduced exactly). The success interval is widened to at least the pooled
 Wilson interval, because a percentile bootstrap collapses to a point where every episode agrees
@@ -23,9 +23,9 @@ Wilson interval, because a percentile bootstrap collapses to a point where every
 Every table prints a measure as ``value (low–high)``, its 95 % interval (``low to high`` where
 ``low`` is negative; the value alone where the interval is undefined, such as cycles to success
 from one successful episode): success as ``24/30 (0.63–0.93)``, cycles to success as
-``120 (100–142)``, ``–`` without a success. The compact summary (:func:`~training.report.summary_table`, what
+``120 (100–142)``, ``–`` without a success. The compact summary (:func:`~training.judging.report.summary_table`, what
 ``--publish`` writes into README.md) has one cell per task and policy:
-``24/30 (0.63–0.93), 120 (100–142)``. :data:`~training.report.INTERVALS` says this under every table but the
+``24/30 (0.63–0.93), 120 (100–142)``. :data:`~training.judging.report.INTERVALS` says this under every table but the
 summary, whose first column's head is ``task (95 % CI)``.
 
 Settings per task and the checkpoints to compare come from a YAML file (``configs/eval.yaml``)::
@@ -49,14 +49,14 @@ on. Each checkpoint runs at the control level it was trained at (``control`` in 
 checkpoint uses, the random policy runs at that level too (random moves under the task's rules
 at ``move``). Writes ``results.md`` (the tables), ``results.json`` (every episode) and
 ``eval.png`` (the three measures per task) into ``--out``; ``--publish PAGE.md`` also puts the
-tables into a page between its markers (:func:`~training.report.publish`). ``--from-results RESULTS.json`` runs
+tables into a page between its markers (:func:`~training.judging.report.publish`). ``--from-results RESULTS.json`` runs
 no episode: it writes the tables of an earlier ``results.json`` again, in the current format,
-into ``--out`` and the ``--publish`` pages (:func:`~training.report.rerender`), e.g.::
+into ``--out`` and the ``--publish`` pages (:func:`~training.judging.report.rerender`), e.g.::
 
     proteo eval --from-results docs/eval/study/results.json --out docs/eval/study \\
         --publish README.md --publish docs/guides/learning.md
 
-Each episode is one job (:class:`~training.episodes.EpisodeJob`): ``--ray`` runs them as Ray tasks, on a local
+Each episode is one job (:class:`~training.judging.episodes.EpisodeJob`): ``--ray`` runs them as Ray tasks, on a local
 Ray instance (``--workers N`` CPUs) or a cluster (``--address``), with results identical to
 the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
 an interrupted evaluation with the same settings runs only the missing episodes
@@ -70,8 +70,8 @@ from pathlib import Path
 
 from proteo_env.registry import task_name
 from training.common import checkpoint_kind
-from training.episodes import EpisodeJob, run_episodes
-from training.report import PolicyResult, markdown_table, publish, rerender, write_results
+from training.judging.episodes import EpisodeJob, run_episodes
+from training.judging.report import PolicyResult, markdown_table, publish, rerender, write_results
 
 DEFAULT_CONFIG = "configs/eval.yaml"
 """The config ``proteo eval`` reads when run from the repository root without ``--config``."""
@@ -214,7 +214,7 @@ def evaluate(
 ) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
-    Every episode is one :class:`~training.episodes.EpisodeJob`, run in batches of worlds on
+    Every episode is one :class:`~training.judging.episodes.EpisodeJob`, run in batches of worlds on
     ``workers`` processes (default: every core) or as Ray tasks (``ray``), and recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
     the same settings resumes it (see :class:`training.distributed.Journal`). The tables are
     written only when every episode has finished.

@@ -1,23 +1,10 @@
 """``proteo eval --benchmark VERSION``: judge a controller on every split of a versioned protocol.
 
-A protocol is one YAML file per version, ``configs/benchmark/<version>.yaml`` (``v1.yaml`` is
-the first; a published version is never changed, a new one is a new file; ``v2.yaml`` extends
-v1, see :func:`load_protocol`). It fixes, for each task of the study: the task version judged
-(``task``) and the versions whose checkpoints are judged on it (``trained_on``), the control
-levels judged (``levels``: ``learned``, ``rules``, ``random``, and optionally ``evolved``), the training settings (``env``), the training recipes (``recipes``: a config in
-``configs/train`` and a budget in agent-steps) and the evaluation splits (``splits``: each its
-settings over ``env``; ``heldout``, the training size, and ``larger``, about twice the size, in
-every task, then the out-of-distribution variants the task has parameters for). ``worlds``
-fixes how many worlds a policy is judged on per split: the rules and random on ``reference``
-worlds, a learned or evolved recipe on ``per_training_seed`` worlds for each of at least
-``training_seeds`` training seeds; every policy takes the world seeds ``first_seed``,
-``first_seed + 1``, ... (one judged on fewer worlds takes the first ones). :func:`load_protocol`
-reads and checks a file; any bad input (a version that does not exist, an unknown key anywhere,
-a value of the wrong kind, fewer worlds or training seeds than the protocol's statistics need)
-is one :class:`~proteo_env.config.ConfigError` naming the field, the value and what is allowed.
+The protocol (what is judged, on which worlds, and how many) and its loader are
+:mod:`training.judging.protocol` (:func:`~training.judging.protocol.load_protocol`).
 
 :func:`judge` runs the episodes with the machinery of ``proteo eval``
-(:class:`training.episodes.EpisodeJob`, :func:`training.episodes.run_episodes`: serially or as
+(:class:`training.judging.episodes.EpisodeJob`, :func:`training.judging.episodes.run_episodes`: serially or as
 Ray tasks, recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
 ``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
 protocol, the checkpoints' task and control level, the flags) before anything is written::
@@ -52,10 +39,10 @@ protocol, the checkpoints' task and control level, the flags) before anything is
              "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
              "seconds": 3.1}
           ],
-          "summary": {...}                     # training.report.PolicyResult.summary (one run:
+          "summary": {...}                     # training.judging.report.PolicyResult.summary (one run:
                                                # Wilson, Student t) or GroupResult.summary (several
                                                # training seeds: the stratified bootstrap
-                                               # training.statistics.group_bootstrap)
+                                               # training.judging.statistics.group_bootstrap)
         }
       ]
     }
@@ -69,348 +56,16 @@ docs/guides/benchmark.md.
 
 from __future__ import annotations
 
-import difflib
-import hashlib
 import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from proteo_env.config import CONTROL_LEVELS, ConfigError
-
-ROOT = Path(__file__).resolve().parents[1]
-"""The repository: protocol files and recipe configs are read relative to it."""
-PROTOCOL_DIR = "configs/benchmark"
-"""Where the protocol files are: ``<version>.yaml``."""
+from proteo_env.config import ConfigError
+from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, TaskProtocol, load_protocol
 
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
-
-MIN_REFERENCE_WORLDS = 100
-"""The rules and random are judged on at least this many worlds per split (a success rate then
-known to about +-0.05 or better: the widest 95 % Wilson interval at 100 worlds, at 50/100, is
-0.40-0.60, +-0.10 wide in all, +-0.05 ... +-0.10 from the middle; within +-0.05 from 90/100 on)."""
-MIN_WORLDS_PER_TRAINING_SEED = 20
-"""A learned or evolved recipe is judged on at least this many worlds per training seed and split."""
-MIN_TRAINING_SEEDS = 5
-"""A learned or evolved recipe is judged with at least this many training seeds."""
-
-PROTOCOL_KEYS = ("version", "worlds", "equivalence_margin", "tasks")
-EXTENSION_KEYS = ("version", "extends", "tasks")
-"""The keys of a protocol that extends another: it only adds levels and recipes to its tasks."""
-WORLDS_KEYS = ("first_seed", "reference", "per_training_seed", "training_seeds")
-TASK_KEYS = ("task", "trained_on", "levels", "env", "recipes", "splits")
-EXTENSION_TASK_KEYS = ("levels", "recipes")
-LEVEL_KEYS = ("learned", "rules", "random")
-OPTIONAL_LEVEL_KEYS = ("evolved",)
-"""``evolved``: the levels evolved controllers are judged at (without it: ``learned``'s)."""
-RECIPE_KEYS = ("config", "agent_steps", "init")
-SPLIT_KEYS = ("about", "env")
-REQUIRED_SPLITS = ("heldout", "larger")
-POLICIES = ("rules", "random")
-"""The names ``--policy`` takes: the task's hand-coded rules, and the random policy."""
-
-
-@dataclass(frozen=True)
-class Split:
-    """One evaluation split of a task: its name and the ``proteo_env.make`` settings of its worlds."""
-
-    name: str
-    about: str
-    env: dict
-
-
-@dataclass(frozen=True)
-class TaskProtocol:
-    """What a protocol fixes for one task."""
-
-    name: str
-    task_id: str
-    trained_on: tuple
-    levels: dict
-    """``{"learned": [...], "rules": [...], "random": [...], "evolved": [...]}``: the control levels
-    judged (``evolved`` defaults to ``learned``'s)."""
-    env: dict
-    recipes: dict
-    splits: tuple
-    """The :class:`Split` s, in the file's order."""
-
-
-@dataclass(frozen=True)
-class Protocol:
-    """A benchmark protocol version (:func:`load_protocol`)."""
-
-    version: str
-    path: Path
-    sha256: str
-    """Of this version's file (see ``lineage`` for the files it extends)."""
-    lineage: tuple
-    """``((version, sha256), ...)``: the versions this one extends, oldest first, then itself.
-    A result judged under an earlier version of the lineage holds under this one: an extension
-    only adds levels and recipes."""
-    first_seed: int
-    reference: int
-    per_training_seed: int
-    training_seeds: int
-    tasks: dict
-    """``{task name: TaskProtocol}``."""
-    equivalence_margin: float | None = None
-    """The margin within which a controller's success rate "matches" the rules' on the same worlds
-    (two one-sided tests, :func:`training.statistics.equivalence`); ``None``: no "matches" claim."""
-
-    def world_seeds(self, n: int) -> list[int]:
-        """The first ``n`` world seeds: every policy judged on ``n`` worlds gets these."""
-        return list(range(self.first_seed, self.first_seed + n))
-
-    def worlds(self, kind: str, cap: int | None = None) -> int:
-        """Worlds per split (per training seed for a learned or evolved policy) for ``kind``,
-        at most ``cap`` (quick checks only)."""
-        n = self.reference if kind in ("hand-coded", "random") else self.per_training_seed
-        return n if cap is None else min(n, cap)
-
-
-def versions(root=None) -> list[str]:
-    """The protocol versions present: the names of ``configs/benchmark/*.yaml``."""
-    folder = Path(root or ROOT) / PROTOCOL_DIR
-    return sorted(p.stem for p in folder.glob("*.yaml"))
-
-
-def _unknown(where: str, keys, allowed) -> None:
-    bad = [k for k in keys if k not in allowed]
-    if bad:
-        close = difflib.get_close_matches(str(bad[0]), [str(a) for a in allowed], n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ConfigError(
-            f"{where}: unknown key {bad[0]!r}{hint} = {keys[bad[0]]!r} is not allowed; allowed keys: {', '.join(allowed)}"
-        )
-
-
-def _mapping(where: str, field_path: str, value, allowed) -> dict:
-    value = {} if value is None else value
-    if not isinstance(value, dict):
-        raise ConfigError(
-            f"{where}: {field_path} = {value!r} is not allowed; allowed: a mapping with keys {', '.join(allowed)}"
-        )
-    return value
-
-
-def _integer(where: str, field_path: str, value, least: int, why: str = "") -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise ConfigError(
-            f"{where}: {field_path} = {value!r} is not allowed; allowed: an integer >= {least}{f' ({why})' if why else ''}"
-        )
-    return value
-
-
-def _settings(where: str, at: str, field_path: str, value, cls) -> dict:
-    """``value`` checked as ``proteo_env.make`` settings of task class ``cls`` (no ``control``)."""
-    from proteo_env.config import split_overrides
-
-    value = _mapping(where, field_path, value, ["proteo_env.make settings"])
-    try:
-        split_overrides(value, cls.Params, task_name=cls.task_id())
-    except (ValueError, TypeError) as err:
-        raise ConfigError(f"{where}: {field_path} = {value!r} is not allowed: {err}") from None
-    if "control" in value:
-        raise ConfigError(
-            f"{where}: {field_path}.control = {value['control']!r} is not allowed; allowed: the levels "
-            f"under {at}.levels (settings without control)"
-        )
-    return dict(value)
-
-
-def _protocol_data(version: str, root: Path, children: tuple) -> tuple[dict, tuple]:
-    """The checked top level of ``<version>.yaml`` with the protocols it extends merged in, and
-    its lineage (:attr:`Protocol.lineage`). ``children``: the versions that extend it (a cycle
-    is an error)."""
-    from proteo_env.config import load_yaml
-
-    present = versions(root)
-    if not isinstance(version, str) or version not in present:
-        field_path = f"{PROTOCOL_DIR}/{children[-1]}.yaml: extends" if children else "--benchmark"
-        raise ConfigError(
-            f"{field_path} {version!r} is not allowed: no protocol file {PROTOCOL_DIR}/{version}.yaml; "
-            f"allowed: {', '.join(v for v in present if v not in children) or 'none present'}"
-        )
-    if version in children:
-        raise ConfigError(
-            f"benchmark {PROTOCOL_DIR}/{children[-1]}.yaml: extends = {version!r} is not allowed: a cycle "
-            f"({' -> '.join([*children, version])}); allowed: an earlier version"
-        )
-    path = root / PROTOCOL_DIR / f"{version}.yaml"
-    where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"
-    sha = hashlib.sha256(path.read_bytes()).hexdigest()
-    data = load_yaml(path, "benchmark protocol", f"one of {', '.join(present)}")
-    allowed = EXTENSION_KEYS if isinstance(data, dict) and "extends" in data else PROTOCOL_KEYS
-    data = _mapping(where, "top level", data, allowed)
-    _unknown(f"{where}: top level", data, allowed)
-    if data.get("version") != version:
-        raise ConfigError(
-            f"{where}: version = {data.get('version')!r} is not allowed; allowed: {version!r} (the file's name)"
-        )
-    if "extends" not in data:
-        return data, ((version, sha),)
-    parent, lineage = _protocol_data(data["extends"], root, (*children, version))
-    merged = {**parent, "version": version, "tasks": {k: dict(v) for k, v in parent["tasks"].items()}}
-    tasks = _mapping(where, "tasks", data.get("tasks"), list(parent["tasks"]))
-    _unknown(f"{where}: tasks", tasks, list(parent["tasks"]))
-    for name, entry in tasks.items():
-        at = f"tasks.{name}"
-        entry = _mapping(where, at, entry, EXTENSION_TASK_KEYS)
-        _unknown(f"{where}: {at} (an extension only adds levels and recipes)", entry, EXTENSION_TASK_KEYS)
-        into = merged["tasks"][name]
-        for key in EXTENSION_TASK_KEYS:
-            added = _mapping(where, f"{at}.{key}", entry.get(key), ["new names"])
-            before = dict(into.get(key) or {})
-            again = [k for k in added if k in before]
-            if again:
-                raise ConfigError(
-                    f"{where}: {at}.{key}.{again[0]} = {added[again[0]]!r} is not allowed: {data['extends']} "
-                    f"already fixes it; allowed: {key} that {data['extends']} does not have"
-                )
-            into[key] = {**before, **added}
-    return merged, (*lineage, (version, sha))
-
-
-def load_protocol(version: str, root=None) -> Protocol:
-    """The protocol ``configs/benchmark/<version>.yaml``, checked.
-
-    Bad input is one :class:`ConfigError` naming the field (its path in the file), the value and
-    what is allowed: a version with no file (the message lists the versions present), a file
-    whose ``version`` is not its name, an unknown key anywhere, a task name that is not
-    registered, a task version that is not one of the name's, a control level that does not
-    exist, settings a task does not have or does not allow, a recipe config that does not exist,
-    a protocol without a ``heldout`` or ``larger`` split, and fewer worlds or training seeds than
-    :data:`MIN_REFERENCE_WORLDS`, :data:`MIN_WORLDS_PER_TRAINING_SEED` and
-    :data:`MIN_TRAINING_SEEDS`.
-
-    A file with ``extends: <earlier version>`` holds only what it adds to that version: new
-    levels (``evolved``) and new recipes of its tasks; changing anything the earlier version fixes
-    (worlds, splits, settings, a level or recipe it has) is an error, so every result judged under
-    the earlier version holds under this one (:attr:`Protocol.lineage`).
-    """
-    from proteo_env.registry import TASKS
-
-    root = Path(root or ROOT)
-    data, lineage = _protocol_data(version, root, ())
-    where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"
-    worlds = _mapping(where, "worlds", data.get("worlds"), WORLDS_KEYS)
-    _unknown(f"{where}: worlds", worlds, WORLDS_KEYS)
-    least = {
-        "first_seed": (0, ""),
-        "reference": (MIN_REFERENCE_WORLDS, "the rules and random: a success rate known to about +-0.05"),
-        "per_training_seed": (MIN_WORLDS_PER_TRAINING_SEED, "worlds per training seed of a learned recipe"),
-        "training_seeds": (MIN_TRAINING_SEEDS, "training seeds of a learned recipe"),
-    }
-    counts = {}
-    for key in WORLDS_KEYS:
-        if key not in worlds:
-            raise ConfigError(f"{where}: worlds.{key} is missing; allowed: an integer >= {least[key][0]}")
-        counts[key] = _integer(where, f"worlds.{key}", worlds[key], *least[key])
-
-    margin = data.get("equivalence_margin")
-    if margin is not None and (
-        not isinstance(margin, (int, float)) or isinstance(margin, bool) or not 0.0 < margin < 1.0
-    ):
-        raise ConfigError(
-            f"{where}: equivalence_margin = {margin!r} is not allowed; allowed: a success-rate difference "
-            "between 0 and 1 (0.05: within five points), or no key (no equivalence claims)"
-        )
-
-    tasks_raw = data.get("tasks")
-    names = sorted({cls.name for cls in TASKS.values()} - {"sandbox"})
-    tasks_raw = _mapping(where, "tasks", tasks_raw, names)
-    if not tasks_raw:
-        raise ConfigError(
-            f"{where}: tasks = {tasks_raw!r} is not allowed; allowed: a mapping of task names ({', '.join(names)})"
-        )
-    _unknown(f"{where}: tasks", tasks_raw, names)
-    tasks = {}
-    for name, entry in tasks_raw.items():
-        at = f"tasks.{name}"
-        entry = _mapping(where, at, entry, TASK_KEYS)
-        _unknown(f"{where}: {at}", entry, TASK_KEYS)
-        ids = sorted(tid for tid, cls in TASKS.items() if cls.name == name)
-        task_id = entry.get("task")
-        if task_id not in ids:
-            raise ConfigError(f"{where}: {at}.task = {task_id!r} is not allowed; allowed: {', '.join(ids)}")
-        trained_on = entry.get("trained_on", [task_id])
-        if not isinstance(trained_on, list) or task_id not in trained_on or any(t not in ids for t in trained_on):
-            raise ConfigError(
-                f"{where}: {at}.trained_on = {trained_on!r} is not allowed; allowed: a list of versions of "
-                f"{name} ({', '.join(ids)}) that holds {task_id!r}"
-            )
-        levels = _mapping(where, f"{at}.levels", entry.get("levels"), LEVEL_KEYS + OPTIONAL_LEVEL_KEYS)
-        _unknown(f"{where}: {at}.levels", levels, LEVEL_KEYS + OPTIONAL_LEVEL_KEYS)
-        levels.setdefault("evolved", levels.get("learned"))
-        for key in LEVEL_KEYS + OPTIONAL_LEVEL_KEYS:
-            value = levels.get(key)
-            if not isinstance(value, list) or not value or any(v not in CONTROL_LEVELS for v in value):
-                raise ConfigError(
-                    f"{where}: {at}.levels.{key} = {value!r} is not allowed; allowed: a list of control levels "
-                    f"({', '.join(CONTROL_LEVELS)})"
-                )
-        cls = TASKS[task_id]
-
-        env = _settings(where, at, f"{at}.env", entry.get("env"), cls)
-        recipes_raw = _mapping(where, f"{at}.recipes", entry.get("recipes"), RECIPE_KEYS)
-        recipes = {}
-        for label, recipe in recipes_raw.items():
-            rat = f"{at}.recipes.{label}"
-            recipe = _mapping(where, rat, recipe, RECIPE_KEYS)
-            _unknown(f"{where}: {rat}", recipe, RECIPE_KEYS)
-            config = recipe.get("config")
-            if not isinstance(config, str) or not (root / config).is_file():
-                raise ConfigError(
-                    f"{where}: {rat}.config = {config!r} is not allowed; allowed: a file in configs/train"
-                )
-            steps = recipe.get("agent_steps")
-            if steps is not None:
-                _integer(where, f"{rat}.agent_steps", steps, 1, "or null: the config's own budget")
-            init = recipe.get("init")
-            if init is not None and init not in recipes_raw:
-                raise ConfigError(
-                    f"{where}: {rat}.init = {init!r} is not allowed; allowed: one of {', '.join(recipes_raw)}"
-                )
-            recipes[str(label)] = {"config": config, "agent_steps": steps, "init": init}
-        splits_raw = _mapping(where, f"{at}.splits", entry.get("splits"), SPLIT_KEYS)
-        for required in REQUIRED_SPLITS:
-            if required not in splits_raw:
-                raise ConfigError(
-                    f"{where}: {at}.splits = {sorted(splits_raw)!r} is not allowed; allowed: splits that include "
-                    f"{', '.join(REQUIRED_SPLITS)}"
-                )
-        splits = []
-        for split, spec in splits_raw.items():
-            sat = f"{at}.splits.{split}"
-            spec = _mapping(where, sat, spec, SPLIT_KEYS)
-            _unknown(f"{where}: {sat}", spec, SPLIT_KEYS)
-            about = spec.get("about", "")
-            if not isinstance(about, str):
-                raise ConfigError(f"{where}: {sat}.about = {about!r} is not allowed; allowed: a string")
-            merged = _settings(where, at, f"{sat}.env", {**env, **(spec.get("env") or {})}, cls)
-            splits.append(Split(name=str(split), about=about, env=merged))
-        tasks[name] = TaskProtocol(
-            name=name,
-            task_id=task_id,
-            trained_on=tuple(trained_on),
-            levels={k: list(levels[k]) for k in LEVEL_KEYS + OPTIONAL_LEVEL_KEYS},
-            env=env,
-            recipes=recipes,
-            splits=tuple(splits),
-        )
-    return Protocol(
-        version=version,
-        path=root / PROTOCOL_DIR / f"{version}.yaml",
-        sha256=lineage[-1][1],
-        lineage=lineage,
-        first_seed=counts["first_seed"],
-        reference=counts["reference"],
-        per_training_seed=counts["per_training_seed"],
-        training_seeds=counts["training_seeds"],
-        tasks=tasks,
-        equivalence_margin=None if margin is None else float(margin),
-    )
 
 
 @dataclass
@@ -640,8 +295,8 @@ def judge(
     from training.checkpoints import load_policy
     from training.common import provenance
     from training.distributed import Journal
-    from training.episodes import EpisodeJob, run_episodes
-    from training.report import PolicyResult
+    from training.judging.episodes import EpisodeJob, run_episodes
+    from training.judging.report import PolicyResult
 
     protocol = load_protocol(version, root)
     if worlds_cap is not None:
@@ -727,7 +382,7 @@ def judge(
     run_episodes(results, jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
     seconds = time.perf_counter() - started
 
-    from training.report import GroupResult
+    from training.judging.report import GroupResult
 
     doc_rows = []
     for e, split, seeds, indices in rows:
@@ -786,7 +441,7 @@ def judge(
 
 def markdown(document: dict) -> str:
     """The rows of a ``benchmark.json`` document as a markdown table with 95 % intervals."""
-    from training.report import INTERVALS, cycles_cell, interval, success_cell
+    from training.judging.report import INTERVALS, cycles_cell, interval, success_cell
 
     head = [
         "task",
@@ -826,7 +481,7 @@ def markdown(document: dict) -> str:
 def main(args) -> int:
     """``proteo eval --benchmark VERSION ...`` (arguments parsed in :mod:`training.cli`)."""
     from training.distributed import ray_options
-    from training.evaluate import refuse_flags
+    from training.judging.evaluate import refuse_flags
 
     conflicting = {
         "--config": args.config,

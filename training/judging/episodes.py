@@ -108,7 +108,7 @@ def run_episode_job(job: EpisodeJob) -> dict:
 
 def add_episode(result, job: EpisodeJob, episode: dict) -> None:
     """Add one finished episode (what :func:`run_episode_job` returns) to its row's ``result``
-    (a :class:`~training.report.PolicyResult`)."""
+    (a :class:`~training.judging.report.PolicyResult`)."""
     result.returns.append(episode["return"])
     result.successes.append(episode["success"])
     result.cycles.append(episode["cycles"])

@@ -1,10 +1,10 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
-    python -m training.results --benchmark v5 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
-    python -m training.results --benchmark v1 --root docs/benchmark --out docs/results.md
+    python -m training.judging.results --benchmark v5 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
+    python -m training.judging.results --benchmark v1 --root docs/benchmark --out docs/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
-``ROOT/VERSION/`` (one folder per task and policy, :mod:`training.benchmark`) and the training
+``ROOT/VERSION/`` (one folder per task and policy, :mod:`training.judging.judge`) and the training
 progress of the protocol's learned runs (``ROOT/VERSION/learning/progress/<recipe>_<task>_<level>_s<k>.csv``,
 written by ``python -m training.study --keep-dir checkpoints/VERSION --docs-dir ROOT/VERSION/learning``),
 and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``results/``:
@@ -18,7 +18,7 @@ and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``resul
 - per task, one table: a row per policy, a column per split, each cell the successes with the
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
-  learned recipe: :mod:`training.statistics`);
+  learned recipe: :mod:`training.judging.statistics`);
 - the aggregate per task (every recipe of a task over the same splits; never over a recipe's
   own mix of tasks), after rliable: the interquartile mean of the normalised score (rules at
   ``full`` = 1, random = 0, on the 100 reference worlds) over training seeds x splits with its
@@ -43,9 +43,9 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.config import ConfigError
-from training import statistics as st
-from training.pages import filled
-from training.pages import publish as publish_pages
+from training.judging import statistics as st
+from training.judging.pages import filled
+from training.judging.pages import publish as publish_pages
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
@@ -80,7 +80,7 @@ class Row:
 
 def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
     """Every row of every ``benchmark.json`` below ``root/<version>`` for each ``(version,
-    sha256)`` of a protocol's :attr:`~training.benchmark.Protocol.lineage`, and each file's
+    sha256)`` of a protocol's :attr:`~training.judging.protocol.Protocol.lineage`, and each file's
     header. A file judged under another protocol, or under a protocol file that has changed
     since (its ``protocol_sha256``), or one that is not complete (fewer training seeds or worlds
     than the protocol asks, a ``--worlds-cap``), is a :class:`ConfigError`: nothing is published
@@ -159,11 +159,11 @@ def paired(row: Row, reference: Row, margin: float | None = None) -> dict | None
     """``row`` against ``reference`` on the worlds both played (each training seed of ``row`` on
     the same worlds; the reference judged once, on those and more): ``{"success", "cycles",
     "time", "worlds", "rate", "reference_rate"}``, each of the first three a
-    :func:`training.statistics.paired_difference` (bootstrap over training seeds and worlds
+    :func:`training.judging.statistics.paired_difference` (bootstrap over training seeds and worlds
     jointly): the success rate; cycles to success on the pairs where both succeeded; and the time
     to success counting a failure at the cycle limit. With a ``margin`` (the protocol's
     ``equivalence_margin``) also ``"equivalence"``: two one-sided tests that the success rates
-    differ by less than it (:func:`training.statistics.equivalence`). None when ``row`` played a
+    differ by less than it (:func:`training.judging.statistics.equivalence`). None when ``row`` played a
     world the reference did not."""
     column = {seed: i for i, seed in enumerate(reference.world_seeds)}
     if any(seed not in column for seed in row.world_seeds):
@@ -192,7 +192,7 @@ def _difference(d: dict, digits: int = 2) -> str:
 
 
 def detectable(d: dict) -> bool:
-    """Whether a :func:`~training.statistics.paired_difference`'s interval excludes 0."""
+    """Whether a :func:`~training.judging.statistics.paired_difference`'s interval excludes 0."""
     return bool(d["pairs"]) and (d["lo"] > 0 or d["hi"] < 0)
 
 
@@ -381,7 +381,7 @@ def _policy_order(policies) -> list[str]:
 
 def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
     """The page's markdown (figures written beside ``out``); ``protocol`` a
-    :class:`training.benchmark.Protocol`."""
+    :class:`training.judging.protocol.Protocol`."""
     figures = out.parent / "results"
     figures.mkdir(parents=True, exist_ok=True)
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
@@ -437,7 +437,7 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
         f"{protocol.reference} worlds per split, a learned or evolved recipe on {protocol.per_training_seed} worlds per "
         f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
         f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
-        "Regenerate: `make results` (`python -m training.results`).",
+        "Regenerate: `make results` (`python -m training.judging.results`).",
         "",
         "## The short answer",
         "",
@@ -548,7 +548,7 @@ PUBLISH_END = "<!-- end of the results table -->"
 
 def publish(path, table: str) -> None:
     """Put ``table`` between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END` in the page ``path``
-    (:mod:`training.pages`)."""
+    (:mod:`training.judging.pages`)."""
     publish_pages([path], {PUBLISH_BEGIN: table}, PUBLISH_END)
 
 
@@ -570,9 +570,9 @@ def heldout_table(rows: list[Row], protocol) -> str:
 
 
 def main(argv=None) -> int:
-    from training.benchmark import load_protocol
+    from training.judging.protocol import load_protocol
 
-    parser = argparse.ArgumentParser(prog="python -m training.results", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m training.judging.results", description=__doc__.splitlines()[0])
     parser.add_argument("--benchmark", default="v1", help="protocol version (configs/benchmark/<version>.yaml)")
     parser.add_argument("--root", default="docs/benchmark", help="folder holding <version>/<task>/<policy>/")
     parser.add_argument("--out", default="docs/results.md", help="the page to write")
