@@ -441,4 +441,3 @@ def test_every_published_judgement_was_made_under_the_protocol_file_as_it_is_now
         document = json.loads(path.read_text())
         now = hashlib.sha256((ROOT / document["protocol_file"]).read_bytes()).hexdigest()
         assert document["protocol_sha256"] == now, f"{document['protocol_file']} changed since {path} was judged"
-
