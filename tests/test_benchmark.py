@@ -441,3 +441,17 @@ def test_every_published_judgement_was_made_under_the_protocol_file_as_it_is_now
         document = json.loads(path.read_text())
         now = hashlib.sha256((ROOT / document["protocol_file"]).read_bytes()).hexdigest()
         assert document["protocol_sha256"] == now, f"{document['protocol_file']} changed since {path} was judged"
+
+
+def test_v7_judges_ten_seeds_on_a_hundred_worlds_and_a_run_on_its_task_id_passes_the_config_check():
+    protocol = load_protocol("v7")
+    assert (protocol.training_seeds, protocol.per_training_seed, protocol.reference) == (10, 100, 100)
+    assert protocol.equivalence_margin == 0.05
+    table = protocol.tasks["table"]
+    assert table.task_id == "table-v2" and "threshold_T6" not in protocol.tasks["branch"].splits
+    config = yaml.safe_load((ROOT / "configs/train/kickstart_table_move.yaml").read_text())
+    assert config["task"] == "table-v1"  # v1's config; a study for v7 trains it with --task table-v2
+    meta = {"seed": 9, "args": {**config, "task": "table-v2"}, "agent_steps": 6_000_000}
+    judge.check_recipe_run(protocol, table, "kickstart-move", "run", meta)
+    with pytest.raises(ConfigError, match="training seed = 10 is not allowed; allowed: .* 0 to 9"):
+        judge.check_recipe_run(protocol, table, "kickstart-move", "run", {**meta, "seed": 10})

@@ -164,3 +164,25 @@ def test_every_recipe_names_a_registered_trainer_and_its_configs_exist():
     for name, prefix, _ in study.RECIPES.values():
         assert trainer(name).algorithms  # a trainer that writes checkpoints
         assert list(Path("configs/train").glob(f"{prefix}_*.yaml"))
+
+
+def test_a_study_for_a_protocol_trains_its_recipes_configs_and_budgets_on_its_task_id(tmp_path):
+    args = study.Args(benchmark="v7", level="move", tasks=("table",))
+    cmd = study._command(args, "kickstart", "table", 3, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("--config") + 1] == "configs/train/kickstart_table_move.yaml"
+    assert cmd[cmd.index("--task") + 1] == "table-v2", "the config says table-v1; the protocol judges table-v2"
+    assert cmd[cmd.index("--total-steps") + 1] == "6000000"
+    assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
+    full = study.Args(benchmark="v7", level="full", tasks=("branch",))
+    cmd = study._command(full, "evolve-large", "branch", 0, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("--config") + 1] == "configs/train/evolve_large_branch_full.yaml"
+    assert cmd[cmd.index("--task") + 1] == "branch-v0" and "--total-steps" not in cmd
+    assert "--task" not in study._command(study.Args(), "ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+
+
+def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_written(tmp_path):
+    docs = tmp_path / "docs"
+    argv = ["--benchmark", "v7", "--recipes", "[curriculum]", "--tasks", "[table]", "--docs-dir", str(docs)]
+    with pytest.raises(ValueError, match=r"recipe 'curriculum' at level 'move' \(curriculum-move\) on table"):
+        study.main(argv)
+    assert not docs.exists()

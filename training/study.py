@@ -116,6 +116,10 @@ class Args:
     keep_dir: str = "runs/study/checkpoints"
     """Where the final checkpoints are kept, as <task>/<recipe>_<level>/seed_<S>/ (without trainer.pt); the
     protocol's studies keep theirs in its tree (``checkpoints/v6``, the Makefile's learning-results)."""
+    benchmark: str | None = None
+    """A benchmark protocol version (``v7``): each recipe's config, budget and clone are the protocol's
+    (recipe ``kickstart`` at level ``move`` is its ``kickstart-move``) and each run trains on the protocol's
+    task id (``--task``); default: the configs configs/train/<prefix>_<task>_<level>.yaml as they are."""
     docs_dir: str = "runs/study/docs"
     """Where the progress logs (progress/), the learning-curve figures and study_<level>.json are written (the
     protocol's studies: ``docs/benchmark/v6/learning``)."""
@@ -134,14 +138,49 @@ def _config(recipe: str, task: str, level: str) -> Path:
     return path
 
 
+class Plan:
+    """What the study trains for one recipe on one task: the config, the budget of a PPO run (0: the
+    config's) and the task id (None: the config's); from ``configs/train`` or from a benchmark protocol."""
+
+    def __init__(self, args: Args):
+        self.level = args.level
+        self.protocol = None
+        if args.benchmark is not None:
+            from training.judging.protocol import load_protocol
+
+            self.protocol = load_protocol(args.benchmark)
+        self.total_steps = args.total_steps
+
+    def recipe(self, recipe: str, task: str) -> tuple[Path, int, str | None]:
+        """``(config, agent-steps of a PPO run, task id)`` of ``recipe`` on ``task``; an unknown recipe, or
+        one the protocol does not fix for the task, is one error naming what is allowed."""
+        if self.protocol is None:
+            return _config(recipe, task, self.level), self.total_steps or RECIPES[recipe][2], None
+        if recipe not in RECIPES:
+            raise ValueError(f"recipe {recipe!r} is not allowed; allowed: {', '.join(RECIPES)}")
+        where = f"benchmark {self.protocol.version}"
+        if task not in self.protocol.tasks:
+            raise ValueError(f"{where}: task {task!r} is not allowed; allowed: {', '.join(self.protocol.tasks)}")
+        fixed = self.protocol.tasks[task]
+        label = f"{recipe}-{self.level.replace('+', '-')}"
+        if label not in fixed.recipes:
+            raise ValueError(
+                f"{where}: recipe {recipe!r} at level {self.level!r} ({label}) on {task} is not allowed; "
+                f"allowed: {', '.join(fixed.recipes)}"
+            )
+        entry = fixed.recipes[label]
+        return Path(entry["config"]), self.total_steps or entry["agent_steps"] or 0, fixed.task_id
+
+
 def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone: Path) -> list[str]:
     trainer = RECIPES[recipe][0]
+    config, steps, task_id = Plan(args).recipe(recipe, task)
     cmd = [
         sys.executable,
         "-m",
         f"training.{trainer}",
         "--config",
-        str(_config(recipe, task, args.level)),
+        str(config),
         "--seed",
         str(seed),
         "--run-dir",
@@ -154,8 +193,9 @@ def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone
     if trainer in ("cma_es", "evolve"):
         cmd += ["--workers", "1"]  # one process per run: the study runs ``parallel`` of them
     if trainer == "ppo":
-        steps = args.total_steps or RECIPES[recipe][2]
         cmd += ["--total-steps", str(steps)] if steps else []
+    if task_id is not None:
+        cmd += ["--task", task_id]
     if recipe in FROM_CLONE:
         cmd += ["--init", str(clone)]
     return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
@@ -185,17 +225,18 @@ def main(argv=None) -> int:
     args = parse_args(Args, argv)
     level = args.level.replace("+", "-")
     keep_dir, docs = Path(args.keep_dir), Path(args.docs_dir)
-    (docs / "progress").mkdir(parents=True, exist_ok=True)
 
     def kept(recipe: str, task: str, seed: int) -> Path:
         return keep_dir / task / f"{recipe}_{level}" / f"seed_{seed}"
 
+    plan = Plan(args)
     jobs = [(recipe, task, seed) for recipe in args.recipes for task in args.tasks for seed in args.seeds]
     for recipe, task, _ in jobs:
-        _config(recipe, task, args.level)
+        plan.recipe(recipe, task)
     for recipe in args.flags:
         if recipe not in args.recipes:
             raise ValueError(f"flags of recipe {recipe!r} are not allowed; allowed: flags of {', '.join(args.recipes)}")
+    (docs / "progress").mkdir(parents=True, exist_ok=True)
     pending, running, summary = list(jobs), [], []
     while pending or running:
         waiting = {(t, s) for r, t, s in pending + [j[:3] for j in running] if r == "imitation"}

@@ -97,7 +97,8 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
     """That the checkpoint at ``path`` is a run of ``recipe`` as ``protocol`` fixes it, else one
     :class:`ConfigError`: a training seed among the protocol's (``0 .. training_seeds - 1``); the
     recipe config's settings (every key the checkpoint recorded as well, except
-    :data:`RUN_OPTIONS`); and the budget: ``agent_steps`` from the protocol's up to
+    :data:`RUN_OPTIONS` and the task, whose version the protocol's ``trained_on`` fixes: a study
+    for a protocol trains the config on the protocol's task id); and the budget: ``agent_steps`` from the protocol's up to
     :data:`BUDGET_OVERSHOOT` more, or, where the protocol leaves the budget to the config
     (``agent_steps`` null), every generation or round the config asks for."""
     import yaml
@@ -113,7 +114,7 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
     config = yaml.safe_load((protocol.path.parents[2] / entry["config"]).read_text()) or {}
     recorded = meta.get("args") or {}
     for key, value in config.items():
-        if key in RUN_OPTIONS or key not in recorded:
+        if key in RUN_OPTIONS or key == "task" or key not in recorded:  # the task: ``trained_on``, checked above
             continue
         if json.dumps(recorded[key], sort_keys=True) != json.dumps(value, sort_keys=True):
             raise ConfigError(
