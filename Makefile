@@ -61,7 +61,7 @@ results: install
 # parameters; v3: evolved chain programs; v4 and v5: evolved branch, table and grasp programs, from the paper's and from random ones;
 # v6: evolution with ten times the episodes per generation on all four), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
-# judged once per protocol: make benchmark-references (about 25 minutes).
+# judged once per protocol (v1, and v7, which does not extend it): make benchmark-references (v7: about 10 minutes).
 STUDY := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]"
 STUDY_V1 := $(STUDY) --keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning --runs-dir runs/v1
 STUDY_V2 := $(STUDY) --keep-dir checkpoints/v2 --docs-dir docs/benchmark/v2/learning --runs-dir runs/v2
@@ -84,8 +84,8 @@ learning-results: install
 	$(MAKE) results
 
 benchmark-references: install
-	for task in chain branch table grasp locomotion; do \
-		$(BIN)/proteo eval --benchmark v1 --policy rules --level full --tasks $$task --out docs/benchmark/v1/$$task/rules_full && \
-		$(BIN)/proteo eval --benchmark v1 --policy rules --level move --tasks $$task --out docs/benchmark/v1/$$task/rules_move && \
-		$(BIN)/proteo eval --benchmark v1 --policy random --level move --tasks $$task --out docs/benchmark/v1/$$task/random \
-		|| exit 1; done
+	for version in v1 v7; do for task in chain branch table grasp locomotion; do \
+		$(BIN)/proteo eval --benchmark $$version --policy rules --level full --tasks $$task --out docs/benchmark/$$version/$$task/rules_full && \
+		$(BIN)/proteo eval --benchmark $$version --policy rules --level move --tasks $$task --out docs/benchmark/$$version/$$task/rules_move && \
+		$(BIN)/proteo eval --benchmark $$version --policy random --level move --tasks $$task --out docs/benchmark/$$version/$$task/random \
+		|| exit 1; done; done
