@@ -1,58 +1,12 @@
 """Branch: grow a recursively branching tree from an arbitrary connected blob.
 
-Description
-    All modules start in SLEEP as a random connected blob, except one NODE picked by the task
-    (the module nearest the blob's centre: the paper's "a module randomly decides to switch to
-    the NODE mode", with the choice made centrally as in the chain task). A NODE emits both
-    scents and spawns up to ``B`` seeds; each seed grows a branch straight away from its node
-    like the chain's seed; a FINAL module whose node scent exceeds ``T`` (it is more than
-    ``T`` hops from the nearest node) becomes a NODE itself, so branches branch again about
-    every ``T + 1`` modules until the modules run out.
-Agents
-    Every module (``module_0`` ... ``module_{N-1}``).
-Observation
-    The common observation (:mod:`proteo_env.spaces`) with two scent channels: 0 the
-    *regular* scent (emitted by SEED and NODE, climbed by SEARCH modules), 1 the *node* scent
-    (emitted by NODE and INODE, read by FINAL modules to decide whether to become a node).
-Actions
-    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, 4 NODE, 5 INODE.
-Reward (team reward, the sum of these terms each cycle)
-    ``grown``   = ``(G_t - G_{t-1}) / N``, the change in the number ``G`` of modules in the
-                  grown tree (see Metrics; a potential-based shaping term);
-    ``levels``  = ``0.5 * (L_t - L_{t-1})``, the change in the number of branching levels;
-    ``success`` = 1 on the cycle of success;
-    ``time``    = ``-time_penalty`` (default 0.001).
-Metrics (exact, O(N) per cycle)
-    The *grown structure* is the connected piece, containing the first node (the root), of the
-    modules that have left the crowd: modes SEED, FINAL, NODE, INODE (SLEEP and SEARCH
-    modules are the unused blob and travellers). Which modules count is read from the modes;
-    everything else is measured from the sites alone. On it:
+All modules start in SLEEP as a random blob, except one NODE picked by the task; a NODE spawns up to ``B`` seeds
+that grow branches like the chain's seed, and a FINAL module more than ``T`` hops from the nearest node becomes a
+NODE, so branches branch again. Registered: ``branch-v0`` (growth in the horizontal plane of the first node) and
+``branch-v1``, the newest (:class:`BranchV1`: growth in every direction, ``planar=False``). Paper section 4.2
+(Recursive Branching for Locomotion and Manipulation).
 
-    ``tree_size`` (``G``), ``tree`` (1 when the piece has ``G - 1`` contacts, i.e. no
-    cycles), ``branch_points`` (modules with at least 3 neighbours in the piece),
-    ``levels`` (branching levels: only *real* branching points count, those with at least
-    two child arms of at least ``min_gap`` modules (default 3; an arm runs from the point's
-    child down to the next branching point or leaf, both included); the topmost real point on
-    a path from the root is level 1, and each real point is one level more than the nearest
-    real point above it when it is at least ``min_gap`` hops below it, the same level when
-    closer; ``levels`` is the largest: a star with long arms is 1 level, a star whose arms
-    branch again further out is 2), ``branches_per_point`` (mean number of child branches of a
-    branching point: its degree, minus 1 unless it is the root), ``max_branches`` (the most
-    child branches at one branching point), ``point_distance`` (mean
-    graph distance along the tree from each non-root branching point to the nearest
-    branching point on its path to the root; 0 when there is none), ``leaves`` (degree-1
-    modules of the piece), ``used_share`` (``G / N``); mode counts as extra information:
-    ``nodes`` (NODE + INODE), ``seeds``, ``searching`` (SLEEP + SEARCH).
-    Contacts are counted in the whole module graph restricted to the piece; when the piece
-    has cycles (``tree`` = 0) the levels and distances are those of a breadth-first
-    spanning tree from the root.
-Termination
-    Success: the grown structure is a tree (no cycles) with at least ``target_levels``
-    (default 2) levels of branching. Truncation at ``max_cycles``.
-Parameters
-    See :class:`BranchParams`.
-Paper section
-    4.2 (Recursive Branching for Locomotion and Manipulation).
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/branch.md.
 """
 
 from __future__ import annotations
@@ -114,7 +68,7 @@ def measure_tree(
     and its distance), ``any_d`` (distance to the nearest branching point above, 0 if none),
     ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
     most_children, distance_sum, distance_count, leaves)`` (``children``: summed over the
-    branching points, ``most_children``: the largest at one point); see the module docstring
+    branching points, ``most_children``: the largest at one point); see docs/tasks/branch.md
     for the definitions.
     """
     for n in range(n_modules):

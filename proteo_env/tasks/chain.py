@@ -1,33 +1,11 @@
 """Chain: turn an arbitrary connected blob into one one-module-thick chain.
 
-Description
-    All modules start in SLEEP as a random connected blob, except one SEED picked by the
-    task (the module farthest from the blob's centre, the paper's "initial seed determined
-    centrally"). The seed emits scent; searching modules climb the scent gradient; a module
-    that arrives in the seed's growth direction becomes the new seed and the old one FINAL.
-Agents
-    Every module (``module_0`` ... ``module_{N-1}``).
-Observation
-    The common observation (:mod:`proteo_env.spaces`) with one scent channel.
-Actions
-    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL.
-Reward (team reward, the sum of these terms each cycle)
-    ``thin``    = ``(T_t - T_{t-1}) / N``, the change in the number ``T`` of modules with at
-                  most two neighbours (a potential-based shaping term);
-    ``success`` = 1 on the cycle the chain is complete (``chain-v1``, the default: its
-                  straightness, end-to-end lattice distance over ``N - 1``; :class:`ChainV1`);
-    ``time``    = ``-time_penalty`` (default 0.001).
-Metrics
-    ``chain_length`` (largest one-module-thick connected piece), ``thin_share`` (``T / N``),
-    ``max_degree``, ``components``, ``success``.
-Termination
-    Success: the module graph is one connected, one-module-thick chain (connected, ``N - 1``
-    contacts, every module with at most 2 neighbours); it need not be straight (the
-    hand-coded policy grows it straight). Truncation at ``max_cycles``.
-Parameters
-    See :class:`ChainParams`.
-Paper section
-    4.1 (A Chain).
+All modules start in SLEEP as a random blob, except one SEED picked by the task; searching modules climb its
+scent and extend the chain at the seed until every module is in it. Registered: ``chain-v0`` (success bonus 1 for
+any complete chain) and ``chain-v1``, the newest (:class:`ChainV1`: the bonus is the chain's straightness, and the
+metric ``straightness``). Paper section 4.1 (A Chain).
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/chain.md.
 """
 
 from __future__ import annotations

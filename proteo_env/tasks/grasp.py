@@ -1,59 +1,11 @@
 """Grasp: grow eight fingers towards an object of unknown shape and size and wrap it.
 
-Description
-    The robot starts as a connected lump of modules (the base: a random blob, new each
-    episode, or a compact ball), all in SLEEP except ``n_seed_modules`` (paper: eight) SEED modules
-    spread over the front of the base, the side that faces the object. The object is a
-    solid set of lattice sites (a discretised sphere, an axis-aligned box, or a random
-    connected blob, new each episode) placed about ``distance`` empty layers in front of
-    the base's foremost module along the true direction. The agents know only a rough
-    direction to it (the observation ``hint``, the same unit vector for every agent, drawn
-    within ``hint_noise_deg`` of the true direction); shape, size and distance are unknown
-    to them. A module's contact sensor (``contact[1]``) tells it when it touches the object.
-    The paper's rules grow fingers from the seeds towards the object; on contact the seeds
-    turn into TOUCHSEEDs and the fingers grow over the object's surface. There is no floor
-    (gravity is not modelled); the object is solid: modules can neither enter it nor roll
-    about it (a pivot must be a module), and it blocks the cells a roll sweeps through.
-Agents
-    Every module of the base (``module_0`` ... ``module_{N-1}``).
-Observation
-    The common observation (:mod:`proteo_env.spaces`) with two scent channels: 0, the seed
-    scent (the paper's scent, emitted by SEED and TOUCHSEED modules in the hand-coded
-    rules) and 1, the touch scent (emitted by TOUCHSEEDs only, so a searcher can tell that
-    the object has been reached and where); what emits or relays is up to the policy.
-    ``hint`` is the rough direction of the object (a unit vector); ``contact[1]`` is the
-    contact sensor.
-Actions
-    The common action. Modes: 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, 4 TOUCHSEED, 5 TOUCH.
-Geometry the metrics use (fixed per episode, O(object surface) to read)
-    *Surface sites*: the sites inside the box, not part of the object, that are face
-    neighbours of an object site. A module touches the object exactly when it stands on a
-    surface site. *Sides*: each surface site is assigned to the nearest of the 12 lattice face
-    directions (largest cosine with the vector from the object's centroid to the site; a
-    site on a boundary between sectors goes to the one that faces the base most, so the
-    equator is never credited to the far side); the 12 sectors are congruent, a twelfth of
-    the sphere each. The sides that hold at least one
-    surface site are the object's sides (all 12 for a compact object).
-Metrics
-    ``gap``      hop distance from the nearest module to a surface site (0: in contact),
-                 counted through the box around the object (modules do not block it);
-    ``contact``  number of modules touching the object;
-    ``coverage`` share of the surface sites that hold a module;
-    ``surround`` share of the object's sides with at least one module on them;
-    ``success``  1 when both thresholds are met.
-Reward (team reward, the sum of these terms each cycle; the first three are potential-based)
-    ``reach``    = ``(gap_{t-1} - gap_t) / gap_0`` (sums to 1 over the approach);
-    ``coverage`` = ``coverage_weight * (coverage_t - coverage_{t-1})``;
-    ``surround`` = ``surround_weight * (surround_t - surround_{t-1})``;
-    ``success``  = 1 on the cycle the grasp succeeds;
-    ``time``     = ``-time_penalty``.
-Termination
-    Success: ``coverage >= coverage_threshold`` and ``surround >= surround_threshold``.
-    Truncation at ``max_cycles``.
-Parameters
-    See :class:`GraspParams`.
-Paper section
-    4.4 (Grasping an Object).
+A connected base of SLEEP modules with ``n_seed_modules`` SEEDs on its front grows fingers towards a solid object
+it knows only by a rough direction (the observation ``hint``) and by touch (``contact[1]``), then wraps it until
+it holds enough of its surface from enough of its sides. Registered: ``grasp-v0``. Paper section 4.4 (Grasping an
+Object).
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/grasp.md.
 """
 
 from __future__ import annotations

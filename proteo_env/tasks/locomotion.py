@@ -1,48 +1,11 @@
 """Locomotion: move the robot's centroid in a goal direction, over a step or through a tunnel.
 
-Description
-    The paper's reason for chains: "moving over steps, snaking into holes". The robot starts
-    as a random connected blob of modules lying on a floor (ground under ``z = 0``). Ahead of
-    it, ``distance`` empty sites from its foremost module along the goal direction ``+x``,
-    lies an obstacle across the whole width of the box: a *step*, solid ground ``step_height``
-    sites high from its face on to the far end of the box, and, as an option, a *tunnel*: a
-    solid roof ``tunnel_height`` free layers above the ground (or the step) over
-    ``tunnel_length`` sites (with ``closed_above``, the roof rises as a wall to the top of the
-    box, so the tunnel is a hole in a wall), or a *slot*: a wall as high as the box over ``tunnel_length``
-    sites with an opening ``slot_width`` sites wide across the goal direction. The *finish
-    line* is the step's face, or the tunnel's or the slot's exit; with none of them
-    (``step_height=0``, ``tunnel_height=0``, ``slot_width=0``) it lies where the face would be. The
-    robot must get every module beyond it, rolling its modules over each other: a roll needs
-    a module to pivot on (never the ground), so a lone module cannot move and the robot
-    travels like a tread, its modules climbing over the others to the front.
-Agents
-    Every module (``module_0`` ... ``module_{N-1}``).
-Observation
-    The common observation (:mod:`proteo_env.spaces`) with one scent channel. ``hint`` is the
-    goal direction ``(1, 0, 0)`` for every agent (the paper's global hint, as in grasp);
-    ``contact[0]`` fires next to the ground, the step or the roof.
-Actions
-    The common action. Modes: 0 SEARCH, 1 SEED (a module at the front).
-Reward (team reward, the sum of these terms each cycle)
-    ``progress`` = ``(c_t - c_{t-1}) / course``: the centroid's advance along the goal
-                   direction, ``c_t`` the mean ``x`` of the modules, over ``course``, the
-                   distance from the start centroid to the finish line (potential-based;
-                   sums to 1 when the centroid reaches the line);
-    ``success``  = 1 on the cycle the whole robot is beyond the finish line;
-    ``time``     = ``-time_penalty``.
-Metrics
-    ``distance``   centroid advance since the start (sites, along ``+x``);
-    ``speed``      ``distance`` per cycle (sites per cycle);
-    ``beyond``     share of the modules beyond the finish line;
-    ``components`` connected pieces of the robot (1: connected);
-    ``success``    1 when every module is beyond the finish line.
-Termination
-    Success: every module's ``x`` is at least the finish line's. Truncation at ``max_cycles``.
-Parameters
-    See :class:`LocomotionParams`.
-Paper section
-    1 and 4.1 (chains "for moving over steps, snaking into holes"), 2.2 (directed random
-    moves).
+A random blob of modules on a floor must get every module beyond a finish line ahead of it along ``+x``: the face
+of a step, or the exit of a tunnel or of a slot in a wall, rolling its modules over each other like a tread.
+Registered: ``locomotion-v0``. Paper sections 1 and 4.1 (chains "for moving over steps, snaking into holes"), 2.2
+(directed random moves).
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/locomotion.md.
 """
 
 from __future__ import annotations

@@ -1,28 +1,10 @@
 """Sandbox: any layout, no reward, nothing to achieve.
 
-Description
-    The bare lattice: modules on any start layout (a generated blob, ball or line, or a
-    layout text file), moving under the chosen motion model. Useful for exploring the
-    physics, benchmarking, and writing new behaviours before defining a task.
-Agents
-    Every movable module (``module_0`` ...).
-Observation
-    The common observation of :mod:`proteo_env.spaces` with ``n_channels`` scent channels;
-    ``load`` and ``hint`` are zero.
-Actions
-    The common action (move, mode, scent roles, message); modes are ``MODE_0`` ..
-    ``MODE_{n_modes-1}`` with no meaning attached.
-Reward
-    None (0 every cycle).
-Metrics
-    ``components`` (connected pieces), ``mobile_share`` (share of agents with a legal move
-    at the end of the cycle), ``moved`` (modules that moved this cycle).
-Termination
-    Never; ``truncated`` at ``max_cycles``.
-Parameters
-    See :class:`SandboxParams`.
-Paper section
-    2 (the robot system and its simulator).
+The bare lattice: modules on any start layout (a generated blob, ball or line, or a layout text file), moving under
+the chosen motion model; for exploring the physics, benchmarking, and writing new behaviours before defining a
+task. Registered: ``sandbox-v0``. Paper section 2 (the robot system and its simulator).
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/sandbox.md.
 """
 
 from __future__ import annotations

@@ -1,37 +1,11 @@
 """Snake: a blob that forms a chain and travels as a chain, head first, through a tunnel.
 
-Description
-    The paper's reason for chains, taken literally: "moving over steps, snaking into holes or
-    squeezing through narrow passages". The course is locomotion's (:mod:`proteo_env.tasks.locomotion`):
-    a random connected blob on a floor, and ahead of it, ``distance`` empty sites from its
-    foremost module, a tunnel (a hole through a wall, ``tunnel_height`` free layers high over
-    ``tunnel_length`` sites; by default 2 layers, 6 sites), a step, or a narrow slot. The
-    robot must get every module beyond the finish line (the tunnel's exit). All modules start
-    in SLEEP except one SEED picked by the task, the foremost module lying on the ground (the
-    paper's "initial seed determined centrally"). The behaviour is composed
-    (:mod:`baselines.compose`): the modules first form a chain by the paper's chain rules,
-    then hand over, module by module, to a crawl in which modules leave the chain's tail,
-    travel along the chain and join it at its head, so the chain moves head first, one
-    module thick.
-Agents
-    Every module (``module_0`` ... ``module_{N-1}``).
-Observation
-    The common observation (:mod:`proteo_env.spaces`) with one scent channel; ``hint`` is the
-    goal direction ``(1, 0, 0)``; ``contact[0]`` fires next to the ground, the step, the roof
-    or the slot's walls.
-Actions
-    The common action. Modes: the chain's 0 SLEEP, 1 SEARCH, 2 SEED, 3 FINAL, then the crawl's
-    (:mod:`proteo_env.tasks.crawl`) 4 CRAWL, 5 HEAD, 6 BODY. Message values 1..15.
-Reward, metrics, termination
-    Locomotion's: ``progress``, ``success`` and ``time``; ``distance``, ``speed``, ``beyond``,
-    ``components``, ``success``; success when every module is beyond the finish line,
-    truncation at ``max_cycles``.
-Parameters
-    See :class:`SnakeParams` (locomotion's, with a tunnel 2 layers high and no step by
-    default).
-Paper section
-    1 and 4.1 (chains "for moving over steps, snaking into holes or squeezing through narrow
-    passages").
+On locomotion's course (:mod:`proteo_env.tasks.locomotion`; by default a tunnel 2 layers high through a wall, no
+step), the modules first form a chain by the paper's chain rules, then crawl: modules leave the chain's tail, travel
+along it and join it at its head (:mod:`proteo_env.tasks.crawl`). Reward, metrics and termination are locomotion's.
+Registered: ``snake-v0``. Paper sections 1 and 4.1 ("snaking into holes or squeezing through narrow passages").
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/snake.md.
 """
 
 from __future__ import annotations

@@ -1,97 +1,12 @@
 """Table: a board held up by legs that grow where the weight is and move when it shifts.
 
-Description
-    A horizontal board of modules that never move (the table top) hangs ``depth`` layers
-    above a floor. Most board modules are FIXED and passive (they only relay scent); every
-    ``root_spacing`` sites a board module is a *root*, an agent that never moves but decides
-    when to grow or disband a leg below it. Weights ``W1`` (left half of the board) and
-    ``W2`` (right half) press on the board; a schedule shifts them during the episode (by
-    default the paper's sequences: most weight on the left, then on the right, then in the
-    centre). Spare modules hang under the middle of the board in SLEEP. Roots grow legs
-    (chains of modules down to the floor, one layer per module) and disband them,
-    probabilistically, so that the weight per active root of each region stays between
-    ``f_min`` and ``f_max``.
-Board geometry (the FCC reading of the paper's "30 by 30 board, roots every 3 sites")
-    The board is the FCC layer ``z = depth``: every site ``(x, y, depth)`` with
-    ``0 <= x, y < board_size`` and ``x + y + depth`` even (a checkerboard; in-plane face
-    neighbours are ``(+-1, +-1, 0)`` apart), ``board_size**2 / 2`` modules (450 for 30).
-    Roots are the board sites with ``x = o + root_spacing * i`` and ``y = o + root_spacing * j``
-    (``o`` centres the sub-grid on the board, 1 for 30 by 30); parity keeps half of these
-    points, so neighbouring roots are ``(+-3, +-3, 0)`` apart: 3 face hops along the layer's
-    two lattice rows, "separated by 3 modules in each direction" (50 roots for 30 by 30, 25
-    per half). The regions are the halves ``x < board_size / 2`` (left, weight ``W1``) and
-    the rest (right, ``W2``). The floor is ground below ``z = 0``, so a leg is ``depth``
-    modules, ``z = depth - 1 .. 0``, and its lowest module touches the ground. The box is
-    the board's square and ``depth + 1`` layers high: nothing climbs onto the board.
-Spare modules
-    ``n_spares`` movable modules in SLEEP, the sites nearest the point under the board's
-    centre (a half ball hanging from the board, straddling both halves; it reaches the floor
-    when it is large). They are connected to the board, so the whole robot is one piece.
-    ``table-v2`` draws the point they hang under from the world's seed
-    (:meth:`TableV2.spares_under`).
-Agents
-    The spares (``module_0`` .. ``module_{n_spares-1}``), then the roots. FIXED board
-    modules are passive (not agents).
-Observation
-    The common observation (:mod:`proteo_env.spaces`), one scent channel. ``load`` of a root
-    is its load sensor (below); 0 for every other module (module weights are neglected, as in
-    the paper). ``contact[0]`` tells a module it touches the floor.
-Load sensor (the paper's model)
-    A root reads the weight per active root of its region: ``W_r / N_r`` with ``N_r`` the
-    roots of region ``r`` in ROOT or AROOT mode. The paper's roots sum their force readings
-    by signals through the fixed modules, "much faster than physical movements"; the task
-    computes that sum directly, every cycle, from the roots' modes (an environment-provided
-    sensor, not policy state). With no active root a region's weight rests on nothing and the
-    reading saturates at ``load_cap`` (0 when ``W_r = 0``).
-Actions
-    The common action. Modes: 0 FIXED, 1 ROOT, 2 IROOT, 3 AROOT, 4 SLEEP, 5 SEARCH, 6 SEED,
-    7 FINAL, 8 DISBAND. Board modules show FIXED, roots start IROOT, spares SLEEP.
-Legs (measured by the task, O(modules in legs) per cycle)
-    A root has a *grounded leg* when a chain of FINAL or SEED modules runs from it to the
-    floor going down one layer per module (each module a face neighbour below the previous
-    one). ``legs_left`` and ``legs_right`` count roots with a grounded leg per region.
-Stable configuration
-    The *signature* is the pair (set of active roots, set of roots with a grounded leg). It is
-    *complete* when both sets are equal (every active root stands on a grounded leg and no
-    other root does). A stable configuration starts at cycle ``c`` when the signature is
-    complete and stays unchanged for ``stable_window`` cycles from ``c``. For the shift at
-    cycle ``s_k`` (entry ``k`` of the schedule; entry 0 is the start), ``restabilise_k`` is
-    ``max(c, s_k) - s_k`` for the first such period that starts and lasts
-    ``stable_window`` cycles before the next shift; -1 while unknown or if there is none.
-Reward (team reward, the sum of these terms each cycle)
-    ``support`` = ``sum_r min(W_r, f_max * G_r) / sum_r W_r``: the share of the weight that
-                  the grounded legs ``G_r`` carry when each leg carries at most ``f_max``
-                  (the load per grounded leg within capacity); 0 when there is no weight;
-    ``legs``    = ``-leg_cost * (G_left + G_right)`` (few legs).
-    ``settled`` (``table-v1``, the default) = ``(max_cycles - cycle) * (support + legs)`` on the
-                  cycle of success, else 0: the rest of the horizon at the stable rate
-                  (:class:`TableV1`).
-Metrics
-    ``weight_left``, ``weight_right`` (current ``W1``, ``W2``; a change marks a shift),
-    ``legs_left``, ``legs_right``, ``grounded_legs``, ``active_left``, ``active_right``,
-    ``load_left``, ``load_right`` (the sensor reading per region), ``support``,
-    ``stable`` (1 while in a stable configuration), ``leg_creations`` and ``leg_disbands``
-    (cumulative counts of roots turning active and inactive), ``restabilise_0`` ..
-    ``restabilise_{K-1}`` (one per schedule entry), ``success``.
-Termination
-    Success: the configuration after the last scheduled shift is stable
-    (``restabilise_{K-1}`` is known); ``table-v1`` also asks that, in that stable
-    configuration, each region's grounded legs carry ``min(W, f_max * R)`` of its weight
-    (``R`` its roots: all of it when the roots suffice); ``table-v2`` asks for a stable
-    configuration after every shift, each with no idle leg (:class:`TableV2`). Truncation at
-    ``max_cycles``: set it past the last shift plus the time to re-stabilise and
-    ``stable_window``. With the default schedule the hand-coded policy succeeds after 920-1120
-    cycles (docs/evidence/table.md), so the env's default of 1000 is too short;
-    ``configs/table.yaml`` uses 1300.
-Motion model
-    Legs reach the floor only under ``minimal``. Under ``sphere``, ``rounded`` and
-    ``rhombic`` no single roll brings a module onto a floor site below a SEED one layer up
-    (the roll would sweep through the ground or the leg), so no leg ever grounds; the
-    configs set ``motion_model: minimal`` (docs/tasks/table.md has the numbers).
-Parameters
-    See :class:`TableParams`.
-Paper section
-    4.3 (Dynamically Adapting to External Forces).
+Roots of a fixed board grow legs of spare modules down to a floor, and disband them, as a schedule shifts the
+weight between the board's two halves. Registered: ``table-v0``; ``table-v1`` (:class:`TableV1`: the ``settled``
+reward term, and success needs the legs to carry the weight); ``table-v2``, the newest (:class:`TableV2`: no idle
+leg, a stable configuration after every shift, the spares placed per world). Paper section 4.3 (Dynamically
+Adapting to External Forces).
+
+The contract (layout, agents, observation, actions, reward, metrics, termination, parameters): docs/tasks/table.md.
 """
 
 from __future__ import annotations
