@@ -83,23 +83,25 @@ def test_the_page_names_every_version(name):
     assert not missing, f"docs/tasks/{name}.md does not name {missing}"
 
 
-@pytest.mark.parametrize("name", TASK_NAMES)
-def test_the_page_names_every_metric(name):
+def unnamed(name: str, names_of) -> dict:
+    """``{task id: names the page of task ``name`` does not name}`` over its versions, ``names_of(cls)``
+    giving a version's names."""
     text = page_text(name)
     missing = {}
     for cls in task_classes()[name]:
-        absent = sorted(m for m in metric_names(cls.task_id()) if not named_in(text, m))
+        absent = sorted(n for n in names_of(cls) if not named_in(text, n))
         if absent:
             missing[cls.task_id()] = absent
+    return missing
+
+
+@pytest.mark.parametrize("name", TASK_NAMES)
+def test_the_page_names_every_metric(name):
+    missing = unnamed(name, lambda cls: metric_names(cls.task_id()))
     assert not missing, f"docs/tasks/{name}.md does not name these metrics: {missing}"
 
 
 @pytest.mark.parametrize("name", TASK_NAMES)
 def test_the_page_names_every_parameter(name):
-    text = page_text(name)
-    missing = {}
-    for cls in task_classes()[name]:
-        absent = sorted(f.name for f in dataclasses.fields(cls.Params) if not named_in(text, f.name))
-        if absent:
-            missing[cls.task_id()] = absent
+    missing = unnamed(name, lambda cls: [f.name for f in dataclasses.fields(cls.Params)])
     assert not missing, f"docs/tasks/{name}.md does not name these parameters: {missing}"
