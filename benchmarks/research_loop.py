@@ -113,13 +113,13 @@ def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, wo
     original = episodes.run_episodes
     if per_episode_path:
 
-        def one_by_one(results, jobs, out_dir, *, ray, journal, progress, workers=None):
+        def one_by_one(jobs, out_dir, *, ray, journal, progress, workers=None):
             from training.distributed import run_jobs
 
-            for (row, job), episode in zip(
+            for (run, job), episode in zip(
                 jobs, run_jobs(episodes.run_episode_job, [j for _, j in jobs], [j.key for _, j in jobs], progress=False)
             ):
-                episodes.add_episode(results[row], job, episode)
+                run.add(job.seed, episode)
 
         episodes.run_episodes = one_by_one
     try:

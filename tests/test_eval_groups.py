@@ -11,7 +11,6 @@ import yaml
 
 from proteo_env.config import ConfigError
 from training.judging.evaluate import evaluate, load_config
-from training.judging.report import GroupResult
 from training.judging.statistics import group_bootstrap, wilson
 
 RUNS = [
@@ -48,10 +47,10 @@ def test_a_group_of_training_seeds_is_one_row_with_the_spread_across_them(tmp_pa
         progress=False,
         plots=False,
     )
-    (group,) = [r for r in rows if isinstance(r, GroupResult)]
+    (group,) = [r for r in rows if r.group]
     assert [r.source for r in group.runs] == RUNS
     summary = group.summary()
-    per_run = [r.summary() for r in group.runs]
+    per_run = [r.summary() for r in group.each_run()]
     assert summary["training_seeds"] == 3 and summary["episodes"] == 6
     assert summary["interval"] == "stratified bootstrap"
     boot = group_bootstrap(
@@ -86,19 +85,11 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
 
 
 def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
-    from training.judging.report import INTERVALS, PUBLISH_END, PolicyResult, markdown_table, publish, summary_table
+    from training.judging.report import INTERVALS, PUBLISH_END, Result, Run, markdown_table, publish, summary_table
 
     def result(task, policy, kind, successes, cycles, level="move"):
-        return PolicyResult(
-            task=task,
-            policy=policy,
-            kind=kind,
-            source="",
-            level=level,
-            returns=[1.0] * len(cycles),
-            successes=successes,
-            cycles=cycles,
-        )
+        run = Run(source="", returns=[1.0] * len(cycles), successes=successes, cycles=cycles)
+        return Result(task=task, policy=policy, kind=kind, level=level, runs=[run])
 
     results = [
         result("chain-v1", "chain", "hand-coded", [True, True], [80, 90], level="full"),
@@ -135,16 +126,11 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
     assert page.read_text() == before  # nothing written when one file lacks the markers
 
 
-def _run(policy, successes, cycles, group="", source="", task="grasp-v0", kind="learned", level="move"):
-    from training.judging.report import PolicyResult
+def _run(successes, cycles, source):
+    from training.judging.report import Run
 
-    return PolicyResult(
-        task=task,
-        policy=policy,
-        kind=kind,
-        source=source or f"checkpoints/{policy}",
-        level=level,
-        group=group,
+    return Run(
+        source=source,
         returns=[2.0 + c / 1000 for c in cycles],
         successes=successes,
         cycles=cycles,
@@ -154,20 +140,29 @@ def _run(policy, successes, cycles, group="", source="", task="grasp-v0", kind="
     )
 
 
-def _kickstart_runs():
+def _rules():
+    """The rules on grasp: 9/10."""
+    from training.judging.report import Result
+
+    run = _run([True] * 9 + [False], [100 + j for j in range(9)] + [300], "baselines.grasp")
+    return Result(task="grasp-v0", policy="grasp", kind="hand-coded", level="full", runs=[run])
+
+
+def _kickstart():
     """The study's kickstart on grasp: three training seeds, each 8/10."""
-    runs = []
-    for i, won_in in enumerate((153, 94, 114)):
-        cycles = [won_in + j for j in range(8)] + [300, 300]
-        runs.append(_run("kickstart", [True] * 8 + [False] * 2, cycles, "kickstart-move", f"ks/seed_{i}"))
-    return runs
+    from training.judging.report import Result
+
+    runs = [
+        _run([True] * 8 + [False] * 2, [won_in + j for j in range(8)] + [300, 300], f"ks/seed_{i}")
+        for i, won_in in enumerate((153, 94, 114))
+    ]
+    return Result(task="grasp-v0", policy="kickstart-move", kind="learned", level="move", runs=runs, group=True)
 
 
 def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width():
-    from training.judging.report import grouped, markdown_table, summary_table
+    from training.judging.report import markdown_table, summary_table
 
-    rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
-    rows = grouped([rules, *_kickstart_runs()])
+    rows = [_rules(), _kickstart()]
     s = rows[1].summary()
     assert s["successes"] == 24 and s["success_rate"] == pytest.approx(0.8)
     assert s["success_lo"] <= wilson(24, 30)[0] and s["success_hi"] >= wilson(24, 30)[1]
@@ -200,8 +195,7 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     from training.cli import main
     from training.judging import episodes
 
-    rules = _run("grasp", [True] * 9 + [False], [100 + j for j in range(9)] + [300], kind="hand-coded", level="full")
-    results = [rules, *_kickstart_runs()]
+    results = [_rules(), _kickstart()]
     first = _written(tmp_path, results)
     old = json.loads((first / "results.json").read_text())
     old["results"][0].pop("level")  # as written before control levels
@@ -217,9 +211,8 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     assert (first / "results.md").read_text() == (again / "results.md").read_text()
     written = json.loads((first / "results.json").read_text())
     assert written == json.loads((again / "results.json").read_text())  # every episode kept, summaries anew
-    rows = ev.grouped(results)
     assert page.read_text() == f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\n" + (
-        f"{ev.summary_table(rows)}\n{ev.PUBLISH_END}\nb\n"
+        f"{ev.summary_table(results)}\n{ev.PUBLISH_END}\nb\n"
     )
     # a page without markers: nothing written, not even results.md
     (first / "results.md").write_text("kept\n")
@@ -239,7 +232,7 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
 def test_from_results_refuses_flags_that_run_episodes(tmp_path, capsys, flags, message):
     from training.cli import main
 
-    first = _written(tmp_path, _kickstart_runs())
+    first = _written(tmp_path, [_kickstart()])
     assert main(["eval", "--from-results", str(first / "results.json"), "--out", str(first), *flags]) == 2
     assert message in capsys.readouterr().err
 

@@ -164,7 +164,7 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
         config=config, tasks=["chain"], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
     )
     by_kind = {(r.kind, r.level): r for r in rows}
-    learned, random_moves = by_kind[("learned", "move")], by_kind[("random", "move")]
+    learned, random_moves = by_kind[("learned", "move")].runs[0], by_kind[("random", "move")].runs[0]
 
     def standard_error(values):
         return np.std(values, ddof=1) / math.sqrt(len(values))

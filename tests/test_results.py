@@ -42,9 +42,11 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
     for split, runs in per_split.items():
         run_dicts = [
             {
+                "source": f"checkpoints/{policy}/seed_{k}" if kind in ("learned", "evolved") else f"baselines.{policy}",
                 "successes": s,
                 "cycles": [50 if ok else 300 for ok in s],
                 "returns": [0.0] * len(s),
+                "seconds": 0.0,
                 "training_seed": k if kind in ("learned", "evolved") else None,
                 "agent_steps": 1000 if kind in ("learned", "evolved") else None,
             }
@@ -57,6 +59,7 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
                 "policy": policy,
                 "kind": kind,
                 "level": level,
+                "recipe": policy if kind in ("learned", "evolved") else None,
                 "env": {"max_cycles": 300},
                 "world_seeds": list(range(1000, 1000 + len(runs[0]))),
                 "runs": run_dicts,
@@ -130,7 +133,7 @@ def test_the_paired_test_finds_a_difference_that_overlapping_intervals_hide(tmp_
     _write(folder, "grasp", "clone", "learned", "move", {"heldout": seeds})
     rows, headers = results.read_rows(folder.parent, load_protocol("v1").lineage)
     by_key = {(r.policy): r for r in rows}
-    clone, rule = by_key["clone"].summary, by_key["rules"].summary
+    clone, rule = by_key["clone"].summary(), by_key["rules"].summary()
     assert not (clone["success_hi"] < rule["success_lo"])  # the intervals overlap
     text = results.render(rows, headers, "v1", folder.parent, tmp_path / "results.md", load_protocol("v1"))
     assert "clone succeeds below the rules on the same 20 worlds: 0.65 against 0.90, difference -0.25 (" in text

@@ -37,8 +37,9 @@ class EpisodeJob:
     """One episode: everything its result depends on (picklable; sent to Ray workers as it is).
 
     ``policy`` is a registered policy name (``checkpoint=False``) or a checkpoint path;
-    ``overrides`` is the JSON of the ``proteo_env.make`` overrides; ``picture`` a caption: when
-    not empty the end of the episode is drawn and returned.
+    ``overrides`` is the JSON of the ``proteo_env.make`` overrides; ``picture`` the name of what
+    acts (a policy, a checkpoint folder, a group's label): when not empty the end of the episode is
+    drawn under it and returned.
     """
 
     task_id: str
@@ -101,25 +102,16 @@ def run_episode_job(job: EpisodeJob) -> dict:
     }
     if job.picture:
         out["picture"] = _picture_png(
-            env, f"{job.picture} · seed {job.seed} · cycle {episode.cycles}{' · success' if episode.success else ''}"
+            env,
+            f"{job.task_id} · {job.picture} ({job.level}) · seed {job.seed} · cycle {episode.cycles}"
+            + (" · success" if episode.success else ""),
         )
     return out
 
 
-def add_episode(result, job: EpisodeJob, episode: dict) -> None:
-    """Add one finished episode (what :func:`run_episode_job` returns) to its row's ``result``
-    (a :class:`~training.judging.report.PolicyResult`)."""
-    result.returns.append(episode["return"])
-    result.successes.append(episode["success"])
-    result.cycles.append(episode["cycles"])
-    result.seeds.append(job.seed)
-    result.metrics.append(episode["metrics"])
-    result.seconds += episode["seconds"]
-
-
-def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
-    """Run the planned ``jobs`` and add each episode to its row of ``results``; pictures go to
-    ``out_dir/pictures``.
+def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
+    """Run the planned ``jobs`` (``[(Run, EpisodeJob)]``) and add each episode to its run; pictures
+    go to ``out_dir/pictures/<task>_<picture>_<level>.png``.
 
     The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`, on
     ``workers`` processes, default every core, or on Ray); a job with a picture runs on its own
@@ -175,18 +167,9 @@ def run_episodes(results: list, jobs: list, out_dir: Path, *, ray, journal, prog
                 "seconds": seconds,
                 "picture": None,
             }
-    for (row, job), episode in zip(jobs, episodes):
-        result = results[row]
-        add_episode(result, job, episode)
+    for (run, job), episode in zip(jobs, episodes):
+        run.add(job.seed, episode)
         if episode["picture"]:
-            file = (
-                out_dir
-                / "pictures"
-                / (
-                    f"{task_name(job.task_id)}_"
-                    f"{result.group or (result.policy if not job.checkpoint else Path(job.policy).name)}"
-                    f"_{job.level}.png"
-                ).replace("+", "-")
-            )
+            file = out_dir / "pictures" / f"{task_name(job.task_id)}_{job.picture}_{job.level}.png".replace("+", "-")
             file.parent.mkdir(parents=True, exist_ok=True)
             file.write_bytes(base64.b64decode(episode["picture"]))

@@ -71,7 +71,7 @@ from pathlib import Path
 from proteo_env.registry import task_name
 from training.common import checkpoint_kind
 from training.judging.episodes import EpisodeJob, run_episodes
-from training.judging.report import PolicyResult, markdown_table, publish, rerender, write_results
+from training.judging.report import Result, Run, markdown_table, publish, rerender, write_results
 
 DEFAULT_CONFIG = "configs/eval.yaml"
 """The config ``proteo eval`` reads when run from the repository root without ``--config``."""
@@ -179,13 +179,13 @@ def load_config(path) -> dict:
     return {"seeds": numbers["seeds"], "first_seed": numbers["first_seed"], "tasks": tasks}
 
 
-def _name_apart(results: list[PolicyResult]) -> None:
+def _name_apart(results: list[Result]) -> None:
     """Give policies that share a name (two checkpoints of one algorithm) their checkpoint
     folder's name in brackets, so that the table tells them apart."""
     names = [r.policy for r in results]
     for r in results:
-        if names.count(r.policy) > 1 and not r.source.startswith("baselines."):
-            r.policy = f"{r.policy} ({Path(r.source).name})"
+        if names.count(r.policy) > 1 and not r.runs[0].source.startswith("baselines."):
+            r.policy = f"{r.policy} ({Path(r.runs[0].source).name})"
 
 
 def _checkpoint_identity(path) -> str:
@@ -234,7 +234,7 @@ def evaluate(
         fresh: discard the episodes of an unfinished earlier run in ``out`` instead of resuming it.
 
     Returns:
-        one :class:`PolicyResult` per policy, or :class:`GroupResult` per training-seed group.
+        one :class:`~training.judging.report.Result` per policy or training-seed group.
 
     It chooses the tasks and checkpoints, then plans every episode (:func:`plan_episodes`), runs
     them (:func:`run_episodes`) and writes the tables (:func:`write_results`).
@@ -282,17 +282,15 @@ def evaluate(
         "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
     }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
-    run_episodes(results, jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
-    rows = write_results(
-        results, out_dir, seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots
-    )
+    run_episodes(jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
+    write_results(results, out_dir, seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots)
     journal.complete()
-    return rows
+    return results
 
 
 def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool):
-    """Every policy's result row and its episodes as jobs: ``(results, jobs)``, ``jobs`` a list of
-    ``(row in results, EpisodeJob)``. Policies are built here once, so that a bad checkpoint fails
+    """Every policy's (or training-seed group's) result and its episodes as jobs: ``(results, jobs)``,
+    ``jobs`` a list of ``(Run, EpisodeJob)``, the run of the result the episode adds to. Policies are built here once, so that a bad checkpoint fails
     before any episode runs.
 
     Args:
@@ -304,8 +302,8 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
     from baselines import make_policy
     from training.checkpoints import load_policy, read_meta
 
-    results: list[PolicyResult] = []
-    jobs: list[tuple[int, EpisodeJob]] = []
+    results: list[Result] = []
+    jobs: list[tuple[Run, EpisodeJob]] = []
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
         envs = {"full": proteo_env.make(cls.task_id(), **overrides)}
@@ -322,26 +320,27 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
             env = envs[level]
             if path is None:
                 policy = make_policy(name, env, seed=seed_list[0])
-                source = f"baselines.{name}"
+                run = Run(source=f"baselines.{name}")
             else:
                 meta = read_meta(path)
                 policy = load_policy(path, env, seed=seed_list[0], deterministic=deterministic)
                 kind = checkpoint_kind(meta)
-                source = str(path)
-            first_of_group = not group or not any(r.group == group and r.task == cls.task_id() for r in results)
-            label = group or (policy.name if path is None else Path(path).name)
-            results.append(
-                PolicyResult(task=cls.task_id(), policy=policy.name, kind=kind, source=source, level=level, group=group)
+                run = Run(source=str(path), training_seed=meta.get("seed"), agent_steps=meta.get("agent_steps"))
+            result = next(
+                (r for r in results if group and r.group and r.task == cls.task_id() and r.policy == group), None
             )
-            for seed in seed_list:
-                picture = (
-                    f"{cls.task_id()} · {label} ({level})"
-                    if pictures and seed == seed_list[0] and first_of_group
-                    else ""
+            first_of_group = result is None
+            if result is None:
+                result = Result(
+                    task=cls.task_id(), policy=group or policy.name, kind=kind, level=level, group=bool(group)
                 )
+                results.append(result)
+            result.runs.append(run)
+            label = group or (policy.name if path is None else Path(path).name)
+            for seed in seed_list:
                 jobs.append(
                     (
-                        len(results) - 1,
+                        run,
                         EpisodeJob(
                             task_id=cls.task_id(),
                             overrides=json.dumps(overrides, sort_keys=True),
@@ -351,7 +350,7 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
                             seed=seed,
                             policy_seed=seed_list[0],
                             deterministic=deterministic,
-                            picture=picture,
+                            picture=label if pictures and seed == seed_list[0] and first_of_group else "",
                         ),
                     )
                 )

@@ -39,9 +39,9 @@ protocol, the checkpoints' task and control level, the flags) before anything is
              "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
              "seconds": 3.1}
           ],
-          "summary": {...}                     # training.judging.report.PolicyResult.summary (one run:
-                                               # Wilson, Student t) or GroupResult.summary (several
-                                               # training seeds: the stratified bootstrap
+          "summary": {...}                     # training.judging.report.Result.summary (one run:
+                                               # Wilson, Student t; several training seeds: the
+                                               # stratified bootstrap
                                                # training.judging.statistics.group_bootstrap)
         }
       ]
@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from proteo_env.config import ConfigError
-from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, TaskProtocol, load_protocol
+from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, Split, TaskProtocol, load_protocol
 
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
@@ -297,7 +297,7 @@ def judge(
     from training.common import provenance
     from training.distributed import Journal
     from training.judging.episodes import EpisodeJob, run_episodes
-    from training.judging.report import PolicyResult
+    from training.judging.report import Result, Run
 
     protocol = load_protocol(version, root)
     if worlds_cap is not None:
@@ -319,43 +319,40 @@ def judge(
             finally:
                 env.close()
 
-    results: list[PolicyResult] = []
-    jobs = []
-    rows = []
+    rows: list[tuple[Entrant, Split, Result]] = []
+    jobs: list[tuple[Run, EpisodeJob]] = []
     for e in judged:
-        n = protocol.worlds(e.kind, worlds_cap)
-        seeds = protocol.world_seeds(n)
+        seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
         for split in e.task.splits:
             overrides = json.dumps(split.env, sort_keys=True)
-            sources = e.checkpoints or [(f"baselines.{e.policy}", None)]
-            first = len(results)
-            for source, meta in sources:
-                results.append(
-                    PolicyResult(
-                        task=e.task.task_id,
-                        policy=e.label,
-                        kind=e.kind,
-                        source=source,
-                        level=e.level,
-                        group=e.label if len(sources) > 1 else "",
-                    )
+            result = Result(
+                task=e.task.task_id,
+                policy=e.label,
+                kind=e.kind,
+                level=e.level,
+                group=bool(e.checkpoints),
+                split=split.name,
+                max_cycles=split.env.get("max_cycles"),
+            )
+            for source, meta in e.checkpoints or [(f"baselines.{e.policy}", None)]:
+                run = Run(
+                    source=source,
+                    training_seed=meta.get("seed") if meta else None,
+                    agent_steps=meta.get("agent_steps") if meta else None,
                 )
+                result.runs.append(run)
                 for seed in seeds:
-                    jobs.append(
-                        (
-                            len(results) - 1,
-                            EpisodeJob(
-                                task_id=e.task.task_id,
-                                overrides=overrides,
-                                level=e.level,
-                                policy=source if meta is not None else e.policy,
-                                checkpoint=meta is not None,
-                                seed=seed,
-                                policy_seed=protocol.first_seed,
-                            ),
-                        )
+                    job = EpisodeJob(
+                        task_id=e.task.task_id,
+                        overrides=overrides,
+                        level=e.level,
+                        policy=source if meta is not None else e.policy,
+                        checkpoint=meta is not None,
+                        seed=seed,
+                        policy_seed=protocol.first_seed,
                     )
-            rows.append((e, split, seeds, list(range(first, len(results)))))
+                    jobs.append((run, job))
+            rows.append((e, split, result))
 
     complete_counts = worlds_cap is None
     notes = []
@@ -380,45 +377,38 @@ def judge(
     }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="benchmark run")
     started = time.perf_counter()
-    run_episodes(results, jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
+    run_episodes(jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
     seconds = time.perf_counter() - started
 
-    from training.judging.report import GroupResult
-
-    doc_rows = []
-    for e, split, seeds, indices in rows:
-        runs = [results[i] for i in indices]
-        summary = (GroupResult(runs=runs, label=e.label) if len(runs) > 1 else runs[0]).summary()
-        summary["policy"] = e.label
-        row_complete = complete_counts and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds)
-        doc_rows.append(
-            {
-                "task": e.task.task_id,
-                "task_name": task_name(e.task.task_id),
-                "split": split.name,
-                "about": split.about,
-                "env": split.env,
-                "policy": e.label,
-                "kind": e.kind,
-                "level": e.level,
-                "recipe": e.recipe,
-                "world_seeds": seeds,
-                "complete": row_complete,
-                "runs": [
-                    {
-                        "source": r.source,
-                        "training_seed": meta.get("seed") if meta else None,
-                        "agent_steps": meta.get("agent_steps") if meta else None,
-                        "successes": [bool(s) for s in r.successes],
-                        "cycles": [int(c) for c in r.cycles],
-                        "returns": [float(x) for x in r.returns],
-                        "seconds": r.seconds,
-                    }
-                    for r, (_, meta) in zip(runs, e.checkpoints or [(None, None)])
-                ],
-                "summary": summary,
-            }
-        )
+    doc_rows = [
+        {
+            "task": e.task.task_id,
+            "task_name": task_name(e.task.task_id),
+            "split": split.name,
+            "about": split.about,
+            "env": split.env,
+            "policy": e.label,
+            "kind": e.kind,
+            "level": e.level,
+            "recipe": e.recipe,
+            "world_seeds": result.world_seeds,
+            "complete": complete_counts and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
+            "runs": [
+                {
+                    "source": r.source,
+                    "training_seed": r.training_seed,
+                    "agent_steps": r.agent_steps,
+                    "successes": [bool(s) for s in r.successes],
+                    "cycles": [int(c) for c in r.cycles],
+                    "returns": [float(x) for x in r.returns],
+                    "seconds": r.seconds,
+                }
+                for r in result.runs
+            ],
+            "summary": result.summary(),
+        }
+        for e, split, result in rows
+    ]
     document = {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,

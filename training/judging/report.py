@@ -1,7 +1,8 @@
 """The results of ``proteo eval`` and their pages: rows, tables, plots and published regions.
 
-:class:`PolicyResult` is one policy (or checkpoint) on one task over its episodes;
-:class:`GroupResult` pools the training seeds of one configuration (:func:`grouped`). Every
+:class:`Result` is one policy, or one recipe's training seeds, on one task (and split): its
+:class:`Run` of episodes per training seed (one for a policy without training seeds) and the
+summary measures; the judge and the results page read and write the same record. Every
 table prints a measure as ``value (low–high)``, its 95 % interval (:data:`INTERVALS` says
 which; the interval code is :mod:`training.judging.statistics`). :func:`write_results` writes
 ``results.md``, ``results.json`` (every episode) and ``eval.png``; :func:`load_results` and
@@ -34,21 +35,20 @@ INTERVALS = (
 
 
 @dataclass
-class PolicyResult:
-    """Every episode of one policy on one task, and the summary measures."""
+class Run:
+    """The episodes of one policy, or of one checkpoint (one training seed), in the order played."""
 
-    task: str
-    policy: str
-    kind: str
     source: str
-    level: str = "full"
-    """The control level the policy acted at."""
-    group: str = ""
-    """The label of the group of training seeds this run belongs to ("" when none)."""
+    """``baselines.<name>`` for a baseline, else the checkpoint's path."""
+    training_seed: int | None = None
+    """The checkpoint's training seed (``None`` for a baseline)."""
+    agent_steps: int | None = None
+    """The agent-steps the checkpoint was trained for (``None`` for a baseline)."""
     returns: list = field(default_factory=list)
     successes: list = field(default_factory=list)
     cycles: list = field(default_factory=list)
     seeds: list = field(default_factory=list)
+    """The world seed of each episode."""
     metrics: list = field(default_factory=list)
     """The task's metrics at the end of each episode."""
     seconds: float = 0.0
@@ -57,84 +57,119 @@ class PolicyResult:
     def n(self) -> int:
         return len(self.returns)
 
-    def summary(self) -> dict:
-        """The measures over this run's episodes, with 95 % intervals: Wilson for the success
-        rate, Student t for the mean return and the mean cycles to success (over the successful
-        episodes; the interval's lower end cut at 0). ``*_ci`` are the t half-widths."""
-        mean, half = mean_ci(self.returns)
-        k = int(sum(self.successes))
-        lo, hi = wilson(k, self.n)
-        won = [c for c, s in zip(self.cycles, self.successes) if s]
-        c_mean, c_half = mean_ci(won)
-        return {
-            "task": self.task,
-            "policy": self.policy,
-            "kind": self.kind,
-            "level": self.level,
-            "training_seeds": 1 if self.kind in ("learned", "evolved") else 0,
-            "episodes": self.n,
-            "interval": "wilson, t",
-            "return_mean": mean,
-            "return_ci": half,
-            "return_lo": mean - half,
-            "return_hi": mean + half,
-            "successes": k,
-            "success_rate": k / self.n if self.n else 0.0,
-            "success_lo": lo,
-            "success_hi": hi,
-            "cycles_to_success": c_mean,
-            "cycles_ci": c_half,
-            "cycles_lo": float(np.maximum(0.0, c_mean - c_half)),
-            "cycles_hi": c_mean + c_half,
-            "mean_cycles": float(np.mean(self.cycles)) if self.cycles else float("nan"),
-            "seconds": self.seconds,
-        }
+    def add(self, seed: int, episode: dict) -> None:
+        """Add one finished episode played on world ``seed``: ``{"return", "success", "cycles",
+        "metrics", "seconds"}`` (:func:`training.judging.episodes.run_episode_job`)."""
+        self.returns.append(episode["return"])
+        self.successes.append(episode["success"])
+        self.cycles.append(episode["cycles"])
+        self.seeds.append(seed)
+        self.metrics.append(episode["metrics"])
+        self.seconds += episode["seconds"]
 
 
 @dataclass
-class GroupResult:
-    """The runs of one configuration trained with several seeds, summarised across them."""
+class Result:
+    """One policy on one task (and, under a benchmark protocol, one split): its runs and the
+    summary measures, the one record of ``proteo eval``, ``proteo eval --benchmark`` and the
+    results page.
 
-    runs: list
-    """The :class:`PolicyResult` of each training seed."""
-    label: str
+    A policy without training seeds (the rules, random, one checkpoint) has one run; a recipe's
+    training seeds (a ``{label, runs}`` group of an eval config, a protocol's entrant) have one
+    run each, summarised together (:meth:`summary`).
+    """
 
-    @property
-    def task(self) -> str:
-        return self.runs[0].task
-
-    @property
-    def kind(self) -> str:
-        return self.runs[0].kind
-
-    @property
-    def level(self) -> str:
-        return self.runs[0].level
+    task: str
+    policy: str
+    """The row's name: the policy's, a group's label, or a protocol's entrant."""
+    kind: str
+    """``hand-coded``, ``random``, ``learned`` or ``evolved``."""
+    level: str = "full"
+    """The control level the policy acted at."""
+    runs: list = field(default_factory=list)
+    """``[Run]``: one per training seed, or the single run."""
+    group: bool = False
+    """Whether the runs are the training seeds of one configuration, named :attr:`policy` (a group
+    of one run included; ``results.md`` lists them one by one under the groups)."""
+    split: str = ""
+    """The protocol split (``""`` outside a benchmark)."""
+    max_cycles: int | None = None
+    """The episodes' cycle limit: a failure's time in a paired comparison (``None`` outside a benchmark)."""
+    recorded: dict | None = None
+    """The summary a ``benchmark.json`` row holds, as it was judged; :meth:`summary` returns it
+    rather than computing it again."""
 
     @property
     def n(self) -> int:
         return sum(r.n for r in self.runs)
 
+    @property
+    def world_seeds(self) -> list:
+        """The world seed of each episode (every run plays the same worlds)."""
+        return self.runs[0].seeds
+
+    @property
+    def rates(self) -> np.ndarray:
+        """``(runs,)``: each run's success rate."""
+        return np.array([np.mean(r.successes) for r in self.runs])
+
+    def rates_on_first(self, n: int) -> np.ndarray:
+        """``(runs,)``: each run's success rate on its first ``n`` worlds."""
+        return np.array([np.mean(r.successes[:n]) for r in self.runs])
+
+    def each_run(self) -> list[Result]:
+        """One result per run, named ``policy (checkpoint folder)``: a group's training seeds one by one."""
+        return [
+            dataclasses.replace(self, policy=f"{self.policy} ({Path(r.source).name})", runs=[r], recorded=None)
+            for r in self.runs
+        ]
+
     def summary(self) -> dict:
-        """The measures pooled over every episode of every training seed, with the intervals of
-        a stratified bootstrap (:func:`training.judging.statistics.group_bootstrap`: training seeds, then
-        their episodes, drawn with replacement): success rate (successes over episodes; the
-        interval widened to at least the pooled Wilson interval, as a percentile bootstrap
-        collapses to a point where every episode agrees), mean return and mean cycles to success
-        (over the successful episodes). A group of one run is summarised as that run."""
-        per_run = [r.summary() for r in self.runs]
+        """The measures with 95 % intervals (:data:`INTERVALS`).
+
+        One run: Wilson for the success rate, Student t for the mean return and the mean cycles
+        to success (over the successful episodes; the interval's lower end cut at 0); ``*_ci``
+        are the t half-widths. Several runs: pooled over every episode of every run, with the
+        intervals of a stratified bootstrap (:func:`training.judging.statistics.group_bootstrap`:
+        training seeds, then their episodes, drawn with replacement); the success interval is
+        widened to at least the pooled Wilson interval, as a percentile bootstrap collapses to a
+        point where every episode agrees.
+        """
+        if self.recorded is not None:
+            return self.recorded
+        k = int(sum(sum(r.successes) for r in self.runs))
+        lo, hi = wilson(k, self.n)
+        head = {"task": self.task, "policy": self.policy, "kind": self.kind, "level": self.level}
         if len(self.runs) == 1:
-            return {**per_run[0], "policy": self.label}
+            (run,) = self.runs
+            mean, half = mean_ci(run.returns)
+            won = [c for c, s in zip(run.cycles, run.successes) if s]
+            c_mean, c_half = mean_ci(won)
+            return {
+                **head,
+                "training_seeds": 1 if self.kind in ("learned", "evolved") else 0,
+                "episodes": self.n,
+                "interval": "wilson, t",
+                "return_mean": mean,
+                "return_ci": half,
+                "return_lo": mean - half,
+                "return_hi": mean + half,
+                "successes": k,
+                "success_rate": k / self.n if self.n else 0.0,
+                "success_lo": lo,
+                "success_hi": hi,
+                "cycles_to_success": c_mean,
+                "cycles_ci": c_half,
+                "cycles_lo": float(np.maximum(0.0, c_mean - c_half)),
+                "cycles_hi": c_mean + c_half,
+                "mean_cycles": float(np.mean(run.cycles)) if run.cycles else float("nan"),
+                "seconds": run.seconds,
+            }
         boot = group_bootstrap(
             [r.successes for r in self.runs], [r.cycles for r in self.runs], [r.returns for r in self.runs]
         )
-        k = sum(s["successes"] for s in per_run)
-        lo, hi = wilson(k, self.n)
         return {
-            "task": self.task,
-            "policy": self.label,
-            "kind": self.kind,
-            "level": self.level,
+            **head,
             "training_seeds": len(self.runs),
             "episodes": self.n,
             "interval": "stratified bootstrap",
@@ -151,23 +186,8 @@ class GroupResult:
             "cycles_lo": boot["cycles_lo"],
             "cycles_hi": boot["cycles_hi"],
             "mean_cycles": float(np.mean([c for r in self.runs for c in r.cycles])),
-            "seconds": sum(s["seconds"] for s in per_run),
+            "seconds": sum(r.seconds for r in self.runs),
         }
-
-
-def grouped(results: list[PolicyResult]) -> list:
-    """The results with the runs of each training-seed group replaced by one :class:`GroupResult`
-    (at the place of the group's first run)."""
-    out, seen = [], {}
-    for r in results:
-        if not r.group:
-            out.append(r)
-        elif (r.task, r.group) in seen:
-            seen[(r.task, r.group)].runs.append(r)
-        else:
-            seen[(r.task, r.group)] = GroupResult(runs=[r], label=r.group)
-            out.append(seen[(r.task, r.group)])
-    return out
 
 
 def _fmt(x: float, digits: int = 3) -> str:
@@ -230,7 +250,7 @@ def markdown_table(results: list) -> str:
     return "\n".join(lines)
 
 
-def plot(results: list[PolicyResult], path: Path) -> None:
+def plot(results: list[Result], path: Path) -> None:
     """One row per task: mean return, success rate and cycles to success per policy, with 95 % intervals."""
     import matplotlib
 
@@ -280,37 +300,47 @@ def plot(results: list[PolicyResult], path: Path) -> None:
 
 
 def write_results(
-    results: list, out_dir: Path, *, seed_list: list, settings: dict, deterministic: bool, plots: bool
-) -> list:
-    """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out_dir``;
-    returns the rows (training-seed groups summarised)."""
+    results: list[Result], out_dir: Path, *, seed_list: list, settings: dict, deterministic: bool, plots: bool
+) -> list[Result]:
+    """Write ``results.md``, ``results.json`` (a row per run, with its ``group`` label, and the
+    groups' summaries) and (``plots``) ``eval.png`` into ``out_dir``; returns ``results``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows = grouped(results)
-    table = markdown_table(rows)
-    runs = [r for r in results if r.group]
+    groups = [r for r in results if r.group]
     per_run = (
         ""
-        if not runs
+        if not groups
         else (
             "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
-            + markdown_table([dataclasses.replace(r, policy=f"{r.group} ({Path(r.source).name})") for r in runs])
+            + markdown_table([one for g in groups for one in g.each_run()])
         )
     )
     (out_dir / "results.md").write_text(
-        f"{table}{per_run}\n\n{INTERVALS}\n\n"
+        f"{markdown_table(results)}{per_run}\n\n{INTERVALS}\n\n"
         f"Seeds {seed_list[0]}..{seed_list[-1]}; settings per task: {json.dumps(settings)}\n"
     )
+    rows = [
+        {
+            "task": r.task,
+            "policy": r.policy,
+            "kind": r.kind,
+            "level": r.level,
+            "group": r.policy if r.group else "",
+            **asdict(run),
+            "summary": one.summary(),
+        }
+        for r in results
+        for one, run in zip(r.each_run() if r.group else [r], r.runs)
+    ]
     (out_dir / "results.json").write_text(
         json.dumps(
             {
                 "seeds": seed_list,
                 "settings": settings,
                 "deterministic": deterministic,
-                "results": [{**asdict(r), "summary": r.summary()} for r in results],
+                "results": rows,
                 "groups": [
-                    {"label": g.label, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
-                    for g in rows
-                    if isinstance(g, GroupResult)
+                    {"label": g.policy, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
+                    for g in groups
                 ],
             },
             indent=1,
@@ -318,23 +348,36 @@ def write_results(
         )
     )
     if plots:
-        plot(rows, out_dir / "eval.png")
-    return rows
+        plot(results, out_dir / "eval.png")
+    return results
 
 
-def load_results(path) -> tuple[list[PolicyResult], dict]:
+def load_results(path) -> tuple[list[Result], dict]:
     """The episodes of a ``results.json`` that :func:`write_results` wrote:
-    ``(results, {"seed_list", "settings", "deterministic"})``, one :class:`PolicyResult` per row
-    (its ``summary`` left out: it is computed again). Files from before control levels and
+    ``(results, {"seed_list", "settings", "deterministic"})``, one :class:`Result` per policy or
+    training-seed group (the runs of a ``group`` label gathered at the place of its first; the
+    summaries left out: they are computed again). Files from before control levels and
     training-seed groups read with ``level="full"`` and no group. A file that is not such a
     ``results.json`` is a :class:`ConfigError` naming it."""
     from proteo_env.config import ConfigError
 
     p = Path(path)
-    fields = {f.name for f in dataclasses.fields(PolicyResult)}
+    fields = {f.name for f in dataclasses.fields(Run)}
+    results: list[Result] = []
+    groups: dict = {}
     try:
         data = json.loads(p.read_text())
-        results = [PolicyResult(**{k: v for k, v in row.items() if k in fields}) for row in data["results"]]
+        for row in data["results"]:
+            run = Run(**{k: v for k, v in row.items() if k in fields})
+            label = row.get("group") or ""
+            if (row["task"], label) not in groups:
+                result = Result(
+                    row["task"], label or row["policy"], row["kind"], row.get("level", "full"), group=bool(label)
+                )
+                results.append(result)
+                if label:
+                    groups[(row["task"], label)] = result
+            (groups.get((row["task"], label)) or results[-1]).runs.append(run)
         context = {
             "seed_list": list(data["seeds"]),
             "settings": data["settings"],
@@ -346,28 +389,29 @@ def load_results(path) -> tuple[list[PolicyResult], dict]:
             "allowed: a results.json written by proteo eval"
         ) from None
     for r in results:
-        lengths = {len(r.returns), len(r.successes), len(r.cycles)}
-        if len(lengths) != 1 or not r.returns:
-            raise ConfigError(
-                f"--from-results={str(p)!r}: the row {r.task} / {r.policy} has returns, successes and cycles of "
-                f"lengths {len(r.returns)}, {len(r.successes)}, {len(r.cycles)}; allowed: one of each per episode"
-            )
+        for run in r.runs:
+            lengths = {len(run.returns), len(run.successes), len(run.cycles)}
+            if len(lengths) != 1 or not run.returns:
+                raise ConfigError(
+                    f"--from-results={str(p)!r}: the row {r.task} / {r.policy} has returns, successes and cycles of "
+                    f"lengths {len(run.returns)}, {len(run.successes)}, {len(run.cycles)}; allowed: one of each per "
+                    "episode"
+                )
     return results, context
 
 
-def rerender(path, out, *, plots: bool = True, pages=()) -> list:
+def rerender(path, out, *, plots: bool = True, pages=()) -> list[Result]:
     """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out`` from the
     episodes of the ``results.json`` at ``path`` (:func:`load_results`), without running an
     episode, and publish the tables into ``pages`` (:func:`publish`): the tables of an earlier
     evaluation in the current format. Every page is checked before anything is written.
-    Returns the rows."""
+    Returns the results."""
     results, context = load_results(path)
-    tables = page_tables(grouped(results), out)
-    texts = {Path(f): filled(f, tables, PUBLISH_END) for f in pages}
-    rows = write_results(results, Path(out), plots=plots, **context)
+    texts = {Path(f): filled(f, page_tables(results, out), PUBLISH_END) for f in pages}
+    write_results(results, Path(out), plots=plots, **context)
     for f, text in texts.items():
         f.write_text(text)
-    return rows
+    return results
 
 
 PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"

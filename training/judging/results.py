@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections import defaultdict
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +45,7 @@ from proteo_env.config import ConfigError
 from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
+from training.judging.report import Result, Run
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
@@ -53,32 +53,7 @@ REFERENCE_NAMES = {RULES: "the rules", RULES_MOVE: "the rules at move"}
 """How a sentence names each reference."""
 
 
-@dataclass
-class Row:
-    """One policy on one split of one task, from a ``benchmark.json`` row."""
-
-    task: str
-    split: str
-    policy: str
-    kind: str
-    level: str
-    world_seeds: list
-    runs: list
-    summary: dict
-    max_cycles: int
-    """The split's cycle limit: a failure's time in :func:`paired`."""
-
-    @property
-    def rates(self) -> np.ndarray:
-        """``(runs,)``: each training seed's (or the single run's) success rate."""
-        return np.array([np.mean(r["successes"]) for r in self.runs])
-
-    def rates_on_first(self, n: int) -> np.ndarray:
-        """``(runs,)``: each run's success rate on its first ``n`` worlds."""
-        return np.array([np.mean(r["successes"][:n]) for r in self.runs])
-
-
-def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
+def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
     """Every row of every ``benchmark.json`` below ``root/<version>`` for each ``(version,
     sha256)`` of a protocol's :attr:`~training.judging.protocol.Protocol.lineage`, and each file's
     header. A file judged under another protocol, or under a protocol file that has changed
@@ -111,16 +86,28 @@ def read_rows(root: Path, lineage) -> tuple[list[Row], list[dict]]:
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
         for r in data["rows"]:
             rows.append(
-                Row(
+                Result(
                     task=r["task_name"],
-                    split=r["split"],
                     policy=r["policy"],
                     kind=r["kind"],
                     level=r["level"],
-                    world_seeds=r["world_seeds"],
-                    runs=r["runs"],
-                    summary=r["summary"],
+                    runs=[
+                        Run(
+                            source=run["source"],
+                            training_seed=run.get("training_seed"),
+                            agent_steps=run.get("agent_steps"),
+                            returns=run["returns"],
+                            successes=run["successes"],
+                            cycles=run["cycles"],
+                            seeds=r["world_seeds"],
+                            seconds=run["seconds"],
+                        )
+                        for run in r["runs"]
+                    ],
+                    group=r.get("recipe") is not None,
+                    split=r["split"],
                     max_cycles=int(r["env"]["max_cycles"]),
+                    recorded=r["summary"],
                 )
             )
     return rows, headers
@@ -137,16 +124,16 @@ def _successes(s: dict) -> str:
     return f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
 
 
-def cell(row: Row) -> str:
+def cell(row: Result) -> str:
     """``k/n (lo-hi), c (lo-hi)``: successes with the interval of the rate, cycles with theirs."""
-    s = row.summary
+    s = row.summary()
     text = _successes(s)
     if s["successes"]:
         text += f", {s['cycles_to_success']:.0f} ({_interval(s['cycles_lo'], s['cycles_hi'], 0)})"
     return text
 
 
-def reference_of(row: Row, by_key: dict) -> Row | None:
+def reference_of(row: Result, by_key: dict) -> Result | None:
     """The rules at ``row``'s control level on its task and split: ``rules-move`` for a
     controller at ``move`` where it was judged, else the rules (``full``); None without one."""
     for name in (RULES_MOVE, RULES) if row.level == "move" else (RULES,):
@@ -155,7 +142,7 @@ def reference_of(row: Row, by_key: dict) -> Row | None:
     return None
 
 
-def paired(row: Row, reference: Row, margin: float | None = None) -> dict | None:
+def paired(row: Result, reference: Result, margin: float | None = None) -> dict | None:
     """``row`` against ``reference`` on the worlds both played (each training seed of ``row`` on
     the same worlds; the reference judged once, on those and more): ``{"success", "cycles",
     "time", "worlds", "rate", "reference_rate"}``, each of the first three a
@@ -170,10 +157,10 @@ def paired(row: Row, reference: Row, margin: float | None = None) -> dict | None
         return None
     at = [column[seed] for seed in row.world_seeds]
     n = len(at)
-    won = np.array([run["successes"][:n] for run in row.runs], dtype=bool)
-    cycles = np.array([run["cycles"][:n] for run in row.runs], dtype=float)
-    won_ref = np.asarray(reference.runs[0]["successes"], dtype=bool)[at]
-    cycles_ref = np.asarray(reference.runs[0]["cycles"], dtype=float)[at]
+    won = np.array([run.successes[:n] for run in row.runs], dtype=bool)
+    cycles = np.array([run.cycles[:n] for run in row.runs], dtype=float)
+    won_ref = np.asarray(reference.runs[0].successes, dtype=bool)[at]
+    cycles_ref = np.asarray(reference.runs[0].cycles, dtype=float)[at]
     return {
         "equivalence": None if margin is None else st.equivalence(won, won_ref, margin),
         "success": st.paired_difference(won, won_ref),
@@ -201,14 +188,14 @@ def matches(pair: dict) -> bool:
     return pair["equivalence"] is not None and pair["equivalence"]["equivalent"]
 
 
-def compare(name: str, row: Row, reference: Row, margin: float | None = None) -> str:
+def compare(name: str, row: Result, reference: Result, margin: float | None = None) -> str:
     """One sentence comparing a learned or evolved recipe with the rules at its level on a split,
     from the paired differences (:func:`paired`; "matches" only within the protocol's
     equivalence ``margin``)."""
     return _sentence(name, reference, paired(row, reference, margin), margin)
 
 
-def _sentence(name: str, reference: Row, pair: dict | None, margin: float | None) -> str:
+def _sentence(name: str, reference: Result, pair: dict | None, margin: float | None) -> str:
     """:func:`compare`'s sentence from the :func:`paired` comparison ``pair`` with ``reference``."""
     if pair is None:
         return f"{name}: not judged on the reference's worlds"
@@ -264,7 +251,7 @@ def verdicts(task: str, recipe: str, by_key: dict, splits: list[str], margin: fl
     return "; ".join(parts)
 
 
-def aggregate(rows: list[Row], per_training_seed: int) -> dict[tuple[str, str], dict]:
+def aggregate(rows: list[Result], per_training_seed: int) -> dict[tuple[str, str], dict]:
     """Per learned or evolved recipe and task, over the task's splits (which every recipe of the
     task is judged on, so recipes of one task are compared over the same set): normalised scores
     ``(training seeds, splits)``, their IQM, and the probability that a training seed beats the
@@ -379,7 +366,7 @@ def _policy_order(policies) -> list[str]:
     return first + sorted(p for p in policies if p not in first)
 
 
-def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
+def render(rows: list[Result], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
     """The page's markdown (figures written beside ``out``); ``protocol`` a
     :class:`training.judging.protocol.Protocol`."""
     figures = out.parent / "results"
@@ -513,7 +500,7 @@ def render(rows: list[Row], headers: list[dict], version: str, root: Path, out: 
     return "\n".join(lines)
 
 
-def marl_eval_layout(rows: list[Row]) -> dict:
+def marl_eval_layout(rows: list[Result]) -> dict:
     """The learned and evolved recipes' episodes in the raw-data layout of InstaDeep's marl-eval
     (Gorsane et al. 2022): ``{environment: {task: {algorithm: {"run_<training seed>": {"step_1":
     {"step_count": agent-steps, metric: [one value per world]}, "absolute_metrics": {metric:
@@ -530,12 +517,12 @@ def marl_eval_layout(rows: list[Row]) -> dict:
         runs = out.setdefault(f"proteo-{row.task}", {}).setdefault(row.split, {}).setdefault(row.policy, {})
         for run in row.runs:
             metrics = {
-                "success_rate": [int(v) for v in run["successes"]],
-                "cycles": [int(v) for v in run["cycles"]],
-                "return": [round(float(v), 4) for v in run["returns"]],
+                "success_rate": [int(v) for v in run.successes],
+                "cycles": [int(v) for v in run.cycles],
+                "return": [round(float(v), 4) for v in run.returns],
             }
-            runs[f"run_{run['training_seed']}"] = {
-                "step_1": {"step_count": int(run["agent_steps"] or 0), **metrics},
+            runs[f"run_{run.training_seed}"] = {
+                "step_1": {"step_count": int(run.agent_steps or 0), **metrics},
                 "absolute_metrics": metrics,
             }
     return out
@@ -552,13 +539,13 @@ def publish(path, table: str) -> None:
     publish_pages([path], {PUBLISH_BEGIN: table}, PUBLISH_END)
 
 
-def short_cell(row: Row) -> str:
+def short_cell(row: Result) -> str:
     """``k/n (lo-hi), c``: successes with the interval of the rate, and mean cycles to success."""
-    s = row.summary
+    s = row.summary()
     return _successes(s) + (f", {s['cycles_to_success']:.0f}" if s["successes"] else "")
 
 
-def heldout_table(rows: list[Row], protocol) -> str:
+def heldout_table(rows: list[Result], protocol) -> str:
     """One row per policy, one column per task: each policy's ``heldout`` cell (:func:`short_cell`)."""
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
