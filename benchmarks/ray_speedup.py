@@ -26,25 +26,16 @@ def main() -> None:
 
     from training import cma_es
     from training.distributed import run_jobs
-    from training.judging.episodes import EpisodeJob, run_episode_job
+    from training.evaluator import Controller, Episode, episode_key
+    from training.judging.episodes import run_alone
 
-    jobs = [
-        EpisodeJob(
-            task_id="chain-v1",
-            overrides='{"max_cycles": 1500, "motion_model": "rhombic", "n_modules": 40}',
-            level="full",
-            policy="chain",
-            checkpoint=False,
-            seed=s,
-            policy_seed=0,
-        )
-        for s in range(16)
-    ]
-    keys = [j.key for j in jobs]
+    settings = '{"max_cycles": 1500, "motion_model": "rhombic", "n_modules": 40}'
+    jobs = [(Episode("chain-v1", settings, "full", Controller.rules("chain"), s), "") for s in range(16)]
+    keys = [episode_key(episode) for episode, _ in jobs]
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     options = {"address": None, "workers": 2}
-    run_jobs(run_episode_job, jobs[:4], keys[:4], ray=options, progress=False)  # warm the workers
-    run_episode_job(jobs[0])  # and this process
+    run_jobs(run_alone, jobs[:4], keys[:4], ray=options, progress=False)  # warm the workers
+    run_alone(jobs[0])  # and this process
     rows = []
 
     def timed(label, fn):
@@ -53,18 +44,16 @@ def main() -> None:
         fn()
         rows.append((label, time.perf_counter() - started, load))
 
-    timed(
-        "eval: 16 chain episodes (N=40, rhombic), serial", lambda: run_jobs(run_episode_job, jobs, keys, progress=False)
-    )
+    timed("eval: 16 chain episodes (N=40, rhombic), serial", lambda: run_jobs(run_alone, jobs, keys, progress=False))
     timed(
         "eval: 16 chain episodes (N=40, rhombic), Ray, 2 workers",
-        lambda: run_jobs(run_episode_job, jobs, keys, ray=options, progress=False),
+        lambda: run_jobs(run_alone, jobs, keys, ray=options, progress=False),
     )
     with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
-        list(pool.map(run_episode_job, jobs[:4]))  # warm both processes
+        list(pool.map(run_alone, jobs[:4]))  # warm both processes
         timed(
             "eval: the same 16 episodes, 2 plain processes (no Ray: what two cores allow)",
-            lambda: list(pool.map(run_episode_job, jobs)),
+            lambda: list(pool.map(run_alone, jobs)),
         )
     cma = [
         "--config",

@@ -18,7 +18,7 @@ Rows (module-cycles per second: the cycles of every episode times its modules, o
   equal to the per-episode ones, episode by episode.
 * ``judge, per episode`` and ``judge, evaluator``: ``proteo eval --benchmark VERSION`` of each recipe
   of ``--recipes`` (every training seed, every split), with its episodes run one by one
-  (:func:`training.judging.episodes.run_episode_job`, what the judge ran before) and through the
+  (:func:`training.judging.episodes.run_alone`, what the judge ran before) and through the
   evaluator; the two benchmark files are compared row by row (networks: the batched forward
   pass can differ in the last bits of a logit).
 
@@ -115,11 +115,12 @@ def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, wo
 
         def one_by_one(jobs, out_dir, *, ray, journal, progress, workers=None):
             from training.distributed import run_jobs
+            from training.evaluator import episode_key
 
-            for (run, job), episode in zip(
-                jobs, run_jobs(episodes.run_episode_job, [j for _, j in jobs], [j.key for _, j in jobs], progress=False)
-            ):
-                run.add(job.seed, episode)
+            alone = [(episode, "") for _, episode, _ in jobs]
+            keys = [episode_key(episode) for episode, _ in alone]
+            for (run, episode, _), result in zip(jobs, run_jobs(episodes.run_alone, alone, keys, progress=False)):
+                run.add(episode.seed, result)
 
         episodes.run_episodes = one_by_one
     try:

@@ -192,6 +192,7 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     import json
 
     import training.judging.report as ev
+    from training import evaluator
     from training.cli import main
     from training.judging import episodes
 
@@ -204,7 +205,8 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     (first / "results.md").write_text("an old table\n")
     page = tmp_path / "page.md"
     page.write_text(f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\nold\n{ev.PUBLISH_END}\nb\n")
-    monkeypatch.setattr(episodes, "run_episode_job", lambda job: pytest.fail("no episode may run"))
+    monkeypatch.setattr(episodes, "run_alone", lambda job: pytest.fail("no episode may run"))
+    monkeypatch.setattr(evaluator, "run_episodes", lambda *a, **k: pytest.fail("no episode may run"))
     argv = ["eval", "--from-results", str(first / "results.json"), "--out", str(first), "--no-plots"]
     assert main([*argv, "--publish", str(page)]) == 0
     again = _written(tmp_path, results, "again")

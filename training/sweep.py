@@ -16,9 +16,9 @@ A sweep config (YAML, every key checked; see ``configs/sweeps/``)::
     sample_seed: 0
     plot: {x: n_modules, y: cycles_to_success, hue: motion_model}
 
-Each episode is one :class:`~training.judging.episodes.EpisodeJob` (serially, on ``--workers`` local
-processes, or as Ray tasks with ``--ray``; the same results either way), journaled in ``OUT/episodes.jsonl`` as it finishes so
-that an interrupted sweep resumes. Every point of the grid is checked (an environment is
+The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`: on ``--workers``
+local processes, default every core, or as Ray tasks with ``--ray``; the same results either way),
+journaled in ``OUT/episodes.jsonl`` as each batch lands so that an interrupted sweep resumes. Every point of the grid is checked (an environment is
 built) before any episode runs. Written into ``--out`` when every episode has finished:
 
 - ``episodes.csv``: one row per episode: the grid's settings, ``policy``, ``seed``, ``return``,
@@ -149,14 +149,14 @@ def sweep(
         the rows of ``summary.csv`` (one dict per point and policy).
     """
     import proteo_env
-    from training.distributed import Journal, run_jobs
-    from training.judging.episodes import EpisodeJob, run_episode_job
+    from training.distributed import Journal
+    from training.evaluator import Controller, Episode, run_episodes, settings_json
     from training.judging.statistics import mean_ci
 
     cfg = load_sweep(config)
     points = cfg.points()
     seeds = list(range(cfg.first_seed, cfg.first_seed + cfg.seeds))
-    jobs: list[tuple[dict, str, EpisodeJob]] = []
+    jobs: list[tuple[dict, str, Episode]] = []
     for point in points:
         overrides = {**cfg.env, **overrides_of(point)}
         try:
@@ -165,49 +165,28 @@ def sweep(
             raise ConfigError(f"sweep config {str(config)!r}: grid point {point}: {err}") from None
         policies = [env.task.default_policy if name == "default" else name for name in cfg.policies]
         env.close()
+        settings = settings_json(overrides)
         for policy in dict.fromkeys(policies):
-            jobs += [
-                (
-                    point,
-                    policy,
-                    EpisodeJob(
-                        task_id=cfg.task,
-                        overrides=json.dumps(overrides, sort_keys=True),
-                        level="full",
-                        policy=policy,
-                        checkpoint=False,
-                        seed=s,
-                        policy_seed=seeds[0],
-                    ),
-                )
-                for s in seeds
-            ]
+            jobs += [(point, policy, Episode(cfg.task, settings, "full", Controller.rules(policy), s)) for s in seeds]
     out = Path(out)
     fingerprint = {"config": json.loads(json.dumps(cfg.__dict__, default=list)), "jobs": len(jobs)}
     journal = Journal(out / "episodes.jsonl", fingerprint, fresh=fresh, what="sweep")
-    episodes = run_jobs(
-        run_episode_job,
-        [j for _, _, j in jobs],
-        [j.key for _, _, j in jobs],
-        ray=ray,
-        workers=workers,
-        journal=journal,
-        desc="episodes",
-        progress=progress,
+    episodes = run_episodes(
+        [e for _, _, e in jobs], ray=ray, workers=workers, journal=journal, desc="episodes", progress=progress
     )
 
     rows = []
-    for (point, policy, job), e in zip(jobs, episodes):
+    for (point, policy, episode), e in zip(jobs, episodes):
         rows.append(
             {
                 **point,
                 "policy": policy,
-                "seed": job.seed,
-                "return": e["return"],
-                "success": int(e["success"]),
-                "cycles": e["cycles"],
-                "cycles_to_success": e["cycles"] if e["success"] else "",
-                **e["metrics"],
+                "seed": episode.seed,
+                "return": float(e.total_reward),
+                "success": int(e.success),
+                "cycles": int(e.cycles),
+                "cycles_to_success": int(e.cycles) if e.success else "",
+                **{k: float(v) for k, v in e.metrics.items()},
             }
         )
     y = cfg.plot.get("y", "cycles_to_success")

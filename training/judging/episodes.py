@@ -1,16 +1,16 @@
-"""The episodes of ``proteo eval`` and ``proteo sweep``: one :class:`EpisodeJob` per episode.
+"""The episodes of ``proteo eval`` and ``proteo eval --benchmark``.
 
-:func:`run_episode_job` runs one job (building its env and policy once per process, cached
-in :data:`_BUILT`) and returns what the tables need; :func:`run_episodes` runs a list of
-jobs serially or as Ray tasks (:mod:`training.distributed`), writing each finished episode to a
-journal as it arrives, so an interrupted run resumes with the missing episodes only.
+A planner lists each episode as ``(Run, Episode, picture)``: the :class:`~training.judging.report.Run`
+it adds to, the :class:`training.evaluator.Episode` (task, settings, level, controller, world seed)
+and a label to draw its end under (``""``: none). :func:`run_episodes` runs them in batches of worlds
+(:func:`training.evaluator.run_episodes`), writing each finished episode to a journal as its batch
+lands, so an interrupted run resumes with the missing episodes only; an episode whose end is drawn
+runs on its own (:func:`run_alone`).
 """
 
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 from proteo_env.registry import task_name
@@ -32,131 +32,84 @@ def _picture_png(env, caption: str) -> str:
         return base64.b64encode(path.read_bytes()).decode()
 
 
-@dataclass(frozen=True)
-class EpisodeJob:
-    """One episode: everything its result depends on (picklable; sent to Ray workers as it is).
-
-    ``policy`` is a registered policy name (``checkpoint=False``) or a checkpoint path;
-    ``overrides`` is the JSON of the ``proteo_env.make`` overrides; ``picture`` the name of what
-    acts (a policy, a checkpoint folder, a group's label): when not empty the end of the episode is
-    drawn under it and returned.
-    """
-
-    task_id: str
-    overrides: str
-    level: str
-    policy: str
-    checkpoint: bool
-    seed: int
-    policy_seed: int
-    deterministic: bool = False
-    picture: str = ""
-
-    @property
-    def key(self) -> str:
-        """The job's name in a journal: task, settings, level, policy and seed."""
-        return f"{self.task_id}|{self.overrides}|{self.level}|{self.policy}|{self.seed}"
-
-
 _BUILT: dict = {}
-"""(env, policy) per (task, overrides, level, policy): built once per process, reused across episodes."""
+"""(env, policy) per (task, settings, level, controller): built once per process, reused across episodes."""
 
 
-def built(job: EpisodeJob):
-    """The environment and policy ``job`` runs (cached per process; at most 4 kept)."""
-    spec = (job.task_id, job.overrides, job.level, job.policy, job.checkpoint, job.policy_seed, job.deterministic)
+def built(episode):
+    """The environment and policy ``episode`` runs on its own (cached per process; at most 4 kept)."""
+    spec = (episode.task, episode.overrides, episode.level, episode.controller)
     if spec not in _BUILT:
+        import json
+
         import proteo_env
-        from baselines import make_policy
-        from training.checkpoints import load_policy
         from training.common import limit_threads
 
         limit_threads(1)
         while len(_BUILT) >= 4:
             _BUILT.pop(next(iter(_BUILT)))[0].close()
-        overrides = json.loads(job.overrides)
-        env = proteo_env.make(job.task_id, **overrides, **({} if job.level == "full" else {"control": job.level}))
-        policy = (
-            load_policy(job.policy, env, seed=job.policy_seed, deterministic=job.deterministic)
-            if job.checkpoint
-            else make_policy(job.policy, env, seed=job.policy_seed)
-        )
-        _BUILT[spec] = (env, policy)
+        level = {} if episode.level == "full" else {"control": episode.level}
+        env = proteo_env.make(episode.task, **json.loads(episode.overrides), **level)
+        _BUILT[spec] = (env, episode.controller.build(env, episode.seed))
     return _BUILT[spec]
 
 
-def run_episode_job(job: EpisodeJob) -> dict:
-    """Run one episode: ``{"return", "success", "cycles", "metrics", "seconds", "picture"}`` (JSON-ready)."""
+def run_alone(job: tuple) -> dict:
+    """Run one episode on its own, through the per-agent dict API (:func:`proteo_env.rollout.run_episode`;
+    the policy is reset with the world seed), and with a label draw its end: ``job`` is
+    ``(Episode, label)``. Returns ``{"return", "success", "cycles", "metrics", "seconds", "picture"}``
+    (JSON-ready; ``picture`` ``None`` without a label, else a base64-encoded PNG captioned
+    ``task · label (level) · seed · cycle``)."""
     from proteo_env.rollout import run_episode
 
-    env, policy = built(job)
+    episode, label = job
+    env, policy = built(episode)
     started = time.perf_counter()
-    episode = run_episode(env, policy, seed=job.seed)
+    result = run_episode(env, policy, seed=episode.seed)
     out = {
-        "return": float(episode.total_reward),
-        "success": bool(episode.success),
-        "cycles": int(episode.cycles),
-        "metrics": {k: float(v) for k, v in episode.metrics.items()},
+        "return": float(result.total_reward),
+        "success": bool(result.success),
+        "cycles": int(result.cycles),
+        "metrics": {k: float(v) for k, v in result.metrics.items()},
         "seconds": time.perf_counter() - started,
         "picture": None,
     }
-    if job.picture:
-        out["picture"] = _picture_png(
-            env,
-            f"{job.task_id} · {job.picture} ({job.level}) · seed {job.seed} · cycle {episode.cycles}"
-            + (" · success" if episode.success else ""),
-        )
+    if label:
+        caption = f"{episode.task} · {label} ({episode.level}) · seed {episode.seed} · cycle {result.cycles}"
+        out["picture"] = _picture_png(env, caption + (" · success" if result.success else ""))
     return out
 
 
 def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
-    """Run the planned ``jobs`` (``[(Run, EpisodeJob)]``) and add each episode to its run; pictures
-    go to ``out_dir/pictures/<task>_<picture>_<level>.png``.
+    """Run the planned ``jobs`` (``[(Run, Episode, picture)]``) and add each episode to its run;
+    pictures go to ``out_dir/pictures/<task>_<picture>_<level>.png``.
 
     The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`, on
-    ``workers`` processes, default every core, or on Ray); a job with a picture runs on its own
-    (:func:`run_episode_job`), since its world is drawn at its end. Each finished episode is
-    recorded in ``journal`` under its job's key. An episode's ``seconds`` is its batch's
-    wall-clock time shared equally among its episodes.
+    ``workers`` processes, default every core, or on Ray); one with a picture runs on its own
+    (:func:`run_alone`), since its world is drawn at its end. Each finished episode is
+    recorded in ``journal`` under its :func:`~training.evaluator.episode_key`. An episode's
+    ``seconds`` is its batch's wall-clock time shared equally among its episodes.
     """
     import base64
 
     from training.distributed import run_jobs
-    from training.evaluator import Controller, Episode
+    from training.evaluator import episode_key
     from training.evaluator import run_episodes as run_batched
 
-    pictured = [i for i, (_, j) in enumerate(jobs) if j.picture]
-    plain = [i for i, (_, j) in enumerate(jobs) if not j.picture]
+    pictured = [i for i, (_, _, picture) in enumerate(jobs) if picture]
+    plain = [i for i, (_, _, picture) in enumerate(jobs) if not picture]
     episodes: list = [None] * len(jobs)
     if pictured:
+        items = [(jobs[i][1], jobs[i][2]) for i in pictured]
+        keys = [episode_key(e) for e, _ in items]
         for i, episode in zip(
             pictured,
-            run_jobs(
-                run_episode_job,
-                [jobs[i][1] for i in pictured],
-                [jobs[i][1].key for i in pictured],
-                ray=ray,
-                journal=journal,
-                desc="pictured episodes",
-                progress=progress,
-            ),
+            run_jobs(run_alone, items, keys, ray=ray, journal=journal, desc="pictured episodes", progress=progress),
         ):
             episodes[i] = episode
     if plain:
         started = time.perf_counter()
-        batched = run_batched(
-            [
-                Episode(
-                    j.task_id, j.overrides, j.level, Controller(j.policy, (), j.checkpoint, j.deterministic), j.seed
-                )
-                for _, j in (jobs[i] for i in plain)
-            ],
-            keys=[jobs[i][1].key for i in plain],
-            ray=ray,
-            workers=workers,
-            journal=journal,
-            progress=progress,
-        )
+        batched = run_batched([jobs[i][1] for i in plain], ray=ray, workers=workers, journal=journal, progress=progress)
         seconds = (time.perf_counter() - started) / len(plain)
         for i, r in zip(plain, batched):
             episodes[i] = {
@@ -167,9 +120,9 @@ def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, wor
                 "seconds": seconds,
                 "picture": None,
             }
-    for (run, job), episode in zip(jobs, episodes):
-        run.add(job.seed, episode)
-        if episode["picture"]:
-            file = out_dir / "pictures" / f"{task_name(job.task_id)}_{job.picture}_{job.level}.png".replace("+", "-")
+    for (run, episode, picture), result in zip(jobs, episodes):
+        run.add(episode.seed, result)
+        if result["picture"]:
+            file = out_dir / "pictures" / f"{task_name(episode.task)}_{picture}_{episode.level}.png".replace("+", "-")
             file.parent.mkdir(parents=True, exist_ok=True)
-            file.write_bytes(base64.b64decode(episode["picture"]))
+            file.write_bytes(base64.b64decode(result["picture"]))

@@ -56,21 +56,20 @@ into ``--out`` and the ``--publish`` pages (:func:`~training.judging.report.rere
     proteo eval --from-results docs/eval/study/results.json --out docs/eval/study \\
         --publish README.md --publish docs/guides/learning.md
 
-Each episode is one job (:class:`~training.judging.episodes.EpisodeJob`): ``--ray`` runs them as Ray tasks, on a local
-Ray instance (``--workers N`` CPUs) or a cluster (``--address``), with results identical to
-the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
+Each episode is one :class:`training.evaluator.Episode`, run in batches of worlds on every core
+(``--workers N`` processes); ``--ray`` runs the batches as Ray tasks, on a local Ray instance
+(``--workers N`` CPUs) or a cluster (``--address``), with results identical to the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
 an interrupted evaluation with the same settings runs only the missing episodes
 (``--fresh`` starts over). See docs/guides/distributed.md.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from proteo_env.registry import task_name
 from training.common import checkpoint_kind
-from training.judging.episodes import EpisodeJob, run_episodes
+from training.judging.episodes import run_episodes
 from training.judging.report import Result, Run, markdown_table, publish, rerender, write_results
 
 DEFAULT_CONFIG = "configs/eval.yaml"
@@ -214,7 +213,7 @@ def evaluate(
 ) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
-    Every episode is one :class:`~training.judging.episodes.EpisodeJob`, run in batches of worlds on
+    Every episode is one :class:`training.evaluator.Episode`, run in batches of worlds on
     ``workers`` processes (default: every core) or as Ray tasks (``ray``), and recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
     the same settings resumes it (see :class:`training.distributed.Journal`). The tables are
     written only when every episode has finished.
@@ -290,7 +289,7 @@ def evaluate(
 
 def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool):
     """Every policy's (or training-seed group's) result and its episodes as jobs: ``(results, jobs)``,
-    ``jobs`` a list of ``(Run, EpisodeJob)``, the run of the result the episode adds to. Policies are built here once, so that a bad checkpoint fails
+    ``jobs`` a list of ``(Run, Episode, picture)`` (:func:`training.judging.episodes.run_episodes`). Policies are built here once, so that a bad checkpoint fails
     before any episode runs.
 
     Args:
@@ -301,9 +300,10 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
     import proteo_env
     from baselines import make_policy
     from training.checkpoints import load_policy, read_meta
+    from training.evaluator import Controller, Episode, settings_json
 
     results: list[Result] = []
-    jobs: list[tuple[Run, EpisodeJob]] = []
+    jobs: list[tuple[Run, Episode, str]] = []
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
         envs = {"full": proteo_env.make(cls.task_id(), **overrides)}
@@ -337,23 +337,15 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
                 results.append(result)
             result.runs.append(run)
             label = group or (policy.name if path is None else Path(path).name)
+            controller = (
+                Controller.rules(name)
+                if path is None
+                else Controller.from_checkpoint(path, deterministic=deterministic)
+            )
+            settings = settings_json(overrides)
             for seed in seed_list:
-                jobs.append(
-                    (
-                        run,
-                        EpisodeJob(
-                            task_id=cls.task_id(),
-                            overrides=json.dumps(overrides, sort_keys=True),
-                            level=level,
-                            policy=name if path is None else str(path),
-                            checkpoint=path is not None,
-                            seed=seed,
-                            policy_seed=seed_list[0],
-                            deterministic=deterministic,
-                            picture=label if pictures and seed == seed_list[0] and first_of_group else "",
-                        ),
-                    )
-                )
+                picture = label if pictures and seed == seed_list[0] and first_of_group else ""
+                jobs.append((run, Episode(cls.task_id(), settings, level, controller, seed), picture))
         for env in envs.values():
             env.close()
         _name_apart([r for r in results[first_task_row:] if not r.group])

@@ -4,8 +4,8 @@ The protocol (what is judged, on which worlds, and how many) and its loader are
 :mod:`training.judging.protocol` (:func:`~training.judging.protocol.load_protocol`).
 
 :func:`judge` runs the episodes with the machinery of ``proteo eval``
-(:class:`training.judging.episodes.EpisodeJob`, :func:`training.judging.episodes.run_episodes`: serially or as
-Ray tasks, recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
+(:func:`training.judging.episodes.run_episodes`: batches of worlds on every core or as Ray tasks,
+recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
 ``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
 protocol, the checkpoints' task and control level, the flags) before anything is written::
 
@@ -296,7 +296,8 @@ def judge(
     from training.checkpoints import load_policy
     from training.common import provenance
     from training.distributed import Journal
-    from training.judging.episodes import EpisodeJob, run_episodes
+    from training.evaluator import Controller, Episode, episode_key
+    from training.judging.episodes import run_episodes
     from training.judging.report import Result, Run
 
     protocol = load_protocol(version, root)
@@ -320,7 +321,7 @@ def judge(
                 env.close()
 
     rows: list[tuple[Entrant, Split, Result]] = []
-    jobs: list[tuple[Run, EpisodeJob]] = []
+    jobs: list[tuple[Run, Episode, str]] = []
     for e in judged:
         seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
         for split in e.task.splits:
@@ -341,17 +342,8 @@ def judge(
                     agent_steps=meta.get("agent_steps") if meta else None,
                 )
                 result.runs.append(run)
-                for seed in seeds:
-                    job = EpisodeJob(
-                        task_id=e.task.task_id,
-                        overrides=overrides,
-                        level=e.level,
-                        policy=source if meta is not None else e.policy,
-                        checkpoint=meta is not None,
-                        seed=seed,
-                        policy_seed=protocol.first_seed,
-                    )
-                    jobs.append((run, job))
+                controller = Controller.rules(e.policy) if meta is None else Controller.from_checkpoint(source)
+                jobs += [(run, Episode(e.task.task_id, overrides, e.level, controller, seed), "") for seed in seeds]
             rows.append((e, split, result))
 
     complete_counts = worlds_cap is None
@@ -373,7 +365,7 @@ def judge(
         "protocol": protocol.version,
         "sha256": protocol.sha256,
         "worlds_cap": worlds_cap,
-        "jobs": [j.key for _, j in jobs],
+        "jobs": [episode_key(episode) for _, episode, _ in jobs],
     }
     journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="benchmark run")
     started = time.perf_counter()

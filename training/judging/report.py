@@ -59,7 +59,7 @@ class Run:
 
     def add(self, seed: int, episode: dict) -> None:
         """Add one finished episode played on world ``seed``: ``{"return", "success", "cycles",
-        "metrics", "seconds"}`` (:func:`training.judging.episodes.run_episode_job`)."""
+        "metrics", "seconds"}`` (:func:`training.judging.episodes.run_alone`)."""
         self.returns.append(episode["return"])
         self.successes.append(episode["success"])
         self.cycles.append(episode["cycles"])
