@@ -1,10 +1,14 @@
 """Judging controllers, apart from training them: ``proteo eval`` and ``proteo eval --benchmark``.
 
+protocol -> episodes -> one result model -> statistics -> pages:
+
 - :mod:`~training.judging.protocol`: what is judged, on which worlds (``configs/benchmark/<version>.yaml``);
-- :mod:`~training.judging.episodes`: ``proteo eval``'s episode jobs (the batched evaluator stays in
-  :mod:`training.evaluator`, because the trainers use it too);
-- :mod:`~training.judging.report`: the result records of ``proteo eval`` (:mod:`~training.judging.evaluate`
-  runs it); :mod:`~training.judging.judge`: ``proteo eval --benchmark``;
+- :mod:`~training.judging.episodes`: running the planned episodes (:class:`training.evaluator.Episode`,
+  the batched evaluator, which stays in :mod:`training.evaluator` because the trainers use it too);
+- :mod:`~training.judging.report`: the one result record (:class:`~training.judging.report.Result`:
+  a policy, or a recipe's training seeds, on a task and split) and ``proteo eval``'s tables;
+  :mod:`~training.judging.evaluate` runs ``proteo eval``, :mod:`~training.judging.judge`
+  ``proteo eval --benchmark``;
 - :mod:`~training.judging.statistics`: the intervals and the paired comparisons;
 - :mod:`~training.judging.results`: the results page;
 - :mod:`~training.judging.pages`: the one way to publish a table into a markdown file.
