@@ -122,17 +122,17 @@ def test_a_study_that_fails_part_way_keeps_the_record_of_every_run_it_finished(t
 
 def test_the_long_ppo_recipe_trains_the_ppo_config_for_its_own_steps(tmp_path):
     args = study.Args(tasks=("table",), recipes=("ppo48",), minutes=0.0)
-    cmd = study._command(args, "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(args).command("ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/ppo_table_move.yaml"
     assert cmd[cmd.index("--total-steps") + 1] == "48000000"
-    cmd = study._command(study.Args(total_steps=1000), "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(study.Args(total_steps=1000)).command("ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--total-steps") + 1] == "1000", "an explicit budget still wins"
-    assert "--total-steps" not in study._command(args, "ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert "--total-steps" not in study.Plan(args).command("ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
 
 
 def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
     args = study.Args(tasks=("grasp",), recipes=("credit",), minutes=0.0)
-    cmd = study._command(args, "credit", "grasp", 2, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(args).command("credit", "grasp", 2, tmp_path / "run", tmp_path / "clone")
     config = cmd[cmd.index("--config") + 1]
     assert config == "configs/train/credit_grasp_move.yaml"
     assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
@@ -151,7 +151,7 @@ def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
 )
 def test_the_evolution_recipes_run_their_config_for_its_generations(tmp_path, recipe, config):
     args = study.Args(tasks=("chain",), recipes=(recipe,), level="full", minutes=0.0)
-    cmd = study._command(args, recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(args).command(recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("-m") + 1] == "training.evolve" and cmd[cmd.index("--config") + 1] == config
     assert cmd[cmd.index("--time-limit-minutes") + 1] == "0.0" and cmd[cmd.index("--seed") + 1] == "2"
 
@@ -168,16 +168,18 @@ def test_every_recipe_names_a_registered_trainer_and_its_configs_exist():
 
 def test_a_study_for_a_protocol_trains_its_recipes_configs_and_budgets_on_its_task_id(tmp_path):
     args = study.Args(benchmark="v7", level="move", tasks=("table",))
-    cmd = study._command(args, "kickstart", "table", 3, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(args).command("kickstart", "table", 3, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/kickstart_table_move.yaml"
     assert cmd[cmd.index("--task") + 1] == "table-v2", "the config says table-v1; the protocol judges table-v2"
     assert cmd[cmd.index("--total-steps") + 1] == "6000000"
     assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
+    assert study.Plan(args).recipe("kickstart", "table").init == "imitation", "the protocol's init: imitation-move"
+    assert study.Plan(args).recipe("ppo", "table").init is None
     full = study.Args(benchmark="v7", level="full", tasks=("branch",))
-    cmd = study._command(full, "evolve-large", "branch", 0, tmp_path / "run", tmp_path / "clone")
+    cmd = study.Plan(full).command("evolve-large", "branch", 0, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/evolve_large_branch_full.yaml"
     assert cmd[cmd.index("--task") + 1] == "branch-v0" and "--total-steps" not in cmd
-    assert "--task" not in study._command(study.Args(), "ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert "--task" not in study.Plan(study.Args()).command("ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
 
 
 def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_written(tmp_path):
@@ -186,3 +188,29 @@ def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_writ
     with pytest.raises(ValueError, match=r"recipe 'curriculum' at level 'move' \(curriculum-move\) on table"):
         study.main(argv)
     assert not docs.exists()
+
+
+def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path, monkeypatch):
+    import training.plots
+
+    class Finished:  # a training process that writes its final checkpoint and progress log
+        returncode = 0
+
+        def __init__(self, cmd, *a, **k):
+            run_dir = Path(cmd[cmd.index("--run-dir") + 1])
+            (run_dir / "final").mkdir(parents=True)
+            (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123}))
+            (run_dir / "progress.csv").write_text("seconds,agent_steps\n1.0,123\n")
+
+        def poll(self):
+            return 0
+
+    drawn = []
+    monkeypatch.setattr(study.subprocess, "Popen", Finished)
+    monkeypatch.setattr(training.plots, "plot_runs", lambda runs, path, title: drawn.append((path.name, sorted(runs))))
+    for seeds in ("[0, 1]", "[2]"):
+        study.main(
+            ["--tasks", "[chain]", "--seeds", seeds, "--runs-dir", str(tmp_path / "runs")]
+            + ["--keep-dir", str(tmp_path / "checkpoints"), "--docs-dir", str(tmp_path / "docs")]
+        )
+    assert drawn[-1] == ("curves_ppo_chain_move.png", ["seed 0", "seed 1", "seed 2"])

@@ -44,13 +44,19 @@ thread each; a kickstart run waits for its clone), then keeps:
   ``--keep-dir checkpoints/v6``; ``configs/eval.yaml`` names such folders as one ``{label, runs}``
   group per task and recipe);
 - its ``progress.csv`` in ``<docs_dir>/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
-  figure of the learning curves of all seeds per task, ``<docs_dir>/curves_<recipe>_<task>_<level>.png``;
+  figure of the learning curves per task of every seed recorded there (this call's and earlier
+  ones'), ``<docs_dir>/curves_<recipe>_<task>_<level>.png``;
 - ``<docs_dir>/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
   checkpoint, recorded as each run finishes (runs of other recipes, tasks or seeds already recorded there
   are kept).
 
 A run whose folder already holds a final checkpoint (an earlier study of the same ``runs_dir``
 that stopped part way) is kept as it is, not trained again; delete its folder to retrain it.
+
+With ``--benchmark VERSION`` each recipe's config, budget, task id and starting checkpoint are the
+protocol's (``config``, ``agent_steps``, the task's id, ``init``: kickstart-move starts from the
+kept imitation-move clone), and a recipe the protocol does not fix for a task is refused before
+anything runs.
 
 Then ``proteo eval --benchmark v1 --checkpoint ... --out docs/benchmark/v1/<task>/<recipe>`` judges
 each recipe's seeds on every split of the benchmark protocol and ``make results`` writes
@@ -138,67 +144,90 @@ def _config(recipe: str, task: str, level: str) -> Path:
     return path
 
 
+@dataclass(frozen=True)
+class Recipe:
+    """One recipe on one task, as the study trains it."""
+
+    config: Path
+    steps: int
+    """Agent-steps of a PPO run (0: the config's)."""
+    task_id: str | None
+    """The task id to train on (``--task``; None: the config's)."""
+    init: str | None
+    """The recipe whose kept checkpoint of the same task and seed the run starts from (``--init``; None: none)."""
+
+
 class Plan:
-    """What the study trains for one recipe on one task: the config, the budget of a PPO run (0: the
-    config's) and the task id (None: the config's); from ``configs/train`` or from a benchmark protocol."""
+    """What the study trains: each recipe's config, budget, task id and starting checkpoint, from
+    ``configs/train`` (kickstart and credit from the imitation clone) or from a benchmark protocol
+    (its ``config``, ``agent_steps`` and ``init``)."""
 
     def __init__(self, args: Args):
-        self.level = args.level
+        self.args = args
         self.protocol = None
         if args.benchmark is not None:
             from training.judging.protocol import load_protocol
 
             self.protocol = load_protocol(args.benchmark)
-        self.total_steps = args.total_steps
 
-    def recipe(self, recipe: str, task: str) -> tuple[Path, int, str | None]:
-        """``(config, agent-steps of a PPO run, task id)`` of ``recipe`` on ``task``; an unknown recipe, or
-        one the protocol does not fix for the task, is one error naming what is allowed."""
+    def recipe(self, recipe: str, task: str) -> Recipe:
+        """``recipe`` on ``task``; an unknown recipe, or one the protocol does not fix for the task, is one
+        error naming what is allowed."""
+        args = self.args
         if self.protocol is None:
-            return _config(recipe, task, self.level), self.total_steps or RECIPES[recipe][2], None
+            steps = args.total_steps or RECIPES[recipe][2]
+            return Recipe(_config(recipe, task, args.level), steps, None, "imitation" if recipe in FROM_CLONE else None)
         if recipe not in RECIPES:
             raise ValueError(f"recipe {recipe!r} is not allowed; allowed: {', '.join(RECIPES)}")
         where = f"benchmark {self.protocol.version}"
         if task not in self.protocol.tasks:
             raise ValueError(f"{where}: task {task!r} is not allowed; allowed: {', '.join(self.protocol.tasks)}")
         fixed = self.protocol.tasks[task]
-        label = f"{recipe}-{self.level.replace('+', '-')}"
+        suffix = f"-{args.level.replace('+', '-')}"
+        label = f"{recipe}{suffix}"
         if label not in fixed.recipes:
             raise ValueError(
-                f"{where}: recipe {recipe!r} at level {self.level!r} ({label}) on {task} is not allowed; "
+                f"{where}: recipe {recipe!r} at level {args.level!r} ({label}) on {task} is not allowed; "
                 f"allowed: {', '.join(fixed.recipes)}"
             )
         entry = fixed.recipes[label]
-        return Path(entry["config"]), self.total_steps or entry["agent_steps"] or 0, fixed.task_id
+        init = entry["init"]
+        if init is not None and init.removesuffix(suffix) not in RECIPES:
+            raise ValueError(
+                f"{where}: {task}.recipes.{label}.init = {init!r} is not allowed here; allowed: a recipe of the "
+                f"study at level {args.level!r} ({', '.join(r + suffix for r in RECIPES)})"
+            )
+        init = None if init is None else init.removesuffix(suffix)
+        return Recipe(Path(entry["config"]), args.total_steps or entry["agent_steps"] or 0, fixed.task_id, init)
 
-
-def _command(args: Args, recipe: str, task: str, seed: int, run_dir: Path, clone: Path) -> list[str]:
-    trainer = RECIPES[recipe][0]
-    config, steps, task_id = Plan(args).recipe(recipe, task)
-    cmd = [
-        sys.executable,
-        "-m",
-        f"training.{trainer}",
-        "--config",
-        str(config),
-        "--seed",
-        str(seed),
-        "--run-dir",
-        str(run_dir),
-        "--progress-bar",
-        "false",
-    ]
-    if trainer in ("ppo", "cma_es", "evolve"):
-        cmd += ["--time-limit-minutes", str(args.minutes)]
-    if trainer in ("cma_es", "evolve"):
-        cmd += ["--workers", "1"]  # one process per run: the study runs ``parallel`` of them
-    if trainer == "ppo":
-        cmd += ["--total-steps", str(steps)] if steps else []
-    if task_id is not None:
-        cmd += ["--task", task_id]
-    if recipe in FROM_CLONE:
-        cmd += ["--init", str(clone)]
-    return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
+    def command(self, recipe: str, task: str, seed: int, run_dir: Path, init_dir: Path | None) -> list[str]:
+        """The command line of one run; ``init_dir``: the kept checkpoint it starts from, where it has one."""
+        args, plan = self.args, self.recipe(recipe, task)
+        trainer = RECIPES[recipe][0]
+        cmd = [
+            sys.executable,
+            "-m",
+            f"training.{trainer}",
+            "--config",
+            str(plan.config),
+            "--seed",
+            str(seed),
+            "--run-dir",
+            str(run_dir),
+            "--progress-bar",
+            "false",
+        ]
+        if trainer in ("ppo", "cma_es", "evolve"):
+            cmd += ["--time-limit-minutes", str(args.minutes)]
+        if trainer in ("cma_es", "evolve"):
+            cmd += ["--workers", "1"]  # one process per run: the study runs ``parallel`` of them
+        if trainer == "ppo":
+            cmd += ["--total-steps", str(plan.steps)] if plan.steps else []
+        if plan.task_id is not None:
+            cmd += ["--task", plan.task_id]
+        if plan.init is not None:
+            cmd += ["--init", str(init_dir)]
+        return cmd + [str(flag) for flag in args.flags.get(recipe, ())]
 
 
 def _run_seconds(run_dir: Path) -> float:
@@ -231,20 +260,20 @@ def main(argv=None) -> int:
 
     plan = Plan(args)
     jobs = [(recipe, task, seed) for recipe in args.recipes for task in args.tasks for seed in args.seeds]
-    for recipe, task, _ in jobs:
-        plan.recipe(recipe, task)
+    init = {(recipe, task): plan.recipe(recipe, task).init for recipe, task, _ in jobs}
     for recipe in args.flags:
         if recipe not in args.recipes:
             raise ValueError(f"flags of recipe {recipe!r} are not allowed; allowed: flags of {', '.join(args.recipes)}")
     (docs / "progress").mkdir(parents=True, exist_ok=True)
     pending, running, summary = list(jobs), [], []
     while pending or running:
-        waiting = {(t, s) for r, t, s in pending + [j[:3] for j in running] if r == "imitation"}
+        waiting = set(pending) | {j[:3] for j in running}
         for job in list(pending):
             if len(running) >= args.parallel:
                 break
             recipe, task, seed = job
-            if recipe in FROM_CLONE and (task, seed) in waiting:  # its clone is still to be trained
+            start = init[(recipe, task)]
+            if start is not None and (start, task, seed) in waiting:  # what it starts from is still to be trained
                 continue
             pending.remove(job)
             run_dir = Path(args.runs_dir) / f"{recipe}_{task}_{level}_s{seed}"
@@ -252,7 +281,7 @@ def main(argv=None) -> int:
                 print(f"already trained {recipe} {task} seed {seed}: {run_dir}", flush=True)
                 running.append((recipe, task, seed, run_dir, None, None))
                 continue
-            cmd = _command(args, recipe, task, seed, run_dir, kept("imitation", task, seed))
+            cmd = plan.command(recipe, task, seed, run_dir, kept(start, task, seed) if start else None)
             print(f"started {recipe} {task} seed {seed}: {' '.join(cmd)}", flush=True)
             running.append((recipe, task, seed, run_dir, time.perf_counter(), subprocess.Popen(cmd)))
         time.sleep(1.0)
@@ -291,7 +320,10 @@ def main(argv=None) -> int:
 
     for recipe in args.recipes:
         for task in args.tasks:
-            runs = {f"seed {s}": str(docs / "progress" / f"{recipe}_{task}_{level}_s{s}.csv") for s in args.seeds}
+            # every seed recorded in docs_dir, not only this call's: a study resumed for more seeds redraws them all
+            recorded = (docs / "progress").glob(f"{recipe}_{task}_{level}_s*.csv")
+            seeds = sorted(int(path.stem.rsplit("_s", 1)[1]) for path in recorded)
+            runs = {f"seed {s}": str(docs / "progress" / f"{recipe}_{task}_{level}_s{s}.csv") for s in seeds}
             plot_runs(
                 runs,
                 docs / f"curves_{recipe}_{task}_{level}.png",
