@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections import defaultdict
 from pathlib import Path
 
@@ -50,6 +51,8 @@ from training.judging.report import Result, Run
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
 REFERENCE_NAMES = {RULES: "the rules", RULES_MOVE: "the rules at move"}
+DEFAULT_OUT = "docs/results.md"
+"""The published results page (``make results``)."""
 """How a sentence names each reference."""
 
 
@@ -413,18 +416,23 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
             + " (each with its interval below)."
         )
     commits = sorted({h.get("commit") or "unknown" for h in headers})
+
+    def link(path: str) -> str:  # a link from the page to ``path`` (relative to the repository's root)
+        return Path(os.path.relpath(Path(path).resolve(), out.resolve().parent)).as_posix()
+
     files = " extended by ".join(
-        f"[configs/benchmark/{v}.yaml](../configs/benchmark/{v}.yaml)" for v, _ in protocol.lineage
+        f"[configs/benchmark/{v}.yaml]({link(f'configs/benchmark/{v}.yaml')})" for v, _ in protocol.lineage
     )
     lines = [
         "# Results",
         "",
         f"Every controller judged under benchmark protocol **{version}** ({files}, "
-        "[the guide](guides/benchmark.md)): the rules and random on "
+        f"[the guide]({link('docs/guides/benchmark.md')})): the rules and random on "
         f"{protocol.reference} worlds per split, a learned or evolved recipe on {protocol.per_training_seed} worlds per "
         f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
         f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
-        "Regenerate: `make results` (`python -m training.judging.results`).",
+        f"Regenerate: `python -m training.judging.results --benchmark {version} --out {out.as_posix()}`"
+        + (" (`make results`)." if out == Path(DEFAULT_OUT) else "."),
         "",
         "## The short answer",
         "",
@@ -562,7 +570,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m training.judging.results", description=__doc__.splitlines()[0])
     parser.add_argument("--benchmark", default="v1", help="protocol version (configs/benchmark/<version>.yaml)")
     parser.add_argument("--root", default="docs/benchmark", help="folder holding <version>/<task>/<policy>/")
-    parser.add_argument("--out", default="docs/results.md", help="the page to write")
+    parser.add_argument("--out", default=DEFAULT_OUT, help=f"the page to write (default {DEFAULT_OUT})")
     parser.add_argument(
         "--publish", action="append", default=[], help="also write the held-out table between its markers in FILE"
     )
