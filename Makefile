@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint results bench learning-results benchmark-references benchmarl test-benchmarl
+.PHONY: install install-distributed demo test test-all lint results bench learning-results learning-results-v7 benchmark-references benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -82,6 +82,20 @@ learning-results: install
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done
 	$(MAKE) results
+
+# Protocol v7 (standalone: ten training seeds, 100 worlds each, table-v2, branch's edge_start): each recipe's
+# config, budget, task id and starting clone come from configs/benchmark/v7.yaml (training.study --benchmark
+# v7). About 18 hours on 2 cores, 14 of them evolution; a study stopped part way resumes from runs/v7.
+STUDY_V7 := --benchmark v7 --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4, 5, 6, 7, 8, 9]" \
+	--keep-dir checkpoints/v7 --docs-dir docs/benchmark/v7/learning --runs-dir runs/v7
+learning-results-v7: install
+	$(BIN)/python -m training.study --recipes "[imitation, kickstart, ppo]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V7)
+	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V7)
+	$(BIN)/python -m training.study --recipes "[cma, evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V7)
+	for recipe in checkpoints/v7/*/*_*; do \
+		$(BIN)/proteo eval --benchmark v7 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
+			--out docs/benchmark/v7/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
+	$(BIN)/python -m training.judging.results --benchmark v7 --out docs/benchmark/v7/results.md
 
 benchmark-references: install
 	for version in v1 v7; do for task in chain branch table grasp locomotion; do \
