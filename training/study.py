@@ -46,8 +46,8 @@ thread each; a kickstart run waits for its clone), then keeps:
 - its ``progress.csv`` in ``<docs_dir>/progress/<recipe>_<task>_<level>_s<S>.csv`` and one
   figure of the learning curves per task of every seed recorded there (this call's and earlier
   ones'), ``<docs_dir>/curves_<recipe>_<task>_<level>.png``;
-- ``<docs_dir>/study_<level>.json``: per run the recipe, agent-steps, wall-clock and final
-  checkpoint, recorded as each run finishes (runs of other recipes, tasks or seeds already recorded there
+- ``<docs_dir>/study_<level>.json``: per run the recipe, agent-steps, wall-clock (the training's
+  own, from its ``progress.csv``: a run resumed part way counts in all) and final checkpoint, recorded as each run finishes (runs of other recipes, tasks or seeds already recorded there
   are kept).
 
 A run whose folder already holds a final checkpoint (an earlier study of the same ``runs_dir``
@@ -231,7 +231,7 @@ class Plan:
 
 
 def _run_seconds(run_dir: Path) -> float:
-    """Training seconds of a finished run, from the last row of its ``progress.csv``."""
+    """Training seconds of a finished run, from the last row of its ``progress.csv`` (across resumes)."""
     with open(run_dir / "progress.csv") as f:
         rows = list(csv.DictReader(f))
     return float(rows[-1]["seconds"]) if rows else 0.0
@@ -279,23 +279,21 @@ def main(argv=None) -> int:
             run_dir = Path(args.runs_dir) / f"{recipe}_{task}_{level}_s{seed}"
             if (run_dir / "final" / "proteo.json").is_file():  # trained by an earlier study: kept, not retrained
                 print(f"already trained {recipe} {task} seed {seed}: {run_dir}", flush=True)
-                running.append((recipe, task, seed, run_dir, None, None))
+                running.append((recipe, task, seed, run_dir, None))
                 continue
             cmd = plan.command(recipe, task, seed, run_dir, kept(start, task, seed) if start else None)
             print(f"started {recipe} {task} seed {seed}: {' '.join(cmd)}", flush=True)
-            running.append((recipe, task, seed, run_dir, time.perf_counter(), subprocess.Popen(cmd)))
+            running.append((recipe, task, seed, run_dir, subprocess.Popen(cmd)))
         time.sleep(1.0)
-        for job in [j for j in running if j[5] is None or j[5].poll() is not None]:
+        for job in [j for j in running if j[4] is None or j[4].poll() is not None]:
             running.remove(job)
-            recipe, task, seed, run_dir, started, proc = job
-            if proc is None:
-                seconds = _run_seconds(run_dir)
-            elif proc.returncode != 0:
+            recipe, task, seed, run_dir, proc = job
+            if proc is not None and proc.returncode != 0:
                 raise RuntimeError(
                     f"training {recipe} {task} seed {seed} failed (exit {proc.returncode}); see {run_dir}"
                 )
-            else:
-                seconds = time.perf_counter() - started
+            seconds = _run_seconds(run_dir)  # the trainer's clock: a run resumed part way counts in all
+            if proc is not None:
                 print(f"finished {recipe} {task} seed {seed} in {seconds / 60:.1f} min", flush=True)
             keep = kept(recipe, task, seed)
             if keep.exists():
