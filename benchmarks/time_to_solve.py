@@ -99,7 +99,9 @@ def main(argv=None) -> int:
         "# Time to solve chain-v1 with native PPO",
         "",
         f"`{' '.join(['python benchmarks/time_to_solve.py', *(argv if argv is not None else sys.argv[1:])])}` "
-        f"(the script's docstring says what it does): `{CONFIG}` trained for {args.steps:,} agent-steps per seed, "
+        f"(the script's docstring says what it does): `{CONFIG}` (12-module chains at control level `move`: the "
+        "policy picks each module's move, the rules' autopilot the rest) trained for "
+        f"{args.steps:,} agent-steps per seed, "
         f"every checkpoint ({args.every:,} agent-steps apart) judged on {args.worlds} held-out worlds; solved: "
         f"{args.target * 100:.0f} % success. Machine: {machine['cpu']}, {machine['cores']} cores, device {args.device}, "
         f"{args.threads} thread(s), load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
