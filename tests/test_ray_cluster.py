@@ -19,8 +19,10 @@ SWEEP = (
     "task: chain-v1\nenv: {max_cycles: 400}\ngrid:\n  n_modules: [12, 16]\n  motion_model: [minimal, sphere]\n"
     "seeds: 2\nplot: {x: n_modules, hue: motion_model}\n"
 )
-LONG_SWEEP = "task: chain-v1\nenv: {max_cycles: 1500, motion_model: rhombic}\ngrid:\n  n_modules: [30, 40]\nseeds: 2\n"
-"""Episodes of a second or more, so that one can be killed while it runs."""
+LONG_SWEEP = "task: chain-v1\nenv: {max_cycles: 4000, motion_model: rhombic}\ngrid:\n  n_modules: [60, 80]\nseeds: 8\n"
+"""Batches of worlds that run for seconds (half the chains never form under ``rhombic`` and run to
+the cycle limit), so that a Ray task can be killed while it runs: the sweep runs each grid point's
+episodes as one batch, one Ray task."""
 
 
 def test_bad_address_is_one_clear_error(capsys):
