@@ -54,6 +54,18 @@ def built(episode):
     return _BUILT[spec]
 
 
+def _record(result, seconds: float) -> dict:
+    """An episode's result (an ``EpisodeResult``) as the JSON-ready record a run adds (no picture)."""
+    return {
+        "return": float(result.total_reward),
+        "success": bool(result.success),
+        "cycles": int(result.cycles),
+        "metrics": {k: float(v) for k, v in result.metrics.items()},
+        "seconds": seconds,
+        "picture": None,
+    }
+
+
 def run_alone(job: tuple) -> dict:
     """Run one episode on its own, through the per-agent dict API (:func:`proteo_env.rollout.run_episode`;
     the policy is reset with the world seed), and with a label draw its end: ``job`` is
@@ -66,14 +78,7 @@ def run_alone(job: tuple) -> dict:
     env, policy = built(episode)
     started = time.perf_counter()
     result = run_episode(env, policy, seed=episode.seed)
-    out = {
-        "return": float(result.total_reward),
-        "success": bool(result.success),
-        "cycles": int(result.cycles),
-        "metrics": {k: float(v) for k, v in result.metrics.items()},
-        "seconds": time.perf_counter() - started,
-        "picture": None,
-    }
+    out = _record(result, time.perf_counter() - started)
     if label:
         caption = f"{episode.task} · {label} ({episode.level}) · seed {episode.seed} · cycle {result.cycles}"
         out["picture"] = _picture_png(env, caption + (" · success" if result.success else ""))
@@ -112,14 +117,7 @@ def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, wor
         batched = run_batched([jobs[i][1] for i in plain], ray=ray, workers=workers, journal=journal, progress=progress)
         seconds = (time.perf_counter() - started) / len(plain)
         for i, r in zip(plain, batched):
-            episodes[i] = {
-                "return": float(r.total_reward),
-                "success": bool(r.success),
-                "cycles": int(r.cycles),
-                "metrics": {k: float(v) for k, v in r.metrics.items()},
-                "seconds": seconds,
-                "picture": None,
-            }
+            episodes[i] = _record(r, seconds)
     for (run, episode, picture), result in zip(jobs, episodes):
         run.add(episode.seed, result)
         if result["picture"]:
