@@ -109,6 +109,28 @@ def test_same_seed_same_first_update(tmp_path):
     assert not all(torch.equal(first[0][k], other[k]) for k in first[0])
 
 
+def test_worlds_split_over_workers_make_the_same_run(tmp_path):
+    """Two worker processes step the same worlds as one process: the same episodes, rewards and
+    network after several updates, bit for bit."""
+    runs = {workers: tiny_run(tmp_path / f"w{workers}", "--workers", str(workers)) for workers in (1, 2)}
+    weights = {workers: torch.load(final / "policy.pt") for workers, final in runs.items()}
+    assert all(torch.equal(weights[1][k], weights[2][k]) for k in weights[1])
+    logs = {w: list(csv.DictReader((final.parent / "progress.csv").open())) for w, final in runs.items()}
+    learning = [k for k in logs[1][0] if k.startswith(("episode/", "loss/"))]
+    assert [[r[k] for k in learning] for r in logs[1]] == [[r[k] for k in learning] for r in logs[2]]
+    assert any(r["episode/return"] for r in logs[1])  # episodes ended, so worlds restarted inside the workers
+
+
+def test_workers_are_refused_beyond_the_worlds_and_with_teachers(tmp_path):
+    with pytest.raises(ValueError, match="workers=9 is not allowed with n_envs=8; allowed: 1 to n_envs"):
+        tiny_run(tmp_path / "a", "--workers", "9")
+    with pytest.raises(ValueError, match="workers=0 .*allowed"):
+        tiny_run(tmp_path / "b", "--workers", "0")
+    with pytest.raises(ValueError, match="workers=2 is not allowed with distill_coef=0.5; allowed: workers=1"):
+        tiny_run(tmp_path / "c", "--workers", "2", "--distill-coef", "0.5")
+    assert not any((tmp_path / name).exists() for name in "abc")
+
+
 def test_bad_arguments_are_refused(tmp_path):
     with pytest.raises(ValueError, match="arch='conv'.*allowed: shared, mlp"):
         tiny_run(tmp_path / "a", "--arch", "conv")

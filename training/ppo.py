@@ -132,6 +132,9 @@ class Args(RunArgs):
     """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
     device: str = "cpu"
     """Where the network runs: cpu, cuda, cuda:N or mps; the worlds stay on the CPU."""
+    workers: int = 1
+    """Processes that step the worlds, each its share at the same time (training/worlds.py: WorkerEnvs);
+    the same run on any number. Not with distillation or a curriculum."""
     init: str | None = None
     """Start from this checkpoint's network (training/imitate.py or training/ppo.py, the same shape)."""
     teacher: str = "rules"
@@ -150,7 +153,7 @@ class Args(RunArgs):
     """The task's modes of a module not yet in the structure."""
 
     def __post_init__(self):
-        positive = ("n_envs", "n_steps", "minibatch_size", "n_epochs", "checkpoint_every")
+        positive = ("n_envs", "n_steps", "minibatch_size", "n_epochs", "checkpoint_every", "workers")
         check_integers(self, {"total_steps": 0, **dict.fromkeys(positive, 1), "distill_steps": 0})
         check_arch(self.arch)
         check_memory(self.memory)
@@ -160,6 +163,16 @@ class Args(RunArgs):
                 f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
                 "allowed: a number in [0, distill_coef]"
             )
+        if self.workers > self.n_envs:
+            raise ConfigError(
+                f"workers={self.workers!r} is not allowed with n_envs={self.n_envs}; allowed: 1 to n_envs"
+            )
+        for name, value in (("distill_coef", self.distill_coef), ("curriculum", self.curriculum)):
+            if self.workers > 1 and value:
+                raise ConfigError(
+                    f"workers={self.workers!r} is not allowed with {name}={value!r}; allowed: workers=1 "
+                    "(the teachers and the curriculum read the observations in this process)"
+                )
         bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
         loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
         check_numbers(self, {**bounds, **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus"), (0.0, None))})
@@ -448,6 +461,7 @@ def train(args: Args) -> Path:
             saved_interval = agent_steps // args.checkpoint_every
             save(checkpoint_folder(run_dir, agent_steps))
     bar.close()
+    worlds.close()
     save(run_dir / "final")
     log.close()
     print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")

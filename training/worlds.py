@@ -1,16 +1,21 @@
 """The training worlds of :mod:`training.ppo` and :mod:`training.imitate`: ``n_envs`` worlds of one
 task as one :class:`~proteo_env.batched.BatchedEnv`, each restarted as soon as its episode ends,
-with every module's observation encoded into one row of features."""
+with every module's observation encoded into one row of features; or the same worlds split over
+worker processes (:class:`WorkerEnvs`), which step, observe and encode their shares at once."""
 
 from __future__ import annotations
 
+import multiprocessing
 import time
+import traceback
+import weakref
+from multiprocessing import shared_memory
 
 import numpy as np
 
 import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
-from proteo_env.config import ConfigError
+from proteo_env.config import ConfigError, world_seeds
 from proteo_env.spaces import ObservationBuffers
 from training.policies import check_memory, with_memory
 
@@ -47,7 +52,9 @@ class TrainingEnvs:
     Args:
         task, control, env: the task, its control level and the overrides of ``proteo_env.make_batched``.
         n_envs: worlds stepped together.
-        env_seed: the seed of the worlds.
+        env_seed: the seed of the worlds, or one seed per world (world ``w`` is then seeded exactly as
+            a single env reset with ``env_seed[w]``: how :class:`WorkerEnvs` gives each worker its
+            share of one run's worlds).
         message_encoding: how the features encode the messages received (proteo_env.adapters.flatten).
         memory: the inputs appended to the features (:data:`training.policies.MEMORIES`).
         join_bonus: when above zero, :attr:`joined` marks the modules whose mode left ``join_from``.
@@ -85,7 +92,8 @@ class TrainingEnvs:
         """Features per sample: the encoding, then the memory's inputs."""
         self.previous_actions = np.zeros((n_envs * self.n_agents, len(self.nvec)), dtype=np.int64)
         """``(N, F)``: each module's action in the last cycle (zeros at an episode's start), the memory's source."""
-        self.buffers = self.batch.reset(seed=env_seed)
+        per_world = isinstance(env_seed, (list, tuple))
+        self.buffers = self.batch.reset(**{"world_seeds" if per_world else "seed": env_seed})
         self.join_bonus = join_bonus
         self.outside = join_modes(self.batch.task, join_from) if join_bonus else np.zeros(0, dtype=np.int64)
         """Mode numbers of a module not yet in the structure (module credit; empty when off)."""
@@ -100,21 +108,14 @@ class TrainingEnvs:
         self.encode_seconds = 0.0
 
     @classmethod
-    def for_run(cls, args, env: dict, agent_steps: int = 0) -> TrainingEnvs:
+    def for_run(cls, args, env: dict, agent_steps: int = 0) -> TrainingEnvs | WorkerEnvs:
         """The worlds of a run with arguments ``args`` (task, control, n_envs, seed, message_encoding,
-        memory, and join_bonus and join_from where it has them) and env overrides ``env``, built after
-        ``agent_steps`` (seeded by :func:`training_worlds_seed`)."""
-        return cls(
-            args.task,
-            args.control,
-            env,
-            args.n_envs,
-            training_worlds_seed(args.seed, agent_steps),
-            message_encoding=args.message_encoding,
-            memory=args.memory,
-            join_bonus=getattr(args, "join_bonus", 0.0),
-            join_from=getattr(args, "join_from", JOIN_FROM),
-        )
+        memory, and join_bonus, join_from and workers where it has them) and env overrides ``env``,
+        built after ``agent_steps`` (seeded by :func:`training_worlds_seed`); split over
+        ``args.workers`` processes (:class:`WorkerEnvs`) when that is above 1."""
+        settings = run_settings(args, env, agent_steps)
+        workers = getattr(args, "workers", 1)
+        return WorkerEnvs(settings, workers) if workers > 1 else cls(**settings)
 
     def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
         """Write every module's features ``(N, size)`` (with the memory's inputs) and legal moves
@@ -124,6 +125,9 @@ class TrainingEnvs:
         features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
+
+    def close(self) -> None:
+        """Nothing to release (:meth:`WorkerEnvs.close` stops its workers)."""
 
     def own_modes(self) -> np.ndarray:
         """``(N,)``: every module's own mode in the current observations."""
@@ -174,3 +178,236 @@ class TrainingEnvs:
             self.buffers = self.batch.reset_worlds(ended)
         self.env_seconds += time.perf_counter() - started
         return reward, terminal, truncated
+
+
+def run_settings(args, env: dict, agent_steps: int) -> dict:
+    """The keyword arguments of :class:`TrainingEnvs` for a run (see :meth:`TrainingEnvs.for_run`)."""
+    return {
+        "task": args.task,
+        "control": args.control,
+        "env": dict(env),
+        "n_envs": args.n_envs,
+        "env_seed": training_worlds_seed(args.seed, agent_steps),
+        "message_encoding": args.message_encoding,
+        "memory": args.memory,
+        "join_bonus": getattr(args, "join_bonus", 0.0),
+        "join_from": tuple(getattr(args, "join_from", JOIN_FROM)),
+    }
+
+
+class WorkerEnvs:
+    """The worlds of :class:`TrainingEnvs` split over ``workers`` processes (this one and
+    ``workers - 1`` started here), each stepping, observing and encoding its share (consecutive
+    worlds) at the same time as the others.
+
+    The same worlds as one process: world ``w`` is seeded with child ``w`` of the run's seed
+    whichever process holds it, and the features, masks, rewards and ended episodes come back in
+    world order, so a trainer that draws its actions from them in one process makes the same run
+    on any number of workers, bit for bit. It offers what :func:`training.ppo.collect` reads of
+    :class:`TrainingEnvs`: :meth:`encode`, :meth:`step`, ``final_rows``, ``final_features``,
+    ``joined``, ``encoder``, ``nvec``, ``size``, ``task_id``, ``n_envs`` and ``n_agents``; not
+    the observation ``buffers`` (most stay in the workers), so no teacher labels them.
+    ``env_seconds`` counts the wall-clock of each parallel step (the encoding included),
+    ``encode_seconds`` the copying of the features. Features, masks, actions and per-world
+    results travel in shared memory; a process waiting for the others polls for a moment before
+    it sleeps (a sleeping process wakes a fraction of a millisecond late), so give it a core
+    each. Call :meth:`close` (or let it be collected) to stop the workers.
+
+    Args:
+        settings: :class:`TrainingEnvs`'s keyword arguments for all the worlds (:func:`run_settings`).
+        workers: processes, 1 to ``n_envs``.
+    """
+
+    def __init__(self, settings: dict, workers: int):
+        n_envs = settings["n_envs"]
+        if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= n_envs:
+            raise ConfigError(
+                f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: an integer from 1 to n_envs"
+            )
+        seeds = world_seeds(settings["env_seed"], n_envs)
+        self.shares = [(int(s[0]), int(s[-1]) + 1) for s in np.array_split(np.arange(n_envs), workers)]
+        """``(first, end)`` world of each process, this one's first."""
+        first, end = self.shares[0]
+        self.local = TrainingEnvs(**{**settings, "n_envs": end - first, "env_seed": seeds[first:end]})
+        """This process's share of the worlds."""
+        self.task_id, self.n_agents, self.nvec = self.local.task_id, self.local.n_agents, self.local.nvec
+        self.encoder, self.size = self.local.encoder, self.local.size
+        self.n_envs = n_envs
+        layout = (n_envs, self.n_agents, self.size, len(self.nvec))
+        self._memory = shared_memory.SharedMemory(create=True, size=_shared_size(*layout))
+        self._views = _shared_views(self._memory.buf, *layout)
+        context = multiprocessing.get_context("spawn")  # no fork of a process that runs torch's threads
+        self._pipes, self._processes = [], []
+        for first, end in self.shares[1:]:
+            mine, theirs = context.Pipe()
+            share = {**settings, "n_envs": end - first, "env_seed": seeds[first:end]}
+            process = context.Process(
+                target=_serve, args=(theirs, share, self._memory.name, layout, first), daemon=True
+            )
+            process.start()
+            self._pipes.append(mine)
+            self._processes.append(process)
+        self._finalizer = weakref.finalize(self, _stop, self._pipes, self._processes, self._memory)
+        _encode_share(self.local, self._views, 0)
+        self._gather()
+        self.joined = np.zeros(n_envs * self.n_agents, dtype=bool)
+        self.final_rows = np.zeros(0, dtype=np.int64)
+        self.final_features = np.zeros((0, self.size), dtype=np.float32)
+        self.env_seconds = 0.0
+        self.encode_seconds = 0.0
+
+    def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
+        """Write every module's features ``(N, size)`` and legal moves ``(N, 13)`` (encoded by
+        each process after the last step) into the given arrays."""
+        started = time.perf_counter()
+        features[:] = self._views["features"]
+        move_mask[:] = self._views["mask"]
+        self.encode_seconds += time.perf_counter() - started
+
+    def step(self, actions: np.ndarray, finished: list[dict]):
+        """One cycle of every world from ``(n_envs, A, F)`` actions, as :meth:`TrainingEnvs.step`."""
+        started = time.perf_counter()
+        self._views["actions"][:] = actions
+        for pipe in self._pipes:
+            pipe.send("step")
+        answers = [_step_share(self.local, self._views, 0), *self._gather()]
+        rows, features = [], []
+        for (first, _), (ended, final_rows, final_features) in zip(self.shares, answers):
+            finished.extend(ended)
+            rows.append(final_rows + first * self.n_agents)
+            features.append(final_features)
+        self.final_rows, self.final_features = np.concatenate(rows), np.concatenate(features)
+        views = self._views
+        self.joined = views["joined"].copy()
+        self.env_seconds += time.perf_counter() - started
+        return views["reward"].copy(), views["terminal"].copy(), views["truncated"].copy()
+
+    def _gather(self) -> list:
+        """Every worker's answer, in order; a worker's error is raised here with its traceback."""
+        answers = []
+        for pipe, process in zip(self._pipes, self._processes):
+            try:
+                _wait(pipe)
+                kind, answer = pipe.recv()
+            except EOFError:
+                self.close()
+                raise RuntimeError(f"a worker of the training worlds died (exit code {process.exitcode})") from None
+            if kind == "error":
+                self.close()
+                if isinstance(answer, ConfigError):
+                    raise answer
+                raise RuntimeError(f"a worker of the training worlds failed:\n{answer}")
+            answers.append(answer)
+        return answers
+
+    def close(self) -> None:
+        """Stop the workers and free the shared memory (again: nothing)."""
+        self._finalizer()
+
+
+POLL_SECONDS = 0.002
+"""How long a process of :class:`WorkerEnvs` polls for the others' message before it sleeps."""
+
+
+def _wait(pipe) -> None:
+    """Return when ``pipe`` has a message: poll for :data:`POLL_SECONDS`, then sleep until one comes."""
+    deadline = time.perf_counter() + POLL_SECONDS
+    while not pipe.poll():
+        if time.perf_counter() > deadline:
+            pipe.poll(None)
+            return
+
+
+def _shared_fields(n_envs: int, n_agents: int, size: int, n_fields: int) -> list[tuple[str, tuple, type]]:
+    n = n_envs * n_agents
+    return [
+        ("features", (n, size), np.float32),
+        ("mask", (n, 13), np.bool_),
+        ("actions", (n_envs, n_agents, n_fields), np.int64),
+        ("reward", (n_envs,), np.float64),
+        ("terminal", (n_envs,), np.bool_),
+        ("truncated", (n_envs,), np.bool_),
+        ("joined", (n,), np.bool_),
+    ]
+
+
+def _aligned(nbytes: int) -> int:
+    return -(-nbytes // 64) * 64
+
+
+def _shared_size(*layout: int) -> int:
+    return sum(_aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize) for _, shape, dtype in _shared_fields(*layout))
+
+
+def _shared_views(buffer, *layout: int) -> dict[str, np.ndarray]:
+    """The arrays :class:`WorkerEnvs` shares with its workers, one after another in ``buffer``;
+    ``layout``: worlds, modules per world, features per module, action fields."""
+    views, offset = {}, 0
+    for name, shape, dtype in _shared_fields(*layout):
+        views[name] = np.ndarray(shape, dtype=dtype, buffer=buffer, offset=offset)
+        offset += _aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize)
+    return views
+
+
+def _encode_share(worlds: TrainingEnvs, views: dict, first: int) -> None:
+    """Encode the share of ``worlds`` (its first world is world ``first``) into the shared features."""
+    rows = slice(first * worlds.n_agents, (first + worlds.n_envs) * worlds.n_agents)
+    worlds.encode(views["features"][rows], views["mask"][rows])
+
+
+def _step_share(worlds: TrainingEnvs, views: dict, first: int) -> tuple:
+    """Step the share of ``worlds`` with its shared actions, write its results and features, and
+    return what does not fit the shared arrays: ``(ended episodes, final_rows, final_features)``."""
+    end = first + worlds.n_envs
+    ended = []
+    reward, terminal, truncated = worlds.step(views["actions"][first:end], ended)
+    for name, value in (("reward", reward), ("terminal", terminal), ("truncated", truncated)):
+        views[name][first:end] = value
+    views["joined"][first * worlds.n_agents : end * worlds.n_agents] = worlds.joined
+    _encode_share(worlds, views, first)
+    return ended, worlds.final_rows, worlds.final_features
+
+
+def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) -> None:
+    """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``, stepped
+    on each ``"step"`` until ``"close"``; answers ``("ok", ...)`` or ``("error", ...)``."""
+    from training.common import limit_threads
+
+    limit_threads(1)
+    memory = None
+    try:
+        worlds = TrainingEnvs(**settings)
+        memory = shared_memory.SharedMemory(name=memory_name)
+        views = _shared_views(memory.buf, *layout)
+        _encode_share(worlds, views, first)
+        pipe.send(("ok", None))
+        while True:
+            _wait(pipe)
+            if pipe.recv() != "step":
+                break
+            pipe.send(("ok", _step_share(worlds, views, first)))
+    except ConfigError as error:
+        pipe.send(("error", error))
+    except Exception:  # noqa: BLE001 - the trainer raises it with this traceback
+        pipe.send(("error", traceback.format_exc()))
+    finally:
+        views = None
+        if memory is not None:
+            memory.close()
+
+
+def _stop(pipes, processes, memory) -> None:
+    for pipe in pipes:
+        try:
+            pipe.send("close")
+        except (BrokenPipeError, OSError):
+            pass
+    for process in processes:
+        process.join(timeout=10)
+        if process.is_alive():
+            process.terminate()
+    try:
+        memory.close()
+    except BufferError:  # views of it are still alive here; the mapping goes with the process
+        pass
+    memory.unlink()

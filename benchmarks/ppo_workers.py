@@ -1,0 +1,142 @@
+"""Native PPO on every core: agent-steps per second with the worlds split over 1 to K processes,
+beside the batched engine on the same worlds, measured in one run.
+
+    NUMBA_NUM_THREADS=1 python benchmarks/ppo_workers.py --out docs/speed/ppo_workers
+
+The worlds are those of ``configs/train/ppo_chain_move.yaml`` (64 chain-v1 worlds of 12
+modules at ``move``). For each ``--workers`` count it trains ``training/ppo.py`` with the
+config's settings and seed 0 for ``--steps`` agent-steps (``--workers K``, one torch thread)
+and takes its rate from ``progress.csv`` over the rows after ``--warmup`` agent-steps (before
+them each process compiles its worlds' batched autopilot: :data:`proteo_env.batched.ONE_CALL_AFTER`
+world-cycles, the more the fewer worlds it holds), split as the trainer logs it into the
+environment step (with the encoding of the observations), the forward passes of the rollouts and
+the update. Every run must end with the same network, bit for bit (the script fails otherwise).
+The engine's rate is the batched env alone (``step_arrays`` and ``observe_arrays`` of the same
+64 worlds at ``full``, one process), timed after a warm-up of the same length, with uniformly
+random actions (the speed suite's workload: most moves are refused at once) and with the move
+drawn among the legal ones (every module that can move does: more connectivity checks); the
+ratio "of the engine" is taken against the faster of the two. The machine and its load average at the end are written beside the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from machine_info import describe
+
+CONFIG = "configs/train/ppo_chain_move.yaml"
+
+
+def engine_rate(cycles: int, legal: bool) -> float:
+    """Module-cycles per second of the config's worlds stepped and observed by the batched env
+    alone, with uniformly random actions (``legal``: the move drawn among the legal ones)."""
+    import proteo_env
+
+    cfg = yaml.safe_load(Path(CONFIG).read_text())
+    env = proteo_env.make_batched(cfg["task"], cfg["n_envs"], **{**cfg["env"], "max_cycles": 10**9})
+    rng = np.random.default_rng(0)
+    mask = env.reset(seed=0).action_mask
+    nvec = env.action_layout.nvec
+
+    def run(n: int) -> None:
+        nonlocal mask
+        for _ in range(n):
+            actions = rng.integers(0, nvec, size=(env.n_envs, env.n_agents, len(nvec)))
+            if legal:
+                moves = np.argmax(mask * rng.random(mask.shape), axis=1)
+                actions[..., 0] = moves.reshape(env.n_envs, env.n_agents)
+            env.step_arrays(actions)
+            mask = env.observe_arrays().action_mask
+
+    run(cycles)
+    started = time.perf_counter()
+    run(cycles)
+    return cycles * env.n_envs * env.n_agents / (time.perf_counter() - started)
+
+
+def train(workers: int, steps: int, run_dir: Path) -> dict:
+    """One PPO run of the config split over ``workers`` processes; its rows of ``progress.csv``."""
+    cmd = [sys.executable, "-m", "training.ppo", "--config", CONFIG, "--seed", "0", "--run-dir", str(run_dir)]
+    cmd += ["--total-steps", str(steps), "--time-limit-minutes", "0", "--workers", str(workers), "--threads", "1"]
+    cmd += ["--progress-bar", "false", "--tensorboard", "false", "--checkpoint-every", str(10 * steps)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    with open(run_dir / "progress.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def steady(rows: list[dict], warmup: int) -> dict:
+    """Agent-steps per second over the rows after ``warmup`` agent-steps, and the split of that time."""
+    done = [int(r["agent_steps"]) for r in rows]
+    kept = [r for r, previous in zip(rows[1:], done) if previous >= warmup]
+    parts = {
+        name: sum(float(r[f"time/{name}_seconds"]) for r in kept) for name in ("env", "encode", "forward", "update")
+    }
+    steps = int(kept[-1]["agent_steps"]) - int(rows[len(rows) - len(kept) - 1]["agent_steps"])
+    return {"agent_steps": steps, "agent_steps_per_s": steps / sum(parts.values()), "seconds": parts}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--steps", type=int, default=4_000_000, help="agent-steps of each run")
+    parser.add_argument("--warmup", type=int, default=2_000_000, help="agent-steps left out of the rate")
+    parser.add_argument("--engine-cycles", type=int, default=2000)
+    parser.add_argument("--out", default="docs/speed/ppo_workers", help="writes OUT.json and OUT.md")
+    args = parser.parse_args(argv)
+    engines = {"uniform": engine_rate(args.engine_cycles, False), "legal": engine_rate(args.engine_cycles, True)}
+    engine = max(engines.values())
+    runs, digests = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in args.workers:
+            rows = train(k, args.steps, Path(tmp) / f"w{k}")
+            runs[k] = steady(rows, args.warmup)
+            digests[k] = hashlib.sha256((Path(tmp) / f"w{k}" / "final" / "policy.pt").read_bytes()).hexdigest()
+    same = len(set(digests.values())) == 1
+    machine = describe("torch", "numba")
+    result = {"engine_module_cycles_per_s": engines, "runs": runs, "same_network": same, "machine": machine}
+    result["config"], result["steps"], result["warmup"] = CONFIG, args.steps, args.warmup
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(result, indent=1))
+    one = runs[args.workers[0]]["agent_steps_per_s"]
+    lines = [
+        "# Native PPO on every core",
+        "",
+        f"`NUMBA_NUM_THREADS=1 python benchmarks/ppo_workers.py --out {args.out}` (one run; {machine['cpu']}, "
+        f"{machine['cores']} cores, load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
+        f"numba {machine['numba']}). `{CONFIG}`, seed 0, {args.steps:,} agent-steps a run, the rate over those after "
+        f"{args.warmup:,}; the batched engine alone on the same 64 worlds (one process): {engines['uniform']:,.0f} "
+        f"module-cycles/s with uniformly random actions, {engines['legal']:,.0f} with random legal moves.",
+        "",
+        "| workers | agent-steps/s | x 1 worker | of the engine | env step + encoding s | forward s | update s |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for k, run in runs.items():
+        s = run["seconds"]
+        lines.append(
+            f"| {k} | {run['agent_steps_per_s']:,.0f} | {run['agent_steps_per_s'] / one:.2f} | "
+            f"{run['agent_steps_per_s'] / engine:.3f} | {s['env'] + s['encode']:.2f} | {s['forward']:.2f} | "
+            f"{s['update']:.2f} |"
+        )
+    lines += [
+        "",
+        "Every run ends with the same network, bit for bit: " + ("yes." if same else "**no**."),
+        "",
+    ]
+    out.with_suffix(".md").write_text("\n".join(lines))
+    print("\n".join(lines))
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
