@@ -18,7 +18,7 @@ import pytest
 from conftest import task_params
 
 import proteo_env
-from proteo_env.adapters.flatten import ObservationEncoder, flat_action_mask
+from proteo_env.adapters.flatten import SCENT_SCALE, ObservationEncoder, flat_action_mask
 from proteo_env.registry import task_name
 from proteo_env.spaces import ObservationBuffers
 
@@ -44,6 +44,54 @@ def test_encoder_blocks_are_named_and_match_both_inputs():
         np.testing.assert_array_equal(a[i, slices["action_mask"]], observations[agent]["action_mask"])
         assert a[i, slices["own_mode"]].sum() == 1.0
         assert a[i, slices["neighbour_kind"]].sum() == enc.n_sites  # one kind per site
+
+
+@pytest.mark.parametrize("task", ["grasp-v0", "table-v2"])
+def test_every_feature_is_its_block_formula_of_the_observation(task):
+    """Each block's value, site by site and channel by channel, as the module docstring defines
+    it (after a few cycles of random legal moves, so scents, modes, messages and loads vary)."""
+    env = proteo_env.make_batched(task, 2)
+    buffers, rng = env.reset(seed=5), np.random.default_rng(1)
+    for _ in range(6):
+        actions = rng.integers(0, env.action_layout.nvec, size=(2, env.n_agents, env.action_layout.length))
+        moves = np.argmax(buffers.action_mask * rng.random(buffers.action_mask.shape), axis=1)
+        actions[..., 0] = moves.reshape(2, env.n_agents)
+        env.step_arrays(actions)
+        buffers = env.observe_arrays()
+    enc = ObservationEncoder(
+        n_sites=env.n_sites,
+        n_channels=env.task.n_channels,
+        n_modes=len(env.task.modes),
+        n_message_values=env.task.n_message_values,
+        scent_max=env.config.physics.scent_max,
+    )
+    x, sl, m, v, top = enc.encode_buffers(buffers), enc.slices, enc.n_modes, enc.n_message_values, enc.scent_max
+    scaled = lambda value: min(value, SCENT_SCALE) / SCENT_SCALE  # noqa: E731
+    scent = buffers.neighbour_scent.reshape(len(x), enc.n_sites, enc.n_channels).astype(int)
+    own = buffers.own_scent.reshape(len(x), enc.n_channels).astype(int)
+    assert (scent < top).any() and (buffers.messages > 0).any()  # the formulas below are exercised
+    for r in range(len(x)):
+        expected = np.zeros(enc.size)
+        for s in range(enc.n_sites):
+            expected[sl["neighbour_kind"].start + 4 * s + buffers.neighbour_kind[r, s]] = 1
+            expected[sl["neighbour_mode"].start + (m + 1) * s + buffers.neighbour_mode[r, s] + 1] = 1
+            for ch in range(enc.n_channels):
+                i = s * enc.n_channels + ch
+                expected[sl["neighbour_scent_present"].start + i] = scent[r, s, ch] < top
+                expected[sl["neighbour_scent_value"].start + i] = scaled(scent[r, s, ch])
+                if scent[r, s, ch] < top and own[r, ch] < top:
+                    expected[sl["neighbour_scent_delta"].start + i] = np.clip(scent[r, s, ch] - own[r, ch], -2, 2) / 2
+        expected[sl["own_mode"].start + buffers.own_mode[r, 0]] = 1
+        for ch in range(enc.n_channels):
+            expected[sl["own_scent_present"].start + ch] = own[r, ch] < top
+            expected[sl["own_scent_value"].start + ch] = scaled(own[r, ch])
+        for d in range(12):
+            expected[sl["messages"].start + d * (v + 1) + buffers.messages[r, d]] = 1
+        expected[sl["contact"]] = buffers.contact[r]
+        expected[sl["load"]] = np.log1p(buffers.load[r])
+        expected[sl["hint"]] = buffers.hint[r]
+        expected[sl["action_mask"]] = buffers.action_mask[r]
+        np.testing.assert_array_equal(x[r], expected.astype(np.float32), err_msg=f"row {r}")
 
 
 def test_compact_message_encoding_says_who_sent_and_what():

@@ -122,7 +122,10 @@ class TrainingEnvs:
         ``(N, 13)`` into the given arrays."""
         started = time.perf_counter()
         fields = {name: getattr(self.buffers, name) for name in ObservationBuffers.FIELDS}
-        features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
+        if self.memory == "none":
+            self.encoder.encode_fields(fields, out=features)
+        else:
+            features[:] = with_memory(self.encoder.encode_fields(fields), self.previous_actions, self.memory, self.nvec)
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
 

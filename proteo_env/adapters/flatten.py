@@ -47,6 +47,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..core.jit import kernel
 from ..core.records import OBSERVATION_FIELDS
 from ..spaces import N_MOVES
 
@@ -155,57 +156,104 @@ class ObservationEncoder:
         obs = list(observations.values())
         return self.encode_fields({name: np.stack([o[name] for o in obs]) for name in OBSERVATION_FIELDS})
 
-    def encode_fields(self, fields: Mapping[str, np.ndarray]) -> np.ndarray:
-        """Features from observation fields that carry a leading batch axis ``B``: ``(B, size)``."""
+    def encode_fields(self, fields: Mapping[str, np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
+        """Features from observation fields that carry a leading batch axis ``B``: ``(B, size)``,
+        written into ``out`` ``(B, size)`` float32 when it is given (and returned)."""
         kind = np.asarray(fields["neighbour_kind"])
         b, k = kind.shape
         if k != self.n_sites:
             raise ValueError(f"observation has {k} neighbour sites; this encoder expects {self.n_sites}")
-        out = np.zeros((b, self.size), dtype=np.float32)
+        if out is None:
+            out = np.empty((b, self.size), dtype=np.float32)
+        c = self.n_channels
         sl = self.slices
-        c, m, v = self.n_channels, self.n_modes, self.n_message_values
-        rows = np.arange(b)[:, None]
-        sites = np.arange(k)[None, :]
-
-        view = np.zeros((b, k, 4), dtype=np.float32)
-        view[rows, sites, np.clip(kind, 0, 3)] = 1.0
-        out[:, sl["neighbour_kind"]] = view.reshape(b, -1)
-
-        mode = np.asarray(fields["neighbour_mode"])
-        view = np.zeros((b, k, m + 1), dtype=np.float32)
-        view[rows, sites, np.clip(mode + 1, 0, m)] = 1.0
-        out[:, sl["neighbour_mode"]] = view.reshape(b, -1)
-
-        scent = np.asarray(fields["neighbour_scent"]).reshape(b, k, c).astype(np.int64)
-        own = np.asarray(fields["own_scent"]).reshape(b, 1, c).astype(np.int64)
-        present = scent < self.scent_max
-        own_present = own < self.scent_max
-        out[:, sl["neighbour_scent_present"]] = present.reshape(b, -1)
-        out[:, sl["neighbour_scent_value"]] = (np.minimum(scent, self.scent_scale) / self.scent_scale).reshape(b, -1)
-        delta = np.where(present & own_present, np.clip(scent - own, -2, 2) / 2.0, 0.0)
-        out[:, sl["neighbour_scent_delta"]] = delta.reshape(b, -1)
-
-        own_mode = np.clip(np.asarray(fields["own_mode"]).reshape(b), 0, m - 1)
-        out[np.arange(b), sl["own_mode"].start + own_mode] = 1.0
-        out[:, sl["own_scent_present"]] = own_present.reshape(b, c)
-        out[:, sl["own_scent_value"]] = (np.minimum(own, self.scent_scale) / self.scent_scale).reshape(b, c)
-
-        messages = np.clip(np.asarray(fields["messages"]), 0, v)
-        if self.message_encoding == "compact":
-            out[:, sl["message_from"]] = messages > 0
-            value = np.zeros((b, v + 1), dtype=np.float32)
-            value[rows, messages] = 1.0
-            out[:, sl["message_value"]] = value[:, 1:]
-        else:
-            view = np.zeros((b, 12, v + 1), dtype=np.float32)
-            view[rows, np.arange(12)[None, :], messages] = 1.0
-            out[:, sl["messages"]] = view.reshape(b, -1)
-
-        out[:, sl["contact"]] = np.asarray(fields["contact"]).reshape(b, 2)
+        starts = np.array([sl[name].start for name, _ in self.blocks], dtype=np.int64)
+        encode_rows(
+            kind,
+            np.asarray(fields["neighbour_mode"]),
+            np.asarray(fields["neighbour_scent"]).reshape(b, k, c),
+            np.asarray(fields["own_mode"]).reshape(b),
+            np.asarray(fields["own_scent"]).reshape(b, c),
+            np.asarray(fields["messages"]),
+            np.asarray(fields["contact"]).reshape(b, 2),
+            np.asarray(fields["hint"]).reshape(b, 3),
+            np.asarray(fields["action_mask"]).reshape(b, N_MOVES),
+            self.n_modes,
+            self.n_message_values,
+            self.scent_max,
+            self.scent_scale,
+            self.message_encoding == "compact",
+            starts,
+            out,
+        )
         out[:, sl["load"]] = np.log1p(np.maximum(np.asarray(fields["load"]).reshape(b, 1), 0.0))
-        out[:, sl["hint"]] = np.asarray(fields["hint"]).reshape(b, 3)
-        out[:, sl["action_mask"]] = np.asarray(fields["action_mask"]).reshape(b, N_MOVES)
         return out
+
+
+@kernel
+def encode_rows(
+    kind,
+    mode,
+    scent,
+    own_mode,
+    own_scent,
+    messages,
+    contact,
+    hint,
+    action_mask,
+    n_modes,
+    v,
+    scent_max,
+    scale,
+    compact,
+    starts,
+    out,
+):
+    """Every block of :class:`ObservationEncoder` but ``load`` into ``out`` ``(B, size)``, row by row.
+
+    The fields as :meth:`ObservationEncoder.encode_fields` receives them (``scent`` ``(B, K, C)``,
+    ``own_mode`` ``(B,)``, ``own_scent`` ``(B, C)``); ``starts`` holds where each block of
+    :attr:`ObservationEncoder.blocks` begins, in order. Values are computed in double precision
+    and rounded once to float32.
+    """
+    b, k = kind.shape
+    c = own_scent.shape[1]
+    at_kind, at_mode, at_present, at_value, at_delta, at_own_mode, at_own_present, at_own_value = starts[:8]
+    at_messages = starts[8]
+    at_contact, at_hint, at_mask = starts[-4], starts[-2], starts[-1]
+    for r in range(b):
+        row = out[r]
+        row[:] = 0.0
+        for s in range(k):
+            row[at_kind + 4 * s + min(max(kind[r, s], 0), 3)] = 1.0
+            row[at_mode + (n_modes + 1) * s + min(max(mode[r, s] + 1, 0), n_modes)] = 1.0
+            for ch in range(c):
+                value, own = np.int64(scent[r, s, ch]), np.int64(own_scent[r, ch])
+                i = s * c + ch
+                present = value < scent_max
+                row[at_present + i] = present
+                row[at_value + i] = min(value, scale) / scale
+                if present and own < scent_max:
+                    row[at_delta + i] = min(max(value - own, -2), 2) / 2.0
+        row[at_own_mode + min(max(own_mode[r], 0), n_modes - 1)] = 1.0
+        for ch in range(c):
+            own = np.int64(own_scent[r, ch])
+            row[at_own_present + ch] = own < scent_max
+            row[at_own_value + ch] = min(own, scale) / scale
+        for d in range(12):
+            message = min(max(messages[r, d], 0), v)
+            if compact:  # message_from (12), then message_value (V): value u at u - 1
+                if message > 0:
+                    row[at_messages + d] = 1.0
+                    row[at_messages + 12 + message - 1] = 1.0
+            else:
+                row[at_messages + d * (v + 1) + message] = 1.0
+        for i in range(2):
+            row[at_contact + i] = contact[r, i]
+        for i in range(3):
+            row[at_hint + i] = hint[r, i]
+        for i in range(action_mask.shape[1]):
+            row[at_mask + i] = action_mask[r, i]
 
 
 MESSAGE_ENCODINGS = ("per_direction", "compact")
