@@ -15,7 +15,8 @@ The engine's rate is the batched env alone (``step_arrays`` and ``observe_arrays
 64 worlds at ``full``, one process), timed after a warm-up of the same length, with uniformly
 random actions (the speed suite's workload: most moves are refused at once) and with the move
 drawn among the legal ones (every module that can move does: more connectivity checks); the
-ratio "of the engine" is taken against the faster of the two. The machine and its load average at the end are written beside the figures.
+ratio "of the engine" is taken against the faster of the two. Beside them, 341 sandbox worlds
+of 12 modules with uniformly random actions: the engine without a task's scoring. The machine and its load average at the end are written beside the figures.
 """
 
 from __future__ import annotations
@@ -37,13 +38,17 @@ from machine_info import describe
 CONFIG = "configs/train/ppo_chain_move.yaml"
 
 
-def engine_rate(cycles: int, legal: bool) -> float:
+def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
     """Module-cycles per second of the config's worlds stepped and observed by the batched env
-    alone, with uniformly random actions (``legal``: the move drawn among the legal ones)."""
+    alone, with uniformly random actions (``legal``: the move drawn among the legal ones); with
+    ``sandbox``, 341 worlds of the sandbox task of the same size instead (no task to score)."""
     import proteo_env
 
     cfg = yaml.safe_load(Path(CONFIG).read_text())
-    env = proteo_env.make_batched(cfg["task"], cfg["n_envs"], **{**cfg["env"], "max_cycles": 10**9})
+    if sandbox:
+        env = proteo_env.make_batched("sandbox-v0", 341, n_modules=cfg["env"]["n_modules"], max_cycles=10**9)
+    else:
+        env = proteo_env.make_batched(cfg["task"], cfg["n_envs"], **{**cfg["env"], "max_cycles": 10**9})
     rng = np.random.default_rng(0)
     mask = env.reset(seed=0).action_mask
     nvec = env.action_layout.nvec
@@ -95,6 +100,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     engines = {"uniform": engine_rate(args.engine_cycles, False), "legal": engine_rate(args.engine_cycles, True)}
     engine = max(engines.values())
+    engines["sandbox"] = engine_rate(args.engine_cycles, False, sandbox=True)
     runs, digests = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for k in args.workers:
@@ -116,16 +122,20 @@ def main(argv=None) -> int:
         f"{machine['cores']} cores, load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
         f"numba {machine['numba']}). `{CONFIG}`, seed 0, {args.steps:,} agent-steps a run, the rate over those after "
         f"{args.warmup:,}; the batched engine alone on the same 64 worlds (one process): {engines['uniform']:,.0f} "
-        f"module-cycles/s with uniformly random actions, {engines['legal']:,.0f} with random legal moves.",
+        f"module-cycles/s with uniformly random actions, {engines['legal']:,.0f} with random legal moves "
+        f"(the chain task scores every world after every cycle, in Python); 341 sandbox worlds of 12 modules, "
+        f"which no task scores: {engines['sandbox']:,.0f}.",
         "",
-        "| workers | agent-steps/s | x 1 worker | of the engine | env step + encoding s | forward s | update s |",
-        "|---|---|---|---|---|---|---|",
+        "| workers | agent-steps/s | x 1 worker | of the engine | of the sandbox engine | env step + encoding s "
+        "| forward s | update s |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for k, run in runs.items():
         s = run["seconds"]
         lines.append(
             f"| {k} | {run['agent_steps_per_s']:,.0f} | {run['agent_steps_per_s'] / one:.2f} | "
-            f"{run['agent_steps_per_s'] / engine:.3f} | {s['env'] + s['encode']:.2f} | {s['forward']:.2f} | "
+            f"{run['agent_steps_per_s'] / engine:.3f} | {run['agent_steps_per_s'] / engines['sandbox']:.3f} | "
+            f"{s['env'] + s['encode']:.2f} | {s['forward']:.2f} | "
             f"{s['update']:.2f} |"
         )
     lines += [
