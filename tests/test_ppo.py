@@ -121,13 +121,25 @@ def test_worlds_split_over_workers_make_the_same_run(tmp_path):
     assert any(r["episode/return"] for r in logs[1])  # episodes ended, so worlds restarted inside the workers
 
 
-def test_workers_are_refused_beyond_the_worlds_and_with_teachers(tmp_path):
+def test_kickstarting_over_workers_makes_the_same_run(tmp_path):
+    """The rules teach each worker's share of the worlds, each teacher seeded as in one process:
+    the same labels, distillation losses and network, bit for bit."""
+    extra = ("--distill-coef", "1.0", "--distill-steps", "2000", "--distill-final", "0.2")
+    runs = {w: tiny_run(tmp_path / f"w{w}", "--workers", str(w), *extra) for w in (1, 2)}
+    weights = {w: torch.load(final / "policy.pt") for w, final in runs.items()}
+    assert all(torch.equal(weights[1][k], weights[2][k]) for k in weights[1])
+    logs = {w: list(csv.DictReader((final.parent / "progress.csv").open())) for w, final in runs.items()}
+    assert [r["loss/distill"] for r in logs[1]] == [r["loss/distill"] for r in logs[2]]
+    assert float(logs[1][0]["loss/distill"]) > 0
+
+
+def test_workers_are_refused_beyond_the_worlds_and_with_a_learned_teacher(tmp_path, trained):
     with pytest.raises(ValueError, match="workers=9 is not allowed with n_envs=8; allowed: 1 to n_envs"):
         tiny_run(tmp_path / "a", "--workers", "9")
     with pytest.raises(ValueError, match="workers=0 .*allowed"):
         tiny_run(tmp_path / "b", "--workers", "0")
-    with pytest.raises(ValueError, match="workers=2 is not allowed with distill_coef=0.5; allowed: workers=1"):
-        tiny_run(tmp_path / "c", "--workers", "2", "--distill-coef", "0.5")
+    with pytest.raises(ValueError, match="workers=2 is not allowed with teacher=.*; allowed: workers=1"):
+        tiny_run(tmp_path / "c", "--workers", "2", "--distill-coef", "0.5", "--teacher", str(trained))
     assert not any((tmp_path / name).exists() for name in "abc")
 
 

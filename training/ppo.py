@@ -70,6 +70,7 @@ from training.networks import (
 )
 from training.policies import check_memory, check_sampled
 from training.runs import RunArgs
+from training.teachers import is_checkpoint
 from training.worlds import JOIN_FROM, TrainingEnvs
 
 ALGORITHM = "ppo"
@@ -134,7 +135,7 @@ class Args(RunArgs):
     """Where the network runs: cpu, cuda, cuda:N or mps; the worlds stay on the CPU."""
     workers: int = 1
     """Processes that step the worlds, each its share at the same time (training/worlds.py: WorkerEnvs);
-    the same run on any number. Not with distillation or a curriculum."""
+    the same run on any number. Not with a checkpoint as the teacher, nor with a curriculum."""
     init: str | None = None
     """Start from this checkpoint's network (training/imitate.py or training/ppo.py, the same shape)."""
     teacher: str = "rules"
@@ -167,11 +168,13 @@ class Args(RunArgs):
             raise ConfigError(
                 f"workers={self.workers!r} is not allowed with n_envs={self.n_envs}; allowed: 1 to n_envs"
             )
-        for name, value in (("distill_coef", self.distill_coef), ("curriculum", self.curriculum)):
+        learned_teacher = self.distill_coef > 0 and is_checkpoint(self.teacher)
+        for name, value in (("teacher", self.teacher if learned_teacher else None), ("curriculum", self.curriculum)):
             if self.workers > 1 and value:
                 raise ConfigError(
                     f"workers={self.workers!r} is not allowed with {name}={value!r}; allowed: workers=1 "
-                    "(the teachers and the curriculum read the observations in this process)"
+                    "(a learned teacher draws its labels over every world at once; the curriculum rebuilds "
+                    "the worlds in this process)"
                 )
         bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
         loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
@@ -254,7 +257,7 @@ def collect(
     for t in range(args.n_steps):
         worlds.encode(rollout.obs[t].numpy(), rollout.mask[t].numpy())
         if distill > 0:
-            rollout.labels[t] = torch.from_numpy(teachers.labels([worlds.buffers]))
+            rollout.labels[t] = torch.from_numpy(worlds.teacher_labels(teachers))
         logits, values = net(rollout.obs[t].to(device))
         actions, logp = sample(masked_log_probs(logits, rollout.mask[t].to(device), net.nvec), args.sampled)
         rollout.actions[t], rollout.logp[t], rollout.values[t] = actions.cpu(), logp.cpu(), scale.value(values).cpu()
@@ -340,9 +343,7 @@ def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
     """The teachers of the distillation term for ``worlds`` (``None`` when it is off)."""
     if args.distill_coef <= 0:
         return None
-    from training.teachers import Teachers
-
-    return Teachers(worlds.batch, worlds.n_envs, args.teacher, seed=args.seed + agent_steps, n_fields=len(worlds.nvec))
+    return worlds.make_teachers(args.teacher, seed=args.seed + agent_steps, n_fields=len(worlds.nvec))
 
 
 def main(argv=None) -> Path:

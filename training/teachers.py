@@ -61,12 +61,16 @@ class Teachers:
         env: a batched env of the task (its task, full action layout and physics build the teachers).
         n_envs: worlds taught (those of one or several such envs, in order).
         name: the teacher (:func:`check_teacher`).
-        seed: teacher ``b``'s ``e``-th episode is seeded from ``(seed, b, e)``.
+        seed: teacher ``b``'s ``e``-th episode is seeded from ``(seed, first_world + b, e)``.
         n_fields: how many leading fields of the full action a label holds (the control level's).
+        first_world: the number of the first world taught among all the run's worlds (a share of
+            them taught in another process: :class:`training.worlds.WorkerEnvs`).
     """
 
-    def __init__(self, env, n_envs: int, name: str = DEFAULT_TEACHER, *, seed: int = 0, n_fields: int = 1):
-        self.n_agents, self.n_fields, self.seed = env.n_agents, n_fields, seed
+    def __init__(
+        self, env, n_envs: int, name: str = DEFAULT_TEACHER, *, seed: int = 0, n_fields: int = 1, first_world: int = 0
+    ):
+        self.n_agents, self.n_fields, self.seed, self.first_world = env.n_agents, n_fields, seed, first_world
         self.episodes = np.zeros(n_envs, dtype=np.int64)
         self.checkpoint = None
         """The learned teacher (a :class:`~training.policies.LogitsPolicy`), when ``name`` is a checkpoint."""
@@ -90,7 +94,12 @@ class Teachers:
             self.checkpoint.forget(range(b * self.n_agents, (b + 1) * self.n_agents))
             return
         self.policies[b].reset(
-            seed=int(np.random.SeedSequence([self.seed, b, int(self.episodes[b])]).generate_state(1, np.uint64)[0] >> 1)
+            seed=int(
+                np.random.SeedSequence([self.seed, self.first_world + b, int(self.episodes[b])]).generate_state(
+                    1, np.uint64
+                )[0]
+                >> 1
+            )
         )
         self.episodes[b] += 1
 

@@ -129,6 +129,16 @@ class TrainingEnvs:
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
 
+    def make_teachers(self, name: str, seed: int, n_fields: int):
+        """The teachers of these worlds (:class:`training.teachers.Teachers`, arguments as there)."""
+        from training.teachers import Teachers
+
+        return Teachers(self.batch, self.n_envs, name, seed=seed, n_fields=n_fields)
+
+    def teacher_labels(self, teachers) -> np.ndarray:
+        """``(N, n_fields)``: the teachers' action for every module's present observation."""
+        return teachers.labels([self.buffers])
+
     def close(self) -> None:
         """Nothing to release (:meth:`WorkerEnvs.close` stops its workers)."""
 
@@ -208,8 +218,10 @@ class WorkerEnvs:
     world order, so a trainer that draws its actions from them in one process makes the same run
     on any number of workers, bit for bit. It offers what :func:`training.ppo.collect` reads of
     :class:`TrainingEnvs`: :meth:`encode`, :meth:`step`, ``final_rows``, ``final_features``,
-    ``joined``, ``encoder``, ``nvec``, ``size``, ``task_id``, ``n_envs`` and ``n_agents``; not
-    the observation ``buffers`` (most stay in the workers), so no teacher labels them.
+    ``joined``, ``encoder``, ``nvec``, ``size``, ``task_id``, ``n_envs`` and ``n_agents``, and
+    the hand-coded rules as teachers (:meth:`make_teachers`: each process teaches its share,
+    teacher ``w`` seeded as in one process); not the observation ``buffers`` (most stay in the
+    workers), nor a checkpoint as the teacher (its draws span every world).
     ``env_seconds`` counts the wall-clock of each parallel step (the encoding included),
     ``encode_seconds`` the copying of the features. Features, masks, actions and per-world
     results travel in shared memory; a process waiting for the others polls for a moment before
@@ -259,6 +271,28 @@ class WorkerEnvs:
         self.env_seconds = 0.0
         self.encode_seconds = 0.0
 
+    def make_teachers(self, name: str, seed: int, n_fields: int) -> WorkerTeachers:
+        """The rules as teachers of every world, each process teaching its own share
+        (:class:`training.teachers.Teachers` with its first world; arguments as there)."""
+        self._teacher_fields = n_fields
+        self._command(("teachers", (name, seed, n_fields)))
+        _make_share_teachers(self.local, self._views, 0, name, seed, n_fields)
+        self._gather()
+        return WorkerTeachers(self.n_envs)
+
+    def teacher_labels(self, teachers: WorkerTeachers) -> np.ndarray:
+        """``(N, n_fields)``: the teachers' action for every module's present observation, each
+        process's teachers first restarted for the episodes that ended since the last labels."""
+        restart, teachers.ended = teachers.ended, np.zeros(self.n_envs, dtype=bool)
+        self._command(("label", restart))
+        _label_share(self.local, self._views, 0, restart)
+        self._gather()
+        return self._views["labels"][:, : self._teacher_fields].copy()
+
+    def _command(self, command: tuple) -> None:
+        for pipe in self._pipes:
+            pipe.send(command)
+
     def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
         """Write every module's features ``(N, size)`` and legal moves ``(N, 13)`` (encoded by
         each process after the last step) into the given arrays."""
@@ -271,8 +305,7 @@ class WorkerEnvs:
         """One cycle of every world from ``(n_envs, A, F)`` actions, as :meth:`TrainingEnvs.step`."""
         started = time.perf_counter()
         self._views["actions"][:] = actions
-        for pipe in self._pipes:
-            pipe.send("step")
+        self._command(("step", None))
         answers = [_step_share(self.local, self._views, 0), *self._gather()]
         rows, features = [], []
         for (first, _), (ended, final_rows, final_features) in zip(self.shares, answers):
@@ -308,6 +341,20 @@ class WorkerEnvs:
         self._finalizer()
 
 
+class WorkerTeachers:
+    """The teachers of a :class:`WorkerEnvs` as the trainer holds them: :meth:`restart` notes the
+    worlds whose episodes ended, and the next :meth:`WorkerEnvs.teacher_labels` restarts their
+    teachers in their processes before it labels (as :meth:`training.teachers.Teachers.restart`
+    would have, in between)."""
+
+    def __init__(self, n_envs: int):
+        self.ended = np.zeros(n_envs, dtype=bool)
+
+    def restart(self, worlds) -> None:
+        """New episodes for the teachers of ``worlds`` (``(n_envs,)`` bool), at the next labels."""
+        self.ended |= np.asarray(worlds, dtype=bool)
+
+
 POLL_SECONDS = 0.002
 """How long a process of :class:`WorkerEnvs` polls for the others' message before it sleeps."""
 
@@ -331,6 +378,7 @@ def _shared_fields(n_envs: int, n_agents: int, size: int, n_fields: int) -> list
         ("terminal", (n_envs,), np.bool_),
         ("truncated", (n_envs,), np.bool_),
         ("joined", (n,), np.bool_),
+        ("labels", (n, n_fields), np.int64),
     ]
 
 
@@ -371,9 +419,29 @@ def _step_share(worlds: TrainingEnvs, views: dict, first: int) -> tuple:
     return ended, worlds.final_rows, worlds.final_features
 
 
+def _make_share_teachers(worlds: TrainingEnvs, views: dict, first: int, name: str, seed: int, n_fields: int) -> None:
+    from training.teachers import Teachers
+
+    worlds.teachers = Teachers(worlds.batch, worlds.n_envs, name, seed=seed, n_fields=n_fields, first_world=first)
+
+
+def _label_share(worlds: TrainingEnvs, views: dict, first: int, restart: np.ndarray) -> None:
+    """Restart the share's teachers of the worlds ``restart`` (``(n_envs,)`` of all worlds) marks,
+    then write their labels of the share's present observation into the shared labels."""
+    end = first + worlds.n_envs
+    worlds.teachers.restart(restart[first:end])
+    labels = worlds.teacher_labels(worlds.teachers)
+    views["labels"][first * worlds.n_agents : end * worlds.n_agents, : labels.shape[1]] = labels
+
+
+SHARE_COMMANDS = {"teachers": _make_share_teachers, "label": _label_share}
+"""What a worker of :class:`WorkerEnvs` does on each command but ``"step"``: ``f(worlds, views, first, *args)``."""
+
+
 def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) -> None:
-    """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``, stepped
-    on each ``"step"`` until ``"close"``; answers ``("ok", ...)`` or ``("error", ...)``."""
+    """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``; on each
+    command ``("step", None)``, ``("teachers", (name, seed, n_fields))`` or ``("label", restart)``
+    it answers ``("ok", ...)`` or ``("error", ...)``, until ``("close", None)``."""
     from training.common import limit_threads
 
     limit_threads(1)
@@ -386,9 +454,14 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
         pipe.send(("ok", None))
         while True:
             _wait(pipe)
-            if pipe.recv() != "step":
+            command, arguments = pipe.recv()
+            if command == "step":
+                pipe.send(("ok", _step_share(worlds, views, first)))
+            elif command in SHARE_COMMANDS:
+                args = arguments if command == "teachers" else (arguments,)
+                pipe.send(("ok", SHARE_COMMANDS[command](worlds, views, first, *args)))
+            else:
                 break
-            pipe.send(("ok", _step_share(worlds, views, first)))
     except ConfigError as error:
         pipe.send(("error", error))
     except Exception:  # noqa: BLE001 - the trainer raises it with this traceback
@@ -402,7 +475,7 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
 def _stop(pipes, processes, memory) -> None:
     for pipe in pipes:
         try:
-            pipe.send("close")
+            pipe.send(("close", None))
         except (BrokenPipeError, OSError):
             pass
     for process in processes:
