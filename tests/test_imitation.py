@@ -101,6 +101,18 @@ def test_imitation_is_deterministic_for_a_seed(clone, tmp_path):
     assert all(torch.equal(first[k], second[k]) for k in first)
 
 
+def test_imitation_over_workers_is_the_same_clone(clone, tmp_path):
+    """Three processes step, label (each its share's teachers, seeded as in one) and restart the
+    same worlds: the same DAgger rounds and the same network, bit for bit."""
+    split = tiny_clone(tmp_path / "split", "--workers", "3")
+    first, second = (torch.load(p / "policy.pt", weights_only=True) for p in (clone, split))
+    assert all(torch.equal(first[k], second[k]) for k in first)
+    logs = [list(csv.DictReader((p.parent / "progress.csv").open())) for p in (clone, split)]
+    assert [r["imitation/agreement_move"] for r in logs[0]] == [r["imitation/agreement_move"] for r in logs[1]]
+    with pytest.raises(ValueError, match="workers=17 is not allowed with n_envs=16"):
+        tiny_clone(tmp_path / "refused", "--workers", "17")
+
+
 def test_kickstarting_starts_from_the_clone_and_anneals_the_distillation_term(clone, tmp_path):
     hidden = json.dumps(read_meta(clone)["hidden"])
     common = [

@@ -72,7 +72,7 @@ from training.networks import (
 from training.policies import check_memory, check_sampled
 from training.runs import RunArgs
 from training.teachers import DEFAULT_TEACHER, Teachers
-from training.worlds import TrainingEnvs
+from training.worlds import TrainingEnvs, WorkerEnvs, WorkerTeachers, check_workers
 
 ALGORITHM = "imitation"
 
@@ -92,6 +92,9 @@ class Args(RunArgs):
     the task at this control level (training/teachers.py)."""
     n_envs: int = 16
     """Worlds stepped together."""
+    workers: int = 1
+    """Processes that step the worlds and label them with the teacher, each its share at the same time
+    (training/worlds.py: WorkerEnvs); the same run on any number. Not with a checkpoint as the teacher."""
     rounds: int = 4
     """DAgger rounds after round 0 (0: behaviour cloning only)."""
     cycles_per_round: int = 300
@@ -133,9 +136,11 @@ class Args(RunArgs):
                 "n_epochs": 1,
                 "minibatch_size": 1,
                 "n_envs": 1,
+                "workers": 1,
             },
         )
         check_numbers(self, {"beta": (0, 1), "beta_decay": (0, 1)})
+        check_workers(self.workers, self.n_envs, teacher=self.teacher)
         check_arch(self.arch)
         check_memory(self.memory)
         check_sampled(self.sampled)
@@ -158,7 +163,14 @@ def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[floa
 
 
 def collect(
-    worlds: TrainingEnvs, teachers: Teachers, net: ActorCritic, beta: float, cycles: int, rng, args: Args, bar
+    worlds: TrainingEnvs | WorkerEnvs,
+    teachers: Teachers | WorkerTeachers,
+    net: ActorCritic,
+    beta: float,
+    cycles: int,
+    rng,
+    args: Args,
+    bar,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
     """``cycles`` cycles of every world with each module playing the teacher's action with
     probability ``beta``, else the network's sample. Returns the stored samples' features
@@ -169,7 +181,7 @@ def collect(
     kept_x, kept_m, kept_y, finished = [], [], [], []
     for _ in range(cycles):
         worlds.encode(features, move_mask)
-        labels = teachers.labels([worlds.buffers])
+        labels = worlds.teacher_labels(teachers)
         legal_label = move_mask[np.arange(n), labels[:, 0]]
         keep = legal_label & (move_mask.sum(axis=1) > 1 if args.control == "move" else True)
         kept_x.append(features[keep].copy())
@@ -210,8 +222,8 @@ def train(args: Args) -> Path:
     save_args(args, run_dir)
     worlds = TrainingEnvs.for_run(args, args.env)
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
-    fields = worlds.batch.control_fields
-    teachers = Teachers(worlds.batch, worlds.n_envs, args.teacher, seed=args.seed, n_fields=len(nvec))
+    fields = worlds.control_fields
+    teachers = worlds.make_teachers(args.teacher, seed=args.seed, n_fields=len(nvec))
     net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory).to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
     rng = np.random.default_rng(args.seed)
@@ -277,6 +289,7 @@ def train(args: Args) -> Path:
         if args.time_limit_minutes and log.seconds > 60 * args.time_limit_minutes:
             break  # the network trained on every round collected so far
     bar.close()
+    worlds.close()
     final = run_dir / "final"
     save_network_checkpoint(
         final,

@@ -70,8 +70,7 @@ from training.networks import (
 )
 from training.policies import check_memory, check_sampled
 from training.runs import RunArgs
-from training.teachers import is_checkpoint
-from training.worlds import JOIN_FROM, TrainingEnvs
+from training.worlds import JOIN_FROM, TrainingEnvs, check_workers
 
 ALGORITHM = "ppo"
 
@@ -164,18 +163,8 @@ class Args(RunArgs):
                 f"distill_final={self.distill_final!r} is not allowed with distill_coef={self.distill_coef!r}; "
                 "allowed: a number in [0, distill_coef]"
             )
-        if self.workers > self.n_envs:
-            raise ConfigError(
-                f"workers={self.workers!r} is not allowed with n_envs={self.n_envs}; allowed: 1 to n_envs"
-            )
-        learned_teacher = self.distill_coef > 0 and is_checkpoint(self.teacher)
-        for name, value in (("teacher", self.teacher if learned_teacher else None), ("curriculum", self.curriculum)):
-            if self.workers > 1 and value:
-                raise ConfigError(
-                    f"workers={self.workers!r} is not allowed with {name}={value!r}; allowed: workers=1 "
-                    "(a learned teacher draws its labels over every world at once; the curriculum rebuilds "
-                    "the worlds in this process)"
-                )
+        teacher = self.teacher if self.distill_coef > 0 else None
+        check_workers(self.workers, self.n_envs, teacher=teacher, curriculum=self.curriculum)
         bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
         loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
         check_numbers(self, {**bounds, **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus"), (0.0, None))})

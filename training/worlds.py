@@ -79,6 +79,8 @@ class TrainingEnvs:
         self.task_id = self.batch.task.task_id()
         self.n_envs, self.n_agents = n_envs, self.batch.n_agents
         self.nvec = self.batch.control_nvec
+        self.control_fields = self.batch.control_fields
+        """The names of the action fields the trainer chooses (the control level's)."""
         self.encoder = ObservationEncoder(
             n_sites=self.batch.n_sites,
             n_channels=self.batch.task.n_channels,
@@ -208,6 +210,24 @@ def run_settings(args, env: dict, agent_steps: int) -> dict:
     }
 
 
+def check_workers(workers: int, n_envs: int, *, teacher: str | None = None, curriculum=None) -> None:
+    """Refuse ``workers`` (of :class:`WorkerEnvs`) above ``n_envs``, or above 1 with a checkpoint as
+    the ``teacher`` (its draws span every world; ``None``: no teacher) or with a ``curriculum``
+    (it rebuilds the worlds in the trainer's process): one :class:`ConfigError` naming both."""
+    from training.teachers import is_checkpoint
+
+    if workers > n_envs:
+        raise ConfigError(f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: 1 to n_envs")
+    learned = teacher if teacher is not None and is_checkpoint(teacher) else None
+    for name, value in (("teacher", learned), ("curriculum", curriculum)):
+        if workers > 1 and value:
+            raise ConfigError(
+                f"workers={workers!r} is not allowed with {name}={value!r}; allowed: workers=1 "
+                "(a learned teacher draws its labels over every world at once; the curriculum rebuilds "
+                "the worlds in this process)"
+            )
+
+
 class WorkerEnvs:
     """The worlds of :class:`TrainingEnvs` split over ``workers`` processes (this one and
     ``workers - 1`` started here), each stepping, observing and encoding its share (consecutive
@@ -246,6 +266,7 @@ class WorkerEnvs:
         self.local = TrainingEnvs(**{**settings, "n_envs": end - first, "env_seed": seeds[first:end]})
         """This process's share of the worlds."""
         self.task_id, self.n_agents, self.nvec = self.local.task_id, self.local.n_agents, self.local.nvec
+        self.control_fields = self.local.control_fields
         self.encoder, self.size = self.local.encoder, self.local.size
         self.n_envs = n_envs
         layout = (n_envs, self.n_agents, self.size, len(self.nvec))
