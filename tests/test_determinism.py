@@ -164,3 +164,23 @@ def test_reset_does_not_depend_on_history(task_id, make_small, actions_from):
     obs_fresh, _ = fresh.reset(seed=99)
     _assert_obs_equal(obs_used, obs_fresh)
     _assert_engine_equal(used, fresh)
+
+
+def test_every_tasks_recorded_episodes_are_the_published_ones():
+    """The rules' and random episodes of every task and version, recorded and hashed
+    (benchmarks/episode_hashes.py), are the ones docs/speed/episode_hashes.json holds: an
+    engine or task change that alters any trajectory fails here until the file is remade."""
+    import json
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        from episode_hashes import task_hashes
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    published = json.loads((root / "docs/speed/episode_hashes.json").read_text())
+    assert set(published["hashes"]) == set(proteo_env.registry.TASKS)
+    for task_id, expected in published["hashes"].items():
+        assert task_hashes(task_id, published["seeds"], published["cycles"]) == expected, task_id
