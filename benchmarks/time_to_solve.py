@@ -1,7 +1,7 @@
 """How long native PPO takes to solve chain-v1: wall-clock to 90 % success on held-out worlds.
 
     NUMBA_NUM_THREADS=1 python benchmarks/time_to_solve.py --out docs/speed/time_to_solve
-    python benchmarks/time_to_solve.py --device cuda --threads 8 --out docs/speed/time_to_solve_gpu
+    python benchmarks/time_to_solve.py --device cuda --workers 8 --out docs/speed/time_to_solve_gpu
 
 For each training seed it trains ``training/ppo.py`` with the config's settings
 (``configs/train/ppo_chain_move.yaml``: 12-module chains at ``move``, 64 worlds, the config's
@@ -34,11 +34,13 @@ from machine_info import describe
 CONFIG = "configs/train/ppo_chain_move.yaml"
 
 
-def train(seed: int, steps: int, every: int, threads: int, device: str, run_dir: Path) -> None:
-    """One PPO run of the config, with checkpoints every ``every`` agent-steps."""
+def train(seed: int, steps: int, every: int, threads: int, device: str, run_dir: Path, workers: int = 1) -> None:
+    """One PPO run of the config, with checkpoints every ``every`` agent-steps, its worlds split
+    over ``workers`` processes (the same run on any number)."""
     cmd = [sys.executable, "-m", "training.ppo", "--config", CONFIG, "--seed", str(seed), "--run-dir", str(run_dir)]
     cmd += ["--total-steps", str(steps), "--checkpoint-every", str(every), "--time-limit-minutes", "0"]
     cmd += ["--threads", str(threads), "--device", device, "--progress-bar", "false", "--tensorboard", "false"]
+    cmd += ["--workers", str(workers)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
 
 
@@ -81,6 +83,7 @@ def main(argv=None) -> int:
     parser.add_argument("--target", type=float, default=0.9, help="the success rate that counts as solved (0.9)")
     parser.add_argument("--threads", type=int, default=1, help="torch and numba threads of the training (1)")
     parser.add_argument("--device", default="cpu", help="where the networks run: cpu, cuda, cuda:N, mps (cpu)")
+    parser.add_argument("--workers", type=int, default=1, help="processes that step the worlds (1)")
     parser.add_argument("--out", type=Path, default=None, help="write <out>.json and <out>.md")
     args = parser.parse_args(argv)
 
@@ -88,12 +91,12 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             run_dir = Path(tmp) / f"s{seed}"
-            train(seed, args.steps, args.every, args.threads, args.device, run_dir)
+            train(seed, args.steps, args.every, args.threads, args.device, run_dir, args.workers)
             curve = judge(run_dir, args.worlds)
             solved = solve_time(curve, seconds_at(run_dir), args.target)
             rows.append({"seed": seed, "curve": curve, "solved": solved, "seconds": max(seconds_at(run_dir).values())})
             print(f"seed {seed}: " + (f"{solved[1]:.0f} s, {solved[0]:,} agent-steps" if solved else "not solved"))
-    machine = describe("torch", "numba", device=args.device, threads=args.threads)
+    machine = describe("torch", "numba", device=args.device, threads=args.threads, workers=args.workers)
     times = [r["solved"][1] for r in rows if r["solved"]]
     lines = [
         "# Time to solve chain-v1 with native PPO",
@@ -104,7 +107,7 @@ def main(argv=None) -> int:
         f"{args.steps:,} agent-steps per seed, "
         f"every checkpoint ({args.every:,} agent-steps apart) judged on {args.worlds} held-out worlds; solved: "
         f"{args.target * 100:.0f} % success. Machine: {machine['cpu']}, {machine['cores']} cores, device {args.device}, "
-        f"{args.threads} thread(s), load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
+        f"{args.threads} thread(s), {args.workers} worker process(es), load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
         f"numba {machine['numba']}.",
         "",
         "| training seed | solved at (agent-steps) | wall-clock to solve | success at each checkpoint | run's wall-clock |",
