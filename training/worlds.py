@@ -295,6 +295,7 @@ class WorkerEnvs:
     def make_teachers(self, name: str, seed: int, n_fields: int) -> WorkerTeachers:
         """The rules as teachers of every world, each process teaching its own share
         (:class:`training.teachers.Teachers` with its first world; arguments as there)."""
+        check_workers(len(self.shares), self.n_envs, teacher=name)
         self._teacher_fields = n_fields
         self._command(("teachers", (name, seed, n_fields)))
         _make_share_teachers(self.local, self._views, 0, name, seed, n_fields)
