@@ -131,11 +131,11 @@ class TrainingEnvs:
         move_mask[:] = fields["action_mask"]
         self.encode_seconds += time.perf_counter() - started
 
-    def make_teachers(self, name: str, seed: int, n_fields: int):
+    def make_teachers(self, name: str, seed: int, n_fields: int, first_world: int = 0):
         """The teachers of these worlds (:class:`training.teachers.Teachers`, arguments as there)."""
         from training.teachers import Teachers
 
-        return Teachers(self.batch, self.n_envs, name, seed=seed, n_fields=n_fields)
+        return Teachers(self.batch, self.n_envs, name, seed=seed, n_fields=n_fields, first_world=first_world)
 
     def teacher_labels(self, teachers) -> np.ndarray:
         """``(N, n_fields)``: the teachers' action for every module's present observation."""
@@ -211,12 +211,12 @@ def run_settings(args, env: dict, agent_steps: int) -> dict:
 
 
 def check_workers(workers: int, n_envs: int, *, teacher: str | None = None, curriculum=None) -> None:
-    """Refuse ``workers`` (of :class:`WorkerEnvs`) above ``n_envs``, or above 1 with a checkpoint as
+    """Refuse ``workers`` (of :class:`WorkerEnvs`) other than an integer from 1 to ``n_envs``, or above 1 with a checkpoint as
     the ``teacher`` (its draws span every world; ``None``: no teacher) or with a ``curriculum``
     (it rebuilds the worlds in the trainer's process): one :class:`ConfigError` naming both."""
     from training.teachers import is_checkpoint
 
-    if workers > n_envs:
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= n_envs:
         raise ConfigError(f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: 1 to n_envs")
     learned = teacher if teacher is not None and is_checkpoint(teacher) else None
     for name, value in (("teacher", learned), ("curriculum", curriculum)):
@@ -255,10 +255,7 @@ class WorkerEnvs:
 
     def __init__(self, settings: dict, workers: int):
         n_envs = settings["n_envs"]
-        if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= n_envs:
-            raise ConfigError(
-                f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: an integer from 1 to n_envs"
-            )
+        check_workers(workers, n_envs)
         seeds = world_seeds(settings["env_seed"], n_envs)
         self.shares = [(int(s[0]), int(s[-1]) + 1) for s in np.array_split(np.arange(n_envs), workers)]
         """``(first, end)`` world of each process, this one's first."""
@@ -298,7 +295,7 @@ class WorkerEnvs:
         check_workers(len(self.shares), self.n_envs, teacher=name)
         self._teacher_fields = n_fields
         self._command(("teachers", (name, seed, n_fields)))
-        _make_share_teachers(self.local, self._views, 0, name, seed, n_fields)
+        self._local_teachers = self.local.make_teachers(name, seed, n_fields)
         self._gather()
         return WorkerTeachers(self.n_envs)
 
@@ -307,7 +304,7 @@ class WorkerEnvs:
         process's teachers first restarted for the episodes that ended since the last labels."""
         restart, teachers.ended = teachers.ended, np.zeros(self.n_envs, dtype=bool)
         self._command(("label", restart))
-        _label_share(self.local, self._views, 0, restart)
+        _label_share(self.local, self._local_teachers, self._views, 0, restart)
         self._gather()
         return self._views["labels"][:, : self._teacher_fields].copy()
 
@@ -441,23 +438,13 @@ def _step_share(worlds: TrainingEnvs, views: dict, first: int) -> tuple:
     return ended, worlds.final_rows, worlds.final_features
 
 
-def _make_share_teachers(worlds: TrainingEnvs, views: dict, first: int, name: str, seed: int, n_fields: int) -> None:
-    from training.teachers import Teachers
-
-    worlds.teachers = Teachers(worlds.batch, worlds.n_envs, name, seed=seed, n_fields=n_fields, first_world=first)
-
-
-def _label_share(worlds: TrainingEnvs, views: dict, first: int, restart: np.ndarray) -> None:
-    """Restart the share's teachers of the worlds ``restart`` (``(n_envs,)`` of all worlds) marks,
-    then write their labels of the share's present observation into the shared labels."""
+def _label_share(worlds: TrainingEnvs, teachers, views: dict, first: int, restart: np.ndarray) -> None:
+    """Restart the share's ``teachers`` of the worlds ``restart`` (``(n_envs,)`` of all worlds)
+    marks, then write their labels of the share's present observation into the shared labels."""
     end = first + worlds.n_envs
-    worlds.teachers.restart(restart[first:end])
-    labels = worlds.teacher_labels(worlds.teachers)
+    teachers.restart(restart[first:end])
+    labels = worlds.teacher_labels(teachers)
     views["labels"][first * worlds.n_agents : end * worlds.n_agents, : labels.shape[1]] = labels
-
-
-SHARE_COMMANDS = {"teachers": _make_share_teachers, "label": _label_share}
-"""What a worker of :class:`WorkerEnvs` does on each command but ``"step"``: ``f(worlds, views, first, *args)``."""
 
 
 def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) -> None:
@@ -479,9 +466,13 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
             command, arguments = pipe.recv()
             if command == "step":
                 pipe.send(("ok", _step_share(worlds, views, first)))
-            elif command in SHARE_COMMANDS:
-                args = arguments if command == "teachers" else (arguments,)
-                pipe.send(("ok", SHARE_COMMANDS[command](worlds, views, first, *args)))
+            elif command == "teachers":
+                name, seed, n_fields = arguments
+                teachers = worlds.make_teachers(name, seed, n_fields, first_world=first)
+                pipe.send(("ok", None))
+            elif command == "label":
+                _label_share(worlds, teachers, views, first, arguments)
+                pipe.send(("ok", None))
             else:
                 break
     except ConfigError as error:

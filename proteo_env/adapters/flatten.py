@@ -44,6 +44,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -142,6 +143,11 @@ class ObservationEncoder:
         """Length of the feature vector."""
         return sum(size for _, size in self.blocks)
 
+    @cached_property
+    def block_starts(self) -> np.ndarray:
+        """``(blocks,)`` int64: where each block of :attr:`blocks` begins, in order."""
+        return np.array([part.start for part in self.slices.values()], dtype=np.int64)
+
     def spec(self) -> dict:
         """Plain-dict description (stored in checkpoints and compared on load)."""
         return {**asdict(self), "size": self.size}
@@ -166,8 +172,7 @@ class ObservationEncoder:
         if out is None:
             out = np.empty((b, self.size), dtype=np.float32)
         c = self.n_channels
-        sl = self.slices
-        starts = np.array([sl[name].start for name, _ in self.blocks], dtype=np.int64)
+        starts = self.block_starts
         encode_rows(
             kind,
             np.asarray(fields["neighbour_mode"]),
@@ -186,7 +191,8 @@ class ObservationEncoder:
             starts,
             out,
         )
-        out[:, sl["load"]] = np.log1p(np.maximum(np.asarray(fields["load"]).reshape(b, 1), 0.0))
+        load = starts[-3]  # the blocks end with contact, load, hint, action_mask
+        out[:, load : load + 1] = np.log1p(np.maximum(np.asarray(fields["load"]).reshape(b, 1), 0.0))
         return out
 
 
