@@ -166,6 +166,10 @@ class Program:
         """A number argument's value: the literal, or the named parameter's value."""
         return dict(self.parameters)[argument] if isinstance(argument, str) else argument
 
+    def __deepcopy__(self, memo) -> Program:
+        """The program itself: every part of it is frozen (a policy copied per episode shares it)."""
+        return self
+
     @property
     def mode_sets(self) -> tuple[tuple[str, str], ...]:
         """The distinct ``(neighbour_mode, to)`` pairs of the rules' ``set``, in order: pair

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 import numpy as np
 
@@ -202,6 +203,25 @@ def measure_branch(grid, cell, mode, dir_delta, first_node, min_gap, target_leve
     return size, edges, points, levels, children, most_children, dist_sum, dist_count, leaves, tree, success
 
 
+class TreeMeasure(NamedTuple):
+    """:func:`measure_branch`'s numbers by name: the task's view of the grown piece after each
+    cycle (``size`` modules, ``points`` branching points, ``levels`` of branching, their
+    ``children`` and ``most_children``, ``dist_sum / dist_count`` the mean distance between
+    successive points, ``leaves``; ``tree`` and ``success`` as the kernel says)."""
+
+    size: int
+    edges: int
+    points: int
+    levels: int
+    children: int
+    most_children: int
+    dist_sum: int
+    dist_count: int
+    leaves: int
+    tree: bool
+    success: bool
+
+
 @kernel
 def branch_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, test):
     """:func:`measure_branch`'s success as a task's ``update_and_test``
@@ -327,25 +347,12 @@ class Branch(Task):
         or INODE module."""
         return self._root if self.params.initial_node else -1
 
-    def _measure(self, world):
-        p, mode = self.params, world.mode
-        size, _, points, levels, children, most, dsum, dcount, leaves, tree, complete = measure_branch(
-            world.grid, world.cell, mode, world.dir_delta, self._given_root(), p.min_gap, p.target_levels, self._scratch
+    def _measure(self, world) -> TreeMeasure:
+        p, w = self.params, world
+        root = self._given_root()
+        return TreeMeasure(
+            *measure_branch(w.grid, w.cell, w.mode, w.dir_delta, root, p.min_gap, p.target_levels, self._scratch)
         )
-        return {
-            "size": int(size),
-            "tree": bool(tree),
-            "points": int(points),
-            "levels": int(levels),
-            "branches_per_point": children / points if points else 0.0,
-            "max_branches": int(most),
-            "point_distance": dsum / dcount if dcount else 0.0,
-            "leaves": int(leaves),
-            "nodes": int(((mode == NODE) | (mode == INODE)).sum()),
-            "seeds": int((mode == SEED).sum()),
-            "searching": int(((mode == SLEEP) | (mode == SEARCH)).sum()),
-            "complete": bool(complete),
-        }
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
@@ -354,28 +361,28 @@ class Branch(Task):
         n = world.n_modules
         prev = getattr(self, "_previous", self._last)
         return {
-            "grown": (self._last["size"] - prev["size"]) / n,
-            "levels": 0.5 * (self._last["levels"] - prev["levels"]),
-            "success": 1.0 if self._last["complete"] else 0.0,
+            "grown": (self._last.size - prev.size) / n,
+            "levels": 0.5 * (self._last.levels - prev.levels),
+            "success": 1.0 if self._last.success else 0.0,
             "time": -self.params.time_penalty,
         }
 
     def metrics(self, world):
-        m = self._last
+        m, mode = self._last, world.mode
         return {
-            "tree_size": float(m["size"]),
-            "tree": float(m["tree"]),
-            "branch_points": float(m["points"]),
-            "levels": float(m["levels"]),
-            "branches_per_point": float(m["branches_per_point"]),
-            "max_branches": float(m["max_branches"]),
-            "point_distance": float(m["point_distance"]),
-            "leaves": float(m["leaves"]),
-            "used_share": m["size"] / world.n_modules,
-            "nodes": float(m["nodes"]),
-            "seeds": float(m["seeds"]),
-            "searching": float(m["searching"]),
-            "success": float(m["complete"]),
+            "tree_size": float(m.size),
+            "tree": float(m.tree),
+            "branch_points": float(m.points),
+            "levels": float(m.levels),
+            "branches_per_point": m.children / m.points if m.points else 0.0,
+            "max_branches": float(m.most_children),
+            "point_distance": m.dist_sum / m.dist_count if m.dist_count else 0.0,
+            "leaves": float(m.leaves),
+            "used_share": m.size / world.n_modules,
+            "nodes": float(((mode == NODE) | (mode == INODE)).sum()),
+            "seeds": float((mode == SEED).sum()),
+            "searching": float(((mode == SLEEP) | (mode == SEARCH)).sum()),
+            "success": float(m.success),
         }
 
     def kernels(self, world):
@@ -387,7 +394,7 @@ class Branch(Task):
         )
 
     def success(self, world):
-        return self._last["complete"]
+        return bool(self._last.success)
 
 
 @dataclass(frozen=True)

@@ -148,15 +148,13 @@ class Chain(Task):
         self._previous = self._last
 
     def _measure(self, world):
-        probe = self._probe
-        shape = probe.measure(world)  # is_chain below reuses its scratch; the degrees it writes are the same
+        shape, n = self._probe.measure(world), world.n_modules
         return {
             "thin": shape.thin,
             "max_degree": shape.max_degree,
             "chain_length": shape.thin_piece,
-            "complete": is_chain(
-                world.grid, world.cell, world.n_modules, world.dir_delta, probe.degree, probe.mark, probe.queue
-            ),
+            # is_chain's test: N - 1 contacts, no module with 3 neighbours, one thin piece of all N
+            "complete": shape.max_degree <= 2 and shape.edges == n - 1 and shape.thin_piece == n,
         }
 
     def after_cycle(self, world, cycle):

@@ -84,6 +84,28 @@ def grasp_hold(grid, surface):
     return contact, coverage, surround, success
 
 
+class HoldMeasure(NamedTuple):
+    """The task's view of the modules after each cycle (:func:`hold_measure`): ``gap``, the
+    fewest hops from a module to the object's surface, and :func:`grasp_hold`'s numbers."""
+
+    gap: int
+    contact: int
+    coverage: float
+    surround: float
+    success: bool
+
+
+@kernel
+def hold_measure(grid, cell, n_agents, gap_field, surface):
+    """``(gap, contact, coverage, surround, success)``: the least of ``gap_field`` (cells,) over the
+    cells of the first ``n_agents`` modules, then :func:`grasp_hold`."""
+    gap = gap_field[cell[0]]
+    for n in range(1, n_agents):
+        gap = min(gap, gap_field[cell[n]])
+    contact, coverage, surround, success = grasp_hold(grid, surface)
+    return gap, contact, coverage, surround, success
+
+
 @kernel
 def grasp_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, surface):
     """:func:`grasp_hold`'s success as a task's ``update_and_test`` (:class:`~proteo_env.tasks.base.TaskKernels`)."""
@@ -332,7 +354,8 @@ class Grasp(Task):
         self._index_surface(world)
         self._last = self._measure(world)
         self._previous = self._last
-        self._gap0 = max(self._last["gap"], 1)
+        self._gap0 = max(self._last.gap, 1)
+        self._hint_rows = np.broadcast_to(self._hint, (world.n_agents, 3))
 
     def regrid(self, world):
         self._index_surface(world)
@@ -386,49 +409,34 @@ class Grasp(Task):
             frontier = nb
         return dist
 
-    def _measure(self, world) -> dict:
-        contact, coverage, surround, success = grasp_hold(world.grid, self.surface)
-        gap = int(self._gap_field[world.cell[: world.n_agents]].min())
-        return {
-            "gap": gap,
-            "contact": int(contact),
-            "coverage": float(coverage),
-            "surround": float(surround),
-            "success": bool(success),
-        }
+    def _measure(self, world) -> HoldMeasure:
+        return HoldMeasure(*hold_measure(world.grid, world.cell, world.n_agents, self._gap_field, self.surface))
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
 
     # ------------------------------------------------------------------ hooks read by the env
     def hint(self, world):
-        return np.broadcast_to(self._hint, (world.n_agents, 3))
+        return self._hint_rows
 
     def reward_terms(self, world, moved):
         p, now, before = self.params, self._last, self._previous
         return {
-            "reach": (before["gap"] - now["gap"]) / self._gap0,
-            "coverage": p.coverage_weight * (now["coverage"] - before["coverage"]),
-            "surround": p.surround_weight * (now["surround"] - before["surround"]),
-            "success": 1.0 if now["success"] else 0.0,
+            "reach": (before.gap - now.gap) / self._gap0,
+            "coverage": p.coverage_weight * (now.coverage - before.coverage),
+            "surround": p.surround_weight * (now.surround - before.surround),
+            "success": 1.0 if now.success else 0.0,
             "time": -p.time_penalty,
         }
 
     def metrics(self, world):
-        m = self._last
-        return {
-            "gap": float(m["gap"]),
-            "contact": float(m["contact"]),
-            "coverage": float(m["coverage"]),
-            "surround": float(m["surround"]),
-            "success": float(m["success"]),
-        }
+        return {name: float(value) for name, value in self._last._asdict().items()}
 
     def kernels(self, world):
         return TaskKernels(no_sensor, grasp_update_and_test, self.surface)
 
     def success(self, world):
-        return bool(self._last["success"])
+        return bool(self._last.success)
 
     @property
     def surface_sites(self) -> np.ndarray:

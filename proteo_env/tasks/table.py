@@ -138,6 +138,23 @@ def weight_carried(book):
 
 
 @kernel
+def legs_and_support(book):
+    """``(legs_left, legs_right, support)`` of :class:`TableLedger` ``book``: its grounded legs in
+    each region, and the share of the weight they can carry, ``sum(min(W, f_max * G)) / sum(W)``
+    over the regions (``W`` the weight, ``G`` the grounded legs; 0 without weight)."""
+    legs = np.zeros(2)
+    for r in range(book.roots.shape[0]):
+        if book.grounded[r]:
+            legs[0 if book.left[r] else 1] += 1
+    weights = book.weights
+    total = weights[0] + weights[1]
+    if total <= 0:
+        return int(legs[0]), int(legs[1]), 0.0
+    carried = min(weights[0], book.f_max * legs[0]) + min(weights[1], book.f_max * legs[1])
+    return int(legs[0]), int(legs[1]), carried / total
+
+
+@kernel
 def no_idle_legs(book):
     """Whether :class:`TableLedger` ``book``'s grounded legs are no more than the weight needs: in
     each region ``W >= f_min * G`` (``G`` its roots with a grounded leg), the load per leg at least
@@ -496,25 +513,14 @@ class Table(Task):
         return out
 
     # ------------------------------------------------------------------ reward, metrics, success
-    def _legs(self) -> tuple[int, int]:
-        g, left = self.ledger.grounded, self.ledger.left
-        return int((g & left).sum()), int((g & ~left).sum())
-
-    def _support(self) -> float:
-        weights = self.ledger.weights
-        total = weights.sum()
-        if total <= 0:
-            return 0.0
-        legs = np.array(self._legs(), dtype=np.float64)
-        return float(np.minimum(weights, self.params.f_max * legs).sum() / total)
-
     def reward_terms(self, world, moved):
-        return {"support": self._support(), "legs": 0.0 - self.params.leg_cost * sum(self._legs())}
+        legs_left, legs_right, support = legs_and_support(self.ledger)
+        return {"support": support, "legs": 0.0 - self.params.leg_cost * (legs_left + legs_right)}
 
     def metrics(self, world):
         book = self.ledger
         clock, active, left = book.clock, book.active, book.left
-        legs_left, legs_right = self._legs()
+        legs_left, legs_right, support = legs_and_support(book)
         load_left, load_right = region_loads(book)
         out = {
             "weight_left": float(book.weights[0]),
@@ -526,7 +532,7 @@ class Table(Task):
             "active_right": float((active & ~left).sum()),
             "load_left": float(load_left),
             "load_right": float(load_right),
-            "support": self._support(),
+            "support": support,
             "stable": float(in_stable_configuration(book)),
             "leg_creations": float(clock[CREATIONS]),
             "leg_disbands": float(clock[DISBANDS]),
