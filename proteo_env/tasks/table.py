@@ -292,6 +292,27 @@ def table_update_and_test(grid, cell, mode, anchored, dir_delta, cycle, book):
     return restabilised(book)
 
 
+class TableReading(NamedTuple):
+    """What the task reads of :class:`TableLedger` until the next cycle (:func:`table_cycle`):
+    the grounded legs per region and their ``support`` (:func:`legs_and_support`), and the
+    task's ``success`` (:func:`restabilised`)."""
+
+    legs_left: int
+    legs_right: int
+    support: float
+    success: bool
+
+
+@kernel
+def table_cycle(grid, cell, mode, anchored, cycle, book, loads):
+    """:func:`table_update` after ``cycle``, then each root's load sensor into ``loads`` (A,)
+    float32 (:func:`root_loads`) and the :class:`TableReading` fields, in one call."""
+    table_update(grid, cell, mode, anchored, cycle, book)
+    root_loads(book, loads)
+    legs_left, legs_right, support = legs_and_support(book)
+    return legs_left, legs_right, support, restabilised(book)
+
+
 MODES = tuple(TableMode.__members__)
 ACTIVE = (ROOT, AROOT)
 DOWN = np.flatnonzero(DIRECTIONS[:, 2] == -1)
@@ -502,25 +523,28 @@ class Table(Task):
         book = self.ledger
         grounded_legs(world.grid, world.cell, world.mode, world.anchored, book)
         book.signature[0], book.signature[1] = book.active, book.grounded
+        self._loads = np.zeros(world.n_agents, dtype=np.float32)
+        root_loads(book, self._loads)
+        self.reading = TableReading(*legs_and_support(book), restabilised(book))
+        """The ledger's :class:`TableReading` after the last cycle."""
 
     def after_cycle(self, world, cycle):
-        table_update(world.grid, world.cell, world.mode, world.anchored, cycle, self.ledger)
+        w = world
+        self.reading = TableReading(*table_cycle(w.grid, w.cell, w.mode, w.anchored, cycle, self.ledger, self._loads))
 
     # ------------------------------------------------------------------ sensors
     def load(self, world):
-        out = np.zeros(world.n_agents, dtype=np.float32)
-        root_loads(self.ledger, out)
-        return out
+        return self._loads.copy()
 
     # ------------------------------------------------------------------ reward, metrics, success
     def reward_terms(self, world, moved):
-        legs_left, legs_right, support = legs_and_support(self.ledger)
+        legs_left, legs_right, support, _ = self.reading
         return {"support": support, "legs": 0.0 - self.params.leg_cost * (legs_left + legs_right)}
 
     def metrics(self, world):
         book = self.ledger
         clock, active, left = book.clock, book.active, book.left
-        legs_left, legs_right, support = legs_and_support(book)
+        legs_left, legs_right, support, success = self.reading
         load_left, load_right = region_loads(book)
         out = {
             "weight_left": float(book.weights[0]),
@@ -539,14 +563,14 @@ class Table(Task):
         }
         for k, value in enumerate(book.restabilise):
             out[f"restabilise_{k}"] = float(value)
-        out["success"] = float(self.success(world))
+        out["success"] = float(success)
         return out
 
     def kernels(self, world):
         return TaskKernels(table_sense, table_update_and_test, self.ledger.copy())
 
     def success(self, world):
-        return bool(restabilised(self.ledger))
+        return bool(self.reading.success)
 
 
 class TableV1(Table):
