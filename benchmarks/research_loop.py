@@ -65,8 +65,12 @@ def engine_speed(cycles: int, legal: bool) -> float:
     return 341 * 12 * cycles / (time.perf_counter() - started)
 
 
-def evolution_episodes(n_programs: int, worlds: int) -> tuple[list, list[int]]:
-    """One generation's episodes of chain evolution, and each episode's module count."""
+def evolution_episodes(
+    n_programs: int, worlds: int, config: str = EVOLVE_CONFIG, seed: int = 0, task: str | None = None
+) -> tuple[list, list[int]]:
+    """One generation's episodes of the evolution ``config`` (its settings and variations, on its
+    task or on the version ``task``) and each episode's module count: the paper's program of the task, random programs and
+    mutants of the paper's in turn (drawn from ``seed``), each on ``worlds`` worlds per variation."""
     import yaml
 
     import proteo_env
@@ -74,18 +78,21 @@ def evolution_episodes(n_programs: int, worlds: int) -> tuple[list, list[int]]:
     from training.evolve import generation_seeds, program_episodes
     from training.program_variation import ProgramSpace, mutate, random_program
 
-    cfg = yaml.safe_load(Path(EVOLVE_CONFIG).read_text())
+    cfg = yaml.safe_load(Path(config).read_text())
+    cfg["task"] = task or cfg["task"]
     env = proteo_env.make(cfg["task"], **cfg["env"])
-    rng = np.random.default_rng(0)
-    paper = load_program("chain", env)
+    name = type(env.task).name
+    rng = np.random.default_rng(seed)
+    paper = load_program(name, env)
     space = ProgramSpace.for_program(paper, type(env.task))
     programs = [paper]
     while len(programs) < n_programs:
-        programs.append(random_program(space, rng, "chain") if len(programs) % 2 else mutate(programs[-1], space, rng))
+        programs.append(random_program(space, rng, name) if len(programs) % 2 else mutate(programs[-1], space, rng))
     variations = [json.dumps({**cfg["env"], **v}, sort_keys=True) for v in cfg["variations"]]
-    seeds = generation_seeds(np.random.SeedSequence(0).spawn(3)[0], 0, worlds)
+    seeds = generation_seeds(np.random.SeedSequence(seed).spawn(3)[0], 0, worlds)
     episodes = program_episodes(cfg["task"], variations, [format_program(p) for p in programs], seeds)
-    return episodes, [json.loads(e.overrides)["n_modules"] for e in episodes]
+    modules = {v: proteo_env.make_batched(cfg["task"], 1, **json.loads(v)).n_modules for v in variations}
+    return episodes, [modules[e.overrides] for e in episodes]
 
 
 def per_episode(episodes) -> list:
