@@ -66,10 +66,11 @@ def run_in(checkout: Path, task: str, n_programs: int) -> dict:
 
 
 def commit_of(checkout: Path) -> str:
-    """The short commit of ``checkout``'s HEAD, with ``+`` when its tracked files differ from it."""
+    """The short commit of ``checkout``'s HEAD, with ``+`` when its code (the three packages)
+    differs from it."""
     git = ["git", "-C", str(checkout)]
     head = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    dirty = subprocess.run([*git, "diff", "--quiet", "HEAD"]).returncode != 0
+    dirty = subprocess.run([*git, "diff", "--quiet", "HEAD", "--", "proteo_env", "baselines", "training"]).returncode
     return head + ("+" if dirty else "")
 
 
