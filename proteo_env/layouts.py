@@ -160,6 +160,10 @@ def format_layout(layout: Layout) -> str:
 
 
 # ---------------------------------------------------------------------- generators
+_STEPS = tuple((int(x), int(y), int(z)) for x, y, z in DIRECTIONS)
+"""The 12 face directions as tuples of Python ints (what the site-by-site growth adds)."""
+
+
 def blob_sites(n: int, rng: np.random.Generator, *, flat: bool = False) -> np.ndarray:
     """``(n, 3)`` sites of a random connected blob grown from the origin.
 
@@ -174,8 +178,8 @@ def blob_sites(n: int, rng: np.random.Generator, *, flat: bool = False) -> np.nd
     in_frontier: set = set()
 
     def add_frontier(p):
-        for d in DIRECTIONS:
-            q = (p[0] + int(d[0]), p[1] + int(d[1]), p[2] + int(d[2]))
+        for dx, dy, dz in _STEPS:
+            q = (p[0] + dx, p[1] + dy, p[2] + dz)
             if q not in occupied and q not in in_frontier and (not flat or q[2] >= 0):
                 frontier.append(q)
                 in_frontier.add(q)

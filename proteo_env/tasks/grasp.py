@@ -84,6 +84,36 @@ def grasp_hold(grid, surface):
     return contact, coverage, surround, success
 
 
+FAR = np.iinfo(np.int32).max
+"""The hop distance of a cell no path reaches."""
+
+
+@kernel
+def hop_distances(grid, sources, dir_delta):
+    """``(cells,)`` int32: the fewest face steps from any cell of ``sources`` to each cell of
+    ``grid``, through cells that are empty or hold a module; :data:`FAR` where no path leads
+    (breadth-first, one queue)."""
+    out = np.full(grid.shape[0], FAR, dtype=np.int32)
+    queue = np.empty(grid.shape[0], dtype=np.int64)
+    tail = 0
+    for c in sources:
+        if out[c] != 0:
+            out[c] = 0
+            queue[tail] = c
+            tail += 1
+    head = 0
+    while head < tail:
+        c = queue[head]
+        head += 1
+        for k in range(dir_delta.shape[0]):
+            n = c + dir_delta[k]
+            if grid[n] >= EMPTY and out[n] == FAR:
+                out[n] = out[c] + 1
+                queue[tail] = n
+                tail += 1
+    return out
+
+
 class HoldMeasure(NamedTuple):
     """The task's view of the modules after each cycle (:func:`hold_measure`): ``gap``, the
     fewest hops from a module to the object's surface, and :func:`grasp_hold`'s numbers."""
@@ -394,20 +424,7 @@ class Grasp(Task):
 
     def _hop_field(self, world) -> np.ndarray:
         """Hop distance of every grid cell to the nearest surface site through non-object cells."""
-        grid = world.grid
-        big = np.iinfo(np.int32).max
-        dist = np.full(grid.shape, big, dtype=np.int32)
-        frontier = self._surface_cell
-        dist[frontier] = 0
-        d = 0
-        passable = grid >= EMPTY
-        while frontier.size:
-            d += 1
-            nb = (frontier[:, None] + world.dir_delta[None, :]).reshape(-1)
-            nb = np.unique(nb[passable[nb] & (dist[nb] == big)])
-            dist[nb] = d
-            frontier = nb
-        return dist
+        return hop_distances(world.grid, self._surface_cell, world.dir_delta)
 
     def _measure(self, world) -> HoldMeasure:
         return HoldMeasure(*hold_measure(world.grid, world.cell, world.n_agents, self._gap_field, self.surface))
