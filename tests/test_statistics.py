@@ -202,3 +202,18 @@ def test_equivalence_needs_the_90_percent_interval_inside_the_margin():
     assert wide["lo"] <= test["lo"] and test["hi"] <= wide["hi"]
     with pytest.raises(ValueError, match="margin"):
         st.equivalence(noisy, reference[:10], 0.0)
+
+
+def test_the_interval_of_one_new_seed_is_wider_than_that_of_the_mean_and_covers_new_seeds():
+    rates = [0.91, 0.83, 0.94, 0.95, 0.86, 0.88, 0.91, 0.88, 0.88, 0.90]
+    mean, lo, hi = st.new_seed_interval(rates)
+    half = st.t_quantile(9) * np.std(rates, ddof=1) * np.sqrt(1 + 1 / 10)
+    assert (mean, lo, hi) == pytest.approx((0.894, 0.894 - half, 0.894 + half))
+    assert hi - lo > 2 * st.mean_ci(rates)[1] * 3  # sqrt(n + 1) times the mean's interval
+    assert st.new_seed_interval([0.8, 0.9, 1.0]) == pytest.approx((0.9, 0.403, 1.0), abs=1e-3)  # clipped at 1
+    assert np.isnan(st.new_seed_interval([0.5])[1])
+    # ten seeds drawn from one spread, then one more: the new one lands inside about 95 % of the time
+    rng = np.random.default_rng(0)
+    draws = rng.normal(0.7, 0.05, size=(4000, 11))
+    inside = [lo <= d[10] <= hi for d in draws for _, lo, hi in [st.new_seed_interval(d[:10])]]
+    assert 0.93 < np.mean(inside) < 0.97

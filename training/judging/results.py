@@ -15,6 +15,9 @@ and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``resul
   bootstrap over training seeds and worlds jointly; a difference is claimed only where that
   interval excludes 0, otherwise "no detectable difference" with the interval; cycles are
   compared on the worlds where both succeeded;
+- where one more training seed of each recipe should land on the held-out worlds: the
+  prediction interval from its seeds' rates (:func:`new_seed_lines`), what a rerun on seeds
+  nobody used is held to;
 - per task, one table: a row per policy, a column per split, each cell the successes with the
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
@@ -364,6 +367,36 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def new_seed_lines(rows: list[Result], tasks: list[str]) -> list[str]:
+    """The page's section on one more training seed: for every recipe with several training seeds,
+    its seeds' success rates on the held-out worlds and the interval a new seed's rate should land
+    in (:func:`~training.judging.statistics.new_seed_interval`)."""
+    table = []
+    for task in tasks:
+        for row in sorted((r for r in rows if r.task == task and r.split == "heldout"), key=lambda r: r.policy):
+            if row.kind not in ("learned", "evolved") or len(row.runs) < 2:
+                continue
+            rates = [sum(run.successes) / run.n for run in row.runs]
+            mean, lo, hi = st.new_seed_interval(rates)
+            table.append(
+                f"| {task} | {row.policy} | {len(rates)} | {min(rates):.2f}-{max(rates):.2f} | {mean:.2f} | {_interval(lo, hi)} |"
+            )
+    if not table:
+        return []
+    return [
+        "## One more training seed",
+        "",
+        "The intervals above are about a recipe's seeds taken together and narrow as seeds are added. A rerun "
+        "with one training seed nobody used varies as the seeds do: its success rate on the same held-out worlds "
+        "should land in the 95 % prediction interval below (Student t over the seeds' rates, clipped to 0-1).",
+        "",
+        "| task | recipe | training seeds | their success rates | mean | one new seed (95 %) |",
+        "|---|---|---|---|---|---|",
+        *table,
+        "",
+    ]
+
+
 def _policy_order(policies) -> list[str]:
     first = [p for p in (RULES, RULES_MOVE, RANDOM) if p in policies]
     return first + sorted(p for p in policies if p not in first)
@@ -444,6 +477,7 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
         "where that interval excludes 0, and cycles are compared on the worlds where both succeeded.",
         "",
         *(["## Against the rules, task by task", "", *details, ""] if details else []),
+        *new_seed_lines(rows, tasks),
     ]
     for task in tasks:
         about = {split.name: split.about for split in protocol.tasks[task].splits}

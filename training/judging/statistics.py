@@ -80,6 +80,24 @@ def mean_ci(values, confidence: float = 0.95) -> tuple[float, float]:
     return float(v.mean()), t_quantile(v.size - 1, confidence) * float(v.std(ddof=1)) / math.sqrt(v.size)
 
 
+def new_seed_interval(rates, confidence: float = 0.95) -> tuple[float, float, float]:
+    """``(mean, low, high)``: where one more training seed's success rate on the same worlds is
+    expected to land, from the rates ``rates`` (one per training seed, 1-D): the Student t
+    prediction interval ``mean +- t_{n-1} * s * sqrt(1 + 1/n)``, clipped to ``[0, 1]``
+    (``(mean, nan, nan)`` below two seeds).
+
+    The interval of a recipe's pooled success is about the mean of its seeds and narrows as seeds
+    are added; a rerun with one new seed varies as the seeds do, so this is the interval that
+    rerun should land in. ``new_seed_interval([0.8, 0.9, 1.0]) = (0.9, 0.40, 1.0)``.
+    """
+    v = np.asarray(rates, dtype=float).ravel()
+    mean = float(v.mean()) if v.size else float("nan")
+    if v.size < 2:
+        return mean, float("nan"), float("nan")
+    half = t_quantile(v.size - 1, confidence) * float(v.std(ddof=1)) * math.sqrt(1.0 + 1.0 / v.size)
+    return mean, max(0.0, mean - half), min(1.0, mean + half)
+
+
 def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     """``(low, high)``: the Wilson score interval of the proportion ``successes / n``
     (``(nan, nan)`` when ``n == 0``); ``wilson(24, 30) = (0.627, 0.905)``."""
