@@ -304,13 +304,19 @@ class TableReading(NamedTuple):
 
 
 @kernel
-def table_cycle(grid, cell, mode, anchored, cycle, book, loads):
-    """:func:`table_update` after ``cycle``, then each root's load sensor into ``loads`` (A,)
-    float32 (:func:`root_loads`) and the :class:`TableReading` fields, in one call."""
-    table_update(grid, cell, mode, anchored, cycle, book)
+def table_reading(book, loads):
+    """Each root's load sensor into ``loads`` (A,) float32 (:func:`root_loads`); return the
+    :class:`TableReading` fields of :class:`TableLedger` ``book``."""
     root_loads(book, loads)
     legs_left, legs_right, support = legs_and_support(book)
     return legs_left, legs_right, support, restabilised(book)
+
+
+@kernel
+def table_cycle(grid, cell, mode, anchored, cycle, book, loads):
+    """:func:`table_update` after ``cycle``, then :func:`table_reading`, in one call."""
+    table_update(grid, cell, mode, anchored, cycle, book)
+    return table_reading(book, loads)
 
 
 MODES = tuple(TableMode.__members__)
@@ -524,8 +530,7 @@ class Table(Task):
         grounded_legs(world.grid, world.cell, world.mode, world.anchored, book)
         book.signature[0], book.signature[1] = book.active, book.grounded
         self._loads = np.zeros(world.n_agents, dtype=np.float32)
-        root_loads(book, self._loads)
-        self.reading = TableReading(*legs_and_support(book), restabilised(book))
+        self.reading = TableReading(*table_reading(book, self._loads))
         """The ledger's :class:`TableReading` after the last cycle."""
 
     def after_cycle(self, world, cycle):
