@@ -32,6 +32,7 @@ from .config import ConfigError, EnvConfig, check_seed
 from .config import world_seeds as spawn_worlds
 from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
+from .core.jit import kernel
 from .core.world import World, place_window, shared_windows, window_around
 from .layouts import Layout
 from .spaces import ActionLayout, ObservationBuffers
@@ -43,6 +44,16 @@ per cycle, when the autopilots offer ``batch`` (:mod:`proteo_env.control`; the s
 draw for draw). Before, it calls each world's autopilot: the one call costs a compile of 4-8 s
 per behaviour and process and saves about 80 µs per world-cycle, so only long runs (training)
 gain from it."""
+
+
+@kernel
+def all_below(rows, nvec):
+    """Whether every entry of ``rows`` (R, F) integers lies in ``0 .. nvec[f] - 1`` for its column ``f``."""
+    for r in range(rows.shape[0]):
+        for f in range(rows.shape[1]):
+            if rows[r, f] < 0 or rows[r, f] >= nvec[f]:
+                return False
+    return True
 
 
 class StepResult(NamedTuple):
@@ -350,9 +361,8 @@ class BatchedEnv:
                 f"actions shape {actions.shape} is not allowed{self.at_level}; allowed: {expected} "
                 f"(worlds, agents, {list(fields)})"
             )
-        bad = (actions < 0) | (actions >= nvec)
-        if bad.any():
-            b, a, f = np.argwhere(bad)[0]
+        if not all_below(actions.reshape(-1, len(fields)), nvec):
+            b, a, f = np.argwhere((actions < 0) | (actions >= nvec))[0]
             where = f"world {b}, " if self.n_envs > 1 else ""
             raise ValueError(
                 f"action of {where}module_{a}: {fields[f]}={actions[b, a, f]} is not allowed; allowed: 0..{nvec[f] - 1}"

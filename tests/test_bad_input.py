@@ -340,6 +340,18 @@ def test_wrong_batch_shape_in_the_array_api(running):
         _raises_and_unchanged(env, obs, lambda b=batch: env.step_arrays(b), ValueError, match)
 
 
+@pytest.mark.parametrize("dtype", [np.int8, np.uint8, np.int32, np.uint64])
+def test_an_action_batch_of_any_integer_dtype_is_checked_value_by_value(running, dtype):
+    env, obs = running
+    lay = env.action_layout
+    batch = np.zeros((len(env.possible_agents), lay.length), dtype=dtype)
+    batch[2, lay.mode] = len(env.task.modes)  # one past the last mode
+    match = rf"action of module_2: mode={len(env.task.modes)} is not allowed; allowed: 0\.\.{len(env.task.modes) - 1}"
+    _raises_and_unchanged(env, obs, lambda: env.step_arrays(batch), ValueError, match)
+    batch[2, lay.mode] = 0
+    env.step_arrays(batch)  # the same batch in range is taken
+
+
 @pytest.mark.parametrize(
     "field, value",
     [
