@@ -293,3 +293,26 @@ def test_bad_policy_parameters_name_the_field():
     for key, value in (("p_random", 2.0), ("patience", 0), ("on_flat", "fly")):
         with pytest.raises(ValueError, match=key):
             make_policy("grasp", env, **{key: value})
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box", "blob"])
+def test_the_gap_field_is_the_hop_count_to_the_object_s_surface_through_free_or_module_cells(shape):
+    """Level by level from the surface, each cell's hops are one more than its nearest neighbour's
+    (walls, the ground and the object are never entered), checked on every cell."""
+    from proteo_env.core.lattice import EMPTY
+    from proteo_env.tasks.grasp import FAR
+
+    env = proteo_env.make_batched("grasp-v0", 2, shape=shape)
+    env.reset(seed=5)
+    for task, world in zip(env.tasks, env.worlds):
+        field, grid = task._gap_field, world.grid
+        expected = np.full(grid.shape, FAR, dtype=np.int32)
+        frontier, hops = np.unique(task.surface.cell), 0
+        expected[frontier] = 0
+        while frontier.size:
+            hops += 1
+            around = (frontier[:, None] + world.dir_delta[None, :]).ravel()
+            frontier = np.unique(around[(grid[around] >= EMPTY) & (expected[around] == FAR)])
+            expected[frontier] = hops
+        np.testing.assert_array_equal(field, expected)
+        assert hops > 3 and (field == FAR).any()  # far cells reached, walls and the object not
