@@ -13,7 +13,10 @@ each part in milliseconds:
 * ``cut modules``: :func:`~proteo_env.core.cycle.articulation_points` (Tarjan), needed for
   exact action masks;
 * ``observation``: :func:`~proteo_env.core.cycle.observe` (neighbour fields and masks);
-* ``per-agent dicts``: what the PettingZoo API adds, building one dict per agent.
+* ``per-agent dicts``: what the PettingZoo API adds, building one dict per agent;
+* ``array API kernels``: the parts the array API runs (every part above but the per-agent
+  dicts, moves with connectivity), and ``... connectivity free``: the same with the moves'
+  connectivity checks taken out, the most a faster check could give (its ratio below).
 
 Usage::
 
@@ -94,6 +97,9 @@ def profile(n: int, at: int, repeats: int) -> dict[str, float]:
         "per-agent dicts": lambda: buffers.per_agent(env.possible_agents),
     }
     result = {name: best_ms(run, restore, repeats) for name, run in parts.items()}
+    kernels = sum(v for k, v in result.items() if k not in ("moves without connectivity", "per-agent dicts"))
+    result["array API kernels"] = kernels
+    result["array API kernels, connectivity free"] = kernels - result["moves"] + result["moves without connectivity"]
     restore()
     env.step_arrays(actions)
     result["modules moved"] = int(env.last_moved.sum())
@@ -116,6 +122,8 @@ def main() -> None:
             for at in args.at
         ]
         print(f"| {name} | " + " | ".join(cells) + " |")
+    bounds = [columns[at]["array API kernels"] / columns[at]["array API kernels, connectivity free"] for at in args.at]
+    print("| kernels / kernels without the connectivity checks | " + " | ".join(f"{b:.2f}x" for b in bounds) + " |")
 
 
 if __name__ == "__main__":
