@@ -91,7 +91,7 @@ class StructureProbe:
         self.queue = np.zeros(n_modules, dtype=np.int64)
 
     def measure(self, world) -> GraphShape:
-        shape = graph_shape(
-            world.grid, world.cell, world.n_modules, world.dir_delta, self.degree, self.mark, self.queue
+        # the kernel returns Python ints already
+        return GraphShape._make(
+            graph_shape(world.grid, world.cell, world.n_modules, world.dir_delta, self.degree, self.mark, self.queue)
         )
-        return GraphShape(*map(int, shape))
