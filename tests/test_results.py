@@ -11,6 +11,7 @@ import pytest
 
 from proteo_env.config import ConfigError
 from training.judging import results
+from training.judging import statistics as st
 from training.judging.protocol import load_protocol
 from training.judging.statistics import group_bootstrap, wilson
 
@@ -103,7 +104,7 @@ def test_a_recipe_below_the_rules_is_said_to_be_below(tmp_path):
     text = _page(tmp_path, 0.3)
     assert "clone succeeds below the rules on the same 20 worlds: 0.30 against 1.00, difference -0.70 (" in text
     assert "| clone (move, 5 seeds) | 30/100 (" in text
-    assert "| grasp | clone | 5 | 0.30-0.30 | 0.30 | 0.30-0.30 |" in text  # seeds alike: a new one lands there too
+    assert "| grasp | heldout | clone | 5 | 0.30-0.30 | 0.30 | 0.30-0.30 |" in text  # seeds alike: a new one lands there too
     assert (tmp_path / "docs" / "results" / "profiles.png").is_file()
 
 
@@ -314,3 +315,32 @@ def test_matches_is_said_only_within_the_protocol_s_equivalence_margin(tmp_path)
         replace(load_protocol("v1"), equivalence_margin=0.05),
     )
     assert "clone matches the success of the rules" in page
+
+
+def test_one_more_seed_gives_every_split_an_interval_of_success_and_of_cycles_to_success():
+    """Three seeds with rates 0.5, 0.6 and 0.7 and mean cycles to success 100, 110 and 120: the
+    section gives each split the Student t prediction interval of both; a seed that never succeeds
+    counts in the rates only (its cycles are not cycles to success)."""
+    from training.judging.report import Result, Run
+
+    def run(wins: int, cycles: int) -> Run:
+        return Run(
+            source="x", successes=[True] * wins + [False] * (10 - wins), cycles=[cycles] * 10, returns=[0.0] * 10
+        )
+
+    def result(split: str, runs: list) -> Result:
+        return Result(task="grasp", policy="clone", kind="learned", level="move", runs=runs, group=True, split=split)
+
+    rows = [
+        result("heldout", [run(5, 100), run(6, 110), run(7, 120)]),
+        result("blob", [run(0, 50), run(4, 90), run(2, 70)]),
+    ]
+    lines = results.new_seed_lines(rows, ["grasp"])
+    widen = st.t_quantile(2) * np.sqrt(1 + 1 / 3)  # three seeds
+    rate, cycles = 0.1 * widen, 10.0 * widen  # both standard deviations: 0.1 and 10
+    assert (
+        f"| grasp | heldout | clone | 3 | 0.50-0.70 | 0.60 | {0.6 - rate:.2f}-1.00 | 100-120 (3) | 110 | "  # rates clipped to 1
+        f"{110 - cycles:.0f}-{110 + cycles:.0f} |" in lines
+    )
+    two = st.t_quantile(1) * np.std([90, 70], ddof=1) * np.sqrt(1 + 1 / 2)  # the seed without success left out
+    assert f"| grasp | blob | clone | 3 | 0.00-0.40 | 0.20 | 0.00-1.00 | 70-90 (2) | 80 | 0-{80 + two:.0f} |" in lines

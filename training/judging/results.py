@@ -368,18 +368,31 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
 
 
 def new_seed_lines(rows: list[Result], tasks: list[str]) -> list[str]:
-    """The page's section on one more training seed: for every recipe with several training seeds,
-    its seeds' success rates on the held-out worlds and the interval a new seed's rate should land
-    in (:func:`~training.judging.statistics.new_seed_interval`)."""
+    """The page's section on one more training seed: for every recipe with several training seeds
+    and every split, its seeds' success rates and mean cycles to success, and the intervals a new
+    seed's should land in (:func:`~training.judging.statistics.new_seed_interval`; a seed that
+    never succeeds has no cycles to success and counts only in the success rates)."""
     table = []
     for task in tasks:
-        for row in sorted((r for r in rows if r.task == task and r.split == "heldout"), key=lambda r: r.policy):
+        for row in sorted((r for r in rows if r.task == task), key=lambda r: r.policy):  # splits as judged
             if row.kind not in ("learned", "evolved") or len(row.runs) < 2:
                 continue
             rates = [sum(run.successes) / run.n for run in row.runs]
             mean, lo, hi = st.new_seed_interval(rates)
+            cycles = [
+                float(np.mean([c for c, s in zip(run.cycles, run.successes) if s]))
+                for run in row.runs
+                if any(run.successes)
+            ]
+            c_mean, c_lo, c_hi = st.new_seed_interval(cycles, bounds=(0.0, np.inf))
+            speed = (
+                f"{min(cycles):.0f}-{max(cycles):.0f} ({len(cycles)}) | {c_mean:.0f} | {_interval(c_lo, c_hi, 0)}"
+                if len(cycles) >= 2
+                else "- | - | -"
+            )
             table.append(
-                f"| {task} | {row.policy} | {len(rates)} | {min(rates):.2f}-{max(rates):.2f} | {mean:.2f} | {_interval(lo, hi)} |"
+                f"| {task} | {row.split} | {row.policy} | {len(rates)} | {min(rates):.2f}-{max(rates):.2f} | "
+                f"{mean:.2f} | {_interval(lo, hi)} | {speed} |"
             )
     if not table:
         return []
@@ -387,11 +400,14 @@ def new_seed_lines(rows: list[Result], tasks: list[str]) -> list[str]:
         "## One more training seed",
         "",
         "The intervals above are about a recipe's seeds taken together and narrow as seeds are added. A rerun "
-        "with one training seed nobody used varies as the seeds do: its success rate on the same held-out worlds "
-        "should land in the 95 % prediction interval below (Student t over the seeds' rates, clipped to 0-1).",
+        "with one training seed nobody used varies as the seeds do: on the same worlds of a split, its success "
+        "rate and its mean cycles to success should land in the 95 % prediction intervals below (Student t over "
+        "the seeds' values; rates clipped to 0-1; cycles over the seeds that succeed at least once, how many in "
+        "brackets).",
         "",
-        "| task | recipe | training seeds | their success rates | mean | one new seed (95 %) |",
-        "|---|---|---|---|---|---|",
+        "| task | split | recipe | training seeds | their success rates | mean | one new seed (95 %) "
+        "| their mean cycles to success | mean | one new seed (95 %) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
         *table,
         "",
     ]

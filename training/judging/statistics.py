@@ -80,11 +80,11 @@ def mean_ci(values, confidence: float = 0.95) -> tuple[float, float]:
     return float(v.mean()), t_quantile(v.size - 1, confidence) * float(v.std(ddof=1)) / math.sqrt(v.size)
 
 
-def new_seed_interval(rates, confidence: float = 0.95) -> tuple[float, float, float]:
-    """``(mean, low, high)``: where one more training seed's success rate on the same worlds is
-    expected to land, from the rates ``rates`` (one per training seed, 1-D): the Student t
-    prediction interval ``mean +- t_{n-1} * s * sqrt(1 + 1/n)``, clipped to ``[0, 1]``
-    (``(mean, nan, nan)`` below two seeds).
+def new_seed_interval(rates, confidence: float = 0.95, bounds=(0.0, 1.0)) -> tuple[float, float, float]:
+    """``(mean, low, high)``: where one more training seed's measure on the same worlds is
+    expected to land, from ``rates`` (the measure of each training seed, 1-D; by default success
+    rates): the Student t prediction interval ``mean +- t_{n-1} * s * sqrt(1 + 1/n)``, clipped to
+    ``bounds`` (``(0, inf)`` for cycles; ``(mean, nan, nan)`` below two seeds).
 
     The interval of a recipe's pooled success is about the mean of its seeds and narrows as seeds
     are added; a rerun with one new seed varies as the seeds do, so this is the interval that
@@ -95,7 +95,7 @@ def new_seed_interval(rates, confidence: float = 0.95) -> tuple[float, float, fl
     if v.size < 2:
         return mean, float("nan"), float("nan")
     half = t_quantile(v.size - 1, confidence) * float(v.std(ddof=1)) * math.sqrt(1.0 + 1.0 / v.size)
-    return mean, max(0.0, mean - half), min(1.0, mean + half)
+    return mean, max(bounds[0], mean - half), min(bounds[1], mean + half)
 
 
 def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
