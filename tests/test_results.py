@@ -104,7 +104,9 @@ def test_a_recipe_below_the_rules_is_said_to_be_below(tmp_path):
     text = _page(tmp_path, 0.3)
     assert "clone succeeds below the rules on the same 20 worlds: 0.30 against 1.00, difference -0.70 (" in text
     assert "| clone (move, 5 seeds) | 30/100 (" in text
-    assert "| grasp | heldout | clone | 5 | 0.30-0.30 | 0.30 | 0.30-0.30 |" in text  # seeds alike: a new one lands there too
+    assert (
+        "| grasp | heldout | clone | 5 | 0.30-0.30 | 0.30 | 0.30-0.30 |" in text
+    )  # seeds alike: a new one lands there too
     assert (tmp_path / "docs" / "results" / "profiles.png").is_file()
 
 
