@@ -15,9 +15,9 @@ and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``resul
   bootstrap over training seeds and worlds jointly; a difference is claimed only where that
   interval excludes 0, otherwise "no detectable difference" with the interval; cycles are
   compared on the worlds where both succeeded;
-- where one more training seed of each recipe should land on the held-out worlds: the
-  prediction interval from its seeds' rates (:func:`new_seed_lines`), what a rerun on seeds
-  nobody used is held to;
+- where one more training seed of each recipe should land on each split: the prediction
+  intervals of its success rate and its mean cycles to success from its seeds' values
+  (:func:`new_seed_lines`), what a rerun on seeds nobody used is held to;
 - per task, one table: a row per policy, a column per split, each cell the successes with the
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
