@@ -32,10 +32,9 @@ from .config import ConfigError, EnvConfig, check_seed
 from .config import world_seeds as spawn_worlds
 from .control import ControlLevel, autopilot_factory
 from .core.batch import WorldBatch
-from .core.jit import kernel
 from .core.world import World, place_window, shared_windows, window_around
 from .layouts import Layout
-from .spaces import ActionLayout, ObservationBuffers
+from .spaces import ActionLayout, ObservationBuffers, all_below
 from .tasks.base import Task
 
 ONE_CALL_AFTER = 50_000
@@ -44,16 +43,6 @@ per cycle, when the autopilots offer ``batch`` (:mod:`proteo_env.control`; the s
 draw for draw). Before, it calls each world's autopilot: the one call costs a compile of 4-8 s
 per behaviour and process and saves about 80 µs per world-cycle, so only long runs (training)
 gain from it."""
-
-
-@kernel
-def all_below(rows, nvec):
-    """Whether every entry of ``rows`` (R, F) integers lies in ``0 .. nvec[f] - 1`` for its column ``f``."""
-    for r in range(rows.shape[0]):
-        for f in range(rows.shape[1]):
-            if rows[r, f] < 0 or rows[r, f] >= nvec[f]:
-                return False
-    return True
 
 
 class StepResult(NamedTuple):

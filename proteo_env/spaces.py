@@ -38,6 +38,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .core.cycle import EMIT, KIND_EMPTY, KIND_MODULE, KIND_OBJECT, KIND_SOLID, RELAY, SILENT
+from .core.jit import kernel
 from .core.records import OBSERVATION_FIELDS
 from .core.world import MESSAGE_TO_ALL
 
@@ -71,6 +72,16 @@ class ModuleActionSpace(spaces.MultiDiscrete):
         if isinstance(mask, np.ndarray) and mask.shape == (N_MOVES,):
             mask = (mask.astype(np.int8),) + tuple(np.ones(n, dtype=np.int8) for n in self.nvec[1:])
         return super().sample(mask=mask, probability=probability)
+
+
+@kernel
+def all_below(rows, nvec):
+    """Whether every entry of ``rows`` (R, F) integers lies in ``0 .. nvec[f] - 1`` for its column ``f``."""
+    for r in range(rows.shape[0]):
+        for f in range(rows.shape[1]):
+            if rows[r, f] < 0 or rows[r, f] >= nvec[f]:
+                return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -135,9 +146,8 @@ class ActionLayout:
             raise ValueError(
                 f"action shape {actions.shape[1:]} is not allowed; allowed: ({self.length},) = {self.field_names}"
             )
-        bad = (actions < 0) | (actions >= self.nvec)
-        if bad.any():
-            a, f = np.argwhere(bad)[0]
+        if not all_below(actions, self.nvec):
+            a, f = np.argwhere((actions < 0) | (actions >= self.nvec))[0]
             raise ValueError(
                 f"action of {agents[a]}: {self.field_names[f]}={actions[a, f]} is not allowed; "
                 f"allowed: 0..{self.nvec[f] - 1}"
