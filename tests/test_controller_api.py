@@ -242,7 +242,10 @@ def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     assert out.startswith("usage: proteo train ppo") and "--total-steps" in out
     # each option's docstring reaches the user, with its type and default
     assert (
-        " ".join(out.split()).count("Agent-steps (module-cycles used for learning) to train for. (int, default:") == 1
+        " ".join(out.split()).count(
+            "Agent-steps (module-cycles) to train for, counted across all worlds. (int, default: 10000000)"
+        )
+        == 1
     )
 
 

@@ -69,7 +69,7 @@ from training.networks import (
     teacher_cross_entropy,
 )
 from training.policies import check_memory, check_sampled
-from training.runs import RunArgs
+from training.runs import PPOArgs
 from training.worlds import JOIN_FROM, TrainingEnvs, check_workers
 
 ALGORITHM = "ppo"
@@ -80,35 +80,19 @@ they went still resume; see :func:`training.common.parse_args`)."""
 
 
 @dataclass(frozen=True)
-class Args(RunArgs):
+class Args(PPOArgs):
     """Native PPO with parameter sharing over all modules (arguments of training/ppo.py)."""
 
-    task: str = "chain-v0"
-    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
+    # this trainer's defaults of the shared options (what each means: PPOArgs)
+    total_steps: int = 10_000_000
+    n_envs: int = 64
+    n_steps: int = 32
+    minibatch_size: int = 8192
+    n_epochs: int = 1
+    learning_rate: float = 1e-3
+    checkpoint_every: int = 1_000_000
     control: str = "move"
     """Control level: move, move+mode or full (the fields the policy chooses)."""
-    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
-    """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
-    total_steps: int = 10_000_000
-    """Agent-steps (module-cycles used for learning) to train for."""
-    n_envs: int = 64
-    """Worlds stepped together; samples per cycle = n_envs * modules."""
-    n_steps: int = 32
-    """Cycles per world in one rollout."""
-    minibatch_size: int = 8192
-    """Samples (agent-steps) per minibatch of the update."""
-    n_epochs: int = 1
-    """Passes over each rollout's samples per update."""
-    learning_rate: float = 1e-3
-    """Adam's learning rate (constant)."""
-    gamma: float = 0.99
-    """Discount factor per cycle."""
-    gae_lambda: float = 0.95
-    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
-    clip_range: float = 0.2
-    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
-    ent_coef: float = 0.01
-    """Weight of the entropy bonus (of the sampled fields) in the loss."""
     vf_coef: float = 0.5
     """Weight of the value loss in the loss."""
     value_norm: bool = False
@@ -125,11 +109,8 @@ class Args(RunArgs):
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
     sampled: str = "all"
-    """Which fields the rollouts draw at random: all, or move (the others take their arg-max)."""
-    checkpoint_every: int = 1_000_000
-    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
-    resume: str | None = None
-    """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
+    """Which fields the rollouts draw at random: all, or move (the others take their arg-max); the
+    entropy bonus counts the fields drawn."""
     device: str = "cpu"
     """Where the network runs: cpu, cuda, cuda:N or mps; the worlds stay on the CPU."""
     workers: int = 1

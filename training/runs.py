@@ -2,7 +2,8 @@
 whole run around their loop.
 
 :class:`RunArgs` holds the options of every trainer's run (seed, run folder, time limit, threads,
-logs); a trainer's ``Args`` derives from it and declares only its own. :class:`GenerationalArgs`
+logs); a trainer's ``Args`` derives from it and declares only its own, and :class:`PPOArgs` adds
+what the PPO trainers share. :class:`GenerationalArgs`
 adds what a population-based trainer (training/cma_es.py, training/evolve.py) needs, and
 :class:`GenerationalRun` does the rest of such a run, so that the trainer writes only its
 generation:
@@ -37,7 +38,7 @@ from __future__ import annotations
 
 import os
 import pickle
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from proteo_env.config import ConfigError
@@ -68,6 +69,42 @@ class RunArgs:
     """Also log the progress to TensorBoard (tb/ in the run folder)."""
     progress_bar: bool = True
     """Show a progress bar on the terminal."""
+
+
+@dataclass(frozen=True)
+class PPOArgs(RunArgs):
+    """The options every PPO trainer over proteo's worlds shares (training/ppo.py,
+    training/sb3_ppo.py, training/torchrl_ppo.py); each trainer sets its own defaults and adds
+    its own options."""
+
+    task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides of the worlds' settings as ``proteo_env.make`` takes them (size, cycle limit, physics, task parameters)."""
+    total_steps: int = 200_000
+    """Agent-steps (module-cycles) to train for, counted across all worlds."""
+    n_envs: int = 4
+    """Worlds stepped together; samples per cycle = n_envs * modules."""
+    n_steps: int = 128
+    """Cycles per world in one rollout (rollout = n_steps * n_envs * modules agent-steps)."""
+    minibatch_size: int = 1024
+    """Agent-steps per minibatch of the update."""
+    n_epochs: int = 4
+    """Passes over each rollout's samples per update."""
+    learning_rate: float = 3e-4
+    """Adam's learning rate (constant)."""
+    gamma: float = 0.99
+    """Discount factor per cycle."""
+    gae_lambda: float = 0.95
+    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
+    clip_range: float = 0.2
+    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
+    ent_coef: float = 0.01
+    """Weight of the entropy bonus in the loss."""
+    checkpoint_every: int = 50_000
+    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
+    resume: str | None = None
+    """A checkpoint of this trainer to continue from (its run folder is reused unless run_dir is set)."""
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ runs/<name>`` evaluates the result.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from tqdm import tqdm
@@ -35,47 +35,20 @@ from training.common import (
     torch_device,
     write_checkpoint_meta,
 )
-from training.runs import RunArgs
+from training.runs import PPOArgs
 
 ALGORITHM = "sb3-maskable-ppo"
 
 
 @dataclass(frozen=True)
-class Args(RunArgs):
-    """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py)."""
+class Args(PPOArgs):
+    """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py);
+    ``minibatch_size`` is MaskablePPO's ``batch_size``."""
 
-    task: str = "chain-v0"
-    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
-    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
-    """Overrides passed to ``proteo_env.make`` (size, cycle limit, physics, task parameters)."""
-    total_steps: int = 200_000
-    """Agent-steps (module-cycles) to train for, counted across all worlds."""
-    n_envs: int = 4
-    """Worlds (environment copies); sub-envs = n_envs * modules."""
-    n_steps: int = 128
-    """Cycles per world in one rollout (rollout size = n_steps * n_envs * modules)."""
-    minibatch_size: int = 1024
-    """Agent-steps per minibatch (MaskablePPO's ``batch_size``)."""
-    n_epochs: int = 4
-    """Passes over each rollout per update."""
-    learning_rate: float = 3e-4
-    """Adam's learning rate (constant)."""
-    gamma: float = 0.99
-    """Discount factor per cycle."""
-    gae_lambda: float = 0.95
-    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
-    clip_range: float = 0.2
-    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
-    ent_coef: float = 0.01
-    """Weight of the entropy bonus in the loss."""
     vf_coef: float = 0.5
     """Weight of the value loss in the loss."""
     hidden: tuple[int, ...] = (64, 64)
     """Widths of the tanh hidden layers of the policy's and of the value's separate MLPs (SB3's ``net_arch``)."""
-    checkpoint_every: int = 50_000
-    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
-    resume: str | None = None
-    """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
     device: str = "cpu"
     """Where the networks run: cpu (the default), cuda, cuda:N or mps."""
 

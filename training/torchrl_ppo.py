@@ -20,7 +20,7 @@ evaluates the result.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,52 +38,24 @@ from training.common import (
     seed_everything,
     write_checkpoint_meta,
 )
-from training.runs import RunArgs
+from training.runs import PPOArgs
 
 ALGORITHM = "torchrl-ppo"
 
 
 @dataclass(frozen=True)
-class Args(RunArgs):
+class Args(PPOArgs):
     """IPPO/MAPPO with TorchRL (arguments of training/torchrl_ppo.py)."""
 
-    task: str = "chain-v0"
-    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
-    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
-    """Overrides passed to ``proteo_env.make``."""
     control: str = "full"
     """Control level (``move``, ``move+mode``, ``full``): at ``move`` the actor picks one masked
     move per module (TorchRL's ``MaskedCategorical``) and the rules' autopilot does the rest."""
     variant: str = "ippo"
     """``ippo`` (critic sees one module) or ``mappo`` (critic sees all modules of the world)."""
-    total_steps: int = 200_000
-    """Agent-steps (module-cycles) to train for."""
-    n_envs: int = 4
-    """Worlds (environment copies) batched together."""
-    n_steps: int = 128
-    """Cycles per world in one batch (batch = n_steps * n_envs * modules agent-steps)."""
-    minibatch_size: int = 1024
-    """Agent-steps per minibatch."""
-    n_epochs: int = 4
-    """Passes over each batch per update."""
-    learning_rate: float = 3e-4
-    """Adam's learning rate (constant; one optimiser for the actor and the critic)."""
-    gamma: float = 0.99
-    """Discount factor per cycle."""
-    gae_lambda: float = 0.95
-    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
-    clip_range: float = 0.2
-    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
-    ent_coef: float = 0.01
-    """Weight of the entropy bonus in the loss."""
     max_grad_norm: float = 0.5
-    """Gradient norm limit of the actor's and the critic's parameters together."""
+    """Gradient norm limit of the actor's and the critic's parameters together (one optimiser for both)."""
     hidden: tuple[int, ...] = (64, 64)
     """Widths of the actor's tanh hidden layers; the critic has as many, each ``hidden[0]`` wide (MultiAgentMLP)."""
-    checkpoint_every: int = 50_000
-    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
-    resume: str | None = None
-    """A checkpoint of this script to continue from (its run folder is reused unless run_dir is set)."""
 
 
 def make_distribution_class(nvec):
