@@ -57,6 +57,11 @@ class Run:
     def n(self) -> int:
         return len(self.returns)
 
+    @property
+    def cycles_to_success(self) -> list:
+        """The cycles of the episodes that succeeded, in the order played."""
+        return [c for c, s in zip(self.cycles, self.successes) if s]
+
     def add(self, seed: int, episode: dict) -> None:
         """Add one finished episode played on world ``seed``: ``{"return", "success", "cycles",
         "metrics", "seconds"}`` (:func:`training.judging.episodes.run_alone`)."""
@@ -143,7 +148,7 @@ class Result:
         if len(self.runs) == 1:
             (run,) = self.runs
             mean, half = mean_ci(run.returns)
-            won = [c for c, s in zip(run.cycles, run.successes) if s]
+            won = run.cycles_to_success
             c_mean, c_half = mean_ci(won)
             return {
                 **head,

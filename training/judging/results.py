@@ -377,13 +377,9 @@ def new_seed_lines(rows: list[Result], tasks: list[str]) -> list[str]:
         for row in sorted((r for r in rows if r.task == task), key=lambda r: r.policy):  # splits as judged
             if row.kind not in ("learned", "evolved") or len(row.runs) < 2:
                 continue
-            rates = [sum(run.successes) / run.n for run in row.runs]
+            rates = row.rates
             mean, lo, hi = st.new_seed_interval(rates)
-            cycles = [
-                float(np.mean([c for c, s in zip(run.cycles, run.successes) if s]))
-                for run in row.runs
-                if any(run.successes)
-            ]
+            cycles = [float(np.mean(run.cycles_to_success)) for run in row.runs if any(run.successes)]
             c_mean, c_lo, c_hi = st.new_seed_interval(cycles, bounds=(0.0, np.inf))
             speed = (
                 f"{min(cycles):.0f}-{max(cycles):.0f} ({len(cycles)}) | {c_mean:.0f} | {_interval(c_lo, c_hi, 0)}"
