@@ -49,18 +49,18 @@ bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
 
-# docs/results.md: every controller judged under benchmark protocol v6, which extends v5 to v1
-# (docs/benchmark/v1 to v6, written by proteo eval --benchmark v1|v2|v3|v4|v5|v6;
-# docs/guides/benchmark.md), with intervals, the aggregate and learning curves.
+# docs/results.md: every controller judged under benchmark protocol v7 (docs/benchmark/v7, written by
+# proteo eval --benchmark v7; docs/guides/benchmark.md), with paired intervals, the aggregate and learning
+# curves; the README's held-out table and marl-eval's file from the same judgements.
 results: install
-	$(BIN)/python -m training.judging.results --benchmark v6 --publish README.md --marl-eval docs/results/marl_eval.json
+	$(BIN)/python -m training.judging.results --benchmark v7 --publish README.md --marl-eval docs/results/marl_eval.json
 
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
-# about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe in
-# docs/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
+# about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe of
+# docs/benchmark/v6/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
 # parameters; v3: evolved chain programs; v4 and v5: evolved branch, table and grasp programs, from the paper's and from random ones;
 # v6: evolution with ten times the episodes per generation on all four), each recipe judged on every split of its task (proteo eval
-# --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then make results. The rules' and random's rows are
+# --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then v6's results page. The rules' and random's rows are
 # judged once per protocol (v1, and v7, which does not extend it): make benchmark-references (v7: about 10 minutes).
 STUDY := --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4]"
 STUDY_V1 := $(STUDY) --keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning --runs-dir runs/v1
@@ -81,7 +81,7 @@ learning-results: install
 	for version in v1 v2 v3 v4 v5 v6; do for recipe in checkpoints/$$version/*/*_*; do \
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done
-	$(MAKE) results
+	$(BIN)/python -m training.judging.results --benchmark v6 --out docs/benchmark/v6/results.md
 
 # Protocol v7 (standalone: ten training seeds, 100 worlds each, table-v2, branch's edge_start): each recipe's
 # config, budget, task id and starting clone come from configs/benchmark/v7.yaml (training.study --benchmark
@@ -95,7 +95,7 @@ learning-results-v7: install
 	for recipe in checkpoints/v7/*/*_*; do \
 		$(BIN)/proteo eval --benchmark v7 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/v7/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
-	$(BIN)/python -m training.judging.results --benchmark v7 --out docs/benchmark/v7/results.md
+	$(MAKE) results
 
 benchmark-references: install
 	for version in v1 v7; do for task in chain branch table grasp locomotion; do \

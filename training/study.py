@@ -58,10 +58,10 @@ protocol's (``config``, ``agent_steps``, the task's id, ``init``: kickstart-move
 kept imitation-move clone), and a recipe the protocol does not fix for a task is refused before
 anything runs.
 
-Then ``proteo eval --benchmark v1 --checkpoint ... --out docs/benchmark/v1/<task>/<recipe>`` judges
+Then ``proteo eval --benchmark v7 --checkpoint ... --out docs/benchmark/v7/<task>/<recipe>`` judges
 each recipe's seeds on every split of the benchmark protocol and ``make results`` writes
-docs/results.md (``make learning-results`` runs all three for the published recipes, with
-``--keep-dir checkpoints/v1 --docs-dir docs/benchmark/v1/learning``).
+docs/results.md (``make learning-results-v7`` runs all three for the published recipes, with
+``--benchmark v7 --keep-dir checkpoints/v7 --docs-dir docs/benchmark/v7/learning``).
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ class Args:
     """Folder of the run folders, <recipe>_<task>_<level>_s<S>; one with a final checkpoint is not retrained."""
     keep_dir: str = "runs/study/checkpoints"
     """Where the final checkpoints are kept, as <task>/<recipe>_<level>/seed_<S>/ (without trainer.pt); the
-    protocol's studies keep theirs in its tree (``checkpoints/v6``, the Makefile's learning-results)."""
+    protocol's studies keep theirs in its tree (``checkpoints/v7``, the Makefile's learning-results-v7)."""
     benchmark: str | None = None
     """A benchmark protocol version (``v7``): each recipe's config, budget and clone are the protocol's
     (recipe ``kickstart`` at level ``move`` is its ``kickstart-move``) and each run trains on the protocol's
