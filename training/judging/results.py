@@ -1,7 +1,7 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
     python -m training.judging.results --benchmark v7 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
-    python -m training.judging.results --benchmark v1 --root docs/benchmark --out docs/results.md
+    python -m training.judging.results --benchmark v6 --root docs/benchmark --out docs/benchmark/v6/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
 ``ROOT/VERSION/`` (one folder per task and policy, :mod:`training.judging.judge`) and the training
