@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import kernel
-from .lattice import EMPTY, OBJECT, SOLID
+from .lattice import DIRECTIONS, EMPTY, OBJECT, SOLID
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SILENT, RELAY, EMIT = 0, 1, 2
@@ -92,16 +92,6 @@ def legal_directions(grid, c, roll_delta, roll_table):
 
 # ---------------------------------------------------------------- connectivity
 @kernel
-def _group_root(parents, g):
-    """Union-find root of search group ``g``; ``parents`` packs each group's parent in 4 bits."""
-    while True:
-        up = (parents >> (4 * g)) & 15
-        if up == g:
-            return g
-        g = up
-
-
-@kernel
 def _flood(start, allowed, local_adjacent):
     """Bits of ``allowed`` local sites reachable from the ``start`` bits through ``allowed`` sites.
 
@@ -127,24 +117,67 @@ LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1
 """``(4096,)``: index of the lowest set bit of a 12-bit word (a table read instead of a loop)."""
 
 
+def _faces_joined() -> np.ndarray:
+    adjacent = [
+        sum(1 << j for j in range(12) if any((DIRECTIONS[i] - DIRECTIONS[j] == d).all() for d in DIRECTIONS))
+        for i in range(12)
+    ]
+    joined = np.zeros(4096, dtype=np.bool_)
+    for word in range(4096):
+        reached = word & -word
+        while True:
+            grown = reached
+            for i in range(12):
+                if (reached >> i) & 1:
+                    grown |= adjacent[i] & word
+            if grown == reached:
+                break
+            reached = grown
+        joined[word] = reached == word
+    return joined
+
+
+FACES_JOINED = _faces_joined()
+"""``(4096,)`` bool: whether a set of face neighbours (bit ``k``: direction ``k``) is connected
+through face neighbours of the set alone (true for the empty set and one neighbour)."""
+
+POSITION_SHIFT = 34
+"""A connectivity search's stack entry packs a grid cell (the low 34 bits) and the cell's
+position relative to the module that leaves (10 bits an axis, two's complement)."""
+
+
+@kernel
+def _pack(c, x, y, z):
+    """Stack entry of cell ``c`` at position ``(x, y, z)``: a position beyond 511 sites wraps,
+    which changes only the search's order, never its answer."""
+    return c | ((x & 1023) << POSITION_SHIFT) | ((y & 1023) << (POSITION_SHIFT + 10)) | ((z & 1023) << (POSITION_SHIFT + 20))
+
+
+@kernel
+def _unpack_axis(entry, axis):
+    """Coordinate ``axis`` of the position packed in a stack entry."""
+    return (((entry >> (POSITION_SHIFT + 10 * axis)) & 1023) ^ 512) - 512
+
+
 @kernel
 def detach_keeps_connected(grid, cell, m, geometry, scratch):
     """Do the other modules stay connected when module ``m`` leaves its cell?
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
-    neighbours, or else through the modules within two hops of ``m`` (read only then), yes.
-    Otherwise one depth-first search per group of neighbours runs in lockstep over the module
-    graph (``m`` removed), each stepping first towards the next group's start. The searches stop
-    when all groups have met (connected) or one group's stacks run out (that piece is cut off),
-    so the cost is bounded by the size of the smallest piece.
+    neighbours (:data:`FACES_JOINED`), or else through the modules within two hops of ``m``
+    (read only then), yes. Otherwise one depth-first search per group of neighbours runs in
+    lockstep over the module graph (``m`` removed), each stepping first towards the next
+    group's start. The searches stop when all groups have met (connected) or one group's
+    stacks run out (that piece is cut off), so the cost is bounded by the size of the smallest
+    piece.
 
     The search works on cells, so what it touches lies close together: ``mark`` (cells,) int32
-    labels visited cells, and each group's stack in ``stacks`` (12, N, 4) int32 holds entries
-    ``(cell, x, y, z)``, the position relative to ``m`` riding along. ``search`` (13,) holds
-    the epoch in ``search[0]``, bumped so that ``mark`` needs clearing only when the epochs run
-    out (:data:`LAST_EPOCH`), and the depth of each group's stack in ``search[1:13]``. The
-    groups' union-find parents and start directions are packed 4 bits per group in two
-    integers, so a search allocates nothing.
+    labels visited cells, and each group's stack in ``stacks`` (12, N) int64 holds entries that
+    pack a cell with its position relative to ``m`` (:func:`_pack`). ``search`` (13,) holds the
+    epoch in ``search[0]``, bumped so that ``mark`` needs clearing only when the epochs run out
+    (:data:`LAST_EPOCH`), and the depth of each group's stack in ``search[1:13]``. Each group's
+    merged root and start direction are packed in two integers, so a search allocates nothing; a visit classifies its module
+    neighbours (new, or reached by another group) without branching on their labels.
     """
     dir_delta, directions = geometry.dir_delta, geometry.directions
     local_delta, local_adjacent = geometry.local_delta, geometry.local_adjacency
@@ -153,15 +186,12 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     touching = 0
     for i in range(12):
         touching |= np.int64(grid[c + local_delta[i]] >= 0) << i
-    if touching & (touching - 1) == 0:
-        return True
-    first = touching & -touching
-    if touching & ~_flood(first, touching, local_adjacent) == 0:
+    if FACES_JOINED[touching]:
         return True
     modules = touching
     for i in range(12, local_delta.shape[0]):
         modules |= np.int64(grid[c + local_delta[i]] >= 0) << i
-    if touching & ~_flood(first, modules, local_adjacent) == 0:
+    if touching & ~_flood(touching & -touching, modules, local_adjacent) == 0:
         return True
 
     if search[0] >= LAST_EPOCH:  # once in about 134 million searches
@@ -171,7 +201,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     base = search[0] * LABEL_BITS
     depth = search[1:13]
     mark[c] = base + REMOVED_LABEL
-    parents = 0
+    roots = 0
     start_directions = 0
     n_groups = 0
     remaining = touching
@@ -181,67 +211,71 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
         k = LOWEST_BIT[bit]
         start = c + dir_delta[k]
         mark[start] = base + n_groups
-        stacks[n_groups, 0, 0] = start
-        for axis in range(3):
-            stacks[n_groups, 0, 1 + axis] = directions[k, axis]
+        stacks[n_groups, 0] = _pack(start, directions[k, 0], directions[k, 1], directions[k, 2])
         depth[n_groups] = 1
-        parents |= n_groups << (4 * n_groups)
+        roots |= np.int64(n_groups) << (4 * n_groups)
         start_directions |= np.int64(k) << (4 * n_groups)
         n_groups += 1
     groups_left = n_groups
     while True:
         for g in range(n_groups):
-            if depth[g] == 0:
+            d = depth[g]
+            if d == 0:
                 continue
-            depth[g] -= 1
-            entry = stacks[g, depth[g]]
-            cn, x, y, z = entry[0], entry[1], entry[2], entry[3]
-            label = _group_root(parents, g)
-            target = directions[(start_directions >> (4 * ((g + 1) % n_groups))) & 15]
-            best_at, best_distance = -1, 1 << 62
+            d -= 1
+            entry = stacks[g, d]
+            cn = entry & ((np.int64(1) << POSITION_SHIFT) - 1)
+            x, y, z = _unpack_axis(entry, 0), _unpack_axis(entry, 1), _unpack_axis(entry, 2)
+            label = (roots >> (4 * g)) & 15
             around = 0
             for k in range(12):
                 around |= np.int64(grid[cn + dir_delta[k]] >= 0) << k
-            while around:  # the module neighbours, lowest direction first
+            fresh = 0
+            met = 0
+            while around:  # the module neighbours: not reached yet, or reached by another group
                 k = LOWEST_BIT[around]
                 around &= around - 1
-                nc = cn + dir_delta[k]
-                if mark[nc] >= base:
-                    other = mark[nc] - base
-                    if other == REMOVED_LABEL:
-                        continue
-                    other = _group_root(parents, other)
-                    if other != label:
-                        parents ^= (other ^ label) << (4 * other)
-                        groups_left -= 1
-                        if groups_left == 1:
-                            return True
+                seen_label = mark[cn + dir_delta[k]] - base
+                seen = np.int64(seen_label >= 0)
+                fresh |= (seen ^ 1) << k
+                other = (roots >> (4 * (seen_label & 15))) & 15
+                met |= (seen & np.int64(other != label) & np.int64(seen_label != REMOVED_LABEL)) << k
+            while met:  # the groups join
+                k = LOWEST_BIT[met]
+                met &= met - 1
+                other = (roots >> (4 * (mark[cn + dir_delta[k]] - base))) & 15
+                if other == label:  # joined already through an earlier neighbour of this visit
                     continue
+                groups_left -= 1
+                if groups_left == 1:
+                    return True
+                for h in range(n_groups):
+                    if (roots >> (4 * h)) & 15 == other:
+                        roots ^= (other ^ label) << (4 * h)
+            target = directions[(start_directions >> (4 * ((g + 1) % n_groups))) & 15]
+            tx, ty, tz = x - target[0], y - target[1], z - target[2]
+            best_at, best_score = -1, 1 << 62
+            while fresh:  # pushed in direction order; the one nearest the target goes on top
+                k = LOWEST_BIT[fresh]
+                fresh &= fresh - 1
+                nc = cn + dir_delta[k]
                 mark[nc] = base + g
-                d = depth[g]
-                nx, ny, nz = x + directions[k, 0], y + directions[k, 1], z + directions[k, 2]
-                stacks[g, d, 0] = nc
-                stacks[g, d, 1] = nx
-                stacks[g, d, 2] = ny
-                stacks[g, d, 3] = nz
-                distance = (nx - target[0]) ** 2 + (ny - target[1]) ** 2 + (nz - target[2]) ** 2
-                if distance < best_distance:
-                    best_at, best_distance = d, distance
-                depth[g] = d + 1
-            if best_at >= 0:  # the neighbour nearest the target is explored next
-                top = depth[g] - 1
-                for f in range(4):
-                    stacks[g, top, f], stacks[g, best_at, f] = stacks[g, best_at, f], stacks[g, top, f]
-        for g in range(n_groups):  # a piece is cut off when all its merged groups ran out
-            if depth[g] > 0:
-                continue
-            root = _group_root(parents, g)
-            left = 0
-            for h in range(n_groups):
-                if _group_root(parents, h) == root:
-                    left += depth[h]
-            if left == 0:
-                return False
+                dx, dy, dz = directions[k, 0], directions[k, 1], directions[k, 2]
+                stacks[g, d] = _pack(nc, x + dx, y + dy, z + dz)
+                score = dx * tx + dy * ty + dz * tz  # the squared distance to the target, less constants
+                if score < best_score:
+                    best_at, best_score = d, score
+                d += 1
+            depth[g] = d
+            if best_at >= 0:
+                stacks[g, d - 1], stacks[g, best_at] = stacks[g, best_at], stacks[g, d - 1]
+            elif d == 0:  # this group ran out: its piece is cut off if its joined groups did too
+                left = 0
+                for h in range(n_groups):
+                    if (roots >> (4 * h)) & 15 == label:
+                        left += depth[h]
+                if left == 0:
+                    return False
 
 
 @kernel

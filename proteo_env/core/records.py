@@ -111,7 +111,7 @@ class Scratch(NamedTuple):
         mark: ``(cells,)`` int32 labels of the connectivity search.
         queue: ``(N,)`` int64 breadth-first queue.
         movers: ``(N,)`` int64 the agents that asked to move, in trial order.
-        stacks: ``(12, N, 4)`` int32 the connectivity search's stacks, one per neighbour group.
+        stacks: ``(12, N)`` int64 the connectivity search's stacks, one per neighbour group.
         search: ``(13,)`` int64 the connectivity search's epoch and stack tops.
         adjacency: ``(N, 13)`` int32 neighbour lists of the cut-module search.
         disc, low, stack_node, stack_k: ``(N,)`` int32 the cut-module search's arrays.
@@ -139,7 +139,7 @@ class Scratch(NamedTuple):
             mark=np.full(cells, -1, dtype=np.int32),
             queue=np.zeros(n, dtype=np.int64),
             movers=np.zeros(n, dtype=np.int64),
-            stacks=np.zeros((12, n, 4), dtype=np.int32),
+            stacks=np.zeros((12, n), dtype=np.int64),
             search=np.zeros(13, dtype=np.int64),
             adjacency=np.zeros((n, 13), dtype=np.int32),
             disc=np.zeros(n, dtype=np.int32),
