@@ -150,7 +150,12 @@ position relative to the module that leaves (10 bits an axis, two's complement).
 def _pack(c, x, y, z):
     """Stack entry of cell ``c`` at position ``(x, y, z)``: a position beyond 511 sites wraps,
     which changes only the search's order, never its answer."""
-    return c | ((x & 1023) << POSITION_SHIFT) | ((y & 1023) << (POSITION_SHIFT + 10)) | ((z & 1023) << (POSITION_SHIFT + 20))
+    return (
+        c
+        | ((x & 1023) << POSITION_SHIFT)
+        | ((y & 1023) << (POSITION_SHIFT + 10))
+        | ((z & 1023) << (POSITION_SHIFT + 20))
+    )
 
 
 @kernel
