@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import kernel
-from .lattice import DIRECTIONS, EMPTY, OBJECT, SOLID
+from .lattice import DIRECTIONS, EMPTY, OBJECT, SOLID, WALL
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SILENT, RELAY, EMIT = 0, 1, 2
@@ -512,6 +512,44 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 
 
 # ---------------------------------------------------------------- observations
+TABLE_SHIFT = -OBJECT
+"""Grid value ``v`` (a module index, or EMPTY/WALL/SOLID/OBJECT) is row ``v + TABLE_SHIFT`` of
+the tables of :func:`site_tables`."""
+
+
+@kernel
+def site_tables(mode, scent, scent_max):
+    """What a neighbour site shows, for every grid value: ``(kind_of, mode_of, scent_of)``,
+    ``(N + TABLE_SHIFT,)`` int8, ``(N + TABLE_SHIFT,)`` int32 and ``(N + TABLE_SHIFT, C)``
+    int32, row ``v + TABLE_SHIFT`` for grid value ``v``: a module's kind, mode and scents, and
+    for the other values their kind, mode -1 and ``scent_max``. The observation reads them
+    instead of branching on the value, which the processor cannot predict in a large world.
+    """
+    n_modules, n_channels = mode.shape[0], scent.shape[0]
+    kind_of = np.empty(n_modules + TABLE_SHIFT, np.int8)
+    mode_of = np.empty(n_modules + TABLE_SHIFT, np.int32)
+    scent_of = np.empty((n_modules + TABLE_SHIFT, n_channels), np.int32)
+    for v, kind in ((EMPTY, KIND_EMPTY), (WALL, KIND_SOLID), (SOLID, KIND_SOLID), (OBJECT, KIND_OBJECT)):
+        kind_of[v + TABLE_SHIFT] = kind
+        mode_of[v + TABLE_SHIFT] = -1
+        scent_of[v + TABLE_SHIFT] = scent_max
+    for n in range(n_modules):
+        kind_of[n + TABLE_SHIFT] = KIND_MODULE
+        mode_of[n + TABLE_SHIFT] = mode[n]
+        for ch in range(n_channels):
+            scent_of[n + TABLE_SHIFT, ch] = scent[ch, n]
+    return kind_of, mode_of, scent_of
+
+
+@kernel
+def _show_site(out, a, s, row, kind_of, mode_of, scent_of):
+    """Agent ``a``'s neighbour site ``s`` from row ``row`` of the :func:`site_tables`."""
+    out.neighbour_kind[a, s] = kind_of[row]
+    out.neighbour_mode[a, s] = mode_of[row]
+    for ch in range(scent_of.shape[1]):
+        out.neighbour_scent[a, s, ch] = scent_of[row, ch]
+
+
 @kernel
 def observe(state, settings, geometry, is_cut, out):
     """Fill the per-agent observation arrays of ``out`` (an :class:`~.records.Observation`,
@@ -533,7 +571,6 @@ def observe(state, settings, geometry, is_cut, out):
     )
     n_agents, keep_connected, scent_max = settings.n_agents, settings.keep_connected, settings.scent_max
     nb_delta, roll_delta, roll_table = geometry.neighbourhood_delta, geometry.roll_delta, geometry.roll_table
-    neighbour_kind, neighbour_mode, neighbour_scent = out.neighbour_kind, out.neighbour_mode, out.neighbour_scent
     own_mode, own_scent, messages, contact, action_mask = (
         out.own_mode,
         out.own_scent,
@@ -543,39 +580,22 @@ def observe(state, settings, geometry, is_cut, out):
     )
     n_channels = scent.shape[0]
     n_sites = nb_delta.shape[0]
+    kind_of, mode_of, scent_of = site_tables(mode, scent, scent_max)
     for a in range(n_agents):
         c = cell[a]
         blocked = 0
         modules = 0
-        ground = 0
-        touching = 0
-        for s in range(n_sites):
+        ground = False
+        touching = False
+        for s in range(12):  # the face neighbours: fields and bits, without branching on the value
             v = grid[c + nb_delta[s]]
-            if v >= 0:
-                neighbour_kind[a, s] = KIND_MODULE
-                neighbour_mode[a, s] = mode[v]
-                for ch in range(n_channels):
-                    neighbour_scent[a, s, ch] = scent[ch, v]
-                if s < 12:
-                    blocked |= 1 << s
-                    modules |= 1 << s
-                continue
-            neighbour_mode[a, s] = -1
-            for ch in range(n_channels):
-                neighbour_scent[a, s, ch] = scent_max
-            if v == EMPTY:
-                neighbour_kind[a, s] = KIND_EMPTY
-                continue
-            if v == OBJECT:
-                neighbour_kind[a, s] = KIND_OBJECT
-            else:
-                neighbour_kind[a, s] = KIND_SOLID
-            if s < 12:
-                blocked |= 1 << s
-                if v == SOLID:
-                    ground = 1
-                elif v == OBJECT:
-                    touching = 1
+            _show_site(out, a, s, v + TABLE_SHIFT, kind_of, mode_of, scent_of)
+            blocked |= np.int64(v != EMPTY) << s
+            modules |= np.int64(v >= 0) << s
+            ground |= v == SOLID
+            touching |= v == OBJECT
+        for s in range(12, n_sites):
+            _show_site(out, a, s, grid[c + nb_delta[s]] + TABLE_SHIFT, kind_of, mode_of, scent_of)
         own_mode[a, 0] = mode[a]
         for ch in range(n_channels):
             own_scent[a, ch] = scent[ch, a]
