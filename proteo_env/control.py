@@ -52,6 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from importlib import metadata
 
 import numpy as np
@@ -81,18 +82,18 @@ class ControlLevel:
     def __post_init__(self):
         check_level(self.name)
 
-    @property
+    @cached_property
     def n_fields(self) -> int:
         """How many leading fields of the full action the agent chooses (1, 2 or ``4 + C``)."""
         return {"move": 1, "move+mode": 2}.get(self.name, self.layout.length)
 
-    @property
+    @cached_property
     def fields(self) -> tuple[str, ...]:
         return tuple(self.layout.field_names[: self.n_fields])
 
-    @property
+    @cached_property
     def nvec(self) -> np.ndarray:
-        """``(n_fields,)`` number of values of each chosen field."""
+        """``(n_fields,)`` number of values of each chosen field (read-only)."""
         return self.layout.nvec[: self.n_fields]
 
 

@@ -33,6 +33,7 @@ scent role on channel ``c`` (0 silent, 1 relay, 2 emit), ``message_target`` a di
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from gymnasium import spaces
@@ -96,12 +97,15 @@ class ActionLayout:
     def length(self) -> int:
         return 4 + self.n_channels
 
-    @property
+    @cached_property
     def nvec(self) -> np.ndarray:
-        return np.array(
+        """``(length,)`` int64 number of values of each field (read-only; built once, read every step)."""
+        nvec = np.array(
             [N_MOVES, self.n_modes] + [3] * self.n_channels + [MESSAGE_TO_ALL + 1, self.n_message_values + 1],
             dtype=np.int64,
         )
+        nvec.setflags(write=False)
+        return nvec
 
     @property
     def move(self) -> int:
