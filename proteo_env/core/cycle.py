@@ -170,7 +170,8 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
 
     First local tests: if ``m``'s neighbours are connected to each other through ``m``'s other
     neighbours (:data:`FACES_JOINED`), or else through the modules within two hops of ``m``
-    (read only then), yes. Otherwise one depth-first search per group of neighbours runs in
+    (read only then), yes; if a group of them reaches no module two hops away, that group is a
+    whole piece, and no. Otherwise one depth-first search per group of neighbours runs in
     lockstep over the module graph (``m`` removed), each stepping first towards the next
     group's start. The searches stop when all groups have met (connected) or one group's
     stacks run out (that piece is cut off), so the cost is bounded by the size of the smallest
@@ -212,7 +213,10 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     remaining = touching
     while remaining:
         bit = remaining & -remaining
-        remaining &= ~_flood(bit, modules, local_adjacent)
+        reach = _flood(bit, modules, local_adjacent)
+        if reach >> 12 == 0:  # face neighbours alone (bits 0-11), no module two hops away: a cut-off piece
+            return False
+        remaining &= ~reach
         k = LOWEST_BIT[bit]
         start = c + dir_delta[k]
         mark[start] = base + n_groups
