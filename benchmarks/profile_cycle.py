@@ -118,7 +118,7 @@ def main() -> None:
     print("|---|" + "---|" * len(args.at))
     for name in next(iter(columns.values())):
         cells = [
-            f"{columns[at][name]:.2f}" if isinstance(columns[at][name], float) else f"{columns[at][name]:,}"
+            f"{columns[at][name]:.3f}" if isinstance(columns[at][name], float) else f"{columns[at][name]:,}"
             for at in args.at
         ]
         print(f"| {name} | " + " | ".join(cells) + " |")
