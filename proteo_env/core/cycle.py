@@ -20,6 +20,9 @@ KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
 LABEL_BITS = 16  # connectivity search: mark = epoch * LABEL_BITS + group label (or REMOVED_LABEL)
 REMOVED_LABEL = 15
 LAST_EPOCH = (2**31 - 1) // LABEL_BITS - 1  # int32 marks: past it, marks are cleared and epochs restart
+TABLE_SHIFT = -OBJECT
+"""Grid value ``v`` (a module index, or EMPTY/WALL/SOLID/OBJECT) is row ``v + TABLE_SHIFT`` of a
+table by grid value (:func:`site_tables`, the scent sweep), read instead of branching on ``v``."""
 
 
 # ---------------------------------------------------------------- random numbers
@@ -407,9 +410,8 @@ def deliver_messages(state, n_agents, actions, dir_delta, opposite):
         if value == 0:
             continue
         c = cell[a]
-        for k in range(12):
-            if target[a] != 12 and target[a] != k:
-                continue
+        first, last = (0, 12) if target[a] == 12 else (target[a], target[a] + 1)
+        for k in range(first, last):
             receiver = grid[c + dir_delta[k]]
             if receiver >= 0:
                 inbox[receiver, opposite[k]] = value
@@ -468,7 +470,10 @@ def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, sc
     neighbour value of the previous sweep (saturating at ``scent_max``). On a surface channel
     a relay with no empty neighbour relays nothing.
     """
+    shown = np.empty(n_modules + TABLE_SHIFT, np.int32)  # a site's value by grid value: no branch on it
+    shown[:TABLE_SHIFT] = scent_max
     for _ in range(sweeps):
+        shown[TABLE_SHIFT:] = values[:n_modules]
         for n in range(n_modules):
             r = role[n]
             if r == EMIT:
@@ -479,9 +484,7 @@ def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, sc
                 best = scent_max
                 cn = cell[n]
                 for k in range(12):
-                    nb = grid[cn + dir_delta[k]]
-                    if nb >= 0 and values[nb] < best:
-                        best = values[nb]
+                    best = min(best, shown[grid[cn + dir_delta[k]] + TABLE_SHIFT])
                 buffer[n] = min(best + 1, scent_max)
         values[:n_modules] = buffer[:n_modules]
 
@@ -516,11 +519,6 @@ def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, 
 
 
 # ---------------------------------------------------------------- observations
-TABLE_SHIFT = -OBJECT
-"""Grid value ``v`` (a module index, or EMPTY/WALL/SOLID/OBJECT) is row ``v + TABLE_SHIFT`` of
-the tables of :func:`site_tables`."""
-
-
 @kernel
 def site_tables(mode, scent, scent_max):
     """What a neighbour site shows, for every grid value: ``(kind_of, mode_of, scent_of)``,
