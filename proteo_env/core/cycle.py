@@ -121,6 +121,8 @@ LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1
 
 
 def _faces_joined() -> np.ndarray:
+    """:data:`FACES_JOINED`: a flood through each 12-bit set, face neighbours adjacent when their
+    difference is a direction."""
     adjacent = [
         sum(1 << j for j in range(12) if any((DIRECTIONS[i] - DIRECTIONS[j] == d).all() for d in DIRECTIONS))
         for i in range(12)
@@ -185,8 +187,9 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
     pack a cell with its position relative to ``m`` (:func:`_pack`). ``search`` (13,) holds the
     epoch in ``search[0]``, bumped so that ``mark`` needs clearing only when the epochs run out
     (:data:`LAST_EPOCH`), and the depth of each group's stack in ``search[1:13]``. Each group's
-    merged root and start direction are packed in two integers, so a search allocates nothing; a visit classifies its module
-    neighbours (new, or reached by another group) without branching on their labels.
+    merged root and start direction are packed in two integers, so a search allocates nothing.
+    A visit classifies its module neighbours (new, or reached by another group) without
+    branching on their labels.
     """
     dir_delta, directions = geometry.dir_delta, geometry.directions
     local_delta, local_adjacent = geometry.local_delta, geometry.local_adjacency
@@ -274,7 +277,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
                 mark[nc] = base + g
                 dx, dy, dz = directions[k, 0], directions[k, 1], directions[k, 2]
                 stacks[g, d] = _pack(nc, x + dx, y + dy, z + dz)
-                score = dx * tx + dy * ty + dz * tz  # the squared distance to the target, less constants
+                score = dx * tx + dy * ty + dz * tz  # |p + d - t|^2 less what every d shares: same order
                 if score < best_score:
                     best_at, best_score = d, score
                 d += 1
