@@ -142,6 +142,30 @@ def test_detach_test_and_cut_modules_match_a_full_search(kw, cycles, action_seed
         assert bool(cut[m]) == (not expected), f"module {m}: cut_modules disagrees with a full search"
 
 
+def _thin_loop(length: int, closed: bool) -> list[tuple[int, int, int]]:
+    """Two lines of ``length`` modules along (1, 1, 0), at z = 0 and z = 4, joined by a column at
+    the near end and, when ``closed``, by another at the far end: a loop about ``2 * length`` long."""
+    near = [(0, 0, 0), (1, 0, 1), (0, 0, 2), (1, 0, 3), (0, 0, 4)]
+    lines = [(i, i, z) for i in range(1, length + 1) for z in (0, 4)]
+    far = [(length + 1, length, 1), (length, length, 2), (length + 1, length, 3)] if closed else []
+    return near + lines + far
+
+
+def test_the_detach_search_is_exact_where_its_positions_pass_511_sites():
+    """The search packs each cell's position relative to the leaving module in 10 bits an axis;
+    beyond 511 sites they wrap, which may change the search's order but not its answer. The
+    near column's middle module joins the two lines only locally: without it, the lines meet 600
+    sites away (closed loop: it may leave) or not at all (open: a cut module)."""
+    for closed in (True, False):
+        positions = _thin_loop(600, closed)
+        kw = dict(size=(603, 603, 5), positions=positions, n_agents=len(positions), physics=Physics())
+        world, ref = World(**kw), ReferenceWorld(**kw)
+        m = positions.index((0, 0, 2))
+        assert world.n_components() == 1
+        assert world.can_detach(m) == ref.can_detach(m) == closed
+        assert bool(world.cut_modules()[m]) == (not closed)
+
+
 def _relax_only(world, roles):
     """A cycle in which nobody moves or sends: only the scents change (agents keep their modes)."""
     a = world.n_agents
