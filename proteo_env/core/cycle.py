@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import kernel
-from .lattice import DIRECTIONS, EMPTY, OBJECT, SOLID, WALL
+from .lattice import EMPTY, OBJECT, SOLID, WALL
+from .motion import LOCAL_ADJACENCY_BITS
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SILENT, RELAY, EMIT = 0, 1, 2
@@ -120,29 +121,10 @@ LOWEST_BIT = np.array([0] + [(word & -word).bit_length() - 1 for word in range(1
 """``(4096,)``: index of the lowest set bit of a 12-bit word (a table read instead of a loop)."""
 
 
-def _faces_joined() -> np.ndarray:
-    """:data:`FACES_JOINED`: a flood through each 12-bit set, face neighbours adjacent when their
-    difference is a direction."""
-    adjacent = [
-        sum(1 << j for j in range(12) if any((DIRECTIONS[i] - DIRECTIONS[j] == d).all() for d in DIRECTIONS))
-        for i in range(12)
-    ]
-    joined = np.zeros(4096, dtype=np.bool_)
-    for word in range(4096):
-        reached = word & -word
-        while True:
-            grown = reached
-            for i in range(12):
-                if (reached >> i) & 1:
-                    grown |= adjacent[i] & word
-            if grown == reached:
-                break
-            reached = grown
-        joined[word] = reached == word
-    return joined
-
-
-FACES_JOINED = _faces_joined()
+_flood_in_python = getattr(_flood, "py_func", _flood)  # plain Python at import (also with NUMBA_DISABLE_JIT)
+FACES_JOINED = np.array(
+    [word & ~_flood_in_python(word & -word, word, LOCAL_ADJACENCY_BITS) == 0 for word in range(4096)], dtype=np.bool_
+)
 """``(4096,)`` bool: whether a set of face neighbours (bit ``k``: direction ``k``) is connected
 through face neighbours of the set alone (true for the empty set and one neighbour)."""
 

@@ -104,6 +104,29 @@ The first 12 are :data:`DIRECTIONS`, so bit ``k`` of a local occupancy word is t
 move ``k``."""
 
 
+def _local_adjacency_bits() -> np.ndarray:
+    """``(7, 256)`` int64: entry ``[i, byte]`` holds the bits of the local sites (of the 54
+    within two hops) adjacent to any of the sites ``8 i + j`` for the set bits ``j`` of ``byte``.
+    """
+    faces = {tuple(d) for d in DIRECTIONS}
+    site_bits = np.zeros(len(LOCAL_OFFSETS), dtype=np.int64)
+    for i, a in enumerate(LOCAL_OFFSETS):
+        for j, b in enumerate(LOCAL_OFFSETS):
+            if tuple(a - b) in faces:
+                site_bits[i] |= 1 << j
+    n_bytes = (len(LOCAL_OFFSETS) + 7) // 8
+    bits = np.zeros((n_bytes, 256), dtype=np.int64)
+    for i in range(n_bytes):
+        for byte in range(256):
+            for j in range(8):
+                if (byte >> j) & 1 and 8 * i + j < len(LOCAL_OFFSETS):
+                    bits[i, byte] |= site_bits[8 * i + j]
+    return bits
+
+
+LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
+
+
 def motion_bits(model: str) -> tuple[np.ndarray, np.ndarray]:
     """The model's tables as byte lookups over the sites its rolls involve, for the kernels.
 

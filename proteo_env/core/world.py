@@ -36,7 +36,7 @@ import numpy as np
 
 from . import cycle
 from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
-from .motion import LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
+from .motion import LOCAL_ADJACENCY_BITS, LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SCENT_ROLES = ("silent", "relay", "emit")
@@ -135,29 +135,6 @@ def _direction_adjacency() -> np.ndarray:
 
 
 DIRECTION_ADJACENCY = _direction_adjacency()
-
-
-def _local_adjacency_bits() -> np.ndarray:
-    """``(7, 256)`` int64: entry ``[i, byte]`` holds the bits of the local sites (of the 54
-    within two hops) adjacent to any of the sites ``8 i + j`` for the set bits ``j`` of ``byte``.
-    """
-    faces = {tuple(d) for d in DIRECTIONS}
-    site_bits = np.zeros(len(LOCAL_OFFSETS), dtype=np.int64)
-    for i, a in enumerate(LOCAL_OFFSETS):
-        for j, b in enumerate(LOCAL_OFFSETS):
-            if tuple(a - b) in faces:
-                site_bits[i] |= 1 << j
-    n_bytes = (len(LOCAL_OFFSETS) + 7) // 8
-    bits = np.zeros((n_bytes, 256), dtype=np.int64)
-    for i in range(n_bytes):
-        for byte in range(256):
-            for j in range(8):
-                if (byte >> j) & 1 and 8 * i + j < len(LOCAL_OFFSETS):
-                    bits[i, byte] |= site_bits[8 * i + j]
-    return bits
-
-
-LOCAL_ADJACENCY_BITS = _local_adjacency_bits()
 
 
 class World:
