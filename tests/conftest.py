@@ -42,6 +42,17 @@ def task_params(task_ids=None) -> list:
     return [pytest.param(t, marks=() if t in REPRESENTATIVE_TASKS else pytest.mark.slow, id=t) for t in ids]
 
 
+def reseal(folder: Path) -> None:
+    """Record in checkpoint ``folder``'s ``proteo.json`` the SHA-256 of its payload files as they
+    are now (a test that edits a payload file on purpose, as if its trainer had written it so)."""
+    import json
+
+    from training.common import payload_digests
+
+    meta = json.loads((folder / "proteo.json").read_text())
+    (folder / "proteo.json").write_text(json.dumps({**meta, "files": payload_digests(folder)}))
+
+
 def small_overrides(task_id: str, **extra) -> dict:
     """The small overrides of ``task_id`` (by its task name) updated with ``extra``."""
     name = proteo_env.TASKS[task_id].name

@@ -132,13 +132,14 @@ def git_head(cwd) -> str | None:
 def write_meta(folder: Path) -> dict:
     write_checkpoint_meta(
         folder,
-        algorithm="ppo",
+        algorithm="program-evolution",
         task="chain-v1",
         env_overrides={"n_modules": 8},
         encoder_spec=None,
         nvec=[13],
         agent_steps=10,
         seed=0,
+        extra={"control": "full"},
     )
     return read_meta(folder)
 

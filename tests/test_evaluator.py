@@ -122,7 +122,7 @@ def test_episodes_of_several_settings_and_tasks_in_one_call():
 def _network_checkpoint(folder, env, overrides, seed: int):
     """A checkpoint of a 16-unit NumPy MLP (CMA-ES's neural controller) with random weights."""
     from proteo_env.adapters.flatten import ObservationEncoder
-    from training.common import write_checkpoint_meta
+    from training.common import mlp_meta, write_checkpoint_meta
     from training.policies import NumpyMLP
 
     encoder = ObservationEncoder.for_env(env)
@@ -138,7 +138,7 @@ def _network_checkpoint(folder, env, overrides, seed: int):
         nvec=env.action_layout.nvec,
         agent_steps=0,
         seed=seed,
-        extra={"hidden": [16]},
+        extra=mlp_meta("full", [16]),
     )
     return folder
 

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+from conftest import reseal
 
 torch = pytest.importorskip("torch")
 
@@ -158,6 +159,7 @@ def test_a_checkpoint_saved_with_the_removed_options_at_their_neutral_values_res
     saved = yaml.safe_load((first / "args.yaml").read_text())
     saved.update(ppo.RETIRED)
     (first / "args.yaml").write_text(yaml.safe_dump(saved))
+    reseal(first)
     final = ppo.main(
         ["--resume", str(first), "--total-steps", "1000", "--tensorboard", "false", "--progress-bar", "false"]
     )

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import task_params
+from conftest import reseal, task_params
 
 import proteo_env
 from proteo_env.adapters.flatten import SCENT_SCALE, ObservationEncoder, flat_action_mask
@@ -157,6 +157,41 @@ def test_sb3_env_checker_and_vecenv():
             assert "terminal_observation" in infos[i]
         finished += sum("episode" in info for info in infos)
     assert finished >= 2  # each copy reported its episode once
+
+
+@pytest.mark.parametrize("level", ["move", "move+mode", "full"])
+def test_the_sb3_vecenv_declares_the_action_space_of_its_control_level_and_steps_its_own_samples(level):
+    pytest.importorskip("sb3_contrib")
+    from proteo_env.adapters.sb3 import ProteoVecEnv
+
+    venv = ProteoVecEnv("chain-v1", n_copies=2, seed=0, control=level, **TINY)
+    fields = {"move": 1, "move+mode": 2, "full": 5}[level]
+    assert venv.action_space.shape == (fields,) and list(venv.nvec[:1]) == [13]
+    venv.reset()
+    venv.action_space.seed(0)
+    for _ in range(3):
+        actions = np.stack([venv.action_space.sample() for _ in range(venv.num_envs)])
+        actions[:, 0] = 0  # stay is always legal; the other fields are the space's own samples
+        venv.step(actions)
+        assert venv.action_masks().shape == (venv.num_envs, int(venv.nvec.sum()))
+
+
+def test_a_maskable_ppo_trained_at_move_enters_the_protocol(tmp_path):
+    """MaskablePPO through training/sb3_ppo.py at control level move: its checkpoint records move
+    and is judged under v7 at move (its training unchecked: not a recipe of the protocol)."""
+    pytest.importorskip("sb3_contrib")
+    from training import sb3_ppo
+    from training.judging.judge import judge
+
+    env = json.dumps({"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
+    final = sb3_ppo.main(
+        ["--task", "chain-v1", "--control", "move", "--env", env, "--total-steps", "96", "--n-steps", "4",
+         "--n-envs", "2", "--minibatch-size", "48", "--n-epochs", "1", "--time-limit-minutes", "0",
+         "--tensorboard", "false", "--run-dir", str(tmp_path / "run")]
+    )  # fmt: skip
+    assert json.loads((final / "proteo.json").read_text())["control"] == "move"
+    doc = judge("v7", checkpoints=[final], out=tmp_path / "b", worlds_cap=2, workers=1, progress=False)
+    assert {(r["level"], r["training"]) for r in doc["rows"]} == {("move", "unchecked")}
 
 
 def _levels_of(task_id: str) -> list[str]:
@@ -521,6 +556,9 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
     broken = tmp_path / "broken"
     shutil.copytree(checkpoints["sb3"], broken)
     (broken / "model.zip").write_bytes(b"not a zip")
+    with pytest.raises(CheckpointError, match="model.zip': SHA-256 .* differs from"):
+        load_policy(broken, env)
+    reseal(broken)  # the damage written down as if the trainer had written it: the loader still refuses it
     with pytest.raises(CheckpointError, match="not a loadable MaskablePPO model"):
         load_policy(broken, env)
     bad_json = tmp_path / "bad_json"
@@ -531,6 +569,7 @@ def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
     wrong = tmp_path / "wrong_size"
     shutil.copytree(checkpoints["cma_neural"], wrong)
     np.save(wrong / "genome.npy", np.zeros(3, dtype=np.float32))
+    reseal(wrong)
     with pytest.raises(CheckpointError, match="not a genome"):
         load_policy(wrong, env)
     radius2 = proteo_env.make("chain-v0", obs_radius=2, **TINY)

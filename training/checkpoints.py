@@ -30,6 +30,7 @@ one message naming the path, what was found and what is allowed.
 
 from __future__ import annotations
 
+import json
 import os
 import warnings
 from pathlib import Path
@@ -40,7 +41,7 @@ from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 
-from .common import CheckpointError, read_meta
+from .common import CheckpointError, checkpoint_dir, read_meta
 from .policies import LogitsPolicy, NumpyMLP, torch_mlp
 
 
@@ -50,7 +51,7 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     task = env.task.task_id()
     if task_name(meta["task"]) != env.task.name:
         raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
-    trained, level = meta.get("control", "full"), getattr(env, "control", "full")
+    trained, level = meta["control"], getattr(env, "control", "full")
     if trained != level:
         raise CheckpointError(
             f"{where} was trained at control level {trained!r}; it cannot control {task!r} at "
@@ -59,11 +60,18 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     nvec = [int(n) for n in getattr(env, "control_nvec", env.action_layout.nvec)]
     if meta["nvec"] != nvec:
         raise CheckpointError(f"{where}: action nvec {meta['nvec']} does not match the environment's {nvec}")
-    # checkpoints written before an encoder option existed used its default
-    saved = None if meta.get("encoder") is None else {"message_encoding": "per_direction", **meta["encoder"]}
+    saved = meta["encoder"]
     options = ("scent_scale", "message_encoding")
-    encoder = ObservationEncoder.for_env(env, **({k: saved[k] for k in options} if saved else {}))
-    if saved is not None and saved != encoder.spec():
+    if not isinstance(saved, dict) or any(k not in saved for k in options):
+        raise CheckpointError(
+            f"{where}: encoder = {saved!r} is not allowed; allowed: the observation encoding's spec "
+            "(proteo_env.adapters.flatten.ObservationEncoder.spec)"
+        )
+    try:
+        encoder = ObservationEncoder.for_env(env, **{k: saved[k] for k in options})
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{where}: encoder = {saved!r} is not allowed: {err}") from None
+    if saved != encoder.spec():
         diff = {k: (saved.get(k), v) for k, v in encoder.spec().items() if saved.get(k) != v}
         raise CheckpointError(
             f"{where}: observation encoding does not match the environment (field: (checkpoint, env)) {diff}"
@@ -142,8 +150,8 @@ def network_policy(meta: dict, env, seed: int | None, deterministic: bool, logit
         label=meta.get("label", meta["algorithm"]),
         deterministic=deterministic,
         nvec=meta["nvec"],
-        memory=meta.get("memory", "none"),
-        sampled=meta.get("sampled", "all"),
+        memory=meta["memory"],
+        sampled=meta["sampled"],
     )
 
 
@@ -214,16 +222,21 @@ def program_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
 
     folder = Path(meta["dir"])
     try:
-        policy = make_policy("program", env, program=str(_need(folder / "program.yaml")), seed=seed)
+        policy = make_policy("program", env, program=str(_need(folder / "program.yaml", meta)), seed=seed)
     except ConfigError as err:
         raise CheckpointError(f"checkpoint {str(folder)!r}: program.yaml is not a valid program: {err}") from None
     policy.name = "program (program-evolution)"
     return policy
 
 
-def _need(file: Path) -> Path:
-    if not file.is_file():
-        raise CheckpointError(f"checkpoint {str(file.parent)!r}: {file.name} is missing")
+def _need(file: Path, meta: dict) -> Path:
+    """``file`` of the checkpoint of ``meta``, if ``proteo.json`` lists it (:func:`~training.common.read_meta`
+    has checked its SHA-256 then)."""
+    if file.name not in meta["files"]:
+        raise CheckpointError(
+            f"checkpoint {str(file.parent)!r}: {file.name} is not among the files proteo.json records "
+            f"({', '.join(meta['files']) or 'none'}); allowed: a checkpoint whose trainer wrote {file.name}"
+        )
     return file
 
 
@@ -233,7 +246,7 @@ def _sb3_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     from sb3_contrib import MaskablePPO
 
     try:
-        model = MaskablePPO.load(_need(file), device="cpu")
+        model = MaskablePPO.load(_need(file, meta), device="cpu")
     except CheckpointError:
         raise
     except Exception as err:  # a damaged zip raises many kinds of errors
@@ -261,7 +274,7 @@ def _torch_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     import torch
 
     try:
-        state = torch.load(_need(file), map_location="cpu", weights_only=True)
+        state = torch.load(_need(file, meta), map_location="cpu", weights_only=True)
         net = torch_mlp(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
         net.load_state_dict(state)
     except CheckpointError:
@@ -286,15 +299,15 @@ def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
 
     from training.networks import ARCHS, ActorCritic
 
-    arch = meta.get("arch", "mlp")
+    arch = meta["arch"]
     if meta.get("recurrent", 0) or arch not in ARCHS:
         raise CheckpointError(
             f"checkpoint {str(file)!r} has arch={arch!r}, recurrent={meta.get('recurrent', 0)!r}; allowed: a "
             f"feed-forward network of arch {', '.join(ARCHS)} (the lattice and recurrent networks were removed)"
         )
     try:
-        net = ActorCritic(encoder, meta["nvec"], arch, tuple(meta["hidden"]), memory=meta.get("memory", "none"))
-        net.load_state_dict(torch.load(_need(file), map_location="cpu", weights_only=True))
+        net = ActorCritic(encoder, meta["nvec"], arch, tuple(meta["hidden"]), memory=meta["memory"])
+        net.load_state_dict(torch.load(_need(file, meta), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise
     except Exception as err:
@@ -327,9 +340,8 @@ def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, wh
     wanted = {"task": task_name(task_id), **network, "encoder": encoder_spec}
     found = {
         "task": task_name(meta["task"]),
-        **{key: meta.get(key) for key in network},
-        "memory": meta.get("memory", "none"),  # saved before the memory existed: none
-        "encoder": meta.get("encoder"),
+        **{key: meta[key] for key in network},
+        "encoder": meta["encoder"],
     }
     for key, value in wanted.items():
         if found[key] != value:
@@ -337,14 +349,14 @@ def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, wh
                 f"{where} was trained with {key}={found[key]!r}; this run has {key}={value!r}; "
                 f"allowed: a checkpoint with {key}={value!r}"
             )
-    return torch.load(Path(meta["dir"]) / "policy.pt", map_location="cpu", weights_only=True)
+    return torch.load(_need(Path(meta["dir"]) / "policy.pt", meta), map_location="cpu", weights_only=True)
 
 
 def _numpy_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     file = folder / "genome.npy"
     net = NumpyMLP(encoder.size, int(sum(meta["nvec"])), tuple(meta["hidden"]))
     try:
-        genome = np.load(_need(file), allow_pickle=False)
+        genome = np.load(_need(file, meta), allow_pickle=False)
         net.set_flat(genome)
     except CheckpointError:
         raise
@@ -353,3 +365,58 @@ def _numpy_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
             f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: {type(err).__name__}: {err}"
         ) from None
     return net
+
+
+V1_DEFAULTS = {"control": "full", "arch": "mlp", "memory": "none", "sampled": "all", "activation": "tanh"}
+"""What the version-1 loaders assumed where a version-1 ``proteo.json`` says nothing (every network
+that training/ wrote then had tanh layers): :func:`migrate` writes it down."""
+
+
+def migrate(path) -> bool:
+    """Turn the version-1 checkpoint at ``path`` (a folder with ``proteo.json``) into version 2, in
+    place: the fields its loader assumed (:data:`V1_DEFAULTS`, the encoder's ``message_encoding``
+    and ``version``) written down, and the SHA-256 of every payload file (``files``). The payload
+    files are not touched, so the policy plays the same episodes. Returns whether it changed
+    anything (``False`` for a version-2 checkpoint); a checkpoint of neither version, or one that
+    does not load as version 2 afterwards, is a :class:`CheckpointError` and nothing is written.
+
+    Only for checkpoints that proteo's trainers wrote: it records what they built (tanh layers),
+    which a checkpoint assembled by hand need not have."""
+    from proteo_env.adapters.flatten import ENCODING_VERSION
+
+    from .common import CHECKPOINT_VERSION, META_FILE, check_meta, payload_digests
+    from .trainers import CHECKPOINT_FIELDS
+
+    folder = checkpoint_dir(path)
+    file = folder / META_FILE
+    try:
+        meta = json.loads(file.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
+    if not isinstance(meta, dict) or meta.get("version") not in (1, CHECKPOINT_VERSION):
+        raise CheckpointError(
+            f"checkpoint {str(folder)!r}: {META_FILE} version = "
+            f"{meta.get('version') if isinstance(meta, dict) else None!r} is not allowed; allowed: 1 (to migrate) or "
+            f"{CHECKPOINT_VERSION}"
+        )
+    if meta["version"] == CHECKPOINT_VERSION:
+        read_meta(folder)
+        return False
+    fields = CHECKPOINT_FIELDS.get(meta.get("algorithm"), ())
+    for key in fields:
+        if key in V1_DEFAULTS:
+            meta.setdefault(key, V1_DEFAULTS[key])
+    if isinstance(meta.get("encoder"), dict):
+        encoder = meta["encoder"]
+        meta["encoder"] = {
+            **encoder,
+            "message_encoding": encoder.get("message_encoding", "per_direction"),
+            "version": ENCODING_VERSION,
+        }
+    meta["version"] = CHECKPOINT_VERSION
+    meta["files"] = payload_digests(folder)
+    check_meta(meta, folder)
+    tmp = folder / (META_FILE + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=2))
+    os.replace(tmp, file)
+    return True

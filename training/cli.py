@@ -6,7 +6,8 @@
 interactive 3D page of a recorded episode), ``proteo figures`` (the paper's figures into
 ``docs/figures``), ``proteo eval`` (the comparison table), ``proteo sweep CONFIG`` (a grid
 of settings, policies and seeds) and ``proteo train TRAINER [flags]`` (a trainer of
-``training/``, the flags passed on unchanged). ``proteo --version`` prints the version.
+``training/``, the flags passed on unchanged), ``proteo migrate PATH`` (version-1 checkpoints to
+version 2). ``proteo --version`` prints the version.
 """
 
 from __future__ import annotations
@@ -53,6 +54,24 @@ def train(args) -> int:
         return result
     if result is not None:
         print(f"checkpoint: {result}")
+    return 0
+
+
+def migrate(args) -> int:
+    """``proteo migrate PATH...``: :func:`training.checkpoints.migrate` on every checkpoint under the paths."""
+    from training.checkpoints import migrate as migrate_one
+    from training.common import META_FILE
+
+    folders = []
+    for path in map(Path, args.paths):
+        found = [path] if (path / META_FILE).is_file() else sorted(m.parent for m in path.rglob(META_FILE))
+        if not found:
+            raise ValueError(
+                f"path {str(path)!r} holds no checkpoint (no {META_FILE} in it or below); allowed: checkpoint folders"
+            )
+        folders += found
+    changed = sum(migrate_one(folder) for folder in folders)
+    print(f"{changed} of {len(folders)} checkpoints migrated to version 2 (the others were already)")
     return 0
 
 
@@ -235,6 +254,13 @@ def main(argv=None) -> int:
     p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(t.name for t in TRAINERS)}")
     p.add_argument("flags", nargs=argparse.REMAINDER, help="the trainer's flags, e.g. --config FILE.yaml")
     p.set_defaults(func=train)
+
+    p = sub.add_parser(
+        "migrate",
+        help="rewrite version-1 checkpoints' proteo.json as version 2 (each file's SHA-256, the network's fields)",
+    )
+    p.add_argument("paths", nargs="+", help="checkpoint folders, or folders holding checkpoints at any depth")
+    p.set_defaults(func=migrate)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -41,7 +41,7 @@ import numpy as np
 
 from baselines.base import constructor_parameters
 from proteo_env.registry import task_name
-from training.common import parse_args, seed_everything
+from training.common import mlp_meta, parse_args, seed_everything
 from training.runs import GenerationalArgs, GenerationalRun
 
 
@@ -375,10 +375,10 @@ def main(argv=None) -> Path:
     def write(folder: Path, steps: int) -> None:
         mean = distribution_mean(es)
         if args.controller == "rules":
-            extra = {"policy": policy_name, "params": decode(mean)}
+            extra = {"control": "full", "policy": policy_name, "params": decode(mean)}
         else:
             np.save(folder / "genome.npy", mean.astype(np.float32))
-            extra = {"hidden": list(args.hidden)}
+            extra = mlp_meta("full", args.hidden)
         run.write_meta(
             folder,
             task=env.task.task_id(),

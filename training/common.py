@@ -10,9 +10,11 @@ Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
     final/             the checkpoint at the end
 
 Checkpoint folder: ``proteo.json`` (format, algorithm, task, env overrides, observation
-encoding, action ``nvec``, steps, seed, and the ``proteo_version`` and git ``commit`` that
-wrote it) beside the algorithm's own files. Any checkpoint loads
-by path with :func:`training.checkpoints.load_policy`.
+encoding and its version, action ``nvec``, steps, seed, what rebuilds the network exactly (the
+fields its trainer registers: layer sizes, activation, ...), the SHA-256 of every payload file
+(``files``), and the ``proteo_version`` and git ``commit`` that wrote it) beside the algorithm's
+own files. Any checkpoint loads by path with :func:`training.checkpoints.load_policy`, after
+:func:`read_meta` has checked every field and every file's digest.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import hashlib
 import json
 import os
 import random
@@ -32,10 +35,12 @@ import numpy as np
 import yaml
 
 from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
-from training.trainers import ALGORITHMS
+from training.trainers import ALGORITHMS, CHECKPOINT_FIELDS
 
 CHECKPOINT_FORMAT = "proteo-checkpoint"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2
+"""Version 2 records each payload file's SHA-256 and every field that rebuilds the network (version 1:
+neither; :func:`training.checkpoints.migrate` turns one into the other)."""
 META_FILE = "proteo.json"
 
 
@@ -316,30 +321,96 @@ def checkpoint_dir(path) -> Path:
 
 
 def read_meta(path) -> dict:
-    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added)."""
+    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added): its format
+    and version, its algorithm, every field the algorithm's trainer registers
+    (:data:`training.trainers.CHECKPOINT_FIELDS`) and the SHA-256 of every file it lists; anything
+    else is one :class:`CheckpointError` naming the file and the field."""
     folder = checkpoint_dir(path)
     try:
         meta = json.loads((folder / META_FILE).read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
+    return {**check_meta(meta, folder), "dir": str(folder)}
+
+
+def check_meta(meta, folder: Path) -> dict:
+    """``meta``, the contents of the ``proteo.json`` of checkpoint ``folder``, if it passes
+    :func:`read_meta`'s checks (else one :class:`CheckpointError`)."""
+    where = f"checkpoint {str(folder)!r}: {META_FILE}"
     if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(
-            f"checkpoint {str(folder)!r}: {META_FILE} has format "
-            f"{meta.get('format') if isinstance(meta, dict) else None!r}; allowed: {CHECKPOINT_FORMAT!r}"
+            f"{where} has format {meta.get('format') if isinstance(meta, dict) else None!r}; "
+            f"allowed: {CHECKPOINT_FORMAT!r}"
         )
     if meta.get("version") != CHECKPOINT_VERSION:
+        migrate = " (migrate it: proteo migrate PATH)" if meta.get("version") == 1 else ""
         raise CheckpointError(
-            f"checkpoint {str(folder)!r}: version {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}"
+            f"{where}: version = {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}{migrate}"
         )
     if meta.get("algorithm") not in ALGORITHMS:
         raise CheckpointError(
-            f"checkpoint {str(folder)!r}: algorithm {meta.get('algorithm')!r} is not allowed; "
-            f"allowed: {', '.join(ALGORITHMS)}"
+            f"{where}: algorithm = {meta.get('algorithm')!r} is not allowed; allowed: {', '.join(ALGORITHMS)}"
         )
-    for key in ("task", "nvec"):
+    for key in ("task", "nvec", "files", *CHECKPOINT_FIELDS[meta["algorithm"]]):
         if key not in meta:
-            raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} lacks {key!r}")
-    return {**meta, "dir": str(folder)}
+            raise CheckpointError(
+                f"{where} lacks {key!r}; allowed: a {meta['algorithm']!r} checkpoint records "
+                f"{', '.join(('task', 'nvec', 'files', *CHECKPOINT_FIELDS[meta['algorithm']]))}"
+            )
+    if "activation" in meta and meta["activation"] not in ACTIVATIONS:
+        raise CheckpointError(
+            f"{where}: activation = {meta['activation']!r} is not allowed; allowed: {', '.join(ACTIVATIONS)} (what "
+            "training/ builds; a network of another activation enters the benchmark as a TorchScript or ONNX file, "
+            "docs/guides/entering.md)"
+        )
+    files = meta["files"]
+    if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
+        raise CheckpointError(f"{where}: files = {files!r} is not allowed; allowed: {{file name: sha256 hex digest}}")
+    for name, digest in files.items():
+        file = folder / name
+        if Path(name).name != name or not file.is_file():
+            raise CheckpointError(
+                f"{where}: files lists {name!r}, which is not a file in {str(folder)!r}; allowed: the payload files "
+                "the trainer wrote beside proteo.json"
+            )
+        if sha256_of(file) != digest:
+            raise CheckpointError(
+                f"checkpoint {str(file)!r}: SHA-256 {sha256_of(file)[:16]}... differs from the "
+                f"{digest[:16]}... that {META_FILE} records: the file changed after it was written (damaged or "
+                "edited); allowed: the file as its trainer wrote it"
+            )
+    return meta
+
+
+ACTIVATIONS = ("tanh",)
+"""The activations of the networks ``training/`` builds (:mod:`training.networks`,
+:class:`training.policies.NumpyMLP`, the SB3 and TorchRL actors)."""
+
+
+def sha256_of(file: Path) -> str:
+    """The SHA-256 hex digest of ``file``'s bytes."""
+    digest = hashlib.sha256()
+    with open(file, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def mlp_meta(control: str, hidden) -> dict:
+    """What a checkpoint records of a plain network (:data:`~training.trainers.NETWORK_FIELDS` but
+    the encoder): control level ``control``, tanh layers of sizes ``hidden``, no memory, every field
+    sampled."""
+    return {"control": control, "hidden": list(hidden), "activation": "tanh", "memory": "none", "sampled": "all"}
+
+
+def payload_digests(folder: Path) -> dict[str, str]:
+    """``{name: sha256}`` of every file directly in a checkpoint ``folder`` but ``proteo.json``
+    (what ``files`` in ``proteo.json`` records)."""
+    return {
+        p.name: sha256_of(p)
+        for p in sorted(Path(folder).iterdir())
+        if p.is_file() and p.name != META_FILE and not p.name.endswith(".tmp")
+    }
 
 
 def write_checkpoint_meta(
@@ -354,7 +425,9 @@ def write_checkpoint_meta(
     seed: int,
     extra: dict | None = None,
 ) -> None:
-    """Write ``proteo.json`` into a checkpoint folder (its payload files are the caller's)."""
+    """Write ``proteo.json`` into a checkpoint folder, after its payload files (the caller's): it
+    records their SHA-256 (``files``), so the caller writes them first."""
+    folder.mkdir(parents=True, exist_ok=True)
     meta = {
         "format": CHECKPOINT_FORMAT,
         "version": CHECKPOINT_VERSION,
@@ -368,8 +441,11 @@ def write_checkpoint_meta(
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
         **provenance(),
         **(extra or {}),
+        "files": payload_digests(folder),
     }
-    folder.mkdir(parents=True, exist_ok=True)
+    missing = [key for key in CHECKPOINT_FIELDS[algorithm] if key not in meta]
+    if missing:  # a trainer's own mistake: its checkpoint would not load
+        raise ValueError(f"a {algorithm!r} checkpoint must record {', '.join(missing)}")
     tmp = folder / (META_FILE + ".tmp")
     tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
     os.replace(tmp, folder / META_FILE)

@@ -292,7 +292,7 @@ def main(argv=None) -> Path:
             nvec=env.action_layout.nvec,
             agent_steps=steps,
             generation=generation,
-            extra={"fitness": best_fitness, "complexity": complexity(population[0])},
+            extra={"control": "full", "fitness": best_fitness, "complexity": complexity(population[0])},
         )
 
     episode_score = EPISODE_SCORES[args.fitness]

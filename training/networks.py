@@ -25,8 +25,15 @@ def check_arch(arch) -> str:
 
 def network_meta(args) -> dict:
     """What a checkpoint of :mod:`training.ppo` or :mod:`training.imitate` records of its network
-    (from the script's ``args``): the control level, the architecture, the layer sizes and the memory."""
-    return {"control": args.control, "arch": args.arch, "hidden": list(args.hidden), "memory": args.memory}
+    (from the script's ``args``): the control level, the architecture, the layer sizes, their
+    activation (tanh: :func:`hidden_layers`) and the memory."""
+    return {
+        "control": args.control,
+        "arch": args.arch,
+        "hidden": list(args.hidden),
+        "activation": "tanh",
+        "memory": args.memory,
+    }
 
 
 def hidden_layers(in_dim: int, hidden: tuple[int, ...]) -> list[nn.Module]:

@@ -40,6 +40,7 @@ from training.common import (
     ProgressLog,
     checkpoint_folder,
     make_run_dir,
+    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
@@ -236,8 +237,7 @@ def save_checkpoint(
         seed=args.seed,
         extra={
             "label": "rllib-ppo",
-            "control": "move",
-            "hidden": list(args.hidden),
+            **mlp_meta("move", args.hidden),
             "run_dir": str(run_dir),
             "iteration": iteration,
             "args": asdict(args),

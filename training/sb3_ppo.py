@@ -23,12 +23,14 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from proteo_env.control import check_level
 from proteo_env.registry import task_name
 from training.common import (
     ProgressLog,
     checkpoint_folder,
     episode_stats,
     make_run_dir,
+    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
@@ -47,6 +49,8 @@ class Args(PPOArgs):
 
     vf_coef: float = 0.5
     """Weight of the value loss in the loss."""
+    control: str = "full"
+    """The control level: full, move+mode or move (the fields the policy chooses; the task's rules fill in the rest)."""
     hidden: tuple[int, ...] = (64, 64)
     """Widths of the tanh hidden layers of the policy's and of the value's separate MLPs (SB3's ``net_arch``)."""
     device: str = "cpu"
@@ -55,6 +59,7 @@ class Args(PPOArgs):
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
+    check_level(args.control)
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
 
@@ -71,7 +76,7 @@ def main(argv=None) -> Path:
         resume=resume_meta is not None,
     )
     save_args(args, run_dir)
-    venv = ProteoVecEnv(args.task, n_copies=args.n_envs, seed=args.seed, **args.env)
+    venv = ProteoVecEnv(args.task, n_copies=args.n_envs, seed=args.seed, control=args.control, **args.env)
     tb_dir = str(run_dir / "tb") if args.tensorboard else None
     if resume_meta is not None:
         model = MaskablePPO.load(
@@ -110,7 +115,12 @@ def main(argv=None) -> Path:
             nvec=venv.nvec,
             agent_steps=model.num_timesteps,
             seed=args.seed,
-            extra={"label": "sb3-ppo", "hidden": list(args.hidden), "run_dir": str(run_dir), "args": asdict(args)},
+            extra={
+                "label": "sb3-ppo",
+                **mlp_meta(args.control, args.hidden),
+                "run_dir": str(run_dir),
+                "args": asdict(args),
+            },
         )
 
     class Progress(BaseCallback):

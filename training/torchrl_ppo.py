@@ -33,6 +33,7 @@ from training.common import (
     checkpoint_folder,
     episode_stats,
     make_run_dir,
+    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
@@ -195,9 +196,8 @@ def main(argv=None) -> Path:
             agent_steps=agent_steps,
             seed=args.seed,
             extra={
-                "control": args.control,
+                **mlp_meta(args.control, args.hidden),
                 "label": f"torchrl-{args.variant}",
-                "hidden": list(args.hidden),
                 "run_dir": str(run_dir),
                 "args": asdict(args),
             },

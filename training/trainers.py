@@ -86,6 +86,24 @@ TRAINERS = (
 ALGORITHMS = {algorithm: trainer for trainer in TRAINERS for algorithm in trainer.algorithms}
 """The trainer of each checkpoint ``algorithm``."""
 
+NETWORK_FIELDS = ("control", "encoder", "hidden", "activation", "memory", "sampled")
+"""What a network checkpoint records to rebuild its network and feed it exactly: the control level,
+the observation encoding (:meth:`~proteo_env.adapters.flatten.ObservationEncoder.spec`, with its
+version), the hidden layer sizes, the activation, the memory inputs and the fields it samples."""
+CHECKPOINT_FIELDS = {
+    "ppo": (*NETWORK_FIELDS, "arch"),
+    "imitation": (*NETWORK_FIELDS, "arch"),
+    "cma-rules": ("control", "policy", "params"),
+    "cma-neural": NETWORK_FIELDS,
+    "program-evolution": ("control",),
+    "sb3-maskable-ppo": NETWORK_FIELDS,
+    "torchrl-ppo": NETWORK_FIELDS,
+    "rllib-ppo": NETWORK_FIELDS,
+}
+"""The fields of ``proteo.json`` every checkpoint of an ``algorithm`` must have (besides ``task``,
+``nvec`` and ``files``): :func:`training.common.read_meta` refuses one without them, and no loader
+fills one in with a default."""
+
 
 def trainer(name: str) -> Trainer:
     """The registered trainer ``name`` (``-`` read as ``_``); a ``ValueError`` naming the allowed ones."""

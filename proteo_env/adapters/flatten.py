@@ -54,6 +54,10 @@ from ..spaces import N_MOVES
 
 SCENT_SCALE = 16
 """Scent values at or above this read as "far" (1.0) in the ``*_scent_value`` blocks."""
+ENCODING_VERSION = 1
+"""The version of the blocks above: their order, sizes and values. A change to any of them is a new
+version, so that a network is never fed an encoding it was not trained on (it is in
+:meth:`ObservationEncoder.spec`, which every checkpoint and entrant records)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,10 @@ class ObservationEncoder:
     message_encoding: str = "per_direction"
 
     def __post_init__(self):
+        for name in ("n_sites", "n_channels", "n_modes", "n_message_values", "scent_max", "scent_scale"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name}={value!r} is not allowed; allowed: an integer >= 1")
         if self.message_encoding not in MESSAGE_ENCODINGS:
             raise ValueError(
                 f"message_encoding={self.message_encoding!r} is not allowed; allowed: "
@@ -149,8 +157,9 @@ class ObservationEncoder:
         return np.array([part.start for part in self.slices.values()], dtype=np.int64)
 
     def spec(self) -> dict:
-        """Plain-dict description (stored in checkpoints and compared on load)."""
-        return {**asdict(self), "size": self.size}
+        """Plain-dict description (stored in checkpoints and compared on load): the fields, the
+        feature vector's ``size`` and the encoding's ``version`` (:data:`ENCODING_VERSION`)."""
+        return {**asdict(self), "size": self.size, "version": ENCODING_VERSION}
 
     # ------------------------------------------------------------------ encoding
     def encode_buffers(self, buffers) -> np.ndarray:

@@ -52,8 +52,10 @@ class ProteoVecEnv(VecEnv):
         **overrides: passed to :func:`proteo_env.make` (``n_modules``, ``max_cycles``, ...).
 
     Spaces:
-        observation ``Box(float32, (D,))`` with ``D = encoder.size``; action the env's
-        ``MultiDiscrete`` ``[move, mode, role_0..role_{C-1}, message_target, message_value]``.
+        observation ``Box(float32, (D,))`` with ``D = encoder.size``; action the ``MultiDiscrete``
+        of the fields the agent chooses at the env's control level (``overrides["control"]``):
+        ``[move, mode, role_0..role_{C-1}, message_target, message_value]`` at ``full``, ``[move]``
+        at ``move``, ``[move, mode]`` at ``move+mode`` (the task's rules fill in the rest).
     """
 
     def __init__(self, task_id: str, *, n_copies: int = 1, seed: int | None = None, **overrides):
@@ -66,7 +68,7 @@ class ProteoVecEnv(VecEnv):
         self.n_agents = len(first.possible_agents)
         self.n_copies = n_copies
         self.encoder = ObservationEncoder.for_env(first)
-        self.nvec = first.action_layout.nvec
+        self.nvec = first.control_nvec
         action_space = gym.spaces.MultiDiscrete(self.nvec)
         super().__init__(n_copies * self.n_agents, _observation_box(self.encoder), action_space)
         if seed is not None:
@@ -204,7 +206,7 @@ class ProteoAgentEnv(gym.Env):
         self.env = make(task_id, **overrides)
         self.agent = agent
         self.encoder = ObservationEncoder.for_env(self.env)
-        self.nvec = self.env.action_layout.nvec
+        self.nvec = self.env.control_nvec
         self.observation_space = _observation_box(self.encoder)
         self.action_space = gym.spaces.MultiDiscrete(self.nvec)
         self.co_policy = co_policy or _random_legal
@@ -234,8 +236,8 @@ class ProteoAgentEnv(gym.Env):
 
 
 def _random_legal(env, buffers, rng: np.random.Generator) -> np.ndarray:
-    """Uniform legal moves, every other field uniform (the random baseline, vectorised)."""
-    nvec = env.action_layout.nvec
+    """Uniform legal moves, every other field of the control level uniform (the random baseline, vectorised)."""
+    nvec = env.control_nvec
     actions = rng.integers(0, nvec, size=(buffers.action_mask.shape[0], len(nvec)))
     actions[:, 0] = (rng.random(buffers.action_mask.shape) * buffers.action_mask).argmax(axis=1)
     return actions
