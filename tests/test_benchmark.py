@@ -216,7 +216,7 @@ def _recipe_checkpoint(tmp_path: Path, source: str, folder: str, **changes) -> s
     meta = json.loads((target / "proteo.json").read_text())
     meta["args"].update(changes.pop("args", {}))
     meta.update(changes)
-    (target / "proteo.json").write_text(json.dumps(meta))
+    (target / "proteo.json").write_text(json.dumps({k: v for k, v in meta.items() if v is not None}))
     return str(target)
 
 
@@ -252,14 +252,31 @@ def test_a_recipe_checkpoint_off_the_protocol_is_refused(tmp_path, source, folde
     seed 7 (train ten, submit the best five), another setting, or stopped early, it is refused."""
     path = _recipe_checkpoint(tmp_path, source, folder, **changes)
     with pytest.raises(ConfigError, match=named):
-        judge.entrants(load_protocol("v6"), checkpoints=[path])
+        judge.candidates(load_protocol("v6"), checkpoints=[path])
+
+
+def test_a_recipe_is_recognised_by_what_its_checkpoint_records_not_by_its_folder(tmp_path):
+    """The published checkpoint in a folder named otherwise is still its recipe, and checked as one
+    (with seed 12345 and one agent-step it is refused); without the record, in a folder named like a
+    recipe, it is judged but its rows say that its training was not checked."""
+    source = "checkpoints/v7/chain/ppo_move/seed_0"
+    protocol = load_protocol("v7")
+    renamed = _recipe_checkpoint(tmp_path / "a", source, "my_run")
+    (candidate,) = judge.candidates(protocol, checkpoints=[renamed])
+    assert (candidate.recipe, candidate.label, candidate.training) == ("ppo-move", "ppo-move", "protocol")
+    off = _recipe_checkpoint(tmp_path / "b", source, "my_run", seed=12345, agent_steps=1)
+    with pytest.raises(ConfigError, match="training seed = 12345 is not allowed"):
+        judge.candidates(protocol, checkpoints=[off])
+    unrecorded = _recipe_checkpoint(tmp_path / "c", source, "ppo_move", seed=12345, agent_steps=1, recipe=None)
+    (candidate,) = judge.candidates(protocol, checkpoints=[unrecorded])
+    assert (candidate.recipe, candidate.label, candidate.training) == (None, "ppo_move", "unchecked")
 
 
 def test_every_published_recipe_checkpoint_is_a_run_of_its_recipe():
     for folder in sorted(ROOT.glob("checkpoints/v[1-9]/*/*_*")):
         protocol = load_protocol(folder.parent.parent.name)  # the tree's own protocol (v7 extends none)
         seeds = sorted(str(p) for p in folder.glob("seed_*"))
-        (entrant,) = judge.entrants(protocol, checkpoints=seeds)
+        (entrant,) = judge.candidates(protocol, checkpoints=seeds)
         assert entrant.recipe is not None and len(entrant.checkpoints) == protocol.training_seeds
 
 
@@ -316,7 +333,8 @@ def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, name
         (["--benchmark", "v1", "--policy", "rules", "--level", "move+mode"], ["'move+mode'", "full, move"]),
         (["--benchmark", "v1", "--policy", "rules", "--worlds-cap", "0"], ["--worlds-cap = 0", ">= 1"]),
         (["--benchmark", "v1", "--policy", "rules", "--tasks", "snake"], ["--tasks 'snake'", "chain"]),
-        (["--benchmark", "v1"], ["neither --checkpoint nor --policy"]),
+        (["--benchmark", "v1"], ["none of --checkpoint, --policy, --entrant"]),
+        (["--benchmark", "v1", "--policy", "rules", "--entrant", "x:y"], ["--policy and --entrant", "allowed: one of"]),
         (["--benchmark", "v1", "--policy", "rules", "--seeds", "3"], ["--seeds", "not allowed"]),
         (
             [

@@ -346,3 +346,32 @@ def test_one_more_seed_gives_every_split_an_interval_of_success_and_of_cycles_to
     )
     two = st.t_quantile(1) * np.std([90, 70], ddof=1) * np.sqrt(1 + 1 / 2)  # the seed without success left out
     assert f"| grasp | blob | clone | 3 | 0.00-0.40 | 0.20 | 0.00-1.00 | 70-90 (2) | 80 | 0-{80 + two:.0f} |" in lines
+
+
+def test_an_entrant_is_published_in_its_own_section_and_named_as_declared_everywhere(tmp_path):
+    """An entrant's rows (training declared) stay out of the recipes' sections, which read as without
+    it; its own section gives its declared budget and its paired difference from the rules, and the
+    held-out table and marl-eval's file name it "(declared)"."""
+    folder, protocol = _bench(tmp_path, 0.3), load_protocol("v1")
+
+    def page() -> tuple[str, list]:
+        rows, headers = results.read_rows(folder.parent, protocol.lineage)
+        return results.render(rows, headers, "v1", tmp_path / "bench", tmp_path / "docs/results.md", protocol), rows
+
+    before, _ = page()
+    seeds = [[True] * 19 + [False]] * 3
+    _write(folder, "grasp", "outside", "learned", "move", {"heldout": seeds, "larger": seeds})
+    file = folder / "grasp/outside/benchmark.json"
+    document = json.loads(file.read_text())
+    declared = {"name": "outside", "training_seeds": [0, 1, 2], "budget": {"agent_steps": 5000}, "code": "https://x"}
+    for row in document["rows"]:
+        row.update(recipe=None, training="declared", declared=declared)
+    file.write_text(json.dumps(document))
+    text, rows = page()
+    main, _, section = text.partition("## Entrants: training declared, not verified")
+    assert main == before.replace("Judged by commit(s): abc.\n", "")
+    assert "outside" not in main
+    assert "| outside (declared) | grasp | move | 3 seeds | agent_steps 5,000 | https://x | heldout | 57/60" in section
+    assert "-0.05 (-0.15 to +0.00) (rules)" in section  # 0.95 against the rules' 1.00 on the same 20 worlds
+    assert "| outside (declared) |" in results.heldout_table(rows, protocol)
+    assert "outside (declared)" in results.marl_eval_layout(rows)["proteo-grasp"]["heldout"]

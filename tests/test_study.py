@@ -38,6 +38,9 @@ def test_a_tiny_study_keeps_each_seed_s_checkpoint_progress_and_curves(tmp_path)
     for seed in (0, 1):
         meta = read_meta(keep / "chain" / "ppo_move" / f"seed_{seed}")
         assert meta["seed"] == seed and meta["control"] == "move" and meta["agent_steps"] > 0
+        assert (
+            meta["recipe"] == "ppo-move" and "trainer.pt" not in meta["files"]
+        )  # recorded; read_meta checked the rest
         assert (docs / "progress" / f"ppo_chain_move_s{seed}.csv").is_file()
     assert (docs / "curves_ppo_chain_move.png").stat().st_size > 0
 
@@ -105,7 +108,7 @@ def test_a_study_that_fails_part_way_keeps_the_record_of_every_run_it_finished(t
             self.returncode = int(cmd[cmd.index("--seed") + 1])
             if self.returncode == 0:
                 (run_dir / "final").mkdir(parents=True)
-                (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123}))
+                (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123, "files": {}}))
                 (run_dir / "progress.csv").write_text("seconds,agent_steps\n1.0,123\n")
 
         def poll(self):
@@ -199,7 +202,7 @@ def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path
         def __init__(self, cmd, *a, **k):
             run_dir = Path(cmd[cmd.index("--run-dir") + 1])
             (run_dir / "final").mkdir(parents=True)
-            (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123}))
+            (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123, "files": {}}))
             (run_dir / "progress.csv").write_text("seconds,agent_steps\n1.0,123\n")
 
         def poll(self):

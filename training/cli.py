@@ -214,11 +214,17 @@ def main(argv=None) -> int:
         "--benchmark",
         default=None,
         metavar="VERSION",
-        help="judge --checkpoint (one recipe's training seeds) or --policy on every split of "
+        help="judge --checkpoint (one recipe's training seeds), --entrant or --policy on every split of "
         "configs/benchmark/VERSION.yaml; writes OUT/benchmark.json and benchmark.md",
     )
+    b.add_argument(
+        "--entrant",
+        default=None,
+        help="with --benchmark: a policy from outside, its entrant.yaml (or folder), or a factory module:function "
+        "with --tasks and --level (docs/guides/entering.md)",
+    )
     b.add_argument("--policy", default=None, help="with --benchmark: rules or random (every task, or --tasks)")
-    b.add_argument("--level", default=None, help="with --benchmark --policy: only this control level")
+    b.add_argument("--level", default=None, help="with --benchmark --policy (or a factory): only this control level")
     b.add_argument(
         "--worlds-cap",
         type=int,

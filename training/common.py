@@ -531,6 +531,19 @@ def save_network_checkpoint(folder: Path, net, args, run_dir: Path, *, trainer: 
     write_checkpoint_meta(folder, **meta)
 
 
+def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt",), **fields) -> None:
+    """Copy the checkpoint ``source`` to ``dest`` (replaced) without the files ``drop`` (what only a
+    resumed run needs), its ``proteo.json`` with ``fields`` added and ``files`` left without them."""
+    import shutil
+
+    if dest.exists():
+        shutil.rmtree(dest)
+    shutil.copytree(source, dest, ignore=shutil.ignore_patterns(*drop))
+    meta = json.loads((dest / META_FILE).read_text())
+    meta.update(fields, files={k: v for k, v in meta["files"].items() if k not in drop})
+    (dest / META_FILE).write_text(json.dumps(meta, indent=2, default=_json_default))
+
+
 def trainer_state(optimiser, **extra) -> dict:
     """What ``trainer.pt`` holds: the optimiser's state, torch's random state and ``extra``."""
     import torch

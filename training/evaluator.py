@@ -66,12 +66,16 @@ class Controller:
             ``("program", text)``; evolved rule parameters).
         checkpoint: ``policy`` is a checkpoint (:func:`training.checkpoints.load_policy`).
         deterministic: a network checkpoint takes each field's arg-max.
+        entrant: ``policy`` is an entrant from outside: an ``entrant.yaml`` or a factory
+            ``module:function`` (:mod:`training.judging.entrants`); ``params`` holds its
+            ``training_seed``.
     """
 
     policy: str
     params: tuple = ()
     checkpoint: bool = False
     deterministic: bool = False
+    entrant: bool = False
 
     @classmethod
     def rules(cls, name: str, **params) -> Controller:
@@ -87,9 +91,19 @@ class Controller:
     def from_checkpoint(cls, path, *, deterministic: bool = False) -> Controller:
         return cls(str(path), checkpoint=True, deterministic=deterministic)
 
-    def build(self, env, seed: int):
-        """This controller's policy for ``env`` (an env of the episode's task, settings and level), reset with ``seed``."""
-        if self.checkpoint:
+    @classmethod
+    def from_entrant(cls, source, *, training_seed: int | None = None) -> Controller:
+        """An entrant (an ``entrant.yaml``, its folder, or a factory ``module:function``), with the
+        file of ``training_seed`` where its ``entrant.yaml`` names one per training seed."""
+        return cls(str(source), (("training_seed", training_seed),), entrant=True)
+
+    def build(self, env, seed: int, settings: dict | None = None):
+        """This controller's policy for ``env`` (an env of the episode's task, ``settings`` and level), reset with ``seed``."""
+        if self.entrant:
+            from training.judging.entrants import entrant_policy
+
+            policy = entrant_policy(self.policy, env, seed=seed, settings=settings, **dict(self.params))
+        elif self.checkpoint:
             from training.checkpoints import load_policy
 
             policy = load_policy(self.policy, env, seed=seed, deterministic=self.deterministic)
@@ -106,10 +120,12 @@ class Controller:
         from training.policies import LogitsPolicy
 
         if (key, self) not in _BUILT:
-            _BUILT[(key, self)] = self.build(env, 0)
+            _BUILT[(key, self)] = self.build(env, 0, json.loads(key[1]))
         prototype = _BUILT[(key, self)]
-        # a network is shared, not copied (its reset makes the generator and memory its own)
-        policy = copy.copy(prototype) if isinstance(prototype, LogitsPolicy) else copy.deepcopy(prototype)
+        # a network or an entrant is shared, not copied (its reset makes the generator and memory its own; an
+        # entrant's object is told each world's seed by the batch, _Actors)
+        shared = isinstance(prototype, LogitsPolicy) or self.entrant
+        policy = copy.copy(prototype) if shared else copy.deepcopy(prototype)
         policy.reset(seed)
         return policy
 
@@ -195,11 +211,15 @@ def check_episodes(episodes, *, workers=None, batch_size: int = DEFAULT_BATCH) -
 # ---------------------------------------------------------------------- one batch
 def batch_kind(policy) -> str:
     """How ``policy`` acts in a batch: ``kernel:<class>`` (its rule kernel, over every world in
-    one call), ``network`` (a network without memory: one forward pass per network and cycle) or
-    ``alone`` (its own ``act``, world by world). Policies of one kind share a batch."""
+    one call), ``network`` (a network without memory: one forward pass per network and cycle),
+    ``entrant:<label>`` (an entrant's object, once a cycle over every world) or ``alone`` (its own
+    ``act``, world by world). Policies of one kind share a batch."""
     from baselines.base import KernelPolicy
+    from training.judging.entrants import EntrantPolicy
     from training.policies import LogitsPolicy
 
+    if isinstance(policy, EntrantPolicy):
+        return f"entrant:{policy.label}"
     if isinstance(policy, KernelPolicy):
         return f"kernel:{type(policy).__qualname__}"
     if isinstance(policy, LogitsPolicy) and policy.memory == "none":
@@ -225,15 +245,25 @@ class _Actors:
         kinds = {batch_kind(p) for p in policies}
         self.kind = kinds.pop() if len(kinds) == 1 else "alone"
         self.kernels = None
+        if self.kind.startswith("entrant:"):
+            for b, p in enumerate(policies):
+                p.entrant.reset(b, p.seed)
 
     def replace(self, b: int, policy) -> None:
         self.policies[b] = policy
         if self.kernels is not None:
             self.kernels.replace(b, policy)
+        if self.kind.startswith("entrant:"):
+            policy.entrant.reset(b, policy.seed)
 
-    def act(self, buffers) -> np.ndarray:
-        """``(B * A, F)`` actions of every row's agents."""
+    def act(self, buffers, cycles) -> np.ndarray:
+        """``(B * A, F)`` actions of every row's agents (``cycles``: each row's cycle)."""
         a = self.n_agents
+        if self.kind.startswith("entrant:"):
+            rows = len(self.policies)
+            fields = {f: getattr(buffers, f).reshape(rows, a, *getattr(buffers, f).shape[1:]) for f in buffers.FIELDS}
+            seeds = [p.seed for p in self.policies]
+            return self.policies[0].act_batch(fields, seeds, list(cycles)).reshape(rows * a, -1)
         if self.kind.startswith("kernel:"):
             if self.kernels is None and _KERNEL_WORLD_CYCLES.get(self.kind, 0) >= batched.ONE_CALL_AFTER:
                 self.kernels = type(self.policies[0]).batch(self.policies)
@@ -300,7 +330,7 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     out: list = [None] * len(episodes)
     following = rows
     while any(i >= 0 for i in playing):
-        actions = actors.act(buffers)
+        actions = actors.act(buffers, batch.cycles)
         result = batch.step_arrays(actions.reshape(rows, a, -1))
         returns += result.reward
         ended = np.flatnonzero(result.terminated | result.truncated)

@@ -75,7 +75,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from training.common import parse_args
+from training.common import keep_checkpoint, parse_args
 
 RECIPES = {
     "ppo": ("ppo", "ppo", 0),
@@ -296,9 +296,8 @@ def main(argv=None) -> int:
             if proc is not None:
                 print(f"finished {recipe} {task} seed {seed} in {seconds / 60:.1f} min", flush=True)
             keep = kept(recipe, task, seed)
-            if keep.exists():
-                shutil.rmtree(keep)
-            shutil.copytree(run_dir / "final", keep, ignore=shutil.ignore_patterns("trainer.pt"))  # resume: run_dir
+            # the recipe recorded: the judge recognises it by it, and checks it against the protocol
+            keep_checkpoint(run_dir / "final", keep, recipe=f"{recipe}-{level}")  # resume: run_dir
             shutil.copy(run_dir / "progress.csv", docs / "progress" / f"{recipe}_{task}_{level}_s{seed}.csv")
             meta = json.loads((keep / "proteo.json").read_text())
             summary.append(

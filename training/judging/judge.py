@@ -12,6 +12,7 @@ protocol, the checkpoints' task and control level, the flags) before anything is
     proteo eval --benchmark v1 --checkpoint checkpoints/v1/grasp/kickstart_move/seed_0 --out out/bench
     proteo eval --benchmark v1 --checkpoint runs/s0 --checkpoint runs/s1 ...   # one recipe, its training seeds
     proteo eval --benchmark v1 --policy rules --tasks chain --level full --out docs/benchmark/v1/chain/rules_full
+    proteo eval --benchmark v7 --entrant my_policy/entrant.yaml --out out/mine    # an entrant from outside
 
 ``benchmark.json`` (schema ``proteo-benchmark-results``, ``schema_version`` 1)::
 
@@ -28,14 +29,20 @@ protocol, the checkpoints' task and control level, the flags) before anything is
         {
           "task": "grasp-v0", "task_name": "grasp", "split": "heldout", "about": "...",
           "env": {...},                        # the proteo_env.make settings of the split
-          "policy": "kickstart_move",          # rules, rules-move, random, or the recipe's label
+          "policy": "kickstart_move",          # rules, rules-move, random, the recipe's or the entrant's label
           "kind": "learned",                   # hand-coded, random, learned, evolved
           "level": "move", "recipe": "kickstart-move" or null,
+          "training": "protocol",              # reference (rules, random), protocol (a recipe's checkpoints,
+                                               # checked), declared (an entrant.yaml), undeclared (a bare
+                                               # factory), unchecked (checkpoints of no recipe); absent
+                                               # in files written before entrants: read from kind and recipe
+          "declared": null,                    # an entrant's {name, training_seeds, budget, code}
           "world_seeds": [1000, ..., 1019],    # the worlds every training seed was judged on
           "complete": true,
           "runs": [                            # one per training seed (one for the rules and random)
             {"source": "checkpoints/v1/grasp/kickstart_move/seed_0", "training_seed": 0,
              "agent_steps": 6041600,           # null for the rules and random
+             "sha256": "...",                  # an entrant's file (only for entrants)
              "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
              "seconds": 3.1}
           ],
@@ -61,26 +68,71 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from proteo_env.config import ConfigError
+from proteo_env.config import CONTROL_LEVELS, ConfigError
 from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, Split, TaskProtocol, load_protocol
+
+ENTRANT_FILE_NAME = "entrant.yaml"
 
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
 
 
 @dataclass
-class Entrant:
-    """One policy judged on one task: the rules or random at one level, or a recipe's checkpoints."""
+class Candidate:
+    """One policy judged on one task: the rules or random at one level, a recipe's checkpoints, or
+    an entrant from outside (:mod:`training.judging.entrants`)."""
 
     task: TaskProtocol
     label: str
     kind: str
     level: str
     policy: str
-    """The registered policy name (the rules, random), or "" for checkpoints."""
+    """The registered policy name (the rules, random), or "" for checkpoints and entrants."""
     checkpoints: list = field(default_factory=list)
     """``[(path, meta)]``: one per training seed."""
     recipe: str | None = None
+    entrant: object = None
+    """The checked ``entrant.yaml`` (:class:`~training.judging.entrants.EntrantFile`), or a factory's
+    ``module:function`` (a string) for an entrant without one."""
+
+    @property
+    def training(self) -> str:
+        """How its training is known: ``reference`` (the rules, random), ``protocol`` (a recipe's
+        checkpoints, checked against the protocol), ``declared`` (an entrant's ``entrant.yaml``),
+        ``undeclared`` (a bare factory) or ``unchecked`` (checkpoints that are not a recipe's)."""
+        if self.entrant is not None:
+            return "undeclared" if isinstance(self.entrant, str) else "declared"
+        if not self.checkpoints:
+            return "reference"
+        return "protocol" if self.recipe else "unchecked"
+
+    def runs(self) -> list[tuple]:
+        """``(source, training seed, agent_steps, sha256, Controller)`` of every run judged: one per
+        training seed (one for the rules and random, and for a bare factory)."""
+        from training.evaluator import Controller
+
+        if isinstance(self.entrant, str):
+            return [(self.entrant, None, None, None, Controller.from_entrant(self.entrant))]
+        if self.entrant is not None:
+            from training.judging.entrants import file_digests
+
+            digests, steps = file_digests(self.entrant), self.entrant.budget.get("agent_steps")
+            return [
+                (
+                    file or self.entrant.factory,
+                    seed,
+                    steps,
+                    digests[seed],
+                    Controller.from_entrant(self.entrant.path, training_seed=seed),
+                )
+                for seed, file in sorted(self.entrant.seeds.items())
+            ]
+        if self.checkpoints:
+            return [
+                (path, meta.get("seed"), meta.get("agent_steps"), None, Controller.from_checkpoint(path))
+                for path, meta in self.checkpoints
+            ]
+        return [(f"baselines.{self.policy}", None, None, None, Controller.rules(self.policy))]
 
 
 RUN_OPTIONS = frozenset(
@@ -141,8 +193,8 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
             )
 
 
-def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
-    """The :class:`Entrant` of ``paths`` (the training seeds of one recipe), checked."""
+def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
+    """The :class:`Candidate` of ``paths`` (the training seeds of one recipe), checked."""
     from training.checkpoints import read_meta
     from training.common import checkpoint_kind
 
@@ -193,17 +245,24 @@ def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
             f"--checkpoint: training seeds {seeds!r} are not allowed; allowed: checkpoints of distinct training seeds"
         )
     kinds = {checkpoint_kind(m) for m in metas}
+    recorded = {m.get("recipe") for m in metas}
+    if len(recorded) > 1:
+        raise ConfigError(
+            f"--checkpoint: checkpoints of recipes {', '.join(sorted(map(str, recorded)))} are not allowed together; "
+            "allowed: the training seeds of one recipe"
+        )
+    named = recorded.pop()  # the recipe its checkpoint records (training/study.py writes it), or none
     parents = {Path(p).resolve().parent.name for p in paths}
     folder = parents.pop() if len(parents) == 1 and len(paths) > 1 else Path(paths[0]).resolve().name
     if folder.startswith("seed_"):
         folder = Path(paths[0]).resolve().parent.name
-    recipe = folder.replace("_", "-") if folder.replace("_", "-") in task.recipes else None
+    recipe = named if named in task.recipes else None
     if recipe is not None:
         for path, meta in zip(paths, metas):
             check_recipe_run(protocol, task, recipe, str(path), meta)
-    return Entrant(
+    return Candidate(
         task=task,
-        label=recipe or folder,
+        label=named or folder,
         kind=kinds.pop() if len(kinds) == 1 else "learned",
         level=levels.pop(),
         policy="",
@@ -212,10 +271,59 @@ def _checkpoint_entrant(protocol: Protocol, paths, tasks) -> Entrant:
     )
 
 
-def entrants(protocol: Protocol, *, checkpoints=(), policy=None, level=None, tasks=None) -> list[Entrant]:
-    """The policies to judge, per task: the training seeds of one recipe (``checkpoints``), or
-    the rules or random (``policy``) on every task of the protocol (or of ``tasks``) at every
-    level the protocol judges them at (or at ``level``). Bad input: a :class:`ConfigError`."""
+def _entrant_candidate(protocol: Protocol, source, tasks, level) -> Candidate:
+    """The :class:`Candidate` of an entrant: an ``entrant.yaml`` (its task, level and training
+    seeds declared in it) or a bare factory ``module:function`` (``tasks``: one task, and ``level``)."""
+    from training.judging.entrants import check_factory_name, load_entrant
+
+    held = {tid: name for name, t in protocol.tasks.items() for tid in t.trained_on}
+    text = str(source)
+    if ":" in text and not Path(text).exists():
+        check_factory_name(text)
+        if not tasks or len(tasks) != 1 or level is None:
+            raise ConfigError(
+                f"--entrant {text!r} (a factory without an entrant.yaml) with --tasks {','.join(tasks or []) or None} "
+                f"and --level {level} is not allowed; allowed: --tasks TASK (one) and --level LEVEL, or an "
+                "entrant.yaml that names them"
+            )
+        task, entry, kind, lv = protocol.tasks[tasks[0]], text, "learned", level
+    else:
+        entry = load_entrant(source)
+        if entry.task not in held:
+            raise ConfigError(
+                f"entrant {str(entry.path)!r}: task = {entry.task!r} is not allowed; allowed: the tasks benchmark "
+                f"{protocol.version} holds ({', '.join(sorted(held))})"
+            )
+        task, kind, lv = protocol.tasks[held[entry.task]], entry.kind, entry.level
+        for flag, value, allowed in (("--tasks", tasks, [task.name]), ("--level", level, lv)):
+            if value is not None and value != allowed:
+                raise ConfigError(
+                    f"{flag} {value!r} is not allowed with entrant {str(entry.path)!r}; allowed: none (its "
+                    f"{ENTRANT_FILE_NAME} says {allowed!r})"
+                )
+    levels = task.levels["rules" if kind == "hand-coded" else kind]
+    if lv not in levels:
+        raise ConfigError(
+            f"entrant {text!r}: control level = {lv!r} is not allowed; allowed: the levels benchmark "
+            f"{protocol.version} judges {kind} {task.name} controllers at ({', '.join(levels)})"
+        )
+    label = entry if isinstance(entry, str) else entry.name
+    taken = {*task.recipes, "rules", "random", *(f"{p}-{lv}" for p in POLICIES for lv in CONTROL_LEVELS)}
+    if label in taken:
+        raise ConfigError(
+            f"entrant {text!r}: name = {label!r} is not allowed; allowed: a name that is not one of the protocol's "
+            f"recipes or references ({', '.join(sorted(taken))})"
+        )
+    return Candidate(task=task, label=label, kind=kind, level=lv, policy="", entrant=entry)
+
+
+def candidates(
+    protocol: Protocol, *, checkpoints=(), policy=None, level=None, tasks=None, entrant=None
+) -> list[Candidate]:
+    """The policies to judge, per task: the training seeds of one recipe (``checkpoints``), an
+    entrant from outside (``entrant``), or the rules or random (``policy``) on every task of the
+    protocol (or of ``tasks``) at every level the protocol judges them at (or at ``level``). Bad
+    input: a :class:`ConfigError`."""
     if tasks is not None:
         tasks = list(tasks)
         for t in tasks:
@@ -224,15 +332,21 @@ def entrants(protocol: Protocol, *, checkpoints=(), policy=None, level=None, tas
                     f"--tasks {t!r} is not allowed; allowed: tasks of benchmark {protocol.version} "
                     f"({', '.join(protocol.tasks)})"
                 )
-    if bool(checkpoints) == (policy is not None):
+    given = [
+        flag for flag, value in (("--checkpoint", checkpoints), ("--policy", policy), ("--entrant", entrant)) if value
+    ]
+    if len(given) != 1:
         raise ConfigError(
-            f"--benchmark {protocol.version} with {'both --checkpoint and --policy' if checkpoints else 'neither --checkpoint nor --policy'} "
-            "is not allowed; allowed: --checkpoint PATH (repeatable: one recipe's training seeds) or --policy rules|random"
+            f"--benchmark {protocol.version} with {' and '.join(given) or 'none of --checkpoint, --policy, --entrant'} "
+            "is not allowed; allowed: one of --checkpoint PATH (repeatable: one recipe's training seeds), "
+            "--entrant PATH/entrant.yaml (or a factory module:function) and --policy rules|random"
         )
+    if entrant:
+        return [_entrant_candidate(protocol, entrant, tasks, level)]
     if checkpoints:
         if level is not None:
             raise ConfigError(f"--level {level!r} is not allowed with --checkpoint; allowed: --level with --policy")
-        return [_checkpoint_entrant(protocol, list(checkpoints), tasks)]
+        return [_checkpoint_candidate(protocol, list(checkpoints), tasks)]
     if policy not in POLICIES:
         raise ConfigError(f"--policy {policy!r} is not allowed; allowed: {', '.join(POLICIES)}")
     out = []
@@ -250,7 +364,7 @@ def entrants(protocol: Protocol, *, checkpoints=(), policy=None, level=None, tas
 
             registered = proteo_env.make(task.task_id, **task.env).task.default_policy if policy == "rules" else policy
             out.append(
-                Entrant(
+                Candidate(
                     task=task,
                     label=policy if lv == levels[0] else f"{policy}-{lv}",
                     kind="hand-coded" if policy == "rules" else "random",
@@ -265,6 +379,7 @@ def judge(
     version: str = "v1",
     *,
     checkpoints=(),
+    entrant=None,
     policy: str | None = None,
     level: str | None = None,
     tasks=None,
@@ -282,6 +397,8 @@ def judge(
 
     Args:
         checkpoints: the training seeds of one recipe (checkpoint folders), or
+        entrant: an entrant from outside: an ``entrant.yaml`` (or its folder), or a factory
+            ``module:function`` with one task in ``tasks`` and ``level`` (docs/guides/entering.md), or
         policy: ``"rules"`` or ``"random"`` (every task of the protocol, or ``tasks``), at every
             level the protocol judges it at, or at ``level``.
         ray: ``None`` (this machine) or ``{"address", "workers"}``.
@@ -293,10 +410,9 @@ def judge(
     Everything is checked before anything is written (a :class:`ConfigError` otherwise).
     """
     from proteo_env.registry import task_name
-    from training.checkpoints import load_policy
     from training.common import provenance
     from training.distributed import Journal
-    from training.evaluator import Controller, Episode, episode_key
+    from training.evaluator import Episode, episode_key
     from training.judging.episodes import run_episodes
     from training.judging.report import Result, Run
 
@@ -307,20 +423,23 @@ def judge(
                 f"--worlds-cap = {worlds_cap!r} is not allowed; allowed: an integer >= 1 (worlds per split and "
                 "training seed: a success rate needs at least one)"
             )
-    judged = entrants(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks)
+    judged = candidates(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks, entrant=entrant)
 
-    # every checkpoint loads on its task's worlds before anything is written
+    # every checkpoint and entrant loads on its task's worlds before anything is written
     import proteo_env
 
     for e in judged:
-        for path, _ in e.checkpoints:
-            env = proteo_env.make(e.task.task_id, **e.task.splits[0].env, control=e.level)
-            try:
-                load_policy(path, env, seed=protocol.first_seed)
-            finally:
-                env.close()
+        if e.training == "reference":
+            continue
+        split = e.task.splits[0]
+        env = proteo_env.make(e.task.task_id, **split.env, control=e.level)
+        try:
+            for *_, controller in e.runs():
+                controller.build(env, protocol.first_seed, split.env)
+        finally:
+            env.close()
 
-    rows: list[tuple[Entrant, Split, Result]] = []
+    rows: list[tuple[Candidate, Split, Result]] = []
     jobs: list[tuple[Run, Episode, str]] = []
     for e in judged:
         seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
@@ -331,18 +450,13 @@ def judge(
                 policy=e.label,
                 kind=e.kind,
                 level=e.level,
-                group=bool(e.checkpoints),
+                group=e.training != "reference",
                 split=split.name,
                 max_cycles=split.env.get("max_cycles"),
             )
-            for source, meta in e.checkpoints or [(f"baselines.{e.policy}", None)]:
-                run = Run(
-                    source=source,
-                    training_seed=meta.get("seed") if meta else None,
-                    agent_steps=meta.get("agent_steps") if meta else None,
-                )
+            for source, training_seed, agent_steps, sha256, controller in e.runs():
+                run = Run(source=source, training_seed=training_seed, agent_steps=agent_steps, sha256=sha256)
                 result.runs.append(run)
-                controller = Controller.rules(e.policy) if meta is None else Controller.from_checkpoint(source)
                 jobs += [(run, Episode(e.task.task_id, overrides, e.level, controller, seed), "") for seed in seeds]
             rows.append((e, split, result))
 
@@ -383,6 +497,8 @@ def judge(
             "kind": e.kind,
             "level": e.level,
             "recipe": e.recipe,
+            "training": e.training,
+            "declared": e.entrant.declared() if e.training == "declared" else None,
             "world_seeds": result.world_seeds,
             "complete": complete_counts and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
             "runs": [
@@ -390,6 +506,7 @@ def judge(
                     "source": r.source,
                     "training_seed": r.training_seed,
                     "agent_steps": r.agent_steps,
+                    **({"sha256": r.sha256} if r.sha256 else {}),
                     "successes": [bool(s) for s in r.successes],
                     "cycles": [int(c) for c in r.cycles],
                     "returns": [float(x) for x in r.returns],
@@ -450,8 +567,10 @@ def markdown(document: dict) -> str:
         s = row["summary"]
         seeds = row["world_seeds"]
         worlds = f"{len(seeds)} ({seeds[0]}..{seeds[-1]})" if seeds else "0"
+        how = row.get("training", "protocol")
+        policy = row["policy"] if how in ("protocol", "reference") else f"{row['policy']} ({how})"
         lines.append(
-            f"| {row['task']} | {row['split']} | {row['policy']} | {row['kind']} | {row['level']} | "
+            f"| {row['task']} | {row['split']} | {policy} | {row['kind']} | {row['level']} | "
             f"{len(row['runs']) if row['kind'] in ('learned', 'evolved') else '–'} | {worlds} | {success_cell(s)} | "
             f"{cycles_cell(s)} | {interval(s['return_mean'], s['return_lo'], s['return_hi'], 3)} |"
         )
@@ -478,11 +597,13 @@ def main(args) -> int:
         "--benchmark",
         conflicting,
         "the protocol fixes the worlds and settings",
-        "--checkpoint, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, --address, --no-plots",
+        "--checkpoint, --entrant, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, --address, "
+        "--no-plots",
     )
     document = judge(
         args.benchmark,
         checkpoints=args.checkpoint or (),
+        entrant=args.entrant,
         policy=args.policy,
         level=args.level,
         tasks=args.tasks.split(",") if args.tasks else None,
@@ -498,9 +619,10 @@ def main(args) -> int:
 
 
 def check_flags(args) -> None:
-    """``--policy``, ``--level`` and ``--worlds-cap`` belong to ``--benchmark``: without it, a
-    :class:`ConfigError` (so that a flag is never silently ignored)."""
-    for flag, value in (("--policy", args.policy), ("--level", args.level), ("--worlds-cap", args.worlds_cap)):
+    """``--policy``, ``--entrant``, ``--level`` and ``--worlds-cap`` belong to ``--benchmark``: without
+    it, a :class:`ConfigError` (so that a flag is never silently ignored)."""
+    flags = ("--policy", args.policy), ("--entrant", args.entrant), ("--level", args.level)
+    for flag, value in (*flags, ("--worlds-cap", args.worlds_cap)):
         if value is not None:
             raise ConfigError(
                 f"{flag} {value!r} without --benchmark is not allowed; allowed: --benchmark VERSION {flag} ..."

@@ -44,6 +44,8 @@ class Run:
     """The checkpoint's training seed (``None`` for a baseline)."""
     agent_steps: int | None = None
     """The agent-steps the checkpoint was trained for (``None`` for a baseline)."""
+    sha256: str | None = None
+    """The SHA-256 of an entrant's file (:mod:`training.judging.entrants`; ``None`` otherwise)."""
     returns: list = field(default_factory=list)
     successes: list = field(default_factory=list)
     cycles: list = field(default_factory=list)
@@ -103,6 +105,18 @@ class Result:
     recorded: dict | None = None
     """The summary a ``benchmark.json`` row holds, as it was judged; :meth:`summary` returns it
     rather than computing it again."""
+    training: str | None = None
+    """Under a benchmark protocol, how its training is known (a ``benchmark.json`` row's
+    ``training``: ``reference``, ``protocol``, ``declared``, ``undeclared`` or ``unchecked``);
+    ``None`` outside one."""
+    declared: dict | None = None
+    """An entrant's declared training (``name``, ``training_seeds``, ``budget``, ``code``)."""
+
+    @property
+    def entered(self) -> bool:
+        """Whether it is an entrant or a checkpoint whose training the protocol did not check (the
+        results page lists these apart from the recipes)."""
+        return self.training in ("declared", "undeclared", "unchecked")
 
     @property
     def n(self) -> int:

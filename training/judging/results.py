@@ -91,6 +91,9 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
             )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
         for r in data["rows"]:
+            training = r.get("training") or (  # files judged before entrants: from the kind and the recipe
+                "reference" if r["kind"] in ("hand-coded", "random") else "protocol" if r.get("recipe") else "unchecked"
+            )
             rows.append(
                 Result(
                     task=r["task_name"],
@@ -110,10 +113,12 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
                         )
                         for run in r["runs"]
                     ],
-                    group=r.get("recipe") is not None,
+                    group=training != "reference",
                     split=r["split"],
                     max_cycles=int(r["env"]["max_cycles"]),
                     recorded=r["summary"],
+                    training=training,
+                    declared=r.get("declared"),
                 )
             )
     return rows, headers
@@ -414,9 +419,57 @@ def _policy_order(policies) -> list[str]:
     return first + sorted(p for p in policies if p not in first)
 
 
+def entrant_lines(entrants: list[Result], rows: list[Result], protocol) -> list[str]:
+    """The page's section on the entrants (:attr:`Result.entered`): per entrant and task, its cell on
+    every split and its paired difference in success from the rules at its level on the same worlds,
+    beside what it declares of its training."""
+    if not entrants:
+        return []
+    by_key = {(r.task, r.split, r.policy): r for r in rows}
+    lines = [
+        "## Entrants: training declared, not verified",
+        "",
+        "Policies entered from outside ([entering the benchmark](guides/entering.md)): judged on the same worlds as "
+        "the rules, by the same judge; their training seeds, budget and code are as they declare them, and each "
+        "judged file's SHA-256 is in its `benchmark.json`. Each cell: successes / worlds (95 % interval), mean cycles "
+        "to success; then the difference in success rate from the rules at its level on the same worlds (95 % "
+        "interval, training seeds and worlds drawn jointly).",
+        "",
+        "| entrant | task | level | training | declared budget | code | split | result | minus the rules at its level |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name in sorted({r.policy for r in entrants}):
+        for task in dict.fromkeys(r.task for r in entrants if r.policy == name):
+            splits = [s.name for s in protocol.tasks[task].splits if (task, s.name, name) in by_key]
+            for split in splits:
+                row = by_key[(task, split, name)]
+                declared = row.declared or {}
+                budget = ", ".join(f"{k} {v:,}" for k, v in (declared.get("budget") or {}).items()) or "-"
+                reference = reference_of(row, by_key)
+                pair = paired(row, reference) if reference is not None else None
+                versus = f"{_difference(pair['success'])} ({reference.policy})" if pair else "-"
+                head = (
+                    [
+                        f"{name} ({row.training})",
+                        task,
+                        row.level,
+                        f"{len(row.runs)} seeds",
+                        budget,
+                        declared.get("code", "-"),
+                    ]
+                    if split == splits[0]
+                    else [""] * 6
+                )
+                lines.append("| " + " | ".join([*head, split, cell(row), versus]) + " |")
+    return [*lines, ""]
+
+
 def render(rows: list[Result], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
     """The page's markdown (figures written beside ``out``); ``protocol`` a
-    :class:`training.judging.protocol.Protocol`."""
+    :class:`training.judging.protocol.Protocol`. Entrants (:attr:`Result.entered`) have a section
+    of their own; every other section is the recipes' and references'."""
+    entrants = [r for r in rows if r.entered]
+    everything, rows = rows, [r for r in rows if not r.entered]
     figures = out.parent / "results"
     figures.mkdir(parents=True, exist_ok=True)
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
@@ -550,6 +603,7 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
                 )
             lines.append("")
         lines += ["![Performance profiles per task with bootstrap bands](results/profiles.png)", ""]
+    lines += entrant_lines(entrants, everything, protocol)
     lines += [f"Judged by commit(s): {', '.join(c[:10] for c in commits)}.", ""]
     return "\n".join(lines)
 
@@ -563,12 +617,14 @@ def marl_eval_layout(rows: list[Result]) -> dict:
     as marl-eval requires. The one evaluation step is the final checkpoint on the protocol's worlds,
     which is also the absolute metric (proteo judges only the final checkpoint). Metrics:
     ``success_rate`` (1 or 0 per world), ``cycles``, ``return`` (to 4 decimals); the rules and random, judged as one
-    run, are left out (they are in ``benchmark.json``)."""
+    run, are left out (they are in ``benchmark.json``). An entrant's algorithm is its name with its
+    training after it, ``"<name> (declared)"``: its training was not checked."""
     out: dict = {}
     for row in rows:
         if row.kind not in ("learned", "evolved"):
             continue
-        runs = out.setdefault(f"proteo-{row.task}", {}).setdefault(row.split, {}).setdefault(row.policy, {})
+        name = _label(row)
+        runs = out.setdefault(f"proteo-{row.task}", {}).setdefault(row.split, {}).setdefault(name, {})
         for run in row.runs:
             metrics = {
                 "success_rate": [int(v) for v in run.successes],
@@ -604,10 +660,16 @@ def heldout_table(rows: list[Result], protocol) -> str:
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
     lines = ["| policy | " + " | ".join(protocol.tasks[t].task_id for t in tasks) + " |", "|---|" + "---|" * len(tasks)]
+    labels = {r.policy: _label(r) for r in rows}
     for policy in _policy_order({r.policy for r in rows}):
         cells = [short_cell(by_key[(t, "heldout", policy)]) if (t, "heldout", policy) in by_key else "-" for t in tasks]
-        lines.append(f"| {policy} | " + " | ".join(cells) + " |")
+        lines.append(f"| {labels[policy]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _label(row: Result) -> str:
+    """A row's name in a table: an entrant's with how its training is known after it."""
+    return f"{row.policy} ({row.training})" if row.entered else row.policy
 
 
 def main(argv=None) -> int:
