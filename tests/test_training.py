@@ -192,6 +192,15 @@ def test_a_maskable_ppo_trained_at_move_enters_the_protocol(tmp_path):
     assert json.loads((final / "proteo.json").read_text())["control"] == "move"
     doc = judge("v7", checkpoints=[final], out=tmp_path / "b", worlds_cap=2, workers=1, progress=False)
     assert {(r["level"], r["training"]) for r in doc["rows"]} == {("move", "unchecked")}
+    # the same model.zip as an entrant (format sb3), as SB3 saved it: the same episodes
+    (tmp_path / "entrant").mkdir()
+    shutil.copy(final / "model.zip", tmp_path / "entrant/model.zip")
+    (tmp_path / "entrant/entrant.yaml").write_text(
+        "entrant: 1\nname: sb3-move\ntask: chain-v1\ncontrol: move\nformat: sb3\nseeds: {0: model.zip}\n"
+        "budget: {agent_steps: 96}\ncode: tests/test_training.py\n"
+    )
+    entered = judge("v7", entrant=tmp_path / "entrant", out=tmp_path / "e", worlds_cap=2, workers=1, progress=False)
+    assert [r["runs"][0]["cycles"] for r in entered["rows"]] == [r["runs"][0]["cycles"] for r in doc["rows"]]
 
 
 def _levels_of(task_id: str) -> list[str]:

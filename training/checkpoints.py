@@ -242,7 +242,6 @@ def _need(file: Path, meta: dict) -> Path:
 
 def _sb3_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     file = folder / "model.zip"
-    import torch
     from sb3_contrib import MaskablePPO
 
     try:
@@ -258,6 +257,14 @@ def _sb3_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
             f"checkpoint {str(file)!r}: observation size {model.observation_space.shape} "
             f"does not match the encoder's ({encoder.size},)"
         )
+    return maskable_ppo_logits(model)
+
+
+def maskable_ppo_logits(model):
+    """A MaskablePPO model's policy as ``features (N, D) -> logits (N, sum(nvec))`` (every action
+    field's logits, side by side)."""
+    import torch
+
     policy = model.policy
     policy.set_training_mode(False)
 

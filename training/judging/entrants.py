@@ -51,7 +51,7 @@ from training.common import sha256_of
 ENTRANT_INTERFACE = 1
 """The version of the interface above and of ``entrant.yaml``'s format (its ``entrant:`` key)."""
 ENTRANT_FILE = "entrant.yaml"
-FORMATS = ("torchscript", "onnx", "factory")
+FORMATS = ("torchscript", "onnx", "sb3", "factory")
 ACTIONS = ("sample", "argmax")
 KINDS = ("learned", "evolved", "hand-coded")
 """What an entrant is; a hand-coded one is judged at the levels the protocol judges the rules at."""
@@ -322,49 +322,70 @@ def network_policy(entry: EntrantFile, file: Path, env, *, seed: int):
 
 
 def load_network(file: Path, fmt: str):
-    """A function ``features (N, D) float32 -> logits`` from a TorchScript or ONNX file."""
+    """A function ``features (N, D) float32 -> logits`` from a saved network of format ``fmt``
+    (:data:`NETWORK_FORMATS`); a file that is not what it claims is an :class:`EntrantError`."""
     where = f"entrant network {str(file)!r}"
-    if fmt == "torchscript":
-        import warnings
+    try:
+        return NETWORK_FORMATS[fmt][0](file)
+    except EntrantError:
+        raise
+    except Exception as err:  # each framework raises many kinds on a file that is not its own
+        raise EntrantError(
+            f"{where} is not {NETWORK_FORMATS[fmt][1]} ({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
+            f"allowed: {NETWORK_FORMATS[fmt][2]}"
+        ) from None
 
-        import torch
 
-        try:
-            with warnings.catch_warnings():  # torch 2.10+ calls TorchScript deprecated; it loads all the same
-                warnings.simplefilter("ignore", DeprecationWarning)
-                net = torch.jit.load(str(file), map_location="cpu")
-        except Exception as err:  # torch raises many kinds on a file that is not TorchScript
-            raise EntrantError(
-                f"{where} is not a TorchScript file ({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
-                "allowed: a file written by torch.jit.save"
-            ) from None
-        net.eval()
+def _torchscript(file: Path):
+    import warnings
 
-        def forward(features: np.ndarray) -> np.ndarray:
-            with torch.no_grad():
-                return net(torch.from_numpy(features)).numpy()
+    import torch
 
-        return forward
+    with warnings.catch_warnings():  # torch 2.10+ calls TorchScript deprecated; it loads all the same
+        warnings.simplefilter("ignore", DeprecationWarning)
+        net = torch.jit.load(str(file), map_location="cpu")
+    net.eval()
+
+    def forward(features: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return net(torch.from_numpy(features)).numpy()
+
+    return forward
+
+
+def _onnx(file: Path):
     import onnxruntime
 
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = options.inter_op_num_threads = 1
-    try:
-        session = onnxruntime.InferenceSession(str(file), options, providers=["CPUExecutionProvider"])
-    except Exception as err:
-        raise EntrantError(
-            f"{where} is not an ONNX model ({type(err).__name__}: {str(err).splitlines()[0][:200]}); "
-            "allowed: a file written by torch.onnx.export or any ONNX writer"
-        ) from None
+    session = onnxruntime.InferenceSession(str(file), options, providers=["CPUExecutionProvider"])
     inputs = session.get_inputs()
     if len(inputs) != 1:
-        raise EntrantError(f"{where} has {len(inputs)} inputs; allowed: one, the flat observation (N, F_in)")
+        raise EntrantError(
+            f"entrant network {str(file)!r} has {len(inputs)} inputs; allowed: one, the flat observation (N, F_in)"
+        )
     name = inputs[0].name
 
-    def run(features: np.ndarray) -> np.ndarray:
+    def forward(features: np.ndarray) -> np.ndarray:
         return session.run(None, {name: features})[0]
 
-    return run
+    return forward
+
+
+def _sb3(file: Path):
+    from sb3_contrib import MaskablePPO
+
+    from training.checkpoints import maskable_ppo_logits
+
+    return maskable_ppo_logits(MaskablePPO.load(str(file), device="cpu"))
+
+
+NETWORK_FORMATS = {
+    "torchscript": (_torchscript, "a TorchScript file", "a file written by torch.jit.save"),
+    "onnx": (_onnx, "an ONNX model", "a file written by torch.onnx.export or any ONNX writer"),
+    "sb3": (_sb3, "a MaskablePPO model", "a model.zip written by sb3-contrib's MaskablePPO.save"),
+}
+"""``format: (loader, what it is, what is allowed)`` of the saved networks an entrant may be."""
 
 
 def checked_network(forward, file: Path, n_in: int, n_out: int):
