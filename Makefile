@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all lint results bench learning-results learning-results-v7 benchmark-references benchmarl test-benchmarl
+.PHONY: install install-distributed demo test test-all fuzz lint results bench learning-results learning-results-v7 benchmark-references benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -26,6 +26,11 @@ test: install-distributed
 
 test-all: install-distributed
 	$(BIN)/python -m pytest -n 2
+
+# The property-based search for bad input (tests/test_fuzz.py: env settings, array-API actions, program texts,
+# checkpoint metadata) with 2,000 examples each instead of the test suite's 40: about 20 minutes on 2 cores.
+fuzz: install
+	PROTEO_FUZZ_EXAMPLES=2000 $(BIN)/python -m pytest -n 2 -p no:cacheprovider tests/test_fuzz.py
 
 # BenchMARL in its own environment, .venv-benchmarl (BenchMARL 1.5 needs torchrl < 0.12, the train
 # extra pins 0.14): proteo with the versions of constraints-benchmarl.txt; test-benchmarl runs

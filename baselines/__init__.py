@@ -5,7 +5,7 @@
 
 from __future__ import annotations
 
-from .base import Policy
+from .base import Policy, constructor_parameters
 from .branch import BranchPolicy
 from .chain import ChainPolicy
 from .grasp import GraspPolicy
@@ -47,6 +47,13 @@ def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:
     """Build policy ``name`` for ``env`` (from its static interface only)."""
     if name not in POLICIES:
         raise ValueError(f"unknown policy {name!r}; allowed: {', '.join(sorted(POLICIES))}")
+    given_by_env = ("self", "action_layout", "modes", "scent_max", "seed")
+    accepted = [p for p in constructor_parameters(POLICIES[name]) if p not in given_by_env]
+    unknown = sorted(set(params) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"policy {name!r}: parameter {unknown[0]!r} is not allowed; allowed: {', '.join(accepted) or 'none'}"
+        )
     return POLICIES[name].for_env(env, seed=seed, **params)
 
 

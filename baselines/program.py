@@ -27,11 +27,12 @@ prints it back (``load_program(format_program(p), task) == p``).
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from proteo_env.config import ConfigError, parse_yaml
+from proteo_env.config import ConfigError, parse_yaml, read_text
 from proteo_env.registry import task_class, task_name
 
 PROGRAMS_DIR = Path(__file__).parent / "programs"
@@ -249,7 +250,7 @@ def _read(source) -> tuple[str, str]:
             f"program {str(source)!r} does not exist; allowed: program text, a path to a YAML file, "
             f"or a program name ({names})"
         )
-    return path.read_text(), f"program {str(path)!r}"
+    return read_text(path, "program"), f"program {str(path)!r}"
 
 
 def _line_numbers(text: str) -> dict[tuple, int]:
@@ -267,7 +268,10 @@ def _line_numbers(text: str) -> dict[tuple, int]:
             for index, item in enumerate(node.value):
                 walk(item, path + (index,))
 
-    root = yaml.compose(text)
+    try:  # the parser that read the program (libyaml where PyYAML has it: its own parser refuses some texts libyaml reads)
+        root = yaml.compose(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except yaml.YAMLError:
+        return lines  # no line numbers, the error all the same
     if root is not None:
         walk(root, ())
     return lines
@@ -337,8 +341,8 @@ class _Loader:
         for name, number in value.items():
             if not (isinstance(name, str) and NAME.match(name)):
                 self.fail(path + (name,), name, "a name (letters, digits, _)")
-            if isinstance(number, bool) or not isinstance(number, (int, float)):
-                self.fail(path + (name,), number, "a number")
+            if isinstance(number, bool) or not isinstance(number, (int, float)) or not math.isfinite(number):
+                self.fail(path + (name,), number, "a finite number")
         return dict(value)
 
     def mode(self, path, name):
@@ -467,10 +471,11 @@ class _Loader:
 
 
 def _number(word: str):
-    """``word`` as an int or float, or None when it is no number."""
+    """``word`` as an int or a finite float, or None when it is no number (``nan`` and ``inf`` are not)."""
     for kind in (int, float):
         try:
-            return kind(word)
+            value = kind(word)
         except ValueError:
-            pass
+            continue
+        return value if math.isfinite(value) else None
     return None

@@ -68,13 +68,12 @@ DRAWS_PER_SEARCH_MODULE = 13
 def fresh(n: int, cycles: int, room: int | None = None, *, task: str = "chain", seed: int = 0):
     """The workload's env (reset with ``seed``) and the task's hand-coded policy (seeded the same).
     ``n`` is the number of modules, or for the table the board's side (``configs/table.yaml``)."""
-    import yaml
-
     import proteo_env
     from baselines import make_policy
+    from proteo_env.config import load_yaml
 
     if task in ("table", "grasp"):
-        config = yaml.safe_load((ROOT / "configs" / f"{task}.yaml").read_text())
+        config = load_yaml(ROOT / "configs" / f"{task}.yaml")
         size = {"table": "board_size", "grasp": "n_modules"}[task]
         extra = {k: v for k, v in config.items() if k not in ("task", "max_cycles")} | {size: n}
     else:

@@ -28,11 +28,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 import proteo_env  # noqa: E402
 from baselines import POLICIES, make_policy  # noqa: E402
 from baselines.base import Policy  # noqa: E402
+from proteo_env.config import load_yaml
 from proteo_env.rollout import run_episode  # noqa: E402
 from training.checkpoints import load_policy  # noqa: E402
 from training.judging.statistics import mean_ci  # noqa: E402
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default="configs/eval.yaml", help="per-task settings (the eval config)")
     parser.add_argument("--out", default=None, help="also write the rows as JSON here")
     args = parser.parse_args(argv)
-    settings = yaml.safe_load(Path(args.config).read_text())["tasks"]
+    settings = load_yaml(Path(args.config))["tasks"]
     seeds = list(range(1000, 1000 + args.seeds))
     every = []
     for name in args.tasks.split(","):

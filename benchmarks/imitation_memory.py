@@ -26,8 +26,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import torch
-import yaml
 
+from proteo_env.config import parse_yaml
 from training.common import seed_everything
 from training.networks import ActorCritic, masked_log_probs, teacher_cross_entropy
 from training.policies import with_memory
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
     parser.add_argument("--epochs", type=int, default=8)
     args = parser.parse_args(argv)
     seed_everything(0)
-    env = yaml.safe_load(args.env) or {}
+    env = parse_yaml(args.env, "--env") or {}
     train, test = (collect(args.task, env, args.worlds, args.cycles, seed) for seed in (0, 777))
     variants = {
         "observation (memory: none)": lambda d: d["x"],

@@ -32,8 +32,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 from machine_info import describe
+
+from proteo_env.config import load_yaml
 
 CONFIG = "configs/train/ppo_chain_move.yaml"
 
@@ -44,7 +45,7 @@ def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
     ``sandbox``, 341 worlds of the sandbox task of the same size instead (no task to score)."""
     import proteo_env
 
-    cfg = yaml.safe_load(Path(CONFIG).read_text())
+    cfg = load_yaml(Path(CONFIG))
     if sandbox:
         env = proteo_env.make_batched("sandbox-v0", 341, n_modules=cfg["env"]["n_modules"], max_cycles=10**9)
     else:

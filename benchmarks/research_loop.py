@@ -71,14 +71,13 @@ def evolution_episodes(
     """One generation's episodes of the evolution ``config`` (its settings and variations, on its
     task or on the version ``task``) and each episode's module count: the paper's program of the task, random programs and
     mutants of the paper's in turn (drawn from ``seed``), each on ``worlds`` worlds per variation."""
-    import yaml
-
     import proteo_env
     from baselines.program import format_program, load_program
+    from proteo_env.config import load_yaml
     from training.evolve import generation_seeds, program_episodes
     from training.program_variation import ProgramSpace, mutate, random_program
 
-    cfg = yaml.safe_load(Path(config).read_text())
+    cfg = load_yaml(Path(config))
     cfg["task"] = task or cfg["task"]
     env = proteo_env.make(cfg["task"], **cfg["env"])
     name = type(env.task).name

@@ -41,11 +41,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 import proteo_env
 from baselines import make_policy
-from proteo_env.config import ConfigError
+from proteo_env.config import ConfigError, parse_yaml
 
 VARIANTS = (
     "full, as proteo eval seeds them",
@@ -174,8 +173,8 @@ def main(argv=None) -> int:
     parser.add_argument("--split", type=Path, default=None, help="a results.json of proteo eval to split")
     args = parser.parse_args(argv)
     try:
-        overrides = yaml.safe_load(args.env) or {}
-    except yaml.YAMLError:
+        overrides = parse_yaml(args.env, "--env") or {}
+    except ConfigError:
         overrides = None
     if not isinstance(overrides, dict):
         parser.error(f"--env={args.env!r} is not allowed; allowed: a YAML mapping of env overrides")

@@ -28,8 +28,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import yaml
 from machine_info import describe
+
+from proteo_env.config import load_yaml
 
 CONFIG = "configs/train/ppo_chain_move.yaml"
 
@@ -55,7 +56,7 @@ def judge(run_dir: Path, worlds: int) -> list[tuple[int, float]]:
     from training.checkpoints import read_meta
     from training.evaluator import Controller, evaluate
 
-    cfg = yaml.safe_load(Path(CONFIG).read_text())
+    cfg = load_yaml(Path(CONFIG))
     folders = {}  # by agent-steps: the final checkpoint is the last periodic one when the budget is a multiple
     for folder in [*sorted((run_dir / "checkpoints").glob("step_*")), run_dir / "final"]:
         folders.setdefault(int(read_meta(folder)["agent_steps"]), folder)

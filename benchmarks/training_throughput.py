@@ -241,13 +241,13 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     import torch
-    import yaml
 
     from proteo_env import ConfigError
+    from proteo_env.config import parse_yaml
     from proteo_env.registry import task_name
     from training.common import limit_threads, torch_device
 
-    overrides = yaml.safe_load(args.env) or {}
+    overrides = parse_yaml(args.env, "--env") or {}
     if not isinstance(overrides, dict):
         parser.error(f'--env {args.env!r} is not allowed; allowed: a YAML mapping such as "{{n_modules: 40}}"')
     overrides.setdefault("max_cycles", 300)

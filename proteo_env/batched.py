@@ -118,6 +118,10 @@ class BatchedEnv:
         self.n_modules = len(probe.positions)
         self.world_batch: WorldBatch | None = None
         self.cycles = np.zeros(self.n_envs, dtype=np.int64)
+        self.ended = np.zeros(self.n_envs, dtype=bool)
+        """``(B,)``: the world's episode ended at its last step (success or ``max_cycles``) and no
+        reset came since. A batch steps on regardless (a trainer resets worlds when it chooses); a
+        single env refuses to (:meth:`~proteo_env.env.ProteoEnv.step_arrays`)."""
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         self._rngs = [np.random.default_rng() for _ in tasks]
 
@@ -210,6 +214,7 @@ class BatchedEnv:
         for b in range(self.n_envs):
             self._start_episode(b)
         self.cycles[:] = 0
+        self.ended[:] = False
         self.last_moved = np.zeros((self.n_envs, self.n_agents), dtype=np.bool_)
         return self.observe_arrays()
 
@@ -232,6 +237,11 @@ class BatchedEnv:
             raise ValueError(
                 f"world {int(rows.max() if rows.max() >= self.n_envs else rows.min())} is not "
                 f"allowed; allowed: 0..{self.n_envs - 1}"
+            )
+        if len(np.unique(rows)) != len(rows):
+            raise ValueError(
+                f"worlds {rows.tolist()} are not allowed: a world listed twice; allowed: each world once (one new "
+                "episode per world)"
             )
         if world_seeds is not None:
             if (
@@ -267,6 +277,7 @@ class BatchedEnv:
         for b in layouts:
             self._start_episode(b)
         self.cycles[rows] = 0
+        self.ended[rows] = False
         self.last_moved[rows] = False
         if observed is None:
             return self.observe_arrays()
@@ -421,6 +432,7 @@ class BatchedEnv:
             reward[b] = sum(terms[b].values())
             terminated[b] = success = task.success(world)
             truncated[b] = cycle >= max_cycles and not success
+        self.ended = terminated | truncated
         return StepResult(reward, terminated, truncated, terms)
 
     def observe_arrays(self) -> ObservationBuffers:

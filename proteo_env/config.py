@@ -14,6 +14,7 @@ A run config file is flat YAML: ``task: chain-v0`` plus any overrides that
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from pathlib import Path
 
@@ -115,6 +116,9 @@ def build(cls, values: dict, *, where: str = ""):
                 f"{where}{key}={value!r} is not allowed; allowed: a value of type "
                 f"{getattr(hints[key], '__name__', hints[key])}"
             )
+        numbers = value if isinstance(value, tuple | list) else (value,)
+        if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
+            raise ConfigError(f"{where}{key}={value!r} is not allowed; allowed: finite numbers (no nan or inf)")
         if typing.get_origin(hints[key]) is tuple and isinstance(value, list):
             values = {**values, key: tuple(value)}
     try:
@@ -141,38 +145,115 @@ def split_overrides(overrides: dict, task_params_cls, *, task_name: str):
     return env, params
 
 
+MAX_YAML_DEPTH = 32
+"""The deepest nesting of mappings and lists :func:`parse_yaml` reads: four times the deepest file in
+the repository (a benchmark protocol, 8), far below what would exhaust the parser's stack."""
+
+
 def parse_yaml(text: str, where: str):
     """The YAML value of ``text``; a :class:`ConfigError` that starts with ``where`` (what the text
-    is: a file, a flag) and says where the syntax breaks, instead of the parser's traceback.
+    is: a file, a flag), names the line and says what is wrong, instead of the parser's traceback:
+    broken syntax, a key given twice in one mapping (the later one would silently win), an anchor
+    or alias (``&name``/``*name``: what YAML bombs are made of; no file here needs one), or nesting
+    deeper than :data:`MAX_YAML_DEPTH`.
 
     Parsed by libyaml where PyYAML has it (ten times faster: evolution parses every new
     program); text it rejects is parsed again by PyYAML's own parser, whose messages name the
     problem more plainly."""
     import yaml
 
+    def refuse(problem: str, mark, allowed: str) -> ConfigError:
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        return ConfigError(f"{where} is not allowed{at}: {problem}; allowed: {allowed}")
+
+    fast = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     try:
-        return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        _check_yaml_events(yaml.parse(text, Loader=fast), refuse)
+        return yaml.load(text, Loader=_strict_loader(fast))
     except yaml.YAMLError:
         pass
     try:
-        return yaml.safe_load(text)
+        _check_yaml_events(yaml.parse(text, Loader=yaml.SafeLoader), refuse)
+        return yaml.load(text, Loader=_strict_loader(yaml.SafeLoader))
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(err, "problem", None) or str(err)
+        if problem.startswith("found duplicate key"):
+            raise refuse(problem, mark, "each key once in a mapping") from None
         raise ConfigError(
             f"{where} is not valid YAML{at} ({problem}); allowed: YAML such as 'key: value' lines or {{key: value}}"
         ) from None
 
 
+def _check_yaml_events(events, refuse) -> None:
+    """Walk the parser's events (no recursion, whatever the depth): a :class:`ConfigError` at the
+    first anchor, alias or nesting past :data:`MAX_YAML_DEPTH`."""
+    import yaml
+
+    depth = 0
+    for event in events:
+        if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None) is not None:
+            raise refuse("an anchor or alias (&name, *name)", event.start_mark, "YAML without anchors and aliases")
+        if isinstance(event, yaml.MappingStartEvent | yaml.SequenceStartEvent):
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                raise refuse(
+                    f"mappings and lists nested {depth} deep", event.start_mark, f"at most {MAX_YAML_DEPTH} levels"
+                )
+        elif isinstance(event, yaml.MappingEndEvent | yaml.SequenceEndEvent):
+            depth -= 1
+
+
+_STRICT_LOADERS: dict = {}
+
+
+def _strict_loader(base):
+    """``base`` (a PyYAML safe loader class) that refuses a key given twice in one mapping."""
+    if base not in _STRICT_LOADERS:
+        import yaml
+
+        class Strict(base):
+            def construct_mapping(self, node, deep=False):
+                seen = set()
+                for key_node, _ in node.value:
+                    key = self.construct_object(key_node, deep=True)
+                    if not isinstance(key, str | int | float | bool):
+                        continue  # an unhashable key: the base constructor names it
+                    if key in seen:
+                        raise yaml.constructor.ConstructorError(
+                            "while reading a mapping",
+                            node.start_mark,
+                            f"found duplicate key {key!r}",
+                            key_node.start_mark,
+                        )
+                    seen.add(key)
+                return super().construct_mapping(node, deep=deep)
+
+        _STRICT_LOADERS[base] = Strict
+    return _STRICT_LOADERS[base]
+
+
 def load_yaml(path, what: str = "config file", example: str = "a path to a YAML file"):
-    """The YAML document in file ``path``: the one loader of every config (run, training, eval,
-    sweep). A :class:`ConfigError` names ``what`` and the path when the file is missing or its
-    YAML is malformed (with the line and column)."""
+    """The YAML document in file ``path``: the one loader of every file the project reads (run,
+    training, eval, sweep and entrant configs, protocols, programs). A :class:`ConfigError` names
+    ``what`` and the path when the file is missing, is not UTF-8 text, or its YAML is malformed or
+    refused (:func:`parse_yaml`; with the line and column)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{what} {str(path)!r} does not exist; allowed: {example}")
-    return parse_yaml(path.read_text(), f"{what} {str(path)!r}")
+    return parse_yaml(read_text(path, what), f"{what} {str(path)!r}")
+
+
+def read_text(path, what: str) -> str:
+    """The UTF-8 text of file ``path``; a :class:`ConfigError` naming ``what``, the path and the
+    first byte that is not UTF-8 otherwise."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"{what} {str(path)!r} is not allowed: byte {err.start} is not UTF-8 text; allowed: a UTF-8 YAML file"
+        ) from None
 
 
 def load_run_config(path) -> tuple[str, dict]:

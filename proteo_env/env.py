@@ -221,6 +221,11 @@ class ProteoEnv(ParallelEnv):
         the agent."""
         fields = self.control_fields
         scalar = self.control == "move"
+        if not isinstance(actions, dict):
+            raise ValueError(
+                f"actions of type {type(actions).__name__} are not allowed; allowed: a dict {{agent: action}} for every "
+                "agent in env.agents (env.step_arrays takes an (A, F) array)"
+            )
         if len(actions) != len(self.agents) or not all(a in actions for a in self.agents):
             missing = [a for a in self.agents if a not in actions]
             if missing:
@@ -257,8 +262,14 @@ class ProteoEnv(ParallelEnv):
         Checks the batch first (a bad one raises ``ValueError`` and changes nothing), runs
         the cycle, and returns its :class:`~proteo_env.batched.StepResult` (``B = 1``: the
         team reward ``reward[0]``, ``terminated[0]``, ``truncated[0]``, the reward terms
-        ``terms[0]``). ``self.last_moved`` says who moved.
+        ``terms[0]``). ``self.last_moved`` says who moved. Once the episode has ended (success or
+        ``max_cycles``) another step is a ``RuntimeError`` until :meth:`reset`.
         """
+        self._need_world()
+        if self.batch.ended[0]:
+            raise RuntimeError(
+                f"step_arrays() called after the episode ended at cycle {self.cycle}; call reset() first"
+            )
         actions = np.asarray(actions)
         expected = (self.batch.n_agents, len(self.control_fields))
         if actions.shape != expected:

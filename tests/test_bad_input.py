@@ -111,7 +111,7 @@ def test_unknown_task_id_lists_valid_ids():
 
 @pytest.mark.parametrize("task_id", TASK_IDS)
 def test_scent_sweeps_zero(task_id):
-    with pytest.raises(ConfigError, match=r"scent_sweeps=0 is not allowed; allowed: an integer >= 1"):
+    with pytest.raises(ConfigError, match=r"scent_sweeps=0 is not allowed; allowed: an integer in \[1, 2\*\*31 - 1\]"):
         proteo_env.make(task_id, scent_sweeps=0)
 
 

@@ -86,20 +86,27 @@ def test_checkpoint_of_another_task_or_level_is_refused_naming_both(trained):
         load_policy(trained, proteo_env.make("branch-v0", control="move"))
 
 
-def test_resume_continues_from_the_step_count(trained):
+def test_resume_continues_from_the_step_count_and_logs_each_step_once(trained):
+    """The run went on past its first checkpoint (as one killed between checkpoints has); resumed
+    from that checkpoint, progress.csv keeps the rows up to it unchanged, drops the later ones and
+    logs on from the checkpoint: every step once, in order."""
     run_dir = trained.parent
     step = sorted((run_dir / "checkpoints").iterdir())[0]
     done = read_meta(step)["agent_steps"]
     with (run_dir / "progress.csv").open() as fh:
-        rows_before = len(list(csv.DictReader(fh)))
+        before = list(csv.DictReader(fh))
+    assert float(before[-1]["agent_steps"]) > done  # rows past the checkpoint, as after a kill
     final = ppo.main(
         ["--resume", str(step), "--total-steps", "6000", "--tensorboard", "false", "--progress-bar", "false"]
     )
     assert final == run_dir / "final"
     with (run_dir / "progress.csv").open() as fh:
-        rows = list(csv.DictReader(fh))[rows_before:]
-    assert float(rows[0]["agent_steps"]) > done  # the first update after the resume counts on from the checkpoint
-    assert float(rows[0]["agent_steps"]) - done <= 8 * 6 * 16
+        rows = list(csv.DictReader(fh))
+    kept = [r for r in before if float(r["agent_steps"]) <= done]
+    assert rows[: len(kept)] == kept
+    steps = [float(r["agent_steps"]) for r in rows]
+    assert steps == sorted(set(steps))  # each step once
+    assert done < steps[len(kept)] <= done + 8 * 6 * 16  # the first update after the resume counts on from it
     assert read_meta(final)["agent_steps"] >= 6000
 
 

@@ -50,7 +50,10 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
     where = f"checkpoint {meta['dir']!r}"
     task = env.task.task_id()
     if task_name(meta["task"]) != env.task.name:
-        raise CheckpointError(f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}")
+        raise CheckpointError(
+            f"{where} was trained on task {meta['task']!r}; it cannot control {task!r}; allowed: an env of "
+            f"{task_name(meta['task'])}"
+        )
     trained, level = meta["control"], getattr(env, "control", "full")
     if trained != level:
         raise CheckpointError(
@@ -250,7 +253,8 @@ def _sb3_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
         raise
     except Exception as err:  # a damaged zip raises many kinds of errors
         raise CheckpointError(
-            f"checkpoint {str(file)!r} is not a loadable MaskablePPO model: {type(err).__name__}: {err}"
+            f"checkpoint {str(file)!r} is not a loadable MaskablePPO model: {type(err).__name__}: {err}; allowed: "
+            "a model.zip written by MaskablePPO.save"
         ) from None
     if model.observation_space.shape != (encoder.size,):
         raise CheckpointError(
@@ -289,7 +293,7 @@ def _torch_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     except Exception as err:
         raise CheckpointError(
             f"checkpoint {str(file)!r} is not a loadable actor for layer sizes "
-            f"{meta.get('hidden')}: {type(err).__name__}: {err}"
+            f"{meta.get('hidden')}: {type(err).__name__}: {err}; allowed: weights of the layer sizes proteo.json records"
         ) from None
     net.eval()
 
@@ -320,7 +324,8 @@ def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     except Exception as err:
         raise CheckpointError(
             f"checkpoint {str(file)!r} is not a loadable ppo network (arch {arch!r}, "
-            f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}"
+            f"layer sizes {meta.get('hidden')}): {type(err).__name__}: {err}; allowed: weights of the architecture, "
+            "layer sizes and memory proteo.json records"
         ) from None
     net.eval()
 
@@ -369,7 +374,8 @@ def _numpy_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
         raise
     except Exception as err:
         raise CheckpointError(
-            f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: {type(err).__name__}: {err}"
+            f"checkpoint {str(file)!r} is not a genome for layer sizes {net.sizes}: {type(err).__name__}: {err}; "
+            "allowed: a genome of the layer sizes proteo.json records"
         ) from None
     return net
 

@@ -75,6 +75,22 @@ def migrate(args) -> int:
     return 0
 
 
+def at_least(least: int):
+    """An argparse type: an integer >= ``least``; otherwise argparse's error names the flag, the
+    value and what is allowed."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < least:
+            raise argparse.ArgumentTypeError(f"{text!r} is not allowed; allowed: an integer >= {least}")
+        return value
+
+    return parse
+
+
 def version() -> str:
     from training.common import package_version
 
@@ -109,7 +125,7 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
     g.add_argument("--fps", type=float, default=20.0, help="movie frames per second (default 20)")
     g.add_argument(
         "--max-frames",
-        type=int,
+        type=at_least(1),
         default=movie_default_frames,
         help=f"movie frames at most, spread over the episode (default {movie_default_frames})",
     )
@@ -125,7 +141,7 @@ def main(argv=None) -> int:
     parser.add_argument("--version", action="version", version=f"proteo {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("demo", help="run every registered task with its default policy")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=at_least(0), default=0)
     p.add_argument("--out", default="out/demo", help="folder for the pictures and plots")
     p.add_argument("--motion-model", default=None, help="override the motion model of every task")
     p.set_defaults(func=demo)
@@ -142,8 +158,8 @@ def main(argv=None) -> int:
     p.add_argument(
         "--program", default=None, help="run a program of the paper's primitives: a YAML file or a name such as chain"
     )
-    p.add_argument("--seed", type=int, default=0, help="first seed")
-    p.add_argument("--episodes", type=int, default=1)
+    p.add_argument("--seed", type=at_least(0), default=0, help="first seed")
+    p.add_argument("--episodes", type=at_least(1), default=1)
     p.add_argument("--out", default=None, help="folder for start and end pictures (none if omitted)")
     p.add_argument("--record", default=None, help="write the episode to this .npz file")
     p.add_argument("--render", default=None, help="write a movie of the episode (.gif or .mp4)")
@@ -154,7 +170,7 @@ def main(argv=None) -> int:
     p = sub.add_parser("replay", help="movie, picture or plots of a recorded episode")
     p.add_argument("file", help="a recording written by proteo run --record")
     p.add_argument("--out", default=None, help="movie (.gif, .mp4) or picture (.png, .jpg, .svg, .pdf)")
-    p.add_argument("--cycle", type=int, default=None, help="cycle drawn in a picture (default: the last)")
+    p.add_argument("--cycle", type=at_least(0), default=None, help="cycle drawn in a picture (default: the last)")
     _picture_args(p)
     p.set_defaults(func=replay)
 
@@ -162,13 +178,13 @@ def main(argv=None) -> int:
     p.add_argument("file", help="a recording written by proteo run --record")
     p.add_argument("--out", default=None, help="the page to write (default: the recording's name with .html)")
     p.add_argument("--screenshot", default=None, help="also write a PNG of the page (needs headless Chromium)")
-    p.add_argument("--cycle", type=int, default=None, help="cycle shown in the screenshot (default: the last)")
+    p.add_argument("--cycle", type=at_least(0), default=None, help="cycle shown in the screenshot (default: the last)")
     p.add_argument("--size", default="1200x800", help="screenshot size WIDTHxHEIGHT (default 1200x800)")
     p.set_defaults(func=view)
 
     p = sub.add_parser("figures", help="reproduce the paper's figures (pictures and plots) into docs/figures")
     p.add_argument("--out", default="docs/figures")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=at_least(0), default=0)
     p.add_argument(
         "--only", action="append", default=None, help="only this figure (repeatable): chain, branch, table, grasp"
     )
@@ -273,6 +289,14 @@ def main(argv=None) -> int:
     except ValueError as err:
         print(f"proteo: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(
+            f"proteo {args.command}: interrupted; what finished is kept: proteo eval and sweep resume from "
+            "OUT/episodes.jsonl with the same command, a study from its runs folder, a trainer with --resume "
+            "RUN/checkpoints/step_N",
+            file=sys.stderr,
+        )
+        return 130
 
 
 if __name__ == "__main__":

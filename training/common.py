@@ -101,7 +101,13 @@ def parse_args(args_cls, argv=None, *, description: str = "", retired: dict | No
         )
     ns = parser.parse_args(argv)
     if saved_args and ns.resume and not ns.config:
-        ns.config = checkpoint_dir(ns.resume) / "args.yaml"
+        meta = read_meta(ns.resume)
+        if "args.yaml" not in meta["files"]:
+            raise CheckpointError(
+                f"--resume {ns.resume!r} is a {meta['algorithm']!r} checkpoint without args.yaml; allowed: a checkpoint "
+                "this trainer wrote (RUN/checkpoints/step_N or RUN/final), or --config with the arguments"
+            )
+        ns.config = Path(meta["dir"]) / "args.yaml"
     values: dict = {}
     if ns.config:
         path = Path(ns.config)
@@ -135,6 +141,8 @@ def seed_everything(seed: int, *, threads: int | None = 1) -> None:
     MLP's forward pass measured 20 times slower, a 12-module environment step 100 times
     slower (docs/journal/throughput-training.md).
     """
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        raise ConfigError(f"seed={seed!r} is not allowed; allowed: an integer from 0 to 2**32 - 1")
     random.seed(seed)
     np.random.seed(seed)
     limit_threads(threads)
@@ -214,6 +222,15 @@ def torch_device(name: str):
     )
 
 
+def out_folder(out, flag: str = "--out") -> Path:
+    """``out`` as a folder to write results into (new, or an existing folder); a path that names a
+    file is a :class:`ConfigError` before anything runs."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{flag} {str(path)!r} is not allowed: it is a file; allowed: a folder (new or existing)")
+    return path
+
+
 def make_run_dir(run_dir: str | None, default_name: str, *, resume: bool) -> Path:
     path = Path(run_dir or Path("runs") / default_name)
     if path.exists() and any(path.iterdir()) and not resume:
@@ -224,13 +241,19 @@ def make_run_dir(run_dir: str | None, default_name: str, *, resume: bool) -> Pat
 
 # ---------------------------------------------------------------------- progress log
 class ProgressLog:
-    """Appends rows to ``progress.csv`` (columns fixed by the first row) and to TensorBoard."""
+    """Appends rows to ``progress.csv`` (columns fixed by the first row) and to TensorBoard.
 
-    def __init__(self, run_dir: Path, *, tensorboard: bool = True):
+    ``resumed_at``: a run resumed from the checkpoint of that many agent-steps first drops the rows
+    logged after it (a run killed between checkpoints logged them, and logs them again), so that
+    every step is in the file once whatever the interruptions."""
+
+    def __init__(self, run_dir: Path, *, tensorboard: bool = True, resumed_at: int | None = None):
         self.path = run_dir / "progress.csv"
         self.started = time.perf_counter()
         self.offset = 0.0
-        if self.path.exists():  # resumed: wall-clock continues from the last row
+        if resumed_at is not None:
+            self.drop_after("agent_steps", resumed_at)
+        elif self.path.exists():  # resumed: wall-clock continues from the last row
             with self.path.open() as fh:
                 rows = list(csv.DictReader(fh))
             if rows:
@@ -256,10 +279,12 @@ class ProgressLog:
             reader = csv.DictReader(fh)
             header, rows = reader.fieldnames, list(reader)
         kept = [r for r in rows if not r.get(column) or float(r[column]) <= value]
-        with self.path.open("w", newline="") as fh:
+        tmp = self.path.with_suffix(".tmp")
+        with tmp.open("w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=header)
             writer.writeheader()
             writer.writerows(kept)
+        os.replace(tmp, self.path)  # whole or not at all
         self.offset = float(kept[-1]["seconds"]) if kept else 0.0
 
     def log(self, agent_steps: int, values: dict) -> None:
@@ -357,12 +382,9 @@ def check_meta(meta, folder: Path) -> dict:
                 f"{where} lacks {key!r}; allowed: a {meta['algorithm']!r} checkpoint records "
                 f"{', '.join(('task', 'nvec', 'files', *CHECKPOINT_FIELDS[meta['algorithm']]))}"
             )
-    if "activation" in meta and meta["activation"] not in ACTIVATIONS:
-        raise CheckpointError(
-            f"{where}: activation = {meta['activation']!r} is not allowed; allowed: {', '.join(ACTIVATIONS)} (what "
-            "training/ builds; a network of another activation enters the benchmark as a TorchScript or ONNX file, "
-            "docs/guides/entering.md)"
-        )
+    for key, (ok, allowed) in _field_checks().items():
+        if key in meta and not ok(meta[key]):
+            raise CheckpointError(f"{where}: {key} = {meta[key]!r} is not allowed; allowed: {allowed}")
     files = meta["files"]
     if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
         raise CheckpointError(f"{where}: files = {files!r} is not allowed; allowed: {{file name: sha256 hex digest}}")
@@ -380,6 +402,38 @@ def check_meta(meta, folder: Path) -> dict:
                 "edited); allowed: the file as its trainer wrote it"
             )
     return meta
+
+
+def _field_checks() -> dict:
+    """``{field: (test, what is allowed)}`` of the ``proteo.json`` fields :func:`check_meta` checks
+    (a loader then builds from them without a default)."""
+    from proteo_env.config import CONTROL_LEVELS
+    from proteo_env.registry import TASKS
+    from training.policies import MEMORIES, SAMPLED
+
+    def sizes(value) -> bool:
+        return isinstance(value, list) and bool(value) and all(_positive_int(v) for v in value)
+
+    return {
+        "task": (lambda v: isinstance(v, str) and v in TASKS, f"a registered task id ({', '.join(sorted(TASKS))})"),
+        "nvec": (sizes, "the action fields' sizes, a list of integers >= 1"),
+        "control": (lambda v: v in CONTROL_LEVELS, ", ".join(CONTROL_LEVELS)),
+        "hidden": (sizes, "the hidden layers' sizes, a list of integers >= 1"),
+        "activation": (
+            lambda v: v in ACTIVATIONS,
+            f"{', '.join(ACTIVATIONS)} (what training/ builds; a network of another activation enters the benchmark "
+            "as a TorchScript or ONNX file, docs/guides/entering.md)",
+        ),
+        "memory": (lambda v: v in MEMORIES, ", ".join(MEMORIES)),
+        "sampled": (lambda v: v in SAMPLED, ", ".join(SAMPLED)),
+        "encoder": (lambda v: v is None or isinstance(v, dict), "the observation encoding's spec, a mapping"),
+        "env": (lambda v: isinstance(v, dict), "the proteo_env.make settings, a mapping"),
+        "params": (lambda v: isinstance(v, dict), "the evolved parameters, a mapping"),
+    }
+
+
+def _positive_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 ACTIVATIONS = ("tanh",)
@@ -503,15 +557,22 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {value!r}")
 
 
-def read_resume(path, algorithm: str, script: str) -> dict | None:
+def read_resume(path, algorithm: str, script: str, needs=()) -> dict | None:
     """The checked ``proteo.json`` of the checkpoint a run resumes from (``None`` without one),
-    refused unless ``algorithm`` (the trainer ``script``) wrote it."""
+    refused unless ``algorithm`` (the trainer ``script``) wrote it with the files ``needs`` (what
+    going on needs beside the policy: a kept checkpoint has only the policy)."""
     if not path:
         return None
     meta = read_meta(path)
     if meta["algorithm"] != algorithm:
         raise CheckpointError(
             f"resume={path!r} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of {script}"
+        )
+    missing = [name for name in needs if name not in meta["files"]]
+    if missing:
+        raise CheckpointError(
+            f"resume={path!r} has no {', '.join(missing)} (a checkpoint kept for judging holds the policy alone); "
+            f"allowed: a checkpoint of a run of {script}, RUN/checkpoints/step_N or RUN/final"
         )
     return meta
 

@@ -479,8 +479,9 @@ def run_episodes(
         e = episodes[i]
         kind = batch_kind(_BUILT[((e.task, e.overrides, e.level), e.controller)])
         groups.setdefault((e.task, e.overrides, e.level, kind), []).append(i)
-    # Enough chunks to keep every worker busy, each large enough to keep its batch full.
-    per_chunk = max(batch_size, math.ceil(len(todo) / (4 * workers))) if workers > 1 or ray else len(todo)
+    # One batch a chunk: every worker kept busy, each batch full, and the journal written as each batch lands
+    # (an interrupted run loses at most the batches in flight), whatever the number of workers.
+    per_chunk = batch_size
     chunks, members = [], []
     for indices in groups.values():
         for part in np.array_split(np.array(indices), math.ceil(len(indices) / per_chunk)):
@@ -539,6 +540,9 @@ def evaluate(
 ) -> list[list[EpisodeResult]]:
     """Every controller on every world seed of ``task`` (settings ``env``, control ``level``):
     ``results[c][s]`` for ``controllers[c]`` on ``seeds[s]`` (see :func:`run_episodes`)."""
+    for name, value in (("controllers", controllers), ("seeds", seeds)):
+        if isinstance(value, str | bytes | dict) or not hasattr(value, "__iter__"):
+            raise ConfigError(f"{name}={value!r} is not allowed; allowed: a non-empty list (seeds: range(100), say)")
     controllers, seeds = list(controllers), list(seeds)
     for name, value in (("controllers", controllers), ("seeds", seeds)):
         if not value:

@@ -172,14 +172,14 @@ def demo(args) -> int:
 # ---------------------------------------------------------------------- run
 def _parse_sets(items) -> dict:
     """``["KEY=VALUE", ...]`` to a dict; values are read as YAML scalars (``40``, ``true``, ``sphere``)."""
-    import yaml
+    from proteo_env.config import parse_yaml
 
     overrides = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"--set {item!r} is not allowed; allowed: KEY=VALUE, e.g. --set n_modules=40")
-        overrides[key.strip()] = yaml.safe_load(value) if value.strip() else ""
+        overrides[key.strip()] = parse_yaml(value, f"--set {item!r}") if value.strip() else ""
     return overrides
 
 
@@ -328,6 +328,11 @@ def view(args) -> int:
 
     out = Path(args.out) if args.out else Path(args.file).with_suffix(".html")
     _check_paths(view=out)
+    if args.cycle is not None and not args.screenshot:
+        raise ValueError(
+            f"--cycle {args.cycle} without --screenshot is not allowed; allowed: --cycle with --screenshot (the "
+            "page itself has a slider over every cycle)"
+        )
     recording = load(args.file)
     write_html(recording, out)
     print(

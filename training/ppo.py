@@ -326,7 +326,7 @@ def train(args: Args) -> Path:
     """Train; returns the final checkpoint's folder."""
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
-    resume = read_resume(args.resume, ALGORITHM, "training/ppo.py")
+    resume = read_resume(args.resume, ALGORITHM, "training/ppo.py", needs=("trainer.pt",))
     agent_steps = int(resume["agent_steps"]) if resume else 0
     curriculum = None
     if args.curriculum:
@@ -386,7 +386,7 @@ def train(args: Args) -> Path:
         )
 
     rollout = Rollout.allocate(args.n_steps, worlds)
-    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    log = ProgressLog(run_dir, tensorboard=args.tensorboard, resumed_at=agent_steps if resume is not None else None)
     bar = tqdm(
         total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM, disable=not args.progress_bar
     )

@@ -101,7 +101,8 @@ def main(argv=None) -> Path:
             device=device,
             verbose=0,
         )
-    log = ProgressLog(run_dir, tensorboard=False)  # SB3 writes TensorBoard itself
+    resumed_at = int(resume_meta["agent_steps"]) if resume_meta is not None else None
+    log = ProgressLog(run_dir, tensorboard=False, resumed_at=resumed_at)  # SB3 writes TensorBoard itself
 
     def save(folder: Path) -> None:
         folder.mkdir(parents=True, exist_ok=True)

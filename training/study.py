@@ -75,7 +75,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from training.common import keep_checkpoint, parse_args
+from proteo_env.config import CONTROL_LEVELS, ConfigError
+from training.common import check_integers, check_numbers, keep_checkpoint, parse_args
 
 RECIPES = {
     "ppo": ("ppo", "ppo", 0),
@@ -250,8 +251,27 @@ def _record(path: Path, run: dict) -> None:
     tmp.replace(path)
 
 
+def check_args(args: Args) -> None:
+    """Every argument of a study checked before any run starts: one :class:`ConfigError` naming the
+    field, the value and what is allowed."""
+    check_integers(args, {"parallel": 1, "total_steps": 0})
+    check_numbers(args, {"minutes": (0.0, None)})
+    if args.level not in CONTROL_LEVELS:
+        raise ConfigError(f"level={args.level!r} is not allowed; allowed: {', '.join(CONTROL_LEVELS)}")
+    for recipe in args.recipes:
+        if recipe not in RECIPES:
+            raise ConfigError(f"recipes: {recipe!r} is not allowed; allowed: {', '.join(RECIPES)}")
+    for seed in args.seeds:
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ConfigError(f"seeds: {seed!r} is not allowed; allowed: integers >= 0 (training seeds)")
+    for name, values in (("recipes", args.recipes), ("tasks", args.tasks), ("seeds", args.seeds)):
+        if not values:
+            raise ConfigError(f"{name} = [] is not allowed; allowed: at least one")
+
+
 def main(argv=None) -> int:
     args = parse_args(Args, argv)
+    check_args(args)
     level = args.level.replace("+", "-")
     keep_dir, docs = Path(args.keep_dir), Path(args.docs_dir)
 

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.config import ConfigError
+from training.common import out_folder
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,7 @@ def sweep(
         settings = settings_json(overrides)
         for policy in dict.fromkeys(policies):
             jobs += [(point, policy, Episode(cfg.task, settings, "full", Controller.rules(policy), s)) for s in seeds]
-    out = Path(out)
+    out = out_folder(out)
     fingerprint = {"config": json.loads(json.dumps(cfg.__dict__, default=list)), "jobs": len(jobs)}
     journal = Journal(out / "episodes.jsonl", fingerprint, fresh=fresh, what="sweep")
     episodes = run_episodes(

@@ -218,7 +218,9 @@ def main(argv=None) -> Path:
         sampler=SamplerWithoutReplacement(),
         batch_size=max(1, args.minibatch_size // n_agents),
     )
-    log = ProgressLog(run_dir, tensorboard=args.tensorboard)
+    log = ProgressLog(
+        run_dir, tensorboard=args.tensorboard, resumed_at=agent_steps if resume_meta is not None else None
+    )
     running_return = np.zeros(args.n_envs)
     running_cycles = np.zeros(args.n_envs, dtype=np.int64)
     bar = tqdm(

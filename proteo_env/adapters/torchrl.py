@@ -42,7 +42,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Categorical, Composite, MultiCategorical, Unbounded
 from torchrl.envs import EnvBase
 
-from ..config import world_seeds
+from ..config import ConfigError, check_seed, world_seeds
 from ..registry import make
 from .flatten import ObservationEncoder, flat_action_mask
 
@@ -58,8 +58,8 @@ class ProteoTorchRLEnv(EnvBase):
     """
 
     def __init__(self, task_id: str, *, n_copies: int = 1, seed: int | None = None, device="cpu", **overrides):
-        if n_copies < 1:
-            raise ValueError(f"n_copies={n_copies!r} is not allowed; allowed: an integer >= 1")
+        if isinstance(n_copies, bool) or not isinstance(n_copies, int | np.integer) or n_copies < 1:
+            raise ConfigError(f"n_copies={n_copies!r} is not allowed; allowed: an integer >= 1")
         super().__init__(batch_size=torch.Size([n_copies]), device=device)
         self.envs = [make(task_id, **overrides) for _ in range(n_copies)]
         first = self.envs[0]
@@ -147,7 +147,13 @@ class ProteoTorchRLEnv(EnvBase):
         import time
 
         started = time.perf_counter()
-        actions = tensordict.get(("agents", "action")).cpu().numpy().astype(np.int64)
+        actions = tensordict.get(("agents", "action")).cpu().numpy()
+        if actions.dtype.kind not in "iu":
+            raise ValueError(
+                f"('agents', 'action') of dtype {actions.dtype} is not allowed; allowed: integers (the spec's int64), "
+                "not values to round"
+            )
+        actions = actions.astype(np.int64)
         if self.single:
             actions = actions[..., None]  # (n_copies, A) -> the level's (n_copies, A, 1)
         reward = np.zeros((self.n_copies, self.n_agents, 1), dtype=np.float32)
@@ -174,4 +180,4 @@ class ProteoTorchRLEnv(EnvBase):
     def _set_seed(self, seed: int | None) -> None:
         if seed is None:
             seed = int(np.random.default_rng().integers(2**31))
-        self._seeds = world_seeds(int(seed), self.n_copies)
+        self._seeds = world_seeds(check_seed(seed), self.n_copies)

@@ -453,12 +453,14 @@ def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, sc
 
     Emitters hold 0, silent modules ``scent_max``; a relay takes one more than the smallest
     neighbour value of the previous sweep (saturating at ``scent_max``). On a surface channel
-    a relay with no empty neighbour relays nothing.
+    a relay with no empty neighbour relays nothing. A sweep that changes no value has reached the
+    fixed point, and the sweeps left would repeat it: they are skipped (the same values).
     """
     shown = np.empty(n_modules + TABLE_SHIFT, np.int32)  # a site's value by grid value: no branch on it
     shown[:TABLE_SHIFT] = scent_max
     for _ in range(sweeps):
         shown[TABLE_SHIFT:] = values[:n_modules]
+        changed = False
         for n in range(n_modules):
             r = role[n]
             if r == EMIT:
@@ -471,7 +473,10 @@ def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, sc
                 for k in range(12):
                     best = min(best, shown[grid[cn + dir_delta[k]] + TABLE_SHIFT])
                 buffer[n] = min(best + 1, scent_max)
+            changed |= buffer[n] != values[n]
         values[:n_modules] = buffer[:n_modules]
+        if not changed:
+            break
 
 
 @kernel

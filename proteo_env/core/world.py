@@ -76,6 +76,18 @@ def machine_memory() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
+def check_module_memory(n_modules: int) -> None:
+    """A ``ValueError`` naming ``n_modules`` when a world of that many modules cannot fit in the
+    memory available (:data:`MODULE_BYTES` each): refused when the task's parameters are built,
+    before a start layout is drawn (which for 2**63 modules would run out of time, not memory)."""
+    need, have = n_modules * MODULE_BYTES, machine_memory()
+    if need > have:
+        raise ValueError(
+            f"n_modules={n_modules!r} needs about {gib(need)} at reset ({MODULE_BYTES} bytes per module); "
+            f"allowed: at most about {have // MODULE_BYTES:,} modules, what the memory available ({gib(have)}) holds"
+        )
+
+
 def gib(n_bytes: float) -> str:
     """``n_bytes`` in GiB, readably (``"98.9 GiB"``, ``"5.4e+06 GiB"``)."""
     value = n_bytes / 2**30
@@ -122,8 +134,8 @@ class Physics:
 
     def __post_init__(self):
         check_motion_model(self.motion_model)
-        if not isinstance(self.scent_sweeps, int) or self.scent_sweeps < 1:
-            raise ValueError(f"scent_sweeps={self.scent_sweeps!r} is not allowed; allowed: an integer >= 1")
+        if not isinstance(self.scent_sweeps, int) or not 1 <= self.scent_sweeps <= 2**31 - 1:
+            raise ValueError(f"scent_sweeps={self.scent_sweeps!r} is not allowed; allowed: an integer in [1, 2**31 - 1]")
         if not isinstance(self.scent_max, int) or not 1 <= self.scent_max <= 2**31 - 2:
             raise ValueError(f"scent_max={self.scent_max!r} is not allowed; allowed: an integer in [1, 2**31 - 2]")
 

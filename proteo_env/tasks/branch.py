@@ -19,6 +19,7 @@ import numpy as np
 
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
+from ..core.world import check_module_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 
@@ -278,6 +279,7 @@ class BranchParams:
     def __post_init__(self):
         if self.n_modules < 2:
             raise ValueError(f"n_modules={self.n_modules!r} is not allowed; allowed: an integer >= 2")
+        check_module_memory(self.n_modules)
         if self.T < 1:
             raise ValueError(f"T={self.T!r} is not allowed; allowed: an integer >= 1")
         if self.B < 1:

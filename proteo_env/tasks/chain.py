@@ -18,7 +18,7 @@ import numpy as np
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
 from ..core.structure import StructureProbe, largest_thin_piece
-from ..core.world import MODULE_BYTES, gib, machine_memory
+from ..core.world import check_module_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
 
@@ -102,13 +102,7 @@ class ChainParams:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if self.room is not None and self.room < 1:
             raise ValueError(f"room={self.room!r} is not allowed; allowed: None or an integer >= 1")
-        need, have = self.n_modules * MODULE_BYTES, machine_memory()
-        if need > have:
-            raise ValueError(
-                f"n_modules={self.n_modules!r} needs about {gib(need)} at reset ({MODULE_BYTES} bytes per module); "
-                f"allowed: at most about {have // MODULE_BYTES:,} modules, what the memory available "
-                f"({gib(have)}) holds"
-            )
+        check_module_memory(self.n_modules)
 
     @property
     def side_room(self) -> int:

@@ -19,6 +19,7 @@ import numpy as np
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS, EMPTY
+from ..core.world import check_module_memory
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
 
@@ -196,6 +197,7 @@ class GraspParams:
 
         if self.n_modules < 2:
             bad("n_modules", "an integer >= 2")
+        check_module_memory(self.n_modules)
         if self.base not in BASES:
             bad("base", ", ".join(BASES))
         if not 1 <= self.n_seed_modules <= self.n_modules // 2:

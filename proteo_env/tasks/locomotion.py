@@ -18,6 +18,7 @@ import numpy as np
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
 from ..core.lattice import PAD
+from ..core.world import check_module_memory
 from ..layouts import Layout, blob_sites
 from .base import Task, TaskKernels, no_sensor
 
@@ -91,6 +92,7 @@ class LocomotionParams:
 
         if not isinstance(self.n_modules, int) or self.n_modules < 2:
             bad("n_modules", "an integer >= 2")
+        check_module_memory(self.n_modules)
         for name, low in (
             ("step_height", 0),
             ("distance", 1),

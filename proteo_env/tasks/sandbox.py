@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..core.world import LayoutError
+from ..core.world import LayoutError, check_module_memory
 from ..layouts import Layout, ball_sites, blob_sites, line_sites, parse_layout, place_in_box
 from .base import Task
 
@@ -42,6 +42,7 @@ class SandboxParams:
     def __post_init__(self):
         if self.n_modules < 1:
             raise ValueError(f"n_modules={self.n_modules!r} is not allowed; allowed: an integer >= 1")
+        check_module_memory(self.n_modules)
         if self.margin < 1:
             raise ValueError(f"margin={self.margin!r} is not allowed; allowed: an integer >= 1")
         if not 1 <= self.n_modes <= 64:

@@ -68,7 +68,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from proteo_env.registry import task_name
-from training.common import checkpoint_kind
+from training.common import checkpoint_kind, out_folder
 from training.judging.episodes import run_episodes
 from training.judging.report import Result, Run, markdown_table, publish, rerender, write_results
 
@@ -243,6 +243,7 @@ def evaluate(
     from training.checkpoints import read_meta
     from training.distributed import Journal
 
+    out_folder(out)
     cfg = load_config(config)
     n_seeds = seeds if seeds is not None else cfg["seeds"]
     if n_seeds < 1:

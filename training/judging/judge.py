@@ -153,7 +153,7 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
     for a protocol trains the config on the protocol's task id); and the budget: ``agent_steps`` from the protocol's up to
     :data:`BUDGET_OVERSHOOT` more, or, where the protocol leaves the budget to the config
     (``agent_steps`` null), every generation or round the config asks for."""
-    import yaml
+    from proteo_env.config import load_yaml
 
     where = f"--checkpoint {path!r} ({task.name} / {recipe})"
     seed = meta.get("seed")
@@ -163,7 +163,7 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
             f"{protocol.version} fixes, 0 to {protocol.training_seeds - 1}"
         )
     entry = task.recipes[recipe]
-    config = yaml.safe_load((protocol.path.parents[2] / entry["config"]).read_text()) or {}
+    config = load_yaml(protocol.path.parents[2] / entry["config"], "recipe config") or {}
     recorded = meta.get("args") or {}
     for key, value in config.items():
         if key in RUN_OPTIONS or key == "task" or key not in recorded:  # the task: ``trained_on``, checked above
@@ -410,13 +410,14 @@ def judge(
     Everything is checked before anything is written (a :class:`ConfigError` otherwise).
     """
     from proteo_env.registry import task_name
-    from training.common import provenance
+    from training.common import out_folder, provenance
     from training.distributed import Journal
     from training.evaluator import Episode, episode_key
     from training.judging.episodes import run_episodes
     from training.judging.report import Result, Run
 
     protocol = load_protocol(version, root)
+    out_folder(out)
     if worlds_cap is not None:
         if isinstance(worlds_cap, bool) or not isinstance(worlds_cap, int) or worlds_cap < 1:
             raise ConfigError(
