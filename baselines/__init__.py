@@ -5,6 +5,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from .base import Policy, constructor_parameters
 from .branch import BranchPolicy
 from .chain import ChainPolicy
@@ -54,7 +56,25 @@ def make_policy(name: str, env, *, seed: int | None = None, **params) -> Policy:
         raise ValueError(
             f"policy {name!r}: parameter {unknown[0]!r} is not allowed; allowed: {', '.join(accepted) or 'none'}"
         )
+    for key, value in params.items():
+        _check_kind(name, key, value, constructor_parameters(POLICIES[name])[key].default)
     return POLICIES[name].for_env(env, seed=seed, **params)
+
+
+def _check_kind(policy: str, key: str, value, default) -> None:
+    """A ``ValueError`` when ``value`` is not of the kind of the parameter's ``default`` (a number
+    for a number, a bool for a bool, a string for a string; other defaults are not checked)."""
+    if isinstance(default, bool):
+        ok, kind = isinstance(value, bool | np.bool_), "true or false"
+    elif isinstance(default, int | float):
+        ok = isinstance(value, int | float | np.number) and not isinstance(value, bool) and np.isfinite(value)
+        kind = "a finite number"
+    elif isinstance(default, str):
+        ok, kind = isinstance(value, str), "a string"
+    else:
+        return
+    if not ok:
+        raise ValueError(f"policy {policy!r}: {key}={value!r} is not allowed; allowed: {kind} (default {default!r})")
 
 
 __all__ = ["POLICIES", "Policy", "make_policy", "register_policy"]

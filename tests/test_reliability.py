@@ -283,3 +283,26 @@ def test_ctrl_c_says_what_is_kept_instead_of_a_traceback(capsys, monkeypatch):
     monkeypatch.setattr(judge, "main", interrupted)
     code, err = _cli(["eval", "--benchmark", "v7", "--policy", "rules"], capsys)
     assert code == 130 and "interrupted; what finished is kept" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"momentum": "fast"}, r"momentum='fast' is not allowed; allowed: a finite number \(default 1.0\)"),
+        ({"directed": "yes"}, r"directed='yes' is not allowed; allowed: true or false"),
+        ({"p_random": float("nan")}, r"p_random=nan is not allowed; allowed: a finite number"),
+    ],
+)
+def test_a_rule_parameter_of_the_wrong_kind_is_refused_when_the_policy_is_built(params, message):
+    from baselines import make_policy
+
+    env = proteo_env.make("chain-v1", n_modules=8)
+    with pytest.raises(ValueError, match=message):
+        make_policy("chain", env, **params)
+
+
+def test_the_study_outside_the_repository_says_where_to_run_it(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, err = _cli(["train", "study", "--tasks", "[chain]", "--minutes", "0"], capsys)
+    assert code == 2 and "has no configs/train, where the recipes' configs are; allowed: running the study" in err
+    assert list(tmp_path.iterdir()) == []

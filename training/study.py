@@ -136,6 +136,11 @@ def _config(recipe: str, task: str, level: str) -> Path:
     if recipe not in RECIPES:
         raise ValueError(f"recipe {recipe!r} is not allowed; allowed: {', '.join(RECIPES)}")
     prefix = RECIPES[recipe][1]
+    if not Path("configs/train").is_dir():
+        raise ValueError(
+            f"the working folder {str(Path.cwd())!r} has no configs/train, where the recipes' configs are; allowed: "
+            "running the study from the repository's root"
+        )
     path = Path("configs/train") / f"{prefix}_{task}_{level.replace('+', '-')}.yaml"
     if not path.is_file():
         raise ValueError(

@@ -135,7 +135,9 @@ class Physics:
     def __post_init__(self):
         check_motion_model(self.motion_model)
         if not isinstance(self.scent_sweeps, int) or not 1 <= self.scent_sweeps <= 2**31 - 1:
-            raise ValueError(f"scent_sweeps={self.scent_sweeps!r} is not allowed; allowed: an integer in [1, 2**31 - 1]")
+            raise ValueError(
+                f"scent_sweeps={self.scent_sweeps!r} is not allowed; allowed: an integer in [1, 2**31 - 1]"
+            )
         if not isinstance(self.scent_max, int) or not 1 <= self.scent_max <= 2**31 - 2:
             raise ValueError(f"scent_max={self.scent_max!r} is not allowed; allowed: an integer in [1, 2**31 - 2]")
 
