@@ -143,13 +143,11 @@ def network_policy(meta: dict, env, seed: int | None, deterministic: bool, logit
     was made for ``env``'s task, control level and observation encoding; ``logits_of(folder, meta,
     encoder)`` loads the network as a function from features ``(N, F)`` to logits ``(N, sum(nvec))``."""
     encoder = _check_compatible(meta, env)
-    return LogitsPolicy(
-        env.action_layout,
-        env.task.modes,
-        scent_max=env.config.physics.scent_max,
+    return LogitsPolicy.over(
+        env,
+        logits_of(Path(meta["dir"]), meta, encoder),
+        encoder,
         seed=seed,
-        encoder=encoder,
-        logits_fn=logits_of(Path(meta["dir"]), meta, encoder),
         label=meta.get("label", meta["algorithm"]),
         deterministic=deterministic,
         nvec=meta["nvec"],

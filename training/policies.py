@@ -153,6 +153,20 @@ class LogitsPolicy(Policy):
         self.previous: dict = {}
         """Each agent's (name or row) previous action ``(F,)``, with memory."""
 
+    @classmethod
+    def over(cls, env, logits_fn, encoder: ObservationEncoder, *, seed: int | None, **options) -> LogitsPolicy:
+        """A network ``logits_fn`` over ``encoder``'s features acting in ``env`` (from its static
+        interface; ``options``: ``label``, ``deterministic``, ``nvec``, ``memory``, ``sampled``)."""
+        return cls(
+            env.action_layout,
+            env.task.modes,
+            scent_max=env.config.physics.scent_max,
+            seed=seed,
+            encoder=encoder,
+            logits_fn=logits_fn,
+            **options,
+        )
+
     def reset(self, seed=None):
         super().reset(seed)
         self.previous = {}

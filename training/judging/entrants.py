@@ -295,29 +295,20 @@ def entrant_policy(source: str, env, *, seed: int, training_seed=None, settings:
             factory = factory_function(entry.factory, search=str(entry.path.parent.resolve()))
             spec = spec_for(env, settings, training_seed=training_seed, file=file)
             return EntrantPolicy.build(factory, spec, env, seed=seed, label=entry.name)
-        return network_policy(entry, Path(file), env, seed=seed)
+        return saved_network_policy(entry, Path(file), env, seed=seed)
     factory = factory_function(source)
     return EntrantPolicy.build(factory, spec_for(env, settings), env, seed=seed, label=source)
 
 
-def network_policy(entry: EntrantFile, file: Path, env, *, seed: int):
+def saved_network_policy(entry: EntrantFile, file: Path, env, *, seed: int):
     """A :class:`~training.policies.LogitsPolicy` over the saved network ``file`` (``entry.format``)."""
     from training.policies import LogitsPolicy
 
     encoder = ObservationEncoder.for_env(env, **entry.observation)
     nvec = [int(n) for n in env.control_nvec]
-    loaded = load_network(file, entry.format)
-    logits_fn = checked_network(loaded, file, encoder.size, sum(nvec))
-    return LogitsPolicy(
-        env.action_layout,
-        env.task.modes,
-        scent_max=env.config.physics.scent_max,
-        seed=seed,
-        encoder=encoder,
-        logits_fn=logits_fn,
-        label=entry.name,
-        deterministic=entry.actions == "argmax",
-        nvec=nvec,
+    logits_fn = checked_network(load_network(file, entry.format), file, encoder.size, sum(nvec))
+    return LogitsPolicy.over(
+        env, logits_fn, encoder, seed=seed, label=entry.name, deterministic=entry.actions == "argmax", nvec=nvec
     )
 
 
