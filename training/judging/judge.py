@@ -71,8 +71,6 @@ from pathlib import Path
 from proteo_env.config import CONTROL_LEVELS, ConfigError
 from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, Split, TaskProtocol, load_protocol
 
-ENTRANT_FILE_NAME = "entrant.yaml"
-
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
 
@@ -274,7 +272,7 @@ def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
 def _entrant_candidate(protocol: Protocol, source, tasks, level) -> Candidate:
     """The :class:`Candidate` of an entrant: an ``entrant.yaml`` (its task, level and training
     seeds declared in it) or a bare factory ``module:function`` (``tasks``: one task, and ``level``)."""
-    from training.judging.entrants import check_factory_name, load_entrant
+    from training.judging.entrants import ENTRANT_FILE, check_factory_name, load_entrant
 
     held = {tid: name for name, t in protocol.tasks.items() for tid in t.trained_on}
     text = str(source)
@@ -299,7 +297,7 @@ def _entrant_candidate(protocol: Protocol, source, tasks, level) -> Candidate:
             if value is not None and value != allowed:
                 raise ConfigError(
                     f"{flag} {value!r} is not allowed with entrant {str(entry.path)!r}; allowed: none (its "
-                    f"{ENTRANT_FILE_NAME} says {allowed!r})"
+                    f"{ENTRANT_FILE} says {allowed!r})"
                 )
     levels = task.levels["rules" if kind == "hand-coded" else kind]
     if lv not in levels:
