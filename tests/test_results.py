@@ -55,6 +55,7 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
         ]
         rows.append(
             {
+                "task": task,
                 "task_name": task,
                 "split": split,
                 "policy": policy,

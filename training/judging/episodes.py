@@ -1,19 +1,31 @@
-"""The episodes of ``proteo eval`` and ``proteo eval --benchmark``.
+"""The one way ``proteo eval`` and ``proteo eval --benchmark`` judge: a :class:`Plan` of rows and
+their episodes, run once.
 
-A planner lists each episode as ``(Run, Episode, picture)``: the :class:`~training.judging.report.Run`
-it adds to, the :class:`training.evaluator.Episode` (task, settings, level, controller, world seed)
-and a label to draw its end under (``""``: none). :func:`run_episodes` runs them in batches of worlds
-(:func:`training.evaluator.run_episodes`), writing each finished episode to a journal as its batch
-lands, so an interrupted run resumes with the missing episodes only; an episode whose end is drawn
-runs on its own (:func:`run_alone`).
+A planner (:func:`training.judging.evaluate.plan_episodes` for an evaluation, the judge's
+:func:`~training.judging.judge.plan_protocol` for a protocol) adds each row's record (a
+:class:`~training.judging.report.Result`) and, for each of its runs, the episodes to play
+(:meth:`Plan.add_run`): each is ``(Run, Episode, picture)``, the
+:class:`~training.judging.report.Run` it adds to, the :class:`training.evaluator.Episode` (task,
+settings, level, controller, world seed) and a label to draw its end under (``""``: none).
+:meth:`Plan.execute` runs them in batches of worlds (:func:`training.evaluator.run_episodes`),
+writing each finished episode to a journal as its batch lands, so an interrupted run resumes with
+the missing episodes only (an episode whose end is drawn runs on its own, :func:`run_alone`),
+then lets the caller write its files before the journal is closed.
 """
 
 from __future__ import annotations
 
+import base64
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from proteo_env.registry import task_name
+from training.distributed import Journal, run_jobs
+from training.evaluator import Episode, episode_key
+from training.evaluator import run_episodes as run_batched
+from training.judging.report import Result, Run
 
 
 def _picture_png(env, caption: str) -> str:
@@ -95,12 +107,6 @@ def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, wor
     recorded in ``journal`` under its :func:`~training.evaluator.episode_key`. An episode's
     ``seconds`` is its batch's wall-clock time shared equally among its episodes.
     """
-    import base64
-
-    from training.distributed import run_jobs
-    from training.evaluator import episode_key
-    from training.evaluator import run_episodes as run_batched
-
     pictured = [i for i, (_, _, picture) in enumerate(jobs) if picture]
     plain = [i for i, (_, _, picture) in enumerate(jobs) if not picture]
     episodes: list = [None] * len(jobs)
@@ -124,3 +130,33 @@ def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, wor
             file = out_dir / "pictures" / f"{task_name(episode.task)}_{picture}_{episode.level}.png".replace("+", "-")
             file.parent.mkdir(parents=True, exist_ok=True)
             file.write_bytes(base64.b64decode(result["picture"]))
+
+
+@dataclass
+class Plan:
+    """Rows to judge and the episodes of their runs, in the order they are played (the order fixes
+    the batches of worlds, so a plan played again plays the same episodes)."""
+
+    rows: list[Result] = field(default_factory=list)
+    """One record per row (a policy, or a recipe's training seeds, on one task and split)."""
+    jobs: list[tuple[Run, Episode, str]] = field(default_factory=list)
+    """``(Run, Episode, picture)`` of every episode (:func:`run_episodes`)."""
+
+    def add_run(self, run: Run, controller, task: str, settings: str, level: str, seeds, *, picture: str = ""):
+        """``run``'s episodes: ``controller`` on each world seed of ``seeds`` of ``task`` with
+        ``settings`` (:func:`training.evaluator.settings_json`) at ``level``; ``picture``: a label
+        to draw the end of its first episode under."""
+        for k, seed in enumerate(seeds):
+            self.jobs.append((run, Episode(task, settings, level, controller, seed), picture if k == 0 else ""))
+
+    def execute(self, out_dir: Path, *, fingerprint: dict, fresh: bool, what: str, ray, workers, progress: bool,
+                write: Callable[[float], object]):  # fmt: skip
+        """Play every episode (resuming the journal ``out_dir/episodes.jsonl`` of an unfinished run
+        with the same ``fingerprint``, unless ``fresh``), then ``write(seconds)`` the caller's files
+        and close the journal; returns what ``write`` returns. ``what`` names the run in errors."""
+        journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what=what)
+        started = time.perf_counter()
+        run_episodes(self.jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
+        written = write(time.perf_counter() - started)
+        journal.complete()
+        return written

@@ -69,7 +69,7 @@ from pathlib import Path
 
 from proteo_env.registry import task_name
 from training.common import checkpoint_kind, out_folder
-from training.judging.episodes import run_episodes
+from training.judging.episodes import Plan
 from training.judging.report import Result, Run, markdown_table, publish, rerender, write_results
 
 DEFAULT_CONFIG = "configs/eval.yaml"
@@ -236,12 +236,11 @@ def evaluate(
         one :class:`~training.judging.report.Result` per policy or training-seed group.
 
     It chooses the tasks and checkpoints, then plans every episode (:func:`plan_episodes`), runs
-    them (:func:`run_episodes`) and writes the tables (:func:`write_results`).
+    them (:meth:`~training.judging.episodes.Plan.execute`) and writes the tables (:func:`write_results`).
     """
     from proteo_env.config import ConfigError
     from proteo_env.registry import newest_tasks, task_class
     from training.checkpoints import read_meta
-    from training.distributed import Journal
 
     out_folder(out)
     cfg = load_config(config)
@@ -269,29 +268,34 @@ def evaluate(
             )
         by_task[name].append((str(path), ""))
 
-    results, jobs = plan_episodes(cfg, classes, by_task, seed_list, deterministic=deterministic, pictures=pictures)
-
-    out_dir = Path(out)
+    plan = plan_episodes(cfg, classes, by_task, seed_list, deterministic=deterministic, pictures=pictures)
     settings = {c.name: (cfg["tasks"].get(c.name) or {}).get("env") or {} for c in classes}
     fingerprint = {
         "seeds": seed_list,
         "settings": settings,
         "deterministic": deterministic,
         "pictures": pictures,
-        "jobs": len(jobs),
+        "jobs": len(plan.jobs),
         "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
     }
-    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="evaluation")
-    run_episodes(jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
-    write_results(results, out_dir, seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots)
-    journal.complete()
-    return results
+    return plan.execute(
+        Path(out),
+        fingerprint=fingerprint,
+        fresh=fresh,
+        what="evaluation",
+        ray=ray,
+        workers=workers,
+        progress=progress,
+        write=lambda seconds: write_results(
+            plan.rows, Path(out), seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots
+        ),
+    )
 
 
-def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool):
-    """Every policy's (or training-seed group's) result and its episodes as jobs: ``(results, jobs)``,
-    ``jobs`` a list of ``(Run, Episode, picture)`` (:func:`training.judging.episodes.run_episodes`). Policies are built here once, so that a bad checkpoint fails
-    before any episode runs.
+def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool) -> Plan:
+    """The :class:`~training.judging.episodes.Plan` of an evaluation: every policy's (or
+    training-seed group's) row and its episodes. Policies are built here once, so that a bad
+    checkpoint fails before any episode runs.
 
     Args:
         cfg: the eval config (:func:`load_config`); classes: the task classes evaluated;
@@ -301,10 +305,10 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
     import proteo_env
     from baselines import make_policy
     from training.checkpoints import load_policy, read_meta
-    from training.evaluator import Controller, Episode, settings_json
+    from training.evaluator import Controller, settings_json
 
-    results: list[Result] = []
-    jobs: list[tuple[Run, Episode, str]] = []
+    plan = Plan()
+    results = plan.rows
     for cls in classes:
         overrides = dict((cfg["tasks"].get(cls.name) or {}).get("env") or {})
         envs = {"full": proteo_env.make(cls.task_id(), **overrides)}
@@ -343,14 +347,12 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
                 if path is None
                 else Controller.from_checkpoint(path, deterministic=deterministic)
             )
-            settings = settings_json(overrides)
-            for seed in seed_list:
-                picture = label if pictures and seed == seed_list[0] and first_of_group else ""
-                jobs.append((run, Episode(cls.task_id(), settings, level, controller, seed), picture))
+            picture = label if pictures and first_of_group else ""
+            plan.add_run(run, controller, cls.task_id(), settings_json(overrides), level, seed_list, picture=picture)
         for env in envs.values():
             env.close()
         _name_apart([r for r in results[first_task_row:] if not r.group])
-    return results, jobs
+    return plan
 
 
 def refuse_flags(mode: str, flags: dict, why: str, allowed: str) -> None:

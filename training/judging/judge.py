@@ -3,9 +3,9 @@
 The protocol (what is judged, on which worlds, and how many) and its loader are
 :mod:`training.judging.protocol` (:func:`~training.judging.protocol.load_protocol`).
 
-:func:`judge` runs the episodes with the machinery of ``proteo eval``
-(:func:`training.judging.episodes.run_episodes`: batches of worlds on every core or as Ray tasks,
-recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes) and writes
+:func:`judge` plans its rows and episodes as ``proteo eval`` does, as a
+:class:`~training.judging.episodes.Plan` (batches of worlds on every core or as Ray tasks,
+recorded in ``OUT/episodes.jsonl`` so that an interrupted run resumes), and writes
 ``OUT/benchmark.json`` and ``OUT/benchmark.md`` (the table). Everything is checked (the
 protocol, the checkpoints' task and control level, the flags) before anything is written::
 
@@ -14,51 +14,9 @@ protocol, the checkpoints' task and control level, the flags) before anything is
     proteo eval --benchmark v1 --policy rules --tasks chain --level full --out docs/benchmark/v1/chain/rules_full
     proteo eval --benchmark v7 --entrant my_policy/entrant.yaml --out out/mine    # an entrant from outside
 
-``benchmark.json`` (schema ``proteo-benchmark-results``, ``schema_version`` 1)::
-
-    {
-      "schema": "proteo-benchmark-results", "schema_version": 1,
-      "protocol": "v1",                        # the protocol version
-      "protocol_file": "configs/benchmark/v1.yaml", "protocol_sha256": "...",  # the file judged by
-      "proteo_version": "0.9.0", "commit": "abc123..." or null,   # what ran (training.common.provenance)
-      "created": "2026-01-01T12:00:00",
-      "worlds_cap": null,                      # --worlds-cap (quick checks only; a published run has null)
-      "complete": true,                        # every row judged as the protocol asks (else see "notes")
-      "notes": ["..."],                        # why a row is not complete (fewer training seeds, a cap)
-      "rows": [                                # one per task, split and policy
-        {
-          "task": "grasp-v0", "task_name": "grasp", "split": "heldout", "about": "...",
-          "env": {...},                        # the proteo_env.make settings of the split
-          "policy": "kickstart_move",          # rules, rules-move, random, the recipe's or the entrant's label
-          "kind": "learned",                   # hand-coded, random, learned, evolved
-          "level": "move", "recipe": "kickstart-move" or null,
-          "training": "protocol",              # reference (rules, random), protocol (a recipe's checkpoints,
-                                               # checked), declared (an entrant.yaml), undeclared (a bare
-                                               # factory), unchecked (checkpoints of no recipe); absent
-                                               # in files written before entrants: read from kind and recipe
-          "declared": null,                    # an entrant's {name, training_seeds, budget, code}
-          "world_seeds": [1000, ..., 1019],    # the worlds every training seed was judged on
-          "complete": true,
-          "runs": [                            # one per training seed (one for the rules and random)
-            {"source": "checkpoints/v1/grasp/kickstart_move/seed_0", "training_seed": 0,
-             "agent_steps": 6041600,           # null for the rules and random
-             "sha256": "...",                  # an entrant's file (only for entrants)
-             "successes": [true, ...], "cycles": [162, ...], "returns": [1.2, ...],
-             "seconds": 3.1}
-          ],
-          "summary": {...}                     # training.judging.report.Result.summary (one run:
-                                               # Wilson, Student t; several training seeds: the
-                                               # stratified bootstrap
-                                               # training.judging.statistics.group_bootstrap)
-        }
-      ]
-    }
-
-``summary`` holds ``episodes``, ``successes``, ``success_rate``, ``success_lo``/``success_hi``
-(the 95 % interval), ``cycles_to_success`` with ``cycles_lo``/``cycles_hi`` (over the successful
-episodes), ``return_mean`` with ``return_lo``/``return_hi``, ``training_seeds`` and ``interval``
-(which interval). ``benchmark.md`` is the table of those rows with the intervals. See
-docs/guides/benchmark.md.
+``benchmark.json`` (schema ``proteo-benchmark-results``, ``schema_version`` 1) is written by
+:func:`benchmark_document`, whose fields are the schema; ``benchmark.md`` is the table of its rows
+with the intervals (:func:`markdown`). See docs/guides/benchmark.md.
 """
 
 from __future__ import annotations
@@ -68,8 +26,18 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from proteo_env.config import CONTROL_LEVELS, ConfigError
-from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, Split, TaskProtocol, load_protocol
+import proteo_env
+from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml
+from proteo_env.registry import task_class, task_name
+from training.checkpoints import read_meta
+from training.common import checkpoint_kind, out_folder, provenance
+from training.distributed import ray_options
+from training.evaluator import Controller, episode_key, settings_json
+from training.judging.entrants import ENTRANT_FILE, check_factory_name, file_digests, load_entrant
+from training.judging.episodes import Plan
+from training.judging.evaluate import refuse_flags
+from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, TaskProtocol, load_protocol
+from training.judging.report import BENCHMARK_COLUMNS, INTERVALS, Result, Run, markdown_table, result_of_row
 
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
@@ -107,13 +75,9 @@ class Candidate:
     def runs(self) -> list[tuple]:
         """``(source, training seed, agent_steps, sha256, Controller)`` of every run judged: one per
         training seed (one for the rules and random, and for a bare factory)."""
-        from training.evaluator import Controller
-
         if isinstance(self.entrant, str):
             return [(self.entrant, None, None, None, Controller.from_entrant(self.entrant))]
         if self.entrant is not None:
-            from training.judging.entrants import file_digests
-
             digests, steps = file_digests(self.entrant), self.entrant.budget.get("agent_steps")
             return [
                 (
@@ -151,8 +115,6 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
     for a protocol trains the config on the protocol's task id); and the budget: ``agent_steps`` from the protocol's up to
     :data:`BUDGET_OVERSHOOT` more, or, where the protocol leaves the budget to the config
     (``agent_steps`` null), every generation or round the config asks for."""
-    from proteo_env.config import load_yaml
-
     where = f"--checkpoint {path!r} ({task.name} / {recipe})"
     seed = meta.get("seed")
     if seed not in range(protocol.training_seeds):
@@ -193,8 +155,6 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
 
 def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
     """The :class:`Candidate` of ``paths`` (the training seeds of one recipe), checked."""
-    from training.checkpoints import read_meta
-    from training.common import checkpoint_kind
 
     metas = []
     for path in paths:
@@ -272,8 +232,6 @@ def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
 def _entrant_candidate(protocol: Protocol, source, tasks, level) -> Candidate:
     """The :class:`Candidate` of an entrant: an ``entrant.yaml`` (its task, level and training
     seeds declared in it) or a bare factory ``module:function`` (``tasks``: one task, and ``level``)."""
-    from training.judging.entrants import ENTRANT_FILE, check_factory_name, load_entrant
-
     held = {tid: name for name, t in protocol.tasks.items() for tid in t.trained_on}
     text = str(source)
     if ":" in text and not Path(text).exists():
@@ -358,9 +316,7 @@ def candidates(
                 f"(the levels benchmark {protocol.version} judges it at)"
             )
         for lv in [level] if level is not None else levels:
-            import proteo_env
-
-            registered = proteo_env.make(task.task_id, **task.env).task.default_policy if policy == "rules" else policy
+            registered = task_class(task.task_id).default_policy if policy == "rules" else policy
             out.append(
                 Candidate(
                     task=task,
@@ -390,8 +346,10 @@ def judge(
     root=None,
 ) -> dict:
     """Judge a controller on every split of its task(s) under protocol ``version``; write
-    ``out/benchmark.json`` (the schema is in the module docstring) and ``out/benchmark.md``;
-    return the ``benchmark.json`` document.
+    ``out/benchmark.json`` (:func:`benchmark_document`) and ``out/benchmark.md``; return the
+    ``benchmark.json`` document. In four steps: check (:func:`candidates`, :func:`check_loads`),
+    plan (:func:`plan_protocol`), run (:meth:`~training.judging.episodes.Plan.execute`), write
+    (:func:`benchmark_document`, :func:`markdown`).
 
     Args:
         checkpoints: the training seeds of one recipe (checkpoint folders), or
@@ -407,13 +365,6 @@ def judge(
 
     Everything is checked before anything is written (a :class:`ConfigError` otherwise).
     """
-    from proteo_env.registry import task_name
-    from training.common import out_folder, provenance
-    from training.distributed import Journal
-    from training.evaluator import Episode, episode_key
-    from training.judging.episodes import run_episodes
-    from training.judging.report import Result, Run
-
     protocol = load_protocol(version, root)
     out_folder(out)
     if worlds_cap is not None:
@@ -423,10 +374,33 @@ def judge(
                 "training seed: a success rate needs at least one)"
             )
     judged = candidates(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks, entrant=entrant)
+    check_loads(protocol, judged)
+    plan, judged_rows = plan_protocol(protocol, judged, worlds_cap)
+    fingerprint = {
+        "protocol": protocol.version,
+        "sha256": protocol.sha256,
+        "worlds_cap": worlds_cap,
+        "jobs": [episode_key(episode) for _, episode, _ in plan.jobs],
+    }
+    out_dir = Path(out)
 
-    # every checkpoint and entrant loads on its task's worlds before anything is written
-    import proteo_env
+    def write(seconds: float) -> dict:
+        notes = notes_on(protocol, judged, worlds_cap)
+        document = benchmark_document(protocol, judged_rows, notes, worlds_cap=worlds_cap, seconds=seconds)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "benchmark.json").write_text(json.dumps(document, indent=1, default=float) + "\n")
+        (out_dir / "benchmark.md").write_text(markdown(document))
+        return document
 
+    return plan.execute(
+        out_dir, fingerprint=fingerprint, fresh=fresh, what="benchmark run", ray=ray, workers=workers,
+        progress=progress, write=write,
+    )  # fmt: skip
+
+
+def check_loads(protocol: Protocol, judged: list[Candidate]) -> None:
+    """Every checkpoint and entrant of ``judged`` loads on its task's first split (a
+    :class:`ConfigError` naming what does not), before anything is written."""
     for e in judged:
         if e.training == "reference":
             continue
@@ -438,12 +412,17 @@ def judge(
         finally:
             env.close()
 
-    rows: list[tuple[Candidate, Split, Result]] = []
-    jobs: list[tuple[Run, Episode, str]] = []
+
+def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None):
+    """The :class:`~training.judging.episodes.Plan` of a protocol: for each candidate and split of
+    its task, one row whose runs (one per training seed) play the protocol's world seeds for its
+    kind (the first ``worlds_cap`` of them where given). Returns ``(plan, [(Candidate, Split,
+    Result)])``, one per row in the plan's order."""
+    plan = Plan()
+    rows = []
     for e in judged:
         seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
         for split in e.task.splits:
-            overrides = json.dumps(split.env, sort_keys=True)
             result = Result(
                 task=e.task.task_id,
                 policy=e.label,
@@ -452,14 +431,21 @@ def judge(
                 group=e.training != "reference",
                 split=split.name,
                 max_cycles=split.env.get("max_cycles"),
+                training=e.training,
+                declared=e.entrant.declared() if e.training == "declared" else None,
             )
             for source, training_seed, agent_steps, sha256, controller in e.runs():
                 run = Run(source=source, training_seed=training_seed, agent_steps=agent_steps, sha256=sha256)
                 result.runs.append(run)
-                jobs += [(run, Episode(e.task.task_id, overrides, e.level, controller, seed), "") for seed in seeds]
+                plan.add_run(run, controller, e.task.task_id, settings_json(split.env), e.level, seeds)
+            plan.rows.append(result)
             rows.append((e, split, result))
+    return plan, rows
 
-    complete_counts = worlds_cap is None
+
+def notes_on(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None) -> list[str]:
+    """Why the rows of ``judged`` are not complete, if they are not: a worlds cap, fewer training
+    seeds than the protocol asks."""
     notes = []
     if worlds_cap is not None:
         notes.append(
@@ -472,40 +458,47 @@ def judge(
                 f"{e.task.name} / {e.label}: {len(e.checkpoints)} training seed(s); protocol {protocol.version} "
                 f"asks for at least {protocol.training_seeds} (the rows are not complete)"
             )
+    return notes
 
-    out_dir = Path(out)
-    fingerprint = {
-        "protocol": protocol.version,
-        "sha256": protocol.sha256,
-        "worlds_cap": worlds_cap,
-        "jobs": [episode_key(episode) for _, episode, _ in jobs],
-    }
-    journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what="benchmark run")
-    started = time.perf_counter()
-    run_episodes(jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
-    seconds = time.perf_counter() - started
 
-    doc_rows = [
+def benchmark_document(
+    protocol: Protocol, judged_rows: list, notes: list[str], *, worlds_cap: int | None, seconds: float
+) -> dict:
+    """The ``benchmark.json`` document (schema :data:`SCHEMA`, version :data:`SCHEMA_VERSION`) of
+    the judged rows ``[(Candidate, Split, Result)]`` (:func:`plan_protocol`), every episode played,
+    and the ``notes`` (:func:`notes_on`).
+
+    A row's ``summary`` is :meth:`training.judging.report.Result.summary`: ``episodes``,
+    ``successes``, ``success_rate``, ``success_lo``/``success_hi`` (the 95 % interval),
+    ``cycles_to_success`` with ``cycles_lo``/``cycles_hi`` (over the successful episodes),
+    ``return_mean`` with ``return_lo``/``return_hi``, ``training_seeds`` and ``interval`` (one run:
+    Wilson and Student t; several training seeds: the stratified bootstrap of
+    :func:`training.judging.statistics.group_bootstrap`). The fields, as written below, are the
+    schema (docs/guides/benchmark.md reads them)."""
+    rows = [
         {
             "task": e.task.task_id,
             "task_name": task_name(e.task.task_id),
             "split": split.name,
             "about": split.about,
-            "env": split.env,
-            "policy": e.label,
-            "kind": e.kind,
+            "env": split.env,  # the proteo_env.make settings of the split
+            "policy": e.label,  # rules, rules-move, random, the recipe's or the entrant's label
+            "kind": e.kind,  # hand-coded, random, learned, evolved
             "level": e.level,
-            "recipe": e.recipe,
+            "recipe": e.recipe,  # the protocol recipe its checkpoints ran, or None
+            # reference (rules, random), protocol (a recipe's checkpoints, checked), declared (an
+            # entrant.yaml), undeclared (a bare factory), unchecked (checkpoints of no recipe); absent in
+            # files written before entrants (read from kind and recipe)
             "training": e.training,
-            "declared": e.entrant.declared() if e.training == "declared" else None,
-            "world_seeds": result.world_seeds,
-            "complete": complete_counts and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
-            "runs": [
+            "declared": result.declared,  # an entrant's {name, training_seeds, budget, code}
+            "world_seeds": result.world_seeds,  # the worlds every training seed was judged on
+            "complete": worlds_cap is None and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
+            "runs": [  # one per training seed (one for the rules and random)
                 {
-                    "source": r.source,
+                    "source": r.source,  # the checkpoint, the entrant's file, or baselines.<policy>
                     "training_seed": r.training_seed,
-                    "agent_steps": r.agent_steps,
-                    **({"sha256": r.sha256} if r.sha256 else {}),
+                    "agent_steps": r.agent_steps,  # None for the rules and random
+                    **({"sha256": r.sha256} if r.sha256 else {}),  # an entrant's file
                     "successes": [bool(s) for s in r.successes],
                     "cycles": [int(c) for c in r.cycles],
                     "returns": [float(x) for x in r.returns],
@@ -515,64 +508,35 @@ def judge(
             ],
             "summary": result.summary(),
         }
-        for e, split, result in rows
+        for e, split, result in judged_rows
     ]
-    document = {
+    return {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "protocol": protocol.version,
         "protocol_file": f"{PROTOCOL_DIR}/{protocol.version}.yaml",
-        "protocol_sha256": protocol.sha256,
-        **provenance(),
+        "protocol_sha256": protocol.sha256,  # the protocol file judged by
+        **provenance(),  # proteo_version, commit
         "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "worlds_cap": worlds_cap,
-        "complete": all(r["complete"] for r in doc_rows),
-        "notes": notes,
+        "worlds_cap": worlds_cap,  # --worlds-cap (quick checks only; a published run has None)
+        "complete": all(r["complete"] for r in rows),  # every row judged as the protocol asks (else: notes)
+        "notes": notes,  # why a row is not complete (fewer training seeds, a cap)
         "wall_seconds": seconds,
-        "rows": doc_rows,
+        "rows": rows,  # one per task, split and policy
     }
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "benchmark.json").write_text(json.dumps(document, indent=1, default=float) + "\n")
-    (out_dir / "benchmark.md").write_text(markdown(document))
-    journal.complete()
-    return document
 
 
 def markdown(document: dict) -> str:
-    """The rows of a ``benchmark.json`` document as a markdown table with 95 % intervals."""
-    from training.judging.report import INTERVALS, cycles_cell, interval, success_cell
-
-    head = [
-        "task",
-        "split",
-        "policy",
-        "kind",
-        "level",
-        "training seeds",
-        "worlds",
-        "success (95 % CI)",
-        "cycles to success (95 % CI)",
-        "return (95 % CI)",
-    ]
+    """A ``benchmark.json`` document as ``benchmark.md``: what was judged, the table of its rows
+    (:func:`~training.judging.report.markdown_table`, :data:`~training.judging.report.BENCHMARK_COLUMNS`)
+    with 95 % intervals, and the notes."""
     lines = [
         f"Benchmark {document['protocol']} ({document['protocol_file']}, sha256 {document['protocol_sha256'][:12]}); "
         f"proteo {document['proteo_version']}, commit {(document['commit'] or 'unknown')[:12]}; "
         f"{'complete' if document['complete'] else 'NOT complete (see the notes)'}.",
         "",
-        "| " + " | ".join(head) + " |",
-        "|" + "---|" * len(head),
+        markdown_table([result_of_row(row) for row in document["rows"]], BENCHMARK_COLUMNS),
     ]
-    for row in document["rows"]:
-        s = row["summary"]
-        seeds = row["world_seeds"]
-        worlds = f"{len(seeds)} ({seeds[0]}..{seeds[-1]})" if seeds else "0"
-        how = row.get("training", "protocol")
-        policy = row["policy"] if how in ("protocol", "reference") else f"{row['policy']} ({how})"
-        lines.append(
-            f"| {row['task']} | {row['split']} | {policy} | {row['kind']} | {row['level']} | "
-            f"{len(row['runs']) if row['kind'] in ('learned', 'evolved') else '–'} | {worlds} | {success_cell(s)} | "
-            f"{cycles_cell(s)} | {interval(s['return_mean'], s['return_lo'], s['return_hi'], 3)} |"
-        )
     lines += ["", INTERVALS]
     if document["notes"]:
         lines += ["", "Notes:", "", *[f"- {n}" for n in document["notes"]]]
@@ -581,9 +545,6 @@ def markdown(document: dict) -> str:
 
 def main(args) -> int:
     """``proteo eval --benchmark VERSION ...`` (arguments parsed in :mod:`training.cli`)."""
-    from training.distributed import ray_options
-    from training.judging.evaluate import refuse_flags
-
     conflicting = {
         "--config": args.config,
         "--seeds": args.seeds is not None,

@@ -238,35 +238,88 @@ def cycles_cell(s: dict) -> str:
     return "–" if not s["successes"] else interval(s["cycles_to_success"], s["cycles_lo"], s["cycles_hi"], 0)
 
 
-def markdown_table(results: list) -> str:
-    """The results as one markdown table (one row per task and policy or training-seed group).
+def row_label(r: Result) -> str:
+    """A row's name: an entrant's (or an unchecked checkpoint's) with how its training is known after it."""
+    return f"{r.policy} ({r.training})" if r.entered else r.policy
+
+
+def _worlds_cell(r: Result) -> str:
+    seeds = r.world_seeds
+    return f"{len(seeds)} ({seeds[0]}..{seeds[-1]})" if seeds else "0"
+
+
+COLUMNS = {
+    "task": lambda r, s: r.task,
+    "split": lambda r, s: r.split,
+    "policy": lambda r, s: row_label(r),
+    "kind": lambda r, s: r.kind,
+    "level": lambda r, s: r.level,
+    "training seeds": lambda r, s: str(len(r.runs)) if r.kind in ("learned", "evolved") else "–",
+    "worlds": lambda r, s: _worlds_cell(r),
+    "episodes": lambda r, s: str(s["episodes"]),
+    "return (95 % CI)": lambda r, s: interval(s["return_mean"], s["return_lo"], s["return_hi"], 3),
+    "success (95 % CI)": lambda r, s: success_cell(s),
+    "cycles to success (95 % CI)": lambda r, s: cycles_cell(s),
+    "seconds": lambda r, s: f"{s['seconds']:.1f}",
+}
+"""Every column a table of results may have: its head and its cell of a row ``r`` with summary ``s``."""
+EVALUATION_COLUMNS = ("task", "policy", "kind", "level", "training seeds", "episodes", "return (95 % CI)",
+                      "success (95 % CI)", "cycles to success (95 % CI)", "seconds")  # fmt: skip
+"""The columns of ``proteo eval``'s tables (``results.md``, the published regions)."""
+BENCHMARK_COLUMNS = ("task", "split", "policy", "kind", "level", "training seeds", "worlds", "success (95 % CI)",
+                     "cycles to success (95 % CI)", "return (95 % CI)")  # fmt: skip
+"""The columns of a judgement's table (``benchmark.md``)."""
+
+
+def markdown_table(results: list, columns=EVALUATION_COLUMNS) -> str:
+    """The results as one markdown table (one row per :class:`Result`), the ``columns`` of
+    :data:`COLUMNS`: every table of ``proteo eval`` and ``proteo eval --benchmark``.
 
     Every measure is ``value (low–high)``, its 95 % interval (see :data:`INTERVALS`): return and
     cycles to success are means, success is successes over episodes then the interval of the rate.
     A group's values are pooled over its training seeds and its intervals come from the
     stratified bootstrap.
     """
-    head = [
-        "task",
-        "policy",
-        "kind",
-        "level",
-        "training seeds",
-        "episodes",
-        "return (95 % CI)",
-        "success (95 % CI)",
-        "cycles to success (95 % CI)",
-        "seconds",
-    ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in results:
         s = r.summary()
-        ret = interval(s["return_mean"], s["return_lo"], s["return_hi"], 3)
-        lines.append(
-            f"| {s['task']} | {s['policy']} | {s['kind']} | {s['level']} | {s['training_seeds'] or '–'} | "
-            f"{s['episodes']} | {ret} | {success_cell(s)} | {cycles_cell(s)} | {s['seconds']:.1f} |"
-        )
+        lines.append("| " + " | ".join(COLUMNS[c](r, s) for c in columns) + " |")
     return "\n".join(lines)
+
+
+def result_of_row(row: dict) -> Result:
+    """A ``benchmark.json`` row (:func:`training.judging.judge.benchmark_document`) as a
+    :class:`Result` with its recorded summary (``task``: the task id). Rows judged before entrants
+    have no ``training``: it is read from the kind and the recipe."""
+    training = row.get("training") or (
+        "reference" if row["kind"] in ("hand-coded", "random") else "protocol" if row.get("recipe") else "unchecked"
+    )
+    return Result(
+        task=row["task"],
+        policy=row["policy"],
+        kind=row["kind"],
+        level=row["level"],
+        runs=[
+            Run(
+                source=run["source"],
+                training_seed=run.get("training_seed"),
+                agent_steps=run.get("agent_steps"),
+                sha256=run.get("sha256"),
+                returns=run["returns"],
+                successes=run["successes"],
+                cycles=run["cycles"],
+                seeds=row["world_seeds"],
+                seconds=run["seconds"],
+            )
+            for run in row["runs"]
+        ],
+        group=training != "reference",
+        split=row["split"],
+        max_cycles=int(row["env"]["max_cycles"]),
+        recorded=row["summary"],
+        training=training,
+        declared=row.get("declared"),
+    )
 
 
 def plot(results: list[Result], path: Path) -> None:

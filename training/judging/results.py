@@ -38,6 +38,7 @@ Every number comes from the files; nothing is typed in.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 from collections import defaultdict
@@ -49,7 +50,7 @@ from proteo_env.config import ConfigError
 from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
-from training.judging.report import Result, Run
+from training.judging.report import Result, result_of_row, row_label
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
@@ -90,37 +91,7 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
                 f"--worlds-cap; its notes: {'; '.join(data.get('notes') or []) or 'none'})"
             )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
-        for r in data["rows"]:
-            training = r.get("training") or (  # files judged before entrants: from the kind and the recipe
-                "reference" if r["kind"] in ("hand-coded", "random") else "protocol" if r.get("recipe") else "unchecked"
-            )
-            rows.append(
-                Result(
-                    task=r["task_name"],
-                    policy=r["policy"],
-                    kind=r["kind"],
-                    level=r["level"],
-                    runs=[
-                        Run(
-                            source=run["source"],
-                            training_seed=run.get("training_seed"),
-                            agent_steps=run.get("agent_steps"),
-                            returns=run["returns"],
-                            successes=run["successes"],
-                            cycles=run["cycles"],
-                            seeds=r["world_seeds"],
-                            seconds=run["seconds"],
-                        )
-                        for run in r["runs"]
-                    ],
-                    group=training != "reference",
-                    split=r["split"],
-                    max_cycles=int(r["env"]["max_cycles"]),
-                    recorded=r["summary"],
-                    training=training,
-                    declared=r.get("declared"),
-                )
-            )
+        rows += [dataclasses.replace(result_of_row(r), task=r["task_name"]) for r in data["rows"]]
     return rows, headers
 
 
@@ -623,7 +594,7 @@ def marl_eval_layout(rows: list[Result]) -> dict:
     for row in rows:
         if row.kind not in ("learned", "evolved"):
             continue
-        name = _label(row)
+        name = row_label(row)
         runs = out.setdefault(f"proteo-{row.task}", {}).setdefault(row.split, {}).setdefault(name, {})
         for run in row.runs:
             metrics = {
@@ -660,16 +631,11 @@ def heldout_table(rows: list[Result], protocol) -> str:
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
     lines = ["| policy | " + " | ".join(protocol.tasks[t].task_id for t in tasks) + " |", "|---|" + "---|" * len(tasks)]
-    labels = {r.policy: _label(r) for r in rows}
+    labels = {r.policy: row_label(r) for r in rows}
     for policy in _policy_order({r.policy for r in rows}):
         cells = [short_cell(by_key[(t, "heldout", policy)]) if (t, "heldout", policy) in by_key else "-" for t in tasks]
         lines.append(f"| {labels[policy]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
-
-
-def _label(row: Result) -> str:
-    """A row's name in a table: an entrant's with how its training is known after it."""
-    return f"{row.policy} ({row.training})" if row.entered else row.policy
 
 
 def main(argv=None) -> int:
