@@ -217,6 +217,15 @@ def _finite(*xs) -> bool:
     return all(x is not None and np.isfinite(x) for x in xs)
 
 
+def span(lo: float, hi: float, digits: int = 3, dash: str = "–") -> str:
+    """An interval ``lo–hi`` (``lo to hi`` where ``lo`` is negative); ``dash`` alone where it is
+    not finite. The results page and the README write ``dash="-"``."""
+    if not _finite(lo, hi):
+        return dash
+    a, b = _fmt(lo, digits), _fmt(hi, digits)
+    return f"{a}{' to ' if a.startswith('-') else dash}{b}"
+
+
 def interval(value: float, lo: float, hi: float, digits: int = 3) -> str:
     """``value (lo–hi)``, e.g. ``120 (95–150)``; ``lo to hi`` where ``lo`` is negative; the value
     alone without a finite interval; ``–`` without a value."""
@@ -224,13 +233,12 @@ def interval(value: float, lo: float, hi: float, digits: int = 3) -> str:
         return "–"
     if not _finite(lo, hi):
         return _fmt(value, digits)
-    a, b = _fmt(lo, digits), _fmt(hi, digits)
-    return f"{_fmt(value, digits)} ({a}{' to ' if a.startswith('-') else '–'}{b})"
+    return f"{_fmt(value, digits)} ({span(lo, hi, digits)})"
 
 
-def success_cell(s: dict) -> str:
+def success_cell(s: dict, dash: str = "–") -> str:
     """Successes over episodes and the 95 % interval of the rate: ``24/30 (0.63–0.90)``."""
-    return f"{s['successes']}/{s['episodes']} ({_fmt(s['success_lo'], 2)}–{_fmt(s['success_hi'], 2)})"
+    return f"{s['successes']}/{s['episodes']} ({span(s['success_lo'], s['success_hi'], 2, dash)})"
 
 
 def cycles_cell(s: dict) -> str:

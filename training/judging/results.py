@@ -50,7 +50,7 @@ from proteo_env.config import ConfigError
 from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
-from training.judging.report import Result, result_of_row, row_label
+from training.judging.report import Result, result_of_row, row_label, span, success_cell
 
 RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
 """The policy names of the reference rows in ``benchmark.json``."""
@@ -96,14 +96,12 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
 
 
 def _interval(lo: float, hi: float, digits: int = 2) -> str:
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return "-"
-    return f"{lo:.{digits}f}{' to ' if lo < 0 else '-'}{hi:.{digits}f}"
+    return span(lo, hi, digits, dash="-")
 
 
 def _successes(s: dict) -> str:
     """``k/n (lo-hi)``: a summary's successes with the interval of the rate."""
-    return f"{s['successes']}/{s['episodes']} ({_interval(s['success_lo'], s['success_hi'])})"
+    return success_cell(s, dash="-")
 
 
 def cell(row: Result) -> str:
