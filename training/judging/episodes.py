@@ -23,8 +23,7 @@ from pathlib import Path
 
 from proteo_env.registry import task_name
 from training.distributed import Journal, run_jobs
-from training.evaluator import Episode, episode_key
-from training.evaluator import run_episodes as run_batched
+from training.evaluator import Episode, episode_key, run_episodes
 from training.judging.report import Result, Run
 
 
@@ -97,7 +96,7 @@ def run_alone(job: tuple) -> dict:
     return out
 
 
-def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
+def play_jobs(jobs: list, out_dir: Path, *, ray, journal, progress: bool, workers=None) -> None:
     """Run the planned ``jobs`` (``[(Run, Episode, picture)]``) and add each episode to its run;
     pictures go to ``out_dir/pictures/<task>_<picture>_<level>.png``.
 
@@ -120,7 +119,9 @@ def run_episodes(jobs: list, out_dir: Path, *, ray, journal, progress: bool, wor
             episodes[i] = episode
     if plain:
         started = time.perf_counter()
-        batched = run_batched([jobs[i][1] for i in plain], ray=ray, workers=workers, journal=journal, progress=progress)
+        batched = run_episodes(
+            [jobs[i][1] for i in plain], ray=ray, workers=workers, journal=journal, progress=progress
+        )
         seconds = (time.perf_counter() - started) / len(plain)
         for i, r in zip(plain, batched):
             episodes[i] = _record(r, seconds)
@@ -140,7 +141,7 @@ class Plan:
     rows: list[Result] = field(default_factory=list)
     """One record per row (a policy, or a recipe's training seeds, on one task and split)."""
     jobs: list[tuple[Run, Episode, str]] = field(default_factory=list)
-    """``(Run, Episode, picture)`` of every episode (:func:`run_episodes`)."""
+    """``(Run, Episode, picture)`` of every episode (:func:`play_jobs`)."""
 
     def add_run(self, run: Run, controller, task: str, settings: str, level: str, seeds, *, picture: str = ""):
         """``run``'s episodes: ``controller`` on each world seed of ``seeds`` of ``task`` with
@@ -156,7 +157,7 @@ class Plan:
         and close the journal; returns what ``write`` returns. ``what`` names the run in errors."""
         journal = Journal(out_dir / "episodes.jsonl", fingerprint, fresh=fresh, what=what)
         started = time.perf_counter()
-        run_episodes(self.jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
+        play_jobs(self.jobs, out_dir, ray=ray, workers=workers, journal=journal, progress=progress)
         written = write(time.perf_counter() - started)
         journal.complete()
         return written

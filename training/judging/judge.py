@@ -36,7 +36,7 @@ from training.evaluator import Controller, episode_key, settings_json
 from training.judging.entrants import ENTRANT_FILE, check_factory_name, file_digests, load_entrant
 from training.judging.episodes import Plan
 from training.judging.evaluate import refuse_flags
-from training.judging.protocol import POLICIES, PROTOCOL_DIR, Protocol, TaskProtocol, load_protocol
+from training.judging.protocol import PROTOCOL_DIR, REFERENCE_POLICIES, Protocol, TaskProtocol, load_protocol
 from training.judging.report import BENCHMARK_COLUMNS, INTERVALS, Result, Run, markdown_table, result_of_row
 
 SCHEMA = "proteo-benchmark-results"
@@ -264,7 +264,7 @@ def _entrant_candidate(protocol: Protocol, source, tasks, level) -> Candidate:
             f"{protocol.version} judges {kind} {task.name} controllers at ({', '.join(levels)})"
         )
     label = entry if isinstance(entry, str) else entry.name
-    taken = {*task.recipes, "rules", "random", *(f"{p}-{lv}" for p in POLICIES for lv in CONTROL_LEVELS)}
+    taken = {*task.recipes, "rules", "random", *(f"{p}-{lv}" for p in REFERENCE_POLICIES for lv in CONTROL_LEVELS)}
     if label in taken:
         raise ConfigError(
             f"entrant {text!r}: name = {label!r} is not allowed; allowed: a name that is not one of the protocol's "
@@ -303,8 +303,8 @@ def candidates(
         if level is not None:
             raise ConfigError(f"--level {level!r} is not allowed with --checkpoint; allowed: --level with --policy")
         return [_checkpoint_candidate(protocol, list(checkpoints), tasks)]
-    if policy not in POLICIES:
-        raise ConfigError(f"--policy {policy!r} is not allowed; allowed: {', '.join(POLICIES)}")
+    if policy not in REFERENCE_POLICIES:
+        raise ConfigError(f"--policy {policy!r} is not allowed; allowed: {', '.join(REFERENCE_POLICIES)}")
     out = []
     for name, task in protocol.tasks.items():
         if tasks is not None and name not in tasks:

@@ -54,7 +54,7 @@ OPTIONAL_LEVEL_KEYS = ("evolved",)
 RECIPE_KEYS = ("config", "agent_steps", "init")
 SPLIT_KEYS = ("about", "env")
 REQUIRED_SPLITS = ("heldout", "larger")
-POLICIES = ("rules", "random")
+REFERENCE_POLICIES = ("rules", "random")
 """The names ``--policy`` takes: the task's hand-coded rules, and the random policy."""
 
 
