@@ -1,12 +1,12 @@
 """Training and evaluation of learned and evolved controllers (outside the env package).
 
-One script per algorithm, each readable end to end: :mod:`training.sb3_ppo` (MaskablePPO,
-Stable-Baselines3), :mod:`training.torchrl_ppo` (IPPO/MAPPO, TorchRL) and :mod:`training.cma_es`
-(CMA-ES over the hand-coded rules' parameters or a small neural controller). Checkpoints load
-by path as ordinary policies with :func:`training.checkpoints.load_policy`;
+One script per trainer, each readable end to end, every one registered in
+:data:`training.trainers.TRAINERS` (``proteo train --help`` lists them: native PPO, imitation,
+MaskablePPO, TorchRL's IPPO/MAPPO, RLlib's PPO, CMA-ES, program evolution, the study).
+Checkpoints load by path as ordinary policies with :func:`training.checkpoints.load_policy`;
 :func:`load_controller` gives the environment and the policy of a checkpoint (or of the rules
-or the random policy of a task, ``"rules:chain-v1"``) in one call;
-:mod:`training.judging.evaluate` is ``proteo eval``. Needs the ``train`` extra (``pip install -e ".[train]"``).
+or the random policy of a task, ``"rules:chain-v1"``) in one call; :mod:`training.judging` is
+``proteo eval`` and the benchmark's judge. Needs the ``train`` extra (``pip install -e ".[train]"``).
 """
 
 from __future__ import annotations
