@@ -4,6 +4,7 @@ are, with its training declared (not verified) and every bad input refused befor
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import textwrap
 from pathlib import Path
@@ -250,7 +251,11 @@ def _bad_entrants(tmp_path: Path) -> list[tuple[Path, str]]:
     )
     variant("nobudget", r"budget is missing", budget=None)
     variant("key", r"key 'layers' = 3 is not allowed", layers=3)
-    variant("format", r"format = 'keras' is not allowed; allowed: torchscript, onnx, sb3, factory", format="keras")
+    variant(
+        "format",
+        r"format = 'keras' is not allowed; allowed: torchscript, onnx, sb3, benchmarl, factory",
+        format="keras",
+    )
     variant("missing", r"seeds.0 = 'gone.pt' is not allowed; allowed: a file beside", files={0: "gone.pt"})
     variant("seed", r"seeds = -1 is not allowed; allowed: training seeds: integers >= 0", files={-1: "seed_0.pt"})
     variant("task", r"task = 'snake-v0' is not allowed; allowed: the tasks benchmark v7 holds", task="snake-v0")
@@ -262,6 +267,8 @@ def _bad_entrants(tmp_path: Path) -> list[tuple[Path, str]]:
     )
     variant("onnx", r"is not an ONNX model", format="onnx")
     variant("sb3", r"is not a MaskablePPO model", format="sb3")
+    benchmarl = importlib.util.find_spec("benchmarl") is not None  # its own environment (tests/test_benchmarl.py)
+    variant("benchmarl", r"no config.pkl" if benchmarl else r"BenchMARL is not installed here", format="benchmarl")
     variant("size", r"failed on features of shape \(1, \d+\).*allowed: a network from", observation={})
     (tmp_path / "garbage").mkdir()
     (tmp_path / "garbage/seed_0.pt").write_bytes(b"\x00" * 100)

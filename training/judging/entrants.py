@@ -34,9 +34,13 @@ resumes exactly and the number of workers does not matter).
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import io
 import math
 import sys
+import tempfile
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,7 +55,7 @@ from training.common import sha256_of
 ENTRANT_INTERFACE = 1
 """The version of the interface above and of ``entrant.yaml``'s format (its ``entrant:`` key)."""
 ENTRANT_FILE = "entrant.yaml"
-FORMATS = ("torchscript", "onnx", "sb3", "factory")
+FORMATS = ("torchscript", "onnx", "sb3", "benchmarl", "factory")
 ACTIONS = ("sample", "argmax")
 KINDS = ("learned", "evolved", "hand-coded")
 """What an entrant is; a hand-coded one is judged at the levels the protocol judges the rules at."""
@@ -328,8 +332,6 @@ def load_network(file: Path, fmt: str):
 
 
 def _torchscript(file: Path):
-    import warnings
-
     import torch
 
     with warnings.catch_warnings():  # torch 2.10+ calls TorchScript deprecated; it loads all the same
@@ -371,10 +373,50 @@ def _sb3(file: Path):
     return maskable_ppo_logits(MaskablePPO.load(str(file), device="cpu"))
 
 
+def _benchmarl(file: Path):
+    """The actor of a BenchMARL experiment restored from its checkpoint by BenchMARL itself
+    (``Experiment.reload_from_file``, which reads ``config.pkl`` two folders up): the network that
+    every agent shares, from one agent's observation to its logits."""
+    import torch
+
+    try:
+        from benchmarl.experiment import Experiment
+        from torchrl.modules.models.multiagent import MultiAgentNetBase
+    except ImportError:
+        raise EntrantError(
+            f"entrant network {str(file)!r} has format: benchmarl, and BenchMARL is not installed here; allowed: "
+            "judge it in BenchMARL's own environment (make benchmarl, then .venv-benchmarl/bin/proteo eval ...)"
+        ) from None
+    experiment_folder = file.parent.parent
+    if file.parent.name != "checkpoints" or not (experiment_folder / "config.pkl").is_file():
+        raise EntrantError(
+            f"entrant network {str(file)!r} is not allowed: no config.pkl at {str(experiment_folder)!r}; allowed: a "
+            "checkpoint where BenchMARL saves it, EXPERIMENT/checkpoints/checkpoint_N.pt beside EXPERIMENT/config.pkl"
+        )
+    with tempfile.TemporaryDirectory() as scratch, contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # torchrl's deprecations of what BenchMARL 1.5 calls; it restores all the same
+        experiment = Experiment.reload_from_file(str(file), experiment_patch={"save_folder": scratch, "loggers": []})
+    nets = [m for m in experiment.policy.modules() if isinstance(m, MultiAgentNetBase)]
+    if len(nets) != 1 or not nets[0].share_params or nets[0].centralized:
+        raise EntrantError(
+            f"entrant network {str(file)!r} is not allowed: its actor is not one network shared by every agent; "
+            "allowed: a decentralised actor with shared parameters (BenchMARL's share_param_policy: true), which "
+            "the judge runs on robots of any size"
+        )
+    net = nets[0].get_stateful_net(copy=True).eval()
+
+    def forward(features: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return net(torch.from_numpy(features)).numpy()
+
+    return forward
+
+
 NETWORK_FORMATS = {
     "torchscript": (_torchscript, "a TorchScript file", "a file written by torch.jit.save"),
     "onnx": (_onnx, "an ONNX model", "a file written by torch.onnx.export or any ONNX writer"),
     "sb3": (_sb3, "a MaskablePPO model", "a model.zip written by sb3-contrib's MaskablePPO.save"),
+    "benchmarl": (_benchmarl, "a BenchMARL checkpoint", "a checkpoint_N.pt written by a BenchMARL Experiment"),
 }
 """``format: (loader, what it is, what is allowed)`` of the saved networks an entrant may be."""
 
