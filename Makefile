@@ -62,7 +62,7 @@ results: install
 
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe of
-# docs/benchmark/v6/results.md (python -m training.study) into checkpoints/v1 (v2: CMA-ES over the rules'
+# docs/benchmark/v6/results.md (python -m training.trainers.study) into checkpoints/v1 (v2: CMA-ES over the rules'
 # parameters; v3: evolved chain programs; v4 and v5: evolved branch, table and grasp programs, from the paper's and from random ones;
 # v6: evolution with ten times the episodes per generation on all four), each recipe judged on every split of its task (proteo eval
 # --benchmark) into docs/benchmark/<version>/<task>/<recipe>, then v6's results page. The rules' and random's rows are
@@ -75,28 +75,28 @@ STUDY_V4 := $(STUDY) --keep-dir checkpoints/v4 --docs-dir docs/benchmark/v4/lear
 STUDY_V5 := $(STUDY) --keep-dir checkpoints/v5 --docs-dir docs/benchmark/v5/learning --runs-dir runs/v5
 STUDY_V6 := $(STUDY) --keep-dir checkpoints/v6 --docs-dir docs/benchmark/v6/learning --runs-dir runs/v6
 learning-results: install
-	$(BIN)/python -m training.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
-	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
-	$(BIN)/python -m training.study --recipes "[ppo]" --tasks "[chain, branch, grasp, locomotion]" --total-steps 16000000 $(STUDY_V1)
-	$(BIN)/python -m training.study --recipes "[cma]" --tasks "[grasp, table, branch, chain]" --level full $(STUDY_V2)
-	$(BIN)/python -m training.study --recipes "[evolve, evolve-paper]" --tasks "[chain]" --level full $(STUDY_V3)
-	$(BIN)/python -m training.study --recipes "[evolve-paper]" --tasks "[branch, table, grasp]" --level full $(STUDY_V4)
-	$(BIN)/python -m training.study --recipes "[evolve]" --tasks "[branch, table, grasp]" --level full $(STUDY_V5)
-	$(BIN)/python -m training.study --recipes "[evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V6)
+	$(BIN)/python -m training.trainers.study --recipes "[imitation, kickstart]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V1)
+	$(BIN)/python -m training.trainers.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V1)
+	$(BIN)/python -m training.trainers.study --recipes "[ppo]" --tasks "[chain, branch, grasp, locomotion]" --total-steps 16000000 $(STUDY_V1)
+	$(BIN)/python -m training.trainers.study --recipes "[cma]" --tasks "[grasp, table, branch, chain]" --level full $(STUDY_V2)
+	$(BIN)/python -m training.trainers.study --recipes "[evolve, evolve-paper]" --tasks "[chain]" --level full $(STUDY_V3)
+	$(BIN)/python -m training.trainers.study --recipes "[evolve-paper]" --tasks "[branch, table, grasp]" --level full $(STUDY_V4)
+	$(BIN)/python -m training.trainers.study --recipes "[evolve]" --tasks "[branch, table, grasp]" --level full $(STUDY_V5)
+	$(BIN)/python -m training.trainers.study --recipes "[evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V6)
 	for version in v1 v2 v3 v4 v5 v6; do for recipe in checkpoints/$$version/*/*_*; do \
 		$(BIN)/proteo eval --benchmark $$version $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/$$version/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done; done
 	$(BIN)/python -m training.judging.results --benchmark v6 --out docs/benchmark/v6/results.md
 
 # Protocol v7 (standalone: ten training seeds, 100 worlds each, table-v2, branch's edge_start): each recipe's
-# config, budget, task id and starting clone come from configs/benchmark/v7.yaml (training.study --benchmark
+# config, budget, task id and starting clone come from configs/benchmark/v7.yaml (training.trainers.study --benchmark
 # v7). About 18 hours on 2 cores, 14 of them evolution; a study stopped part way resumes from runs/v7.
 STUDY_V7 := --benchmark v7 --minutes 0 --parallel 2 --seeds "[0, 1, 2, 3, 4, 5, 6, 7, 8, 9]" \
 	--keep-dir checkpoints/v7 --docs-dir docs/benchmark/v7/learning --runs-dir runs/v7
 learning-results-v7: install
-	$(BIN)/python -m training.study --recipes "[imitation, kickstart, ppo]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V7)
-	$(BIN)/python -m training.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V7)
-	$(BIN)/python -m training.study --recipes "[cma, evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V7)
+	$(BIN)/python -m training.trainers.study --recipes "[imitation, kickstart, ppo]" --tasks "[chain, branch, table, grasp, locomotion]" $(STUDY_V7)
+	$(BIN)/python -m training.trainers.study --recipes "[credit]" --tasks "[grasp]" $(STUDY_V7)
+	$(BIN)/python -m training.trainers.study --recipes "[cma, evolve-large, evolve-large-paper]" --tasks "[chain, branch, table, grasp]" --level full $(STUDY_V7)
 	for recipe in checkpoints/v7/*/*_*; do \
 		$(BIN)/proteo eval --benchmark v7 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/v7/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done

@@ -34,8 +34,8 @@ def main(argv=None) -> int:
     import proteo_env
     from baselines import make_policy
     from proteo_env.rollout import run_episode
-    from training.checkpoints import load_policy
-    from training.common import limit_threads
+    from training.machinery.checkpoints import load_policy
+    from training.machinery.runs import limit_threads
 
     limit_threads(1)
     env = proteo_env.make("chain-v0", n_modules=args.modules, max_cycles=args.max_cycles, motion_model="sphere")

@@ -34,8 +34,8 @@ from baselines import POLICIES, make_policy  # noqa: E402
 from baselines.base import Policy  # noqa: E402
 from proteo_env.config import load_yaml
 from proteo_env.rollout import run_episode  # noqa: E402
-from training.checkpoints import load_policy  # noqa: E402
 from training.judging.statistics import mean_ci  # noqa: E402
+from training.machinery.checkpoints import load_policy  # noqa: E402
 
 
 class FixedModePolicy(Policy):

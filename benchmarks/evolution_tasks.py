@@ -3,7 +3,7 @@
 For each task, the episodes of one generation of its ``evolve-large`` recipe
 (``configs/train/evolve_large_<task>_full.yaml`` on the task version of benchmark v7): the
 paper's program, random programs and mutants (``--programs`` in all), one world per variation,
-through :func:`training.evaluator.run_episodes` on one worker, the way ``training/evolve.py``
+through :func:`training.machinery.evaluator.run_episodes` on one worker, the way ``training/trainers/evolve.py``
 runs a generation once it is past its first ones (new programs are parsed and built in the
 timed call; a warm-up generation of other programs compiles first, the programs' one-call
 kernel included). With ``--before DIR`` (a checkout of an earlier commit) the same
@@ -37,7 +37,7 @@ TASKS = {"chain": "chain-v1", "branch": "branch-v0", "table": "table-v2", "grasp
 def generation(task: str, n_programs: int) -> dict:
     """Seconds, module-cycles and every episode's outcome of one generation of ``task`` (this process's checkout)."""
     from proteo_env import batched
-    from training.evaluator import run_episodes
+    from training.machinery.evaluator import run_episodes
 
     batched.ONE_CALL_AFTER = (
         0  # the programs act in one call from the start, as in a long run (compiled in the warm-up)

@@ -4,7 +4,7 @@ with and without memory inputs.
     python benchmarks/imitation_memory.py --task branch-v0 --env "{n_modules: 40, T: 4, B: 3, max_cycles: 200}"
     python benchmarks/imitation_memory.py --task chain-v1 --env "{n_modules: 12, max_cycles: 300, motion_model: sphere}" --worlds 32
 
-The rules (the teacher of :mod:`training.imitate`) drive ``--worlds`` worlds for ``--cycles``
+The rules (the teacher of :mod:`training.trainers.imitate`) drive ``--worlds`` worlds for ``--cycles``
 cycles, once with seed 0 (training states) and once with seed 777 (held-out states); every
 module with a choice (two or more legal moves) is a sample labelled with the rules' move. The
 same network (shared 128 x 128 trunk) is trained by cross-entropy on three inputs:
@@ -28,11 +28,11 @@ import numpy as np
 import torch
 
 from proteo_env.config import parse_yaml
-from training.common import seed_everything
-from training.networks import ActorCritic, masked_log_probs, teacher_cross_entropy
-from training.policies import with_memory
-from training.teachers import Teachers
-from training.worlds import TrainingEnvs
+from training.machinery.networks import ActorCritic, masked_log_probs, teacher_cross_entropy
+from training.machinery.policies import with_memory
+from training.machinery.runs import seed_everything
+from training.trainers.teachers import Teachers
+from training.trainers.worlds import TrainingEnvs
 
 
 def collect(task: str, env: dict, n_envs: int, cycles: int, seed: int) -> dict[str, np.ndarray]:

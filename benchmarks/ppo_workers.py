@@ -4,7 +4,7 @@ beside the batched engine on the same worlds, measured in one run.
     NUMBA_NUM_THREADS=1 python benchmarks/ppo_workers.py --out docs/speed/ppo_workers
 
 The worlds are those of ``configs/train/ppo_chain_move.yaml`` (64 chain-v1 worlds of 12
-modules at ``move``). For each ``--workers`` count it trains ``training/ppo.py`` with the
+modules at ``move``). For each ``--workers`` count it trains ``training/trainers/ppo.py`` with the
 config's settings and seed 0 for ``--steps`` agent-steps (``--workers K``, one torch thread)
 and takes its rate from ``progress.csv`` over the rows after ``--warmup`` agent-steps (before
 them each process compiles its worlds' batched autopilot: :data:`proteo_env.batched.ONE_CALL_AFTER`
@@ -72,7 +72,7 @@ def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
 
 def train(workers: int, steps: int, run_dir: Path) -> dict:
     """One PPO run of the config split over ``workers`` processes; its rows of ``progress.csv``."""
-    cmd = [sys.executable, "-m", "training.ppo", "--config", CONFIG, "--seed", "0", "--run-dir", str(run_dir)]
+    cmd = [sys.executable, "-m", "training.trainers.ppo", "--config", CONFIG, "--seed", "0", "--run-dir", str(run_dir)]
     cmd += ["--total-steps", str(steps), "--time-limit-minutes", "0", "--workers", str(workers), "--threads", "1"]
     cmd += ["--progress-bar", "false", "--tensorboard", "false", "--checkpoint-every", str(10 * steps)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)

@@ -24,10 +24,10 @@ def noop(job):
 def main() -> None:
     import ray
 
-    from training import cma_es
-    from training.distributed import run_jobs
-    from training.evaluator import Controller, Episode, episode_key
     from training.judging.episodes import run_alone
+    from training.machinery.distributed import run_jobs
+    from training.machinery.evaluator import Controller, Episode, episode_key
+    from training.trainers import cma_es
 
     settings = '{"max_cycles": 1500, "motion_model": "rhombic", "n_modules": 40}'
     jobs = [(Episode("chain-v1", settings, "full", Controller.rules("chain"), s), "") for s in range(16)]

@@ -1,5 +1,5 @@
 """The research loop against the engine: program evolution and the benchmark judge, before and
-after the batched evaluator (:mod:`training.evaluator`), measured in one run.
+after the batched evaluator (:mod:`training.machinery.evaluator`), measured in one run.
 
 Rows (module-cycles per second: the cycles of every episode times its modules, over wall-clock):
 
@@ -13,7 +13,7 @@ Rows (module-cycles per second: the cycles of every episode times its modules, o
   paper's chain program, ``--programs`` - 1 random ones and mutants of the paper's (the mix of
   a generation from random programs and from the paper's), each on ``--worlds`` worlds per
   variation.
-* ``evolution, evaluator (W workers)``: the same episodes through :func:`training.evaluator.run_episodes`
+* ``evolution, evaluator (W workers)``: the same episodes through :func:`training.machinery.evaluator.run_episodes`
   (after a first call that starts the worker processes and compiles); the results are checked
   equal to the per-episode ones, episode by episode.
 * ``judge, per episode`` and ``judge, evaluator``: ``proteo eval --benchmark VERSION`` of each recipe
@@ -74,8 +74,8 @@ def evolution_episodes(
     import proteo_env
     from baselines.program import format_program, load_program
     from proteo_env.config import load_yaml
-    from training.evolve import generation_seeds, program_episodes
-    from training.program_variation import ProgramSpace, mutate, random_program
+    from training.trainers.evolve import generation_seeds, program_episodes
+    from training.trainers.program_variation import ProgramSpace, mutate, random_program
 
     cfg = load_yaml(Path(config))
     cfg["task"] = task or cfg["task"]
@@ -120,8 +120,8 @@ def judge_once(version: str, recipe: Path, out: Path, per_episode_path: bool, wo
     if per_episode_path:
 
         def one_by_one(jobs, out_dir, *, ray, journal, progress, workers=None):
-            from training.distributed import run_jobs
-            from training.evaluator import episode_key
+            from training.machinery.distributed import run_jobs
+            from training.machinery.evaluator import episode_key
 
             alone = [(episode, "") for _, episode, _ in jobs]
             keys = [episode_key(episode) for episode, _ in alone]
@@ -162,7 +162,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--out", default=None, help="write <out>.json and <out>.md")
     args = parser.parse_args(argv)
-    from training.evaluator import run_episodes
+    from training.machinery.evaluator import run_episodes
 
     rows = []
     engines = {legal: engine_speed(args.cycles, legal) for legal in (False, True)}

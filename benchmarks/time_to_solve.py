@@ -3,11 +3,11 @@
     NUMBA_NUM_THREADS=1 python benchmarks/time_to_solve.py --out docs/speed/time_to_solve
     python benchmarks/time_to_solve.py --device cuda --workers 8 --out docs/speed/time_to_solve_gpu
 
-For each training seed it trains ``training/ppo.py`` with the config's settings
+For each training seed it trains ``training/trainers/ppo.py`` with the config's settings
 (``configs/train/ppo_chain_move.yaml``: 12-module chains at ``move``, 64 worlds, the config's
 network) for ``--steps`` agent-steps with a checkpoint every ``--every``, then judges every
 checkpoint on the same ``--worlds`` held-out worlds (seeds 1000 on, the benchmark's first world
-seed; :func:`training.evaluator.evaluate`, sampled actions). A seed has solved the task at the
+seed; :func:`training.machinery.evaluator.evaluate`, sampled actions). A seed has solved the task at the
 first checkpoint whose success rate reaches ``--target``; its time is the training's wall-clock
 at that checkpoint (``progress.csv``'s ``seconds``: rollouts and updates, not the judging).
 Training success as logged is no measure of this: its first rows count only the episodes that
@@ -38,7 +38,17 @@ CONFIG = "configs/train/ppo_chain_move.yaml"
 def train(seed: int, steps: int, every: int, threads: int, device: str, run_dir: Path, workers: int = 1) -> None:
     """One PPO run of the config, with checkpoints every ``every`` agent-steps, its worlds split
     over ``workers`` processes (the same run on any number)."""
-    cmd = [sys.executable, "-m", "training.ppo", "--config", CONFIG, "--seed", str(seed), "--run-dir", str(run_dir)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "training.trainers.ppo",
+        "--config",
+        CONFIG,
+        "--seed",
+        str(seed),
+        "--run-dir",
+        str(run_dir),
+    ]
     cmd += ["--total-steps", str(steps), "--checkpoint-every", str(every), "--time-limit-minutes", "0"]
     cmd += ["--threads", str(threads), "--device", device, "--progress-bar", "false", "--tensorboard", "false"]
     cmd += ["--workers", str(workers)]
@@ -53,8 +63,8 @@ def seconds_at(run_dir: Path) -> dict[int, float]:
 
 def judge(run_dir: Path, worlds: int) -> list[tuple[int, float]]:
     """``[(agent-steps, success rate on the held-out worlds)]`` of every checkpoint, in order."""
-    from training.checkpoints import read_meta
-    from training.evaluator import Controller, evaluate
+    from training.machinery.checkpoints import read_meta
+    from training.machinery.evaluator import Controller, evaluate
 
     cfg = load_yaml(Path(CONFIG))
     folders = {}  # by agent-steps: the final checkpoint is the last periodic one when the budget is a multiple

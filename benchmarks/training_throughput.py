@@ -11,7 +11,7 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
 3. the TorchRL env (``ProteoTorchRLEnv.rollout`` with random actions);
 4. MaskablePPO training (rollouts + updates), with a cProfile breakdown of one run into
    engine cycle, observation kernel, encoding, policy forward passes and PPO updates;
-5. the native trainer ``training/ppo.py`` at control level ``full`` (the level MaskablePPO
+5. the native trainer ``training/trainers/ppo.py`` at control level ``full`` (the level MaskablePPO
    runs at: the same environment) and at ``move``, with its own split into environment step,
    observation encoding, rollout forward passes and PPO update (from its ``progress.csv``,
    after two warm-up updates). Its hyper-parameters come from ``--ppo-config`` (default
@@ -29,7 +29,7 @@ Prints (and writes to ``--out`` as JSON) agent-steps per second of:
 
 Any task runs with ``--task`` and its overrides in ``--env`` (YAML); ``--modules`` sets
 ``n_modules`` (chain's size; for tasks without that parameter give the size in ``--env``).
-Torch and numba run one thread each (see training.common.limit_threads). The machine's load
+Torch and numba run one thread each (see training.machinery.runs.limit_threads). The machine's load
 average is recorded with the results: on a shared 2-core machine the absolute numbers move
 with it, the ratios much less.
 """
@@ -132,7 +132,7 @@ def sb3_training(task: str, overrides: dict, steps: int, n_copies: int, *, profi
 def ppo_training(
     task: str, overrides: dict, steps: int, *, control: str, config: str, variant=None, device: str = "cpu"
 ) -> dict:
-    """Agent-steps/s of ``training/ppo.py`` on ``device`` and the share of its time in each part (after
+    """Agent-steps/s of ``training/trainers/ppo.py`` on ``device`` and the share of its time in each part (after
     two warm-up updates); ``variant``: arguments that replace the config's (for example
     ``{"arch": "shared"}``)."""
     import csv
@@ -140,8 +140,8 @@ def ppo_training(
     import tempfile
 
     from proteo_env import batched
-    from training import ppo
-    from training.common import parse_args
+    from training.machinery.runs import parse_args
+    from training.trainers import ppo
 
     # a long run's steady state: the rules of every world in one call (compiled in the warm-up)
     batched.ONE_CALL_AFTER = 0
@@ -193,7 +193,7 @@ FORMER_NETWORK = "move, arch=mlp, n_epochs=2, per-direction messages"
 
 
 def run_key(name: str, device: str) -> str:
-    """The key of a run of ``training/ppo.py`` in the results: its name, with the device unless it is the CPU."""
+    """The key of a run of ``training/trainers/ppo.py`` in the results: its name, with the device unless it is the CPU."""
     return name if device == "cpu" else f"{name}, device={device}"
 
 
@@ -205,36 +205,38 @@ def main(argv=None) -> int:
     parser.add_argument("--copies", type=int, default=4)
     parser.add_argument("--cycles", type=int, default=2000, help="cycles for the environment-only measurements")
     parser.add_argument("--steps", type=int, default=60000, help="agent-steps of MaskablePPO training")
-    parser.add_argument("--ppo-steps", type=int, default=1_500_000, help="agent-steps of training/ppo.py per level")
+    parser.add_argument(
+        "--ppo-steps", type=int, default=1_500_000, help="agent-steps of training/trainers/ppo.py per level"
+    )
     parser.add_argument(
         "--ppo-config",
         default=None,
-        help="hyper-parameters of training/ppo.py (default configs/train/ppo_<task>_move.yaml)",
+        help="hyper-parameters of training/trainers/ppo.py (default configs/train/ppo_<task>_move.yaml)",
     )
     parser.add_argument(
         "--only",
         choices=("all", "training", "native"),
         default="all",
-        help="training: only the two trainers (MaskablePPO and training/ppo.py), no env-only rates; "
-        "native: only training/ppo.py",
+        help="training: only the two trainers (MaskablePPO and training/trainers/ppo.py), no env-only rates; "
+        "native: only training/trainers/ppo.py",
     )
     parser.add_argument(
         "--devices",
         nargs="+",
         default=["cpu"],
-        help="devices that time training/ppo.py, each with every level and variant (cpu, cuda, cuda:N); "
+        help="devices that time training/trainers/ppo.py, each with every level and variant (cpu, cuda, cuda:N); "
         "figures on a device other than cpu are keyed '<name>, device=<device>'",
     )
     parser.add_argument(
         "--former-network",
         action="store_true",
-        help="also time training/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
+        help="also time training/trainers/ppo.py at move with arch=mlp, n_epochs=2 and per-direction "
         "message features (the configs' former networks; same run)",
     )
     parser.add_argument(
         "--variants",
         action="store_true",
-        help="also time training/ppo.py with the distillation term, the memories, value_norm, a GRU and 256 worlds "
+        help="also time training/trainers/ppo.py with the distillation term, the memories, value_norm, a GRU and 256 worlds "
         "(same run)",
     )
     parser.add_argument("--out", default="docs/learning/throughput.json")
@@ -245,7 +247,7 @@ def main(argv=None) -> int:
     from proteo_env import ConfigError
     from proteo_env.config import parse_yaml
     from proteo_env.registry import task_name
-    from training.common import limit_threads, torch_device
+    from training.machinery.runs import limit_threads, torch_device
 
     overrides = parse_yaml(args.env, "--env") or {}
     if not isinstance(overrides, dict):
@@ -327,7 +329,7 @@ def main(argv=None) -> int:
             print(f"{k:45s} {v:10.2f}")
     for level, r in result["ppo"].items():
         print(
-            f"  training/ppo.py at {level}: {r['agent_steps_per_s']:.0f} agent-steps/s; "
+            f"  training/trainers/ppo.py at {level}: {r['agent_steps_per_s']:.0f} agent-steps/s; "
             + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["share"].items())
         )
     for k, v in (result.get("sb3_profile") or {}).items():

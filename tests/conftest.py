@@ -18,7 +18,7 @@ import pytest
 import proteo_env
 
 # The tests run on every core already (pytest -n 2): the batched evaluator of each test runs in
-# its own process unless a test asks for workers (training.evaluator.default_workers).
+# its own process unless a test asks for workers (training.machinery.evaluator.default_workers).
 os.environ.setdefault("PROTEO_WORKERS", "1")
 
 SMALL_OVERRIDES: dict[str, dict] = {
@@ -47,7 +47,7 @@ def reseal(folder: Path) -> None:
     are now (a test that edits a payload file on purpose, as if its trainer had written it so)."""
     import json
 
-    from training.common import payload_digests
+    from training.machinery.checkpoints import payload_digests
 
     meta = json.loads((folder / "proteo.json").read_text())
     (folder / "proteo.json").write_text(json.dumps({**meta, "files": payload_digests(folder)}))

@@ -29,7 +29,7 @@ from benchmarl.experiment import Experiment  # noqa: E402
 
 import proteo_env  # noqa: E402
 from proteo_env.adapters.benchmarl import ProteoTask, experiment, experiment_config  # noqa: E402
-from training.judging.entrants import EntrantError, load_network  # noqa: E402
+from training.machinery.entrants import EntrantError, load_network  # noqa: E402
 
 TINY = {"n_modules": 6, "max_cycles": 16}
 

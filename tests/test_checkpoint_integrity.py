@@ -16,9 +16,9 @@ from proteo_env.rollout import run_episode
 
 pytest.importorskip("torch")
 
-from training.checkpoints import CheckpointError, load_controller, load_policy, migrate  # noqa: E402
-from training.common import CHECKPOINT_VERSION, read_meta  # noqa: E402
-from training.trainers import ALGORITHMS, CHECKPOINT_FIELDS  # noqa: E402
+from training.machinery.checkpoints import CHECKPOINT_VERSION, CheckpointError, load_controller, load_policy, migrate  # noqa: E402
+from training.machinery.registry import ALGORITHMS, CHECKPOINT_FIELDS  # noqa: E402
+from training.machinery.runs import read_meta  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED = ROOT / "checkpoints/v7/chain/ppo_move/seed_0"
@@ -115,7 +115,7 @@ def test_a_checkpoint_that_does_not_say_how_to_rebuild_its_network_is_refused(tm
 
 
 def test_a_payload_file_proteo_json_does_not_list_is_refused(tmp_path):
-    from training.common import payload_digests
+    from training.machinery.checkpoints import payload_digests
 
     folder = copy_of(tmp_path)
     edit_meta(folder, files={k: v for k, v in payload_digests(folder).items() if k != "policy.pt"})

@@ -18,8 +18,8 @@ from proteo_env.config import ConfigError
 from proteo_env.env import ProteoEnv
 from proteo_env.rollout import run_episode
 from training.cli import main as cli_main
-from training.common import read_meta, write_checkpoint_meta
-from training.trainers import ALGORITHMS, TRAINERS, loader
+from training.machinery.checkpoints import read_meta, write_checkpoint_meta
+from training.machinery.registry import ALGORITHMS, TRAINERS, loader
 
 ROOT = Path(__file__).resolve().parents[1]
 PUBLISHED = ROOT / "checkpoints" / "v1" / "chain" / "ppo_move" / "seed_0"  # the README's: 12 modules, 300 cycles, move
@@ -235,7 +235,7 @@ def test_proteo_train_runs_the_trainers_with_their_flags(capsys):
     import importlib
 
     for trainer in TRAINERS:  # every name is a module with a main(argv)
-        assert callable(importlib.import_module(f"training.{trainer.name}").main)
+        assert callable(importlib.import_module(trainer.module).main)
     with pytest.raises(SystemExit) as done:
         cli_main(["train", "ppo", "--help"])
     assert done.value.code == 0
@@ -254,13 +254,13 @@ def test_every_trainer_option_has_a_docstring_for_help():
     import dataclasses
     import importlib
 
-    from training.common import field_docs
+    from training.machinery.runs import field_docs
 
     missing = []
-    for name in dict.fromkeys([t.name for t in TRAINERS] + ["study"]):  # as proteo train imports them
-        args = importlib.import_module(f"training.{name}").Args
+    for trainer in TRAINERS:  # as proteo train imports them
+        args = importlib.import_module(trainer.module).Args
         docs = field_docs(args)
-        missing += [f"training/{name}.py {f.name}" for f in dataclasses.fields(args) if not docs.get(f.name)]
+        missing += [f"{trainer.module} {f.name}" for f in dataclasses.fields(args) if not docs.get(f.name)]
     assert not missing, "Args fields without a docstring (their --help says nothing): " + ", ".join(missing)
 
 

@@ -1,4 +1,4 @@
-"""Curricula in training/ppo.py: stages promoted by success, in order, saved with the checkpoint,
+"""Curricula in training/trainers/ppo.py: stages promoted by success, in order, saved with the checkpoint,
 resumed from it; bad blocks refused naming the stage and the field."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import pytest
 pytest.importorskip("torch")
 
 from proteo_env.config import ConfigError  # noqa: E402
-from training import ppo  # noqa: E402
-from training.checkpoints import read_meta  # noqa: E402
-from training.curriculum import Curriculum  # noqa: E402
+from training.machinery.checkpoints import read_meta  # noqa: E402
+from training.trainers import ppo  # noqa: E402
+from training.trainers.curriculum import Curriculum  # noqa: E402
 
 STAGES = {"stages": [{"n_modules": 4}, {"n_modules": 6}, {"n_modules": 8}], "promote_at": 0.5, "window": 8}
 

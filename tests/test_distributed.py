@@ -84,34 +84,35 @@ def _interrupting(fn, after: int, calls: list):
 
 # ---------------------------------------------------------------------- resume (one process)
 def test_interrupted_eval_resumes_without_losing_or_repeating_episodes(tmp_path, monkeypatch):
-    from training import evaluator
     from training.judging import evaluate as ev
+    from training.machinery import evaluator
 
     config = _eval_config(tmp_path)
     run = {"config": config, "tasks": TASKS, "progress": False, "plots": False, "workers": 1}
-    ev.evaluate(**run, out=tmp_path / "whole")
+    ev.run_evaluation(**run, out=tmp_path / "whole")
     original, calls = evaluator.run_batch, []
     monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 2, calls))  # 4 batches: 2 tasks x 2 policies
     with pytest.raises(Interrupt):
-        ev.evaluate(**run, out=tmp_path / "cut")
+        ev.run_evaluation(**run, out=tmp_path / "cut")
     assert not (tmp_path / "cut" / "results.md").exists()  # no partial table
     with (tmp_path / "cut" / "episodes.jsonl").open("a") as fh:
         fh.write('{"key": "torn')  # the driver died while writing
     with pytest.raises(ConfigError, match="unfinished evaluation with other settings.*seeds"):
-        ev.evaluate(**{**run, "seeds": 2}, out=tmp_path / "cut")
+        ev.run_evaluation(**{**run, "seeds": 2}, out=tmp_path / "cut")
     calls.clear()
     monkeypatch.setattr(evaluator, "run_batch", _interrupting(original, 10**6, calls))
-    ev.evaluate(**run, out=tmp_path / "cut")
+    ev.run_evaluation(**run, out=tmp_path / "cut")
     total = len(_episodes(tmp_path / "whole")) * 3
     assert sum(calls) == total - 6  # only the missing episodes ran
     assert _episodes(tmp_path / "cut") == _episodes(tmp_path / "whole")
     calls.clear()
-    ev.evaluate(**run, out=tmp_path / "cut")
+    ev.run_evaluation(**run, out=tmp_path / "cut")
     assert sum(calls) == total  # a finished evaluation runs anew
 
 
 def test_interrupted_cma_es_resumes_the_interrupted_generation(tmp_path, monkeypatch):
-    from training import cma_es, evaluator
+    from training.machinery import evaluator
+    from training.trainers import cma_es
 
     cma = [*CMA, "--workers", "1"]
     cma_es.main([*cma, "--run-dir", str(tmp_path / "whole")])
@@ -129,9 +130,9 @@ def test_interrupted_cma_es_resumes_the_interrupted_generation(tmp_path, monkeyp
 
 
 def test_cma_es_resumed_from_a_checkpoint_goes_on_as_the_whole_run_and_refuses_other_arguments(tmp_path):
-    """The run base (training/runs.py) gives CMA-ES what evolution has: ``--resume CHECKPOINT``
+    """The run base (training/machinery/runs.py) gives CMA-ES what evolution has: ``--resume CHECKPOINT``
     restores the search and its world stream, and arguments the results depend on must match."""
-    from training import cma_es
+    from training.trainers import cma_es
 
     cma = [*CMA[:2], *CMA[4:], "--workers", "1", "--checkpoint-every", "1"]
     whole = cma_es.main([*cma, "--generations", "2", "--run-dir", str(tmp_path / "whole")])
@@ -173,7 +174,7 @@ def test_eval_on_ray_equals_serial(tmp_path, local_ray, capsys):
 
 
 def test_cma_es_on_ray_equals_serial(tmp_path, local_ray):
-    from training import cma_es
+    from training.trainers import cma_es
 
     cma_es.main([*CMA, "--run-dir", str(tmp_path / "serial")])
     cma_es.main([*CMA, "--run-dir", str(tmp_path / "ray"), "--ray", "true"])
@@ -230,8 +231,8 @@ def test_sweep_tables_tie_settings_and_sample_points(tmp_path):
 
 # ---------------------------------------------------------------------- RLlib
 def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
-    from training import rllib_ppo
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
+    from training.trainers import rllib_ppo
 
     final = rllib_ppo.main(
         [
@@ -258,7 +259,7 @@ def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
     assert (final / "rllib").is_dir()
     config = tmp_path / "eval.yaml"
     config.write_text(json.dumps({"tasks": {"chain": {"env": {"n_modules": 6, "max_cycles": 16}}}}))
-    rows = evaluate(
+    rows = run_evaluation(
         config=config,
         tasks=["chain"],
         seeds=2,
@@ -272,7 +273,7 @@ def test_rllib_one_iteration_checkpoint_loads_in_eval(tmp_path, local_ray):
 
 
 class _RayWhoseFirstLedgerIsDead:
-    """Enough of the ``ray`` module for :func:`training.distributed._ledger`: the kept ledger of
+    """Enough of the ``ray`` module for :func:`training.machinery.distributed._ledger`: the kept ledger of
     the first name has died (clearing it raises Ray's actor error), a ledger of another name is alive."""
 
     exceptions = ray.exceptions
@@ -307,7 +308,7 @@ class _RayWhoseFirstLedgerIsDead:
 def test_a_dead_kept_ledger_is_replaced_by_one_of_a_new_name():
     """Ray can hand back the driver's kept ledger after its process died (CI saw ActorDiedError when
     a second run cleared it); the run then starts a new ledger instead of failing."""
-    from training.distributed import _ledger
+    from training.machinery.distributed import _ledger
 
     fake = _RayWhoseFirstLedgerIsDead()
     ledger = _ledger(fake)

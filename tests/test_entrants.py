@@ -19,9 +19,9 @@ from proteo_env.rollout import run_episode
 torch = pytest.importorskip("torch")
 
 from proteo_env.adapters.flatten import ObservationEncoder  # noqa: E402
-from training.evaluator import Controller, evaluate  # noqa: E402
-from training.judging.entrants import EntrantError  # noqa: E402
 from training.judging.judge import judge  # noqa: E402
+from training.machinery.entrants import EntrantError  # noqa: E402
+from training.machinery.evaluator import Controller, evaluate  # noqa: E402
 
 CHAIN = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}  # protocol v7's chain settings
 
@@ -131,7 +131,7 @@ def walker(tmp_path, monkeypatch):
 def test_a_torchscript_relu_network_is_judged_as_it_was_trained(tmp_path):
     """The judge plays the network as saved (ReLU and all): the same episodes as the network itself
     through a policy built by hand from the public encoder, and each seed's file digest recorded."""
-    from training.policies import LogitsPolicy
+    from training.machinery.policies import LogitsPolicy
 
     entry = torchscript_entrant(tmp_path / "net")
     doc = judge("v7", entrant=entry, out=tmp_path / "bench", worlds_cap=3, workers=1, progress=False)
@@ -192,7 +192,7 @@ def test_an_onnx_export_of_the_network_plays_the_episodes_of_its_torchscript(tmp
 def test_a_factory_entrant_plays_the_same_episodes_in_a_batch_as_alone(tmp_path, walker):
     """The object is told each world's seed: batched with others, or one world at a time through
     run_episode (the PettingZoo API), the same episodes."""
-    from training.judging.entrants import entrant_policy
+    from training.machinery.entrants import entrant_policy
 
     controller = Controller.from_entrant(f"{walker}:make")
     batched = evaluate("chain-v1", [controller], seeds=range(5), env=CHAIN, level="move", workers=1, batch_size=3)[0]

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from proteo_env.config import ConfigError
-from training.judging.evaluate import evaluate, load_config
+from training.judging.evaluate import load_config, run_evaluation
 from training.judging.statistics import group_bootstrap, wilson
 
 RUNS = [
@@ -40,7 +40,7 @@ def _config(tmp_path, checkpoints):
 
 
 def test_a_group_of_training_seeds_is_one_row_with_the_spread_across_them(tmp_path):
-    rows = evaluate(
+    rows = run_evaluation(
         config=_config(tmp_path, [{"label": "three-runs", "runs": RUNS}]),
         tasks=["chain"],
         out=tmp_path / "out",
@@ -75,7 +75,7 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
         match=r"tasks.chain.checkpoints\[0\] = \{'label': 'x'\} is not allowed; "
         r"allowed: a checkpoint path, or \{label: NAME, runs: \[PATH, ...\]\}",
     ):
-        evaluate(
+        run_evaluation(
             config=_config(tmp_path, [{"label": "x"}]),
             tasks=["chain"],
             out=tmp_path / "out",
@@ -85,7 +85,15 @@ def test_a_bad_checkpoint_entry_is_one_clear_error(tmp_path):
 
 
 def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuses_a_page_without_them(tmp_path):
-    from training.judging.report import INTERVALS, PUBLISH_END, Result, Run, markdown_table, publish, summary_table
+    from training.judging.report import (
+        INTERVALS,
+        PUBLISH_END,
+        Result,
+        Run,
+        markdown_table,
+        publish_evaluation,
+        summary_table,
+    )
 
     def result(task, policy, kind, successes, cycles, level="move"):
         run = Run(source="", returns=[1.0] * len(cycles), successes=successes, cycles=cycles)
@@ -112,7 +120,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
         "intro\n<!-- proteo eval --out docs/eval/x --summary -->\nold\n<!-- end of proteo eval table -->\n"
         "middle\n<!-- proteo eval --out docs/eval/x -->\nold table\n<!-- end of proteo eval table -->\nrest\n"
     )
-    publish(results, "docs/eval/x", [page])
+    publish_evaluation(results, "docs/eval/x", [page])
     assert page.read_text() == (
         f"intro\n<!-- proteo eval --out docs/eval/x --summary -->\n{summary_table(results)}\n"
         f"{PUBLISH_END}\nmiddle\n<!-- proteo eval --out docs/eval/x -->\n{markdown_table(results)}\n\n"
@@ -122,7 +130,7 @@ def test_publish_puts_the_table_and_the_summary_between_their_markers_and_refuse
     other.write_text("no markers\n")
     before = page.read_text()
     with pytest.raises(ValueError, match="no '<!-- proteo eval --out docs/eval/y -->'"):
-        publish(results, "docs/eval/y", [page, other])
+        publish_evaluation(results, "docs/eval/y", [page, other])
     assert page.read_text() == before  # nothing written when one file lacks the markers
 
 
@@ -192,9 +200,9 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     import json
 
     import training.judging.report as ev
-    from training import evaluator
     from training.cli import main
     from training.judging import episodes
+    from training.machinery import evaluator
 
     results = [_rules(), _kickstart()]
     first = _written(tmp_path, results)
@@ -287,7 +295,7 @@ def test_a_bad_eval_config_is_one_clear_error_before_anything_is_written(tmp_pat
         load_config(path)
     assert str(caught.value).count("allowed: ") == 1  # one message, one list of what is allowed
     with pytest.raises(ConfigError, match=message):
-        evaluate(config=path, tasks=["chain"], out=tmp_path / "out", progress=False, plots=False)
+        run_evaluation(config=path, tasks=["chain"], out=tmp_path / "out", progress=False, plots=False)
     assert not (tmp_path / "out").exists()
 
 

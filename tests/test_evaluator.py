@@ -1,4 +1,4 @@
-"""The batched evaluator (``training.evaluator``) gives what ``run_episode`` gives, episode by
+"""The batched evaluator (``training.machinery.evaluator``) gives what ``run_episode`` gives, episode by
 episode, for every task and every compiled controller kind; its results do not depend on the
 batch size or the number of worker processes; bad input is refused before any episode runs."""
 
@@ -15,7 +15,7 @@ from baselines import make_policy
 from baselines.program import PROGRAMS_DIR
 from proteo_env.config import ConfigError
 from proteo_env.rollout import run_episode
-from training.evaluator import Controller, Episode, evaluate, run_episodes, settings_json
+from training.machinery.evaluator import Controller, Episode, evaluate, run_episodes, settings_json
 
 SEEDS = [3, 11, 4, 27, 8]
 
@@ -79,7 +79,7 @@ def test_programs_of_a_population_share_one_batch_with_their_own_tables(one_call
     from proteo_env import batched as batched_env
 
     monkeypatch.setattr(batched_env, "ONE_CALL_AFTER", one_call_after)
-    from training.program_variation import ProgramSpace, random_program
+    from training.trainers.program_variation import ProgramSpace, random_program
 
     overrides = small_overrides("chain-v1", max_cycles=150)
     env = proteo_env.make("chain-v1", **overrides)
@@ -122,8 +122,8 @@ def test_episodes_of_several_settings_and_tasks_in_one_call():
 def _network_checkpoint(folder, env, overrides, seed: int):
     """A checkpoint of a 16-unit NumPy MLP (CMA-ES's neural controller) with random weights."""
     from proteo_env.adapters.flatten import ObservationEncoder
-    from training.common import mlp_meta, write_checkpoint_meta
-    from training.policies import NumpyMLP
+    from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+    from training.machinery.policies import NumpyMLP
 
     encoder = ObservationEncoder.for_env(env)
     net = NumpyMLP(encoder.size, int(env.action_layout.nvec.sum()), (16,))
@@ -147,7 +147,7 @@ def test_network_checkpoints_share_a_batch_and_agree_with_run_episode(tmp_path):
     """Networks act in one forward pass per network over the worlds each plays, sampled or
     arg-max: the same episodes as one world at a time (a 16-unit NumPy MLP's batched arithmetic
     is exact here)."""
-    from training.checkpoints import load_policy
+    from training.machinery.checkpoints import load_policy
 
     overrides = small_overrides("chain-v1", max_cycles=40)
     env = proteo_env.make("chain-v1", **overrides)
@@ -176,7 +176,7 @@ def test_network_checkpoints_share_a_batch_and_agree_with_run_episode(tmp_path):
     ],
 )
 def test_bad_input_is_refused_before_any_episode(change, message, monkeypatch):
-    from training import evaluator
+    from training.machinery import evaluator
 
     monkeypatch.setattr(evaluator, "run_batch", lambda *a, **k: pytest.fail("an episode ran"))
     args = {"controllers": [Controller.rules("chain")], "seeds": [0], "workers": 1, "batch_size": 4, **change}
@@ -196,7 +196,7 @@ def test_a_program_that_fails_its_checks_is_refused_before_any_episode():
 
 
 def test_an_episode_listed_twice_runs_once_and_gives_both_places_its_result(monkeypatch):
-    from training import evaluator
+    from training.machinery import evaluator
 
     ran = []
     original = evaluator.run_batch
@@ -208,7 +208,7 @@ def test_an_episode_listed_twice_runs_once_and_gives_both_places_its_result(monk
 
 
 def test_the_default_workers_come_from_proteo_workers_when_set(monkeypatch):
-    from training.evaluator import default_workers
+    from training.machinery.evaluator import default_workers
 
     monkeypatch.setenv("PROTEO_WORKERS", "3")
     assert default_workers() == 3

@@ -1,4 +1,4 @@
-"""Evolution of programs (training/program_variation.py, training/evolve.py).
+"""Evolution of programs (training/trainers/program_variation.py, training/trainers/evolve.py).
 
 The small world: chain-v1 with 8 modules and 100 cycles, where random programs rarely form
 the chain and a few generations of evolution find ones that do.
@@ -17,9 +17,9 @@ import proteo_env
 from baselines.program import format_program, load_program
 from proteo_env.config import ConfigError
 from training import load_controller
-from training.common import checkpoint_kind
-from training.evolve import main as evolve
-from training.program_variation import ProgramSpace, complexity, crossover, mutate, random_program
+from training.machinery.checkpoints import checkpoint_kind
+from training.trainers.evolve import main as evolve
+from training.trainers.program_variation import ProgramSpace, complexity, crossover, mutate, random_program
 
 SMALL = ["--env", "{n_modules: 8, max_cycles: 100, motion_model: sphere}", "--variations", "[{}, {n_modules: 7}]"]
 QUIET = ["--progress-bar", "false", "--tensorboard", "false", "--population", "6", "--offspring", "10"]
@@ -60,7 +60,7 @@ def test_evolution_improves_then_loads_as_a_checkpoint(tmp_path):
     final = evolve([*SMALL, *QUIET, "--generations", "6", "--run-dir", str(tmp_path / "run")])
     best = [float(row["fitness/best"]) for row in _rows(tmp_path / "run")]
     assert len(best) == 6 and best[-1] > best[0]
-    from training.plots import plot_evolution
+    from training.judging.plots import plot_evolution
 
     plot_evolution({"evolve": [str(tmp_path / "run" / "progress.csv")] * 2}, tmp_path / "evolution.png")
     assert (tmp_path / "evolution.png").stat().st_size > 0
@@ -99,8 +99,8 @@ def test_resume_gives_the_same_run(tmp_path):
 def test_the_final_checkpoint_is_the_best_survivor_on_new_worlds(tmp_path):
     """With ``final_episodes_per_variation`` the survivors are re-scored on new worlds after the
     last generation; the checkpoint is the best of them there, with that fitness."""
-    from training.evaluator import run_episodes
-    from training.evolve import generation_seeds, program_episodes
+    from training.machinery.evaluator import run_episodes
+    from training.trainers.evolve import generation_seeds, program_episodes
 
     final = evolve([*SMALL, *QUIET, "--generations", "2", "--final-episodes-per-variation", "2"]
                    + ["--run-dir", str(tmp_path / "run")])  # fmt: skip
@@ -140,7 +140,7 @@ def test_bad_config_is_one_error_before_anything_is_written(tmp_path, config, na
 
 def test_the_success_score_ranks_every_success_above_every_failure_and_faster_above_slower():
     from proteo_env.rollout import EpisodeResult
-    from training.evolve import success_score
+    from training.trainers.evolve import success_score
 
     fast, slow, failed = (
         EpisodeResult(c, s, r, {}) for c, s, r in ((50, True, 0.5), (299, True, 0.5), (300, False, 9.0))
@@ -155,7 +155,7 @@ def test_table_progress_pays_the_legs_that_moved_for_a_shift_not_a_table_that_st
     whose legs stood still after forming (``restabilise_k == 0``), success or not; a failure that
     moved for two shifts scores above a static success's progress."""
     from proteo_env.rollout import EpisodeResult
-    from training.evolve import progress_score, success_score
+    from training.trainers.evolve import progress_score, success_score
 
     env = proteo_env.make("table-v1", max_cycles=600)  # the paper's schedule: three entries
     moved = EpisodeResult(400, True, 1.0, {"restabilise_0": 40.0, "restabilise_1": 30.0, "restabilise_2": 20.0})
@@ -171,7 +171,7 @@ def test_branch_progress_pays_levels_of_a_tree_only():
     """Branch's partial credit is the share of ``target_levels`` a tree reached; a structure with
     cycles or without a real branching point earns nothing; at success it is the success score."""
     from proteo_env.rollout import EpisodeResult
-    from training.evolve import progress_score, success_score
+    from training.trainers.evolve import progress_score, success_score
 
     env = proteo_env.make("branch-v0", n_modules=40, max_cycles=200)  # target_levels 2
     one = EpisodeResult(200, False, 0.0, {"tree": 1.0, "levels": 1.0})
@@ -186,8 +186,8 @@ def test_progress_of_real_episodes_ranks_the_rules_above_a_table_that_stands_sti
     """On the benchmark's table worlds the rules' legs move after each shift (progress 1 wherever
     they succeed), while a program evolved under ``fitness: success`` that grows a leg under every
     root and never disbands (benchmark v4, seed 1) earns at most 1/3, success or not."""
-    from training.evaluator import Controller, evaluate
-    from training.evolve import TASK_PROGRESS
+    from training.machinery.evaluator import Controller, evaluate
+    from training.trainers.evolve import TASK_PROGRESS
 
     settings = {"board_size": 9, "depth": 2, "n_spares": 16, "schedule": [[0, 8, 2], [150, 2, 8], [300, 5, 5]],
                 "stable_window": 50, "motion_model": "minimal", "max_cycles": 600}  # fmt: skip

@@ -139,7 +139,7 @@ PUBLISHED = {
     drop=st.booleans(),
 )  # fmt: skip
 def test_any_checkpoint_metadata_loads_or_one_clear_error(tmp_path_factory, which, key, value, drop):
-    from training.checkpoints import CheckpointError, load_controller
+    from training.machinery.checkpoints import CheckpointError, load_controller
 
     folder = tmp_path_factory.mktemp("ck") / "copy"
     shutil.copytree(PUBLISHED[which], folder)

@@ -1,4 +1,4 @@
-"""training/imitate.py and kickstarting in training/ppo.py: the clone learns the rules' moves,
+"""training/trainers/imitate.py and kickstarting in training/trainers/ppo.py: the clone learns the rules' moves,
 its checkpoint evaluates and starts PPO, the distillation term anneals, and bad input is refused."""
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ torch = pytest.importorskip("torch")
 import proteo_env  # noqa: E402
 from proteo_env.adapters.flatten import ObservationEncoder  # noqa: E402
 from proteo_env.config import ConfigError  # noqa: E402
-from training import imitate, ppo  # noqa: E402
-from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
-from training.networks import ReturnScale  # noqa: E402
-from training.teachers import Teachers  # noqa: E402
+from training.machinery.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
+from training.machinery.networks import ReturnScale  # noqa: E402
+from training.trainers import imitate, ppo  # noqa: E402
+from training.trainers.teachers import Teachers  # noqa: E402
 
 SMALL_ENV = {"n_modules": 8, "max_cycles": 100}
 
@@ -196,7 +196,7 @@ def test_bad_teacher_and_init_are_refused_naming_the_field(clone, tmp_path):
 
 
 def test_last_move_memory_feeds_each_agent_its_own_previous_move_and_resets_with_the_episode():
-    from training.policies import LogitsPolicy
+    from training.machinery.policies import LogitsPolicy
 
     env = proteo_env.make("chain-v0", control="move", **SMALL_ENV)
     seen = []
@@ -224,7 +224,7 @@ def test_last_move_memory_feeds_each_agent_its_own_previous_move_and_resets_with
 
 
 def test_last_action_memory_feeds_every_field_of_each_agents_previous_action_at_full():
-    from training.policies import LogitsPolicy
+    from training.machinery.policies import LogitsPolicy
 
     env = proteo_env.make("chain-v0", control="full", **SMALL_ENV)
     nvec = env.action_layout.nvec
@@ -340,7 +340,7 @@ def test_value_norm_is_saved_with_the_trainer_state_and_resumed(tmp_path):
 
 
 def test_sampled_move_samples_the_move_as_before_and_takes_the_arg_max_of_every_other_field():
-    from training.policies import LogitsPolicy, sample_actions
+    from training.machinery.policies import LogitsPolicy, sample_actions
 
     nvec = np.array([13, 4, 3])
     logits = np.random.default_rng(0).normal(size=(500, int(nvec.sum())))

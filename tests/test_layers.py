@@ -165,3 +165,33 @@ def test_cycles_are_found_and_reported():
 def test_no_import_cycles_between_project_modules():
     cycles = import_cycles(import_graph())
     assert not cycles, "project modules must not import each other: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+ROOMS = ("training.machinery", "training.judging", "training.trainers")
+"""The rooms of ``training/`` from the bottom up (the command line, playback and sweeps stand above
+them all): the trainers use judging and the machinery, judging uses the machinery, and the
+machinery neither."""
+
+
+def room(module: str) -> int:
+    """The index in :data:`ROOMS` of a module of ``training/`` (``len(ROOMS)``: the command line's floor)."""
+    for k, name in enumerate(ROOMS):
+        if module == name or module.startswith(name + "."):
+            return k
+    return len(ROOMS)
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "training").rglob("*.py")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_module_of_training_imports_a_room_above_its_own(path):
+    own = room(module_name(path))
+    above = [
+        f"{path.relative_to(ROOT)}:{line} imports {name}"
+        for line, name in imports(path)
+        if name.startswith("training") and name != "training" and room(name) > own
+    ]
+    assert not above, "training/'s rooms run machinery <- judging <- trainers <- the command line: " + "; ".join(above)
+
+
+def test_rooms_of_training():
+    assert room("training.machinery.checkpoints") == 0 and room("training.judging.judge") == 1
+    assert room("training.trainers.ppo") == 2 and room("training.cli") == room("training.playback") == 3

@@ -76,11 +76,11 @@ def test_a_behaviour_from_outside_the_package_runs_everywhere(worm, tmp_path):
         buffers = moving.observe_arrays()
     assert (moving.world.modes != 0).any()  # the rules woke the blob (SLEEP is mode 0)
 
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 0, "tasks": {"worm": {"env": SMALL}}}))
-    rows = evaluate(config=config, tasks=["worm"], out=tmp_path / "eval", progress=False, plots=False)
+    rows = run_evaluation(config=config, tasks=["worm"], out=tmp_path / "eval", progress=False, plots=False)
     rules = [r.summary() for r in rows if r.kind == "hand-coded"]
     assert rules and rules[0]["policy"] == "worm" and rules[0]["successes"] == 2
 

@@ -11,7 +11,7 @@ import proteo_env
 from baselines import make_policy
 from baselines.base import PolicyBatch
 from proteo_env import batched
-from training.teachers import Teachers
+from training.trainers.teachers import Teachers
 
 N_WORLDS = 3
 

@@ -1,4 +1,4 @@
-"""training/ppo.py: checkpoints that load and evaluate, resume, determinism, refusals, and that it learns."""
+"""training/trainers/ppo.py: checkpoints that load and evaluate, resume, determinism, refusals, and that it learns."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ torch = pytest.importorskip("torch")
 
 import proteo_env  # noqa: E402
 from proteo_env.config import world_seeds  # noqa: E402
-from training import ppo  # noqa: E402
-from training.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
-from training.judging.evaluate import evaluate  # noqa: E402
+from training.judging.evaluate import run_evaluation  # noqa: E402
+from training.machinery.checkpoints import CheckpointError, load_policy, read_meta  # noqa: E402
+from training.trainers import ppo  # noqa: E402
 
 SMALL_ENV = {"n_modules": 6, "max_cycles": 40}
 
@@ -71,7 +71,7 @@ def test_checkpoint_loads_and_proteo_eval_runs_it_at_its_level(trained, tmp_path
     assert all(np.asarray(a).shape == (1,) and observations[k]["action_mask"][int(a[0])] for k, a in actions.items())
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 2, "first_seed": 500, "tasks": {"chain": {"env": SMALL_ENV}}}))
-    rows = evaluate(
+    rows = run_evaluation(
         config=config, tasks=["chain"], checkpoints=[str(trained)], out=tmp_path / "eval", progress=False, plots=False
     )
     learned = [r.summary() for r in rows if r.kind == "learned"]
@@ -203,7 +203,7 @@ def test_the_learner_improves_on_a_small_chain(tmp_path):
     )
     config = tmp_path / "eval.yaml"
     config.write_text(yaml.safe_dump({"seeds": 20, "first_seed": 2000, "tasks": {"chain": {"env": env}}}))
-    rows = evaluate(
+    rows = run_evaluation(
         config=config, tasks=["chain"], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
     )
     by_kind = {(r.kind, r.level): r for r in rows}
@@ -271,7 +271,7 @@ def test_shared_trunk_feeds_both_heads_and_an_mlp_checkpoint_loads(tmp_path):
 
 
 def test_sampled_move_draws_the_move_alone_and_the_checkpoint_acts_so(tmp_path):
-    from training.policies import LogitsPolicy
+    from training.machinery.policies import LogitsPolicy
 
     log_probs = [torch.log_softmax(torch.randn(200, n), dim=1) for n in (13, 4, 6)]
     torch.manual_seed(7)

@@ -27,7 +27,7 @@ episodes as one batch, one Ray task."""
 
 def test_bad_address_is_one_clear_error(capsys):
     from training.cli import main
-    from training.distributed import ClusterError, connect
+    from training.machinery.distributed import ClusterError, connect
 
     assert not ray.is_initialized()
     with pytest.raises(ClusterError, match=r"--address 'headnode' is not allowed; allowed: HOST:PORT"):
@@ -116,7 +116,7 @@ def test_worker_killed_mid_sweep_is_retried_and_the_table_is_complete(tmp_path, 
 
 
 def test_node_lacking_the_project_is_named(two_nodes):
-    from training.distributed import PROJECT_MODULES, ClusterError, check_cluster
+    from training.machinery.distributed import PROJECT_MODULES, ClusterError, check_cluster
 
     assert len(check_cluster()) == 2
     with pytest.raises(

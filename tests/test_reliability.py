@@ -69,7 +69,7 @@ def test_a_protocol_with_a_key_twice_is_refused_not_read_with_the_later_one(tmp_
 
 
 def test_a_training_config_with_a_key_twice_is_refused(tmp_path):
-    from training import ppo
+    from training.trainers import ppo
 
     config = tmp_path / "c.yaml"
     config.write_text("total_steps: 1000\nseed: 1\ntotal_steps: 9\n")
@@ -174,7 +174,7 @@ def test_a_condition_on_nan_is_not_a_number():
 )
 def test_a_checkpoint_of_a_task_that_is_not_registered_is_refused(tmp_path, task, message):
     pytest.importorskip("torch")
-    from training.checkpoints import CheckpointError, load_controller
+    from training.machinery.checkpoints import CheckpointError, load_controller
 
     folder = tmp_path / "copy"
     shutil.copytree(PUBLISHED, folder)
@@ -251,7 +251,7 @@ def test_out_naming_a_file_is_refused_before_anything_runs(argv, capsys, tmp_pat
 
 # ---------------------------------------------------------------------- the evaluator and the judge
 def test_the_evaluator_names_what_it_refuses():
-    from training.evaluator import Controller, evaluate
+    from training.machinery.evaluator import Controller, evaluate
 
     with pytest.raises(ConfigError, match=r"seeds=5 is not allowed; allowed: a non-empty list"):
         evaluate("chain-v1", [Controller.rules("chain")], seeds=5)
@@ -262,8 +262,8 @@ def test_the_evaluator_names_what_it_refuses():
 def test_the_journal_is_written_as_each_batch_lands_with_one_worker(tmp_path, monkeypatch):
     """An interrupted run loses at most the batch in flight: one worker journals every batch (it
     journaled once per task, settings and level, so a long group was played again after a resume)."""
-    from training.distributed import Journal
-    from training.evaluator import Controller, Episode, run_episodes, settings_json
+    from training.machinery.distributed import Journal
+    from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
 
     writes = []
     monkeypatch.setattr(Journal, "add_many", lambda self, items: writes.append(len(list(items))))

@@ -217,10 +217,10 @@ def test_a_page_of_an_extension_holds_the_results_of_the_protocol_it_extends(tmp
 def test_publish_writes_the_held_out_table_between_the_markers_only(tmp_path):
     rows, _ = results.read_rows(_bench(tmp_path, 0.3).parent, load_protocol("v1").lineage)
     page = tmp_path / "README.md"
-    page.write_text(f"intro\n{results.PUBLISH_BEGIN}\nold table\n{results.PUBLISH_END}\nafter\n")
-    results.publish(page, results.heldout_table(rows, load_protocol("v1")))
+    page.write_text(f"intro\n{results.TABLE_BEGIN}\nold table\n{results.TABLE_END}\nafter\n")
+    results.publish_table(page, results.heldout_table(rows, load_protocol("v1")))
     text = page.read_text()
-    assert text.startswith("intro\n") and text.endswith(f"{results.PUBLISH_END}\nafter\n")
+    assert text.startswith("intro\n") and text.endswith(f"{results.TABLE_END}\nafter\n")
     assert "old table" not in text
     assert "| policy | grasp-v0 |" in text  # a row per policy, a column per task: readable without scrolling
     assert (
@@ -250,7 +250,7 @@ def test_an_incomplete_or_capped_result_is_refused_before_anything_is_published(
     file = folder / "grasp" / "clone" / "benchmark.json"
     file.write_text(json.dumps({**json.loads(file.read_text()), **change}))
     page = tmp_path / "README.md"
-    page.write_text(f"{results.PUBLISH_BEGIN}\nold\n{results.PUBLISH_END}\n")
+    page.write_text(f"{results.TABLE_BEGIN}\nold\n{results.TABLE_END}\n")
     out = tmp_path / "results.md"
     with pytest.raises(ConfigError, match=named):
         results.main(["--benchmark", "v1", "--root", str(folder.parent), "--out", str(out), "--publish", str(page)])

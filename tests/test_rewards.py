@@ -12,7 +12,7 @@ from baselines import make_policy
 from proteo_env.registry import newest_tasks, task_class
 from proteo_env.rollout import run_episode
 from proteo_env.tasks.chain import fcc_hops
-from training.checkpoints import load_policy
+from training.machinery.checkpoints import load_policy
 
 CHAIN = {"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"}
 TABLE = {

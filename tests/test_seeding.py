@@ -10,7 +10,7 @@ import proteo_env
 from proteo_env.config import ConfigError, world_seeds
 
 pytest.importorskip("torch")
-from training.worlds import TrainingEnvs, training_worlds_seed  # noqa: E402
+from training.trainers.worlds import TrainingEnvs, training_worlds_seed  # noqa: E402
 
 ENV = {"n_modules": 12, "max_cycles": 20}
 

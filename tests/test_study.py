@@ -1,4 +1,4 @@
-"""training/study.py: several training seeds run, their checkpoints and progress are kept where
+"""training/trainers/study.py: several training seeds run, their checkpoints and progress are kept where
 configs/eval_study.yaml and the docs read them (a tiny budget)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from training import study
-from training.checkpoints import read_meta
+from training.machinery.checkpoints import read_meta
+from training.trainers import study
 
 
 @pytest.mark.slow  # several training seeds
@@ -125,22 +125,24 @@ def test_a_study_that_fails_part_way_keeps_the_record_of_every_run_it_finished(t
 
 def test_the_long_ppo_recipe_trains_the_ppo_config_for_its_own_steps(tmp_path):
     args = study.Args(tasks=("table",), recipes=("ppo48",), minutes=0.0)
-    cmd = study.Plan(args).command("ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    cmd = study.StudyPlan(args).command("ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/ppo_table_move.yaml"
     assert cmd[cmd.index("--total-steps") + 1] == "48000000"
-    cmd = study.Plan(study.Args(total_steps=1000)).command("ppo48", "table", 1, tmp_path / "run", tmp_path / "clone")
+    cmd = study.StudyPlan(study.Args(total_steps=1000)).command(
+        "ppo48", "table", 1, tmp_path / "run", tmp_path / "clone"
+    )
     assert cmd[cmd.index("--total-steps") + 1] == "1000", "an explicit budget still wins"
-    assert "--total-steps" not in study.Plan(args).command("ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert "--total-steps" not in study.StudyPlan(args).command("ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
 
 
 def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
     args = study.Args(tasks=("grasp",), recipes=("credit",), minutes=0.0)
-    cmd = study.Plan(args).command("credit", "grasp", 2, tmp_path / "run", tmp_path / "clone")
+    cmd = study.StudyPlan(args).command("credit", "grasp", 2, tmp_path / "run", tmp_path / "clone")
     config = cmd[cmd.index("--config") + 1]
     assert config == "configs/train/credit_grasp_move.yaml"
     assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
-    from training.common import parse_args
-    from training.ppo import Args
+    from training.machinery.runs import parse_args
+    from training.trainers.ppo import Args
 
     assert parse_args(Args, ["--config", config]).join_bonus > 0
 
@@ -154,15 +156,15 @@ def test_the_credit_recipe_starts_from_the_clone_with_module_credit(tmp_path):
 )
 def test_the_evolution_recipes_run_their_config_for_its_generations(tmp_path, recipe, config):
     args = study.Args(tasks=("chain",), recipes=(recipe,), level="full", minutes=0.0)
-    cmd = study.Plan(args).command(recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
-    assert cmd[cmd.index("-m") + 1] == "training.evolve" and cmd[cmd.index("--config") + 1] == config
+    cmd = study.StudyPlan(args).command(recipe, "chain", 2, tmp_path / "run", tmp_path / "clone")
+    assert cmd[cmd.index("-m") + 1] == "training.trainers.evolve" and cmd[cmd.index("--config") + 1] == config
     assert cmd[cmd.index("--time-limit-minutes") + 1] == "0.0" and cmd[cmd.index("--seed") + 1] == "2"
 
 
 def test_every_recipe_names_a_registered_trainer_and_its_configs_exist():
     from pathlib import Path
 
-    from training.trainers import trainer
+    from training.machinery.registry import trainer
 
     for name, prefix, _ in study.RECIPES.values():
         assert trainer(name).algorithms  # a trainer that writes checkpoints
@@ -171,18 +173,20 @@ def test_every_recipe_names_a_registered_trainer_and_its_configs_exist():
 
 def test_a_study_for_a_protocol_trains_its_recipes_configs_and_budgets_on_its_task_id(tmp_path):
     args = study.Args(benchmark="v7", level="move", tasks=("table",))
-    cmd = study.Plan(args).command("kickstart", "table", 3, tmp_path / "run", tmp_path / "clone")
+    cmd = study.StudyPlan(args).command("kickstart", "table", 3, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/kickstart_table_move.yaml"
     assert cmd[cmd.index("--task") + 1] == "table-v2", "the config says table-v1; the protocol judges table-v2"
     assert cmd[cmd.index("--total-steps") + 1] == "6000000"
     assert cmd[cmd.index("--init") + 1] == str(tmp_path / "clone")
-    assert study.Plan(args).recipe("kickstart", "table").init == "imitation", "the protocol's init: imitation-move"
-    assert study.Plan(args).recipe("ppo", "table").init is None
+    assert study.StudyPlan(args).recipe("kickstart", "table").init == "imitation", "the protocol's init: imitation-move"
+    assert study.StudyPlan(args).recipe("ppo", "table").init is None
     full = study.Args(benchmark="v7", level="full", tasks=("branch",))
-    cmd = study.Plan(full).command("evolve-large", "branch", 0, tmp_path / "run", tmp_path / "clone")
+    cmd = study.StudyPlan(full).command("evolve-large", "branch", 0, tmp_path / "run", tmp_path / "clone")
     assert cmd[cmd.index("--config") + 1] == "configs/train/evolve_large_branch_full.yaml"
     assert cmd[cmd.index("--task") + 1] == "branch-v0" and "--total-steps" not in cmd
-    assert "--task" not in study.Plan(study.Args()).command("ppo", "table", 1, tmp_path / "run", tmp_path / "clone")
+    assert "--task" not in study.StudyPlan(study.Args()).command(
+        "ppo", "table", 1, tmp_path / "run", tmp_path / "clone"
+    )
 
 
 def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_written(tmp_path):
@@ -194,7 +198,7 @@ def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_writ
 
 
 def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path, monkeypatch):
-    import training.plots
+    import training.judging.plots
 
     class Finished:  # a training process that writes its final checkpoint and progress log
         returncode = 0
@@ -210,7 +214,9 @@ def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path
 
     drawn = []
     monkeypatch.setattr(study.subprocess, "Popen", Finished)
-    monkeypatch.setattr(training.plots, "plot_runs", lambda runs, path, title: drawn.append((path.name, sorted(runs))))
+    monkeypatch.setattr(
+        training.judging.plots, "plot_runs", lambda runs, path, title: drawn.append((path.name, sorted(runs)))
+    )
     for seeds in ("[0, 1]", "[2]"):
         study.main(
             ["--tasks", "[chain]", "--seeds", seeds, "--runs-dir", str(tmp_path / "runs")]

@@ -177,11 +177,11 @@ def test_the_sb3_vecenv_declares_the_action_space_of_its_control_level_and_steps
 
 
 def test_a_maskable_ppo_trained_at_move_enters_the_protocol(tmp_path):
-    """MaskablePPO through training/sb3_ppo.py at control level move: its checkpoint records move
+    """MaskablePPO through training/trainers/sb3_ppo.py at control level move: its checkpoint records move
     and is judged under v7 at move (its training unchecked: not a recipe of the protocol)."""
     pytest.importorskip("sb3_contrib")
-    from training import sb3_ppo
     from training.judging.judge import judge
+    from training.trainers import sb3_ppo
 
     env = json.dumps({"n_modules": 12, "max_cycles": 300, "motion_model": "sphere"})
     final = sb3_ppo.main(
@@ -275,13 +275,14 @@ def test_torchrl_env_at_move_steps_the_same_world_as_the_env_with_the_same_moves
 
 
 def test_torchrl_ppo_trains_at_move_and_its_checkpoint_plays_at_move(tmp_path):
-    """training/torchrl_ppo.py at ``control: move``: the actor picks one masked move per module;
+    """training/trainers/torchrl_ppo.py at ``control: move``: the actor picks one masked move per module;
     the checkpoint records the level and its 13 moves, loads, and plays episodes at ``move`` (the
     same results through the batched evaluator as through the env, one world at a time)."""
     pytest.importorskip("torchrl")
     from proteo_env.rollout import run_episode
-    from training import load_controller, torchrl_ppo
-    from training.evaluator import Controller, evaluate
+    from training import load_controller
+    from training.machinery.evaluator import Controller, evaluate
+    from training.trainers import torchrl_ppo
 
     final = torchrl_ppo.main(
         ["--config", "configs/train/torchrl_ippo_chain_move.yaml", "--total-steps", "600", "--n-envs", "2"]
@@ -304,7 +305,7 @@ def checkpoints(tmp_path_factory):
     pytest.importorskip("sb3_contrib")
     pytest.importorskip("torchrl")
     pytest.importorskip("cma")
-    from training import cma_es, sb3_ppo, torchrl_ppo
+    from training.trainers import cma_es, sb3_ppo, torchrl_ppo
 
     root = tmp_path_factory.mktemp("runs")
     common = ["--env", TINY_FLAG, "--tensorboard", "false"]
@@ -401,7 +402,7 @@ def checkpoints(tmp_path_factory):
 
 
 def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_path):
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     for name, final in checkpoints.items():
         meta = json.loads((final / "proteo.json").read_text())
@@ -409,7 +410,7 @@ def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_pat
         assert meta["task"] == trained_on and meta["agent_steps"] > 0, name
         assert (final.parent / "progress.csv").is_file(), name
         assert any((final.parent / "checkpoints").iterdir()), name
-    results = evaluate(
+    results = run_evaluation(
         tasks=["chain"],
         seeds=2,
         checkpoints=[str(p) for p in checkpoints.values()],
@@ -428,11 +429,11 @@ def test_training_scripts_write_checkpoints_that_eval_loads(checkpoints, tmp_pat
 def test_two_checkpoints_of_one_algorithm_get_their_folder_names(checkpoints, tmp_path):
     import shutil
 
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     other = tmp_path / "cma_neural_other"
     shutil.copytree(checkpoints["cma_neural"], other)
-    results = evaluate(
+    results = run_evaluation(
         tasks=["chain"],
         seeds=1,
         checkpoints=[str(checkpoints["cma_neural"]), str(other)],
@@ -448,7 +449,7 @@ def test_two_checkpoints_of_one_algorithm_get_their_folder_names(checkpoints, tm
 
 
 def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
-    from training import cma_es, sb3_ppo
+    from training.trainers import cma_es, sb3_ppo
 
     first = sorted((checkpoints["sb3"].parent / "checkpoints").iterdir())[0]
     final = sb3_ppo.main(
@@ -496,7 +497,7 @@ def test_resume_continues_from_a_checkpoint(checkpoints, tmp_path):
 
 def test_learned_policy_is_deterministic_for_a_seed(checkpoints):
     from proteo_env.rollout import run_episode
-    from training.checkpoints import load_policy
+    from training.machinery.checkpoints import load_policy
 
     env = proteo_env.make("chain-v0", **TINY)
     for path in checkpoints.values():
@@ -508,12 +509,13 @@ def test_learned_policy_is_deterministic_for_a_seed(checkpoints):
 # ---------------------------------------------------------------------- evaluation
 def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
     pytest.importorskip("yaml")
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     config = tmp_path / "eval.yaml"
     config.write_text("seeds: 3\nfirst_seed: 7\ntasks:\n  chain:\n    env: {n_modules: 6, max_cycles: 40}\n")
     runs = [
-        evaluate(config=config, tasks=["chain"], out=tmp_path / f"e{i}", progress=False, plots=False) for i in range(2)
+        run_evaluation(config=config, tasks=["chain"], out=tmp_path / f"e{i}", progress=False, plots=False)
+        for i in range(2)
     ]
     for a, b in zip(*runs):
         assert a.policy == b.policy
@@ -527,21 +529,21 @@ def test_eval_of_hand_coded_and_random_is_deterministic(tmp_path):
 def test_an_eval_config_pins_a_task_version_or_names_the_allowed_ones(tmp_path):
     pytest.importorskip("yaml")
     from proteo_env.config import ConfigError
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     config = tmp_path / "eval.yaml"
     tiny = "    env: {n_modules: 12, T: 3, B: 2, max_cycles: 30}\n"
     config.write_text("seeds: 1\ntasks:\n  branch:\n    task: branch-v0\n" + tiny)
-    rows = evaluate(config=config, tasks=["branch"], out=tmp_path / "pinned", progress=False, plots=False)
+    rows = run_evaluation(config=config, tasks=["branch"], out=tmp_path / "pinned", progress=False, plots=False)
     assert {r.task for r in rows} == {"branch-v0"}
     config.write_text("seeds: 1\ntasks:\n  branch:\n" + tiny)
-    rows = evaluate(config=config, tasks=["branch"], out=tmp_path / "newest", progress=False, plots=False)
+    rows = run_evaluation(config=config, tasks=["branch"], out=tmp_path / "newest", progress=False, plots=False)
     assert {r.task for r in rows} == {proteo_env.registry.task_class("branch").task_id()} != {"branch-v0"}
     config.write_text("seeds: 1\ntasks:\n  branch:\n    task: chain-v1\n" + tiny)
     with pytest.raises(
         ConfigError, match=r"tasks.branch.task = 'chain-v1' is not allowed; allowed: branch-v0, branch-v1"
     ):
-        evaluate(config=config, out=tmp_path / "bad", progress=False, plots=False)
+        run_evaluation(config=config, out=tmp_path / "bad", progress=False, plots=False)
     assert not (tmp_path / "bad").exists()
 
 
@@ -553,8 +555,8 @@ def test_eval_covers_every_task_with_a_reward():
 
 
 def test_bad_checkpoints_get_one_clear_error(checkpoints, tmp_path, capsys):
-    from training.checkpoints import CheckpointError, load_policy
     from training.cli import main
+    from training.machinery.checkpoints import CheckpointError, load_policy
 
     env = proteo_env.make("chain-v0", **TINY)
     with pytest.raises(CheckpointError, match="does not exist"):
@@ -609,7 +611,7 @@ PPO_TINY = [
     *("--total-steps", "64", "--n-steps", "4", "--n-envs", "2"),
     *("--minibatch-size", "32", "--n-epochs", "1", "--checkpoint-every", "32"),
 ]
-"""The flags that shrink a training/ppo.py run (every recipe of it) to seconds."""
+"""The flags that shrink a training/trainers/ppo.py run (every recipe of it) to seconds."""
 TINY_BUDGET = {  # script module and the flags that shrink its run to seconds
     "sb3_ppo": (
         "sb3_ppo",
@@ -702,7 +704,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     import yaml
     from conftest import SMALL_OVERRIDES
 
-    from training.judging.evaluate import evaluate
+    from training.judging.evaluate import run_evaluation
 
     settings = yaml.safe_load((Path("configs/train") / config).read_text())
     task = task_name(settings["task"])
@@ -716,7 +718,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
             **({"motion_model": settings["env"]["motion_model"]} if "motion_model" in settings["env"] else {}),
         }
     )
-    final = importlib.import_module(f"training.{module}").main(
+    final = importlib.import_module(f"training.trainers.{module}").main(
         [
             "--config",
             f"configs/train/{config}",
@@ -734,7 +736,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
     assert meta["task"] == settings["task"] and meta["agent_steps"] > 0
     eval_config = tmp_path / "eval.yaml"
     eval_config.write_text(yaml.safe_dump({"seeds": 1, "first_seed": 0, "tasks": {task: {"env": json.loads(env)}}}))
-    results = evaluate(
+    results = run_evaluation(
         config=eval_config, tasks=[task], checkpoints=[str(final)], out=tmp_path / "eval", progress=False, plots=False
     )
     levels = ["full"] + ([settings["control"]] if settings.get("control", "full") != "full" else [])
@@ -742,7 +744,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
         ("random", lv) for lv in levels
     ] + [("evolved" if module in ("cma_es", "evolve") else "learned", settings.get("control", "full"))]
     if meta["algorithm"] == "cma-rules":  # every evolved parameter reaches the policy, none is dropped
-        from training.checkpoints import load_policy
+        from training.machinery.checkpoints import load_policy
 
         policy = load_policy(final, proteo_env.make(settings["task"], **json.loads(env)))
         assert "ignored" not in policy.name
@@ -752,7 +754,7 @@ def test_each_training_config_runs_and_eval_loads_its_checkpoint(config, tmp_pat
 def test_rule_parameters_follow_kwargs_and_start_at_the_values_the_policy_uses():
     from baselines import POLICIES, make_policy
     from proteo_env.config import ConfigError
-    from training.cma_es import Args, policy_defaults, rule_params
+    from training.trainers.cma_es import Args, policy_defaults, rule_params
 
     env = proteo_env.make("branch-v0", n_modules=12, T=3, B=2, max_cycles=8)
     defaults = policy_defaults(make_policy("branch", env))
@@ -768,7 +770,7 @@ def test_rule_parameters_follow_kwargs_and_start_at_the_values_the_policy_uses()
 
 def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_path):
     pytest.importorskip("cma")
-    from training import cma_es
+    from training.trainers import cma_es
 
     common = [
         "--config",
@@ -804,7 +806,7 @@ def test_candidates_the_rules_reject_score_below_the_rest_or_stop_the_run(tmp_pa
 
 def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped():
     cma = pytest.importorskip("cma")
-    from training.cma_es import distribution_mean
+    from training.trainers.cma_es import distribution_mean
 
     es = cma.CMAEvolutionStrategy([0.1, 0.5], 0.3, {"bounds": [0.0, 1.0], "seed": 1, "verbose": -9})
     for _ in range(15):  # minimising x[0] drives the internal mean below the lower bound
@@ -820,8 +822,8 @@ def test_saved_rule_parameters_are_the_mean_mapped_into_the_bounds_not_clipped()
 def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
     """The committed checkpoints load where ``proteo eval --config configs/<config>`` runs them."""
     pytest.importorskip("sb3_contrib")
-    from training.checkpoints import load_policy, read_meta
     from training.judging.evaluate import load_config
+    from training.machinery.checkpoints import load_policy, read_meta
 
     for name, entry in load_config(Path("configs") / config)["tasks"].items():
         for item in entry.get("checkpoints") or []:
@@ -835,7 +837,7 @@ def test_every_checkpoint_an_eval_config_names_loads_at_its_settings(config):
                 assert "ignored" not in load_policy(path, env, seed=0).name, path  # no evolved parameter dropped
 
 
-@pytest.mark.parametrize("module", ["training.ppo", "training.imitate"])
+@pytest.mark.parametrize("module", ["training.trainers.ppo", "training.trainers.imitate"])
 def test_a_device_that_is_not_one_or_not_here_is_refused_before_anything_is_written(module, tmp_path):
     torch = pytest.importorskip("torch")
     from proteo_env.config import ConfigError
@@ -863,9 +865,9 @@ def test_the_throughput_benchmark_refuses_a_device_before_it_measures_or_writes(
     assert not out.parent.exists()
 
 
-@pytest.mark.parametrize("module", ["training.ppo", "training.imitate", "training.cma_es"])
+@pytest.mark.parametrize("module", ["training.trainers.ppo", "training.trainers.imitate", "training.trainers.cma_es"])
 def test_malformed_yaml_in_a_config_file_or_a_flag_is_one_error_with_its_line_and_column(module, tmp_path, capsys):
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     main = importlib.import_module(module).main
     bad = tmp_path / "bad.yaml"
@@ -887,9 +889,9 @@ VOCABULARY = {"n_envs": "n_copies", "minibatch_size": "batch_size", "n_epochs": 
 def test_every_trainer_names_a_setting_alike_and_refuses_the_old_word(trainer, tmp_path, capsys):
     import dataclasses
 
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
-    module = importlib.import_module(f"training.{trainer}")
+    module = importlib.import_module(f"training.trainers.{trainer}")
     names = {f.name for f in dataclasses.fields(module.Args)}
     assert not names & set(VOCABULARY.values())
     for new, old in VOCABULARY.items():
@@ -924,8 +926,8 @@ def test_a_malformed_eval_config_is_one_error_not_a_parser_traceback(tmp_path, c
 def test_ppo_refuses_a_negative_budget_or_a_bad_hyperparameter_before_writing_anything(
     flag, value, allowed, tmp_path, capsys
 ):
-    from training import ppo
-    from training.common import run_script
+    from training.machinery.runs import run_script
+    from training.trainers import ppo
 
     assert run_script(ppo.main, [flag, value, "--run-dir", str(tmp_path / "run")]) == 2
     name = flag[2:].replace("-", "_")

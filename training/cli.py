@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 
-def evaluate(args) -> int:
+def evaluate_command(args) -> int:
     from training.judging import judge
     from training.judging.evaluate import main as evaluate_main
 
@@ -27,23 +27,24 @@ def evaluate(args) -> int:
     return evaluate_main(args)
 
 
-def sweep(args) -> int:
+def sweep_command(args) -> int:
     from training.sweep import main as sweep_main
 
     return sweep_main(args)
 
 
-def train(args) -> int:
-    """``proteo train NAME FLAGS...``: ``python -m training.NAME FLAGS...`` (the flags unchanged)."""
+def train_command(args) -> int:
+    """``proteo train NAME FLAGS...``: the registered trainer's ``main(FLAGS)`` (the flags unchanged)."""
     import importlib
 
-    from training.trainers import trainer
+    from training.machinery.registry import trainer
 
-    name = trainer(args.trainer).name
+    entry = trainer(args.trainer)
+    name = entry.name
     flags = list(args.flags)
     if flags[:1] == ["--"]:
         flags = flags[1:]
-    module = importlib.import_module(f"training.{name}")
+    module = importlib.import_module(entry.module)
     program = sys.argv[0]
     sys.argv[0] = f"proteo train {name}"  # the trainer's usage and messages name the command that ran it
     try:
@@ -57,10 +58,10 @@ def train(args) -> int:
     return 0
 
 
-def migrate(args) -> int:
-    """``proteo migrate PATH...``: :func:`training.checkpoints.migrate` on every checkpoint under the paths."""
-    from training.checkpoints import migrate as migrate_one
-    from training.common import META_FILE
+def migrate_command(args) -> int:
+    """``proteo migrate PATH...``: :func:`training.machinery.checkpoints.migrate` on every checkpoint under the paths."""
+    from training.machinery.checkpoints import META_FILE
+    from training.machinery.checkpoints import migrate as migrate_one
 
     folders = []
     for path in map(Path, args.paths):
@@ -92,12 +93,12 @@ def at_least(least: int):
 
 
 def version() -> str:
-    from training.common import package_version
+    from training.machinery.checkpoints import package_version
 
     return package_version()
 
 
-def figures(args) -> int:
+def figures_command(args) -> int:
     from baselines.figures import make_figures
 
     make_figures(Path(args.out), seed=args.seed, only=args.only, redraw=args.redraw)
@@ -133,9 +134,9 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 
 
 def main(argv=None) -> int:
-    from training.distributed import add_ray_flags
+    from training.machinery.distributed import add_ray_flags
+    from training.machinery.registry import TRAINERS
     from training.playback import demo, replay, run, view
-    from training.trainers import TRAINERS
 
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     parser.add_argument("--version", action="version", version=f"proteo {version()}")
@@ -189,7 +190,7 @@ def main(argv=None) -> int:
         "--only", action="append", default=None, help="only this figure (repeatable): chain, branch, table, grasp"
     )
     p.add_argument("--redraw", action="store_true", help="draw again from the recordings in --out (no episodes run)")
-    p.set_defaults(func=figures)
+    p.set_defaults(func=figures_command)
 
     p = sub.add_parser("eval", help="compare hand-coded, random, learned and evolved policies over seeds")
     p.add_argument(
@@ -249,7 +250,7 @@ def main(argv=None) -> int:
         help="with --benchmark: at most N worlds per split (quick checks only; the result is marked incomplete)",
     )
     add_ray_flags(p)
-    p.set_defaults(func=evaluate)
+    p.set_defaults(func=evaluate_command)
 
     p = sub.add_parser("sweep", help="a task over a grid of settings, policies and seeds: tidy tables and a plot")
     p.add_argument("config", help="a sweep config (YAML; see configs/sweeps/)")
@@ -264,7 +265,7 @@ def main(argv=None) -> int:
         help="discard the episodes of an interrupted sweep in --out (default: resume it)",
     )
     add_ray_flags(p)
-    p.set_defaults(func=sweep)
+    p.set_defaults(func=sweep_command)
 
     p = sub.add_parser(
         "train",
@@ -275,14 +276,14 @@ def main(argv=None) -> int:
     )
     p.add_argument("trainer", metavar="TRAINER", help=f"one of {', '.join(t.name for t in TRAINERS)}")
     p.add_argument("flags", nargs=argparse.REMAINDER, help="the trainer's flags, e.g. --config FILE.yaml")
-    p.set_defaults(func=train)
+    p.set_defaults(func=train_command)
 
     p = sub.add_parser(
         "migrate",
         help="rewrite version-1 checkpoints' proteo.json as version 2 (each file's SHA-256, the network's fields)",
     )
     p.add_argument("paths", nargs="+", help="checkpoint folders, or folders holding checkpoints at any depth")
-    p.set_defaults(func=migrate)
+    p.set_defaults(func=migrate_command)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

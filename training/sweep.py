@@ -16,7 +16,7 @@ A sweep config (YAML, every key checked; see ``configs/sweeps/``)::
     sample_seed: 0
     plot: {x: n_modules, y: cycles_to_success, hue: motion_model}
 
-The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`: on ``--workers``
+The episodes run in batches of worlds (:func:`training.machinery.evaluator.run_episodes`: on ``--workers``
 local processes, default every core, or as Ray tasks with ``--ray``; the same results either way),
 journaled in ``OUT/episodes.jsonl`` as each batch lands so that an interrupted sweep resumes. Every point of the grid is checked (an environment is
 built) before any episode runs. Written into ``--out`` when every episode has finished:
@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.config import ConfigError
-from training.common import out_folder
+from training.machinery.runs import out_folder
 
 
 @dataclass(frozen=True)
@@ -150,9 +150,9 @@ def sweep(
         the rows of ``summary.csv`` (one dict per point and policy).
     """
     import proteo_env
-    from training.distributed import Journal
-    from training.evaluator import Controller, Episode, run_episodes, settings_json
     from training.judging.statistics import mean_ci
+    from training.machinery.distributed import Journal
+    from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
 
     cfg = load_sweep(config)
     points = cfg.points()
@@ -274,7 +274,7 @@ def plot_sweep(summary: list[dict], cfg: SweepConfig, path: Path, *, title: str)
 
 def main(args) -> int:
     """Entry point of ``proteo sweep`` (arguments parsed in :mod:`training.cli`)."""
-    from training.distributed import ray_options
+    from training.machinery.distributed import ray_options
 
     out = args.out or str(Path("out/sweeps") / Path(args.config).stem)
     summary = sweep(

@@ -10,7 +10,7 @@ level's ``control_nvec``): at ``move`` one ``Categorical(13)`` per module with i
 mask (the form of TorchRL's ``MaskedCategorical`` and of BenchMARL's masked IPPO and MAPPO); at
 ``move+mode`` and ``full`` a ``MultiCategorical(nvec)`` of the level's ``L`` fields with one flat
 mask over their concatenated choices (moves masked, every other choice allowed: the layout of
-sb3-contrib's ``MaskablePPO``; :func:`training.torchrl_ppo.make_distribution_class` samples it):
+sb3-contrib's ``MaskablePPO``; :func:`training.trainers.torchrl_ppo.make_distribution_class` samples it):
 
 ==================================== ========================= ==============================================
 key                                  shape                     meaning

@@ -3,8 +3,8 @@
 protocol -> episodes -> one result model -> statistics -> pages:
 
 - :mod:`~training.judging.protocol`: what is judged, on which worlds (``configs/benchmark/<version>.yaml``);
-- :mod:`~training.judging.episodes`: running the planned episodes (:class:`training.evaluator.Episode`,
-  the batched evaluator, which stays in :mod:`training.evaluator` because the trainers use it too);
+- :mod:`~training.judging.episodes`: running the planned episodes (:class:`training.machinery.evaluator.Episode`,
+  the batched evaluator, which stays in :mod:`training.machinery.evaluator` because the trainers use it too);
 - :mod:`~training.judging.report`: the one result record (:class:`~training.judging.report.Result`:
   a policy, or a recipe's training seeds, on a task and split) and ``proteo eval``'s tables;
   :mod:`~training.judging.evaluate` runs ``proteo eval``, :mod:`~training.judging.judge`

@@ -5,9 +5,9 @@ A planner (:func:`training.judging.evaluate.plan_episodes` for an evaluation, th
 :func:`~training.judging.judge.plan_protocol` for a protocol) adds each row's record (a
 :class:`~training.judging.report.Result`) and, for each of its runs, the episodes to play
 (:meth:`Plan.add_run`): each is ``(Run, Episode, picture)``, the
-:class:`~training.judging.report.Run` it adds to, the :class:`training.evaluator.Episode` (task,
+:class:`~training.judging.report.Run` it adds to, the :class:`training.machinery.evaluator.Episode` (task,
 settings, level, controller, world seed) and a label to draw its end under (``""``: none).
-:meth:`Plan.execute` runs them in batches of worlds (:func:`training.evaluator.run_episodes`),
+:meth:`Plan.execute` runs them in batches of worlds (:func:`training.machinery.evaluator.run_episodes`),
 writing each finished episode to a journal as its batch lands, so an interrupted run resumes with
 the missing episodes only (an episode whose end is drawn runs on its own, :func:`run_alone`),
 then lets the caller write its files before the journal is closed.
@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from proteo_env.registry import task_name
-from training.distributed import Journal, run_jobs
-from training.evaluator import Episode, episode_key, run_episodes
 from training.judging.report import Result, Run
+from training.machinery.distributed import Journal, run_jobs
+from training.machinery.evaluator import Episode, episode_key, run_episodes
 
 
 def _picture_png(env, caption: str) -> str:
@@ -54,7 +54,7 @@ def built(episode):
         import json
 
         import proteo_env
-        from training.common import limit_threads
+        from training.machinery.runs import limit_threads
 
         limit_threads(1)
         while len(_BUILT) >= 4:
@@ -100,10 +100,10 @@ def play_jobs(jobs: list, out_dir: Path, *, ray, journal, progress: bool, worker
     """Run the planned ``jobs`` (``[(Run, Episode, picture)]``) and add each episode to its run;
     pictures go to ``out_dir/pictures/<task>_<picture>_<level>.png``.
 
-    The episodes run in batches of worlds (:func:`training.evaluator.run_episodes`, on
+    The episodes run in batches of worlds (:func:`training.machinery.evaluator.run_episodes`, on
     ``workers`` processes, default every core, or on Ray); one with a picture runs on its own
     (:func:`run_alone`), since its world is drawn at its end. Each finished episode is
-    recorded in ``journal`` under its :func:`~training.evaluator.episode_key`. An episode's
+    recorded in ``journal`` under its :func:`~training.machinery.evaluator.episode_key`. An episode's
     ``seconds`` is its batch's wall-clock time shared equally among its episodes.
     """
     pictured = [i for i, (_, _, picture) in enumerate(jobs) if picture]
@@ -145,7 +145,7 @@ class Plan:
 
     def add_run(self, run: Run, controller, task: str, settings: str, level: str, seeds, *, picture: str = ""):
         """``run``'s episodes: ``controller`` on each world seed of ``seeds`` of ``task`` with
-        ``settings`` (:func:`training.evaluator.settings_json`) at ``level``; ``picture``: a label
+        ``settings`` (:func:`training.machinery.evaluator.settings_json`) at ``level``; ``picture``: a label
         to draw the end of its first episode under."""
         for k, seed in enumerate(seeds):
             self.jobs.append((run, Episode(task, settings, level, controller, seed), picture if k == 0 else ""))

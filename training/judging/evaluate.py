@@ -49,14 +49,14 @@ on. Each checkpoint runs at the control level it was trained at (``control`` in 
 checkpoint uses, the random policy runs at that level too (random moves under the task's rules
 at ``move``). Writes ``results.md`` (the tables), ``results.json`` (every episode) and
 ``eval.png`` (the three measures per task) into ``--out``; ``--publish PAGE.md`` also puts the
-tables into a page between its markers (:func:`~training.judging.report.publish`). ``--from-results RESULTS.json`` runs
+tables into a page between its markers (:func:`~training.judging.report.publish_evaluation`). ``--from-results RESULTS.json`` runs
 no episode: it writes the tables of an earlier ``results.json`` again, in the current format,
 into ``--out`` and the ``--publish`` pages (:func:`~training.judging.report.rerender`), e.g.::
 
     proteo eval --from-results docs/eval/study/results.json --out docs/eval/study \\
         --publish README.md --publish docs/guides/learning.md
 
-Each episode is one :class:`training.evaluator.Episode`, run in batches of worlds on every core
+Each episode is one :class:`training.machinery.evaluator.Episode`, run in batches of worlds on every core
 (``--workers N`` processes); ``--ray`` runs the batches as Ray tasks, on a local Ray instance
 (``--workers N`` CPUs) or a cluster (``--address``), with results identical to the serial run. Finished episodes go to ``--out``/``episodes.jsonl`` as they arrive; rerunning
 an interrupted evaluation with the same settings runs only the missing episodes
@@ -68,9 +68,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from proteo_env.registry import task_name
-from training.common import checkpoint_kind, out_folder
 from training.judging.episodes import Plan
-from training.judging.report import Result, Run, markdown_table, publish, rerender, write_results
+from training.judging.report import Result, Run, markdown_table, publish_evaluation, rerender, write_results
+from training.machinery.checkpoints import checkpoint_kind
+from training.machinery.runs import out_folder
 
 DEFAULT_CONFIG = "configs/eval.yaml"
 """The config ``proteo eval`` reads when run from the repository root without ``--config``."""
@@ -84,7 +85,7 @@ CONFIG_KEYS = ("first_seed", "seeds", "tasks")
 """The keys of an eval config."""
 
 
-TASK_KEYS = ("checkpoints", "env", "task")
+CONFIG_TASK_KEYS = ("checkpoints", "env", "task")
 """The keys of a task's entry under ``tasks``."""
 
 
@@ -99,7 +100,7 @@ def load_config(path) -> dict:
     Bad input is one :class:`ConfigError` naming the field, the value and what is allowed, raised
     before anything runs or is written: an unknown key at the top (:data:`CONFIG_KEYS`), a name
     under ``tasks`` that is not an evaluated task, an unknown key in a task's entry
-    (:data:`TASK_KEYS`) or in a training-seed group (:data:`GROUP_KEYS`), and values of the
+    (:data:`CONFIG_TASK_KEYS`) or in a training-seed group (:data:`GROUP_KEYS`), and values of the
     wrong kind."""
     import difflib
 
@@ -138,9 +139,9 @@ def load_config(path) -> dict:
         entry = {} if entry is None else entry
         if not isinstance(entry, dict):
             raise ConfigError(
-                f"{where}: tasks.{name} = {entry!r} is not allowed; allowed: a mapping with keys {', '.join(TASK_KEYS)}"
+                f"{where}: tasks.{name} = {entry!r} is not allowed; allowed: a mapping with keys {', '.join(CONFIG_TASK_KEYS)}"
             )
-        unknown(f"tasks.{name}", entry, TASK_KEYS)
+        unknown(f"tasks.{name}", entry, CONFIG_TASK_KEYS)
         pinned = entry.get("task")
         versions = sorted(tid for tid, cls in TASKS.items() if cls.name == name)
         if pinned is not None and pinned not in versions:
@@ -191,12 +192,12 @@ def _checkpoint_identity(path) -> str:
     """A hash of a checkpoint's ``proteo.json`` (it changes whenever the checkpoint is written again)."""
     import hashlib
 
-    from training.common import META_FILE, checkpoint_dir
+    from training.machinery.checkpoints import META_FILE, checkpoint_dir
 
     return hashlib.sha256((checkpoint_dir(path) / META_FILE).read_bytes()).hexdigest()[:16]
 
 
-def evaluate(
+def run_evaluation(
     *,
     config=None,
     tasks=None,
@@ -213,9 +214,9 @@ def evaluate(
 ) -> list:
     """Run the comparison and write ``results.md``, ``results.json`` and ``eval.png`` into ``out``.
 
-    Every episode is one :class:`training.evaluator.Episode`, run in batches of worlds on
+    Every episode is one :class:`training.machinery.evaluator.Episode`, run in batches of worlds on
     ``workers`` processes (default: every core) or as Ray tasks (``ray``), and recorded in ``out/episodes.jsonl`` as it finishes; rerunning an interrupted evaluation with
-    the same settings resumes it (see :class:`training.distributed.Journal`). The tables are
+    the same settings resumes it (see :class:`training.machinery.distributed.Journal`). The tables are
     written only when every episode has finished.
 
     Args:
@@ -228,7 +229,7 @@ def evaluate(
         deterministic: learned and evolved neural policies take arg-max actions.
         pictures: draw the end of each policy's first episode (what it builds) into
             ``out/pictures/<task>_<policy>.png`` (the first run of a training-seed group).
-        ray: ``None`` (this machine) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`).
+        ray: ``None`` (this machine) or ``{"address", "workers"}`` (:func:`training.machinery.distributed.ray_options`).
         workers: processes on this machine (default: every core; the results do not depend on it).
         fresh: discard the episodes of an unfinished earlier run in ``out`` instead of resuming it.
 
@@ -240,7 +241,7 @@ def evaluate(
     """
     from proteo_env.config import ConfigError
     from proteo_env.registry import newest_tasks, task_class
-    from training.checkpoints import read_meta
+    from training.machinery.checkpoints import read_meta
 
     out_folder(out)
     cfg = load_config(config)
@@ -304,8 +305,8 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
     """
     import proteo_env
     from baselines import make_policy
-    from training.checkpoints import load_policy, read_meta
-    from training.evaluator import Controller, settings_json
+    from training.machinery.checkpoints import load_policy, read_meta
+    from training.machinery.evaluator import Controller, settings_json
 
     plan = Plan()
     results = plan.rows
@@ -385,9 +386,9 @@ def main(args) -> int:
     config = args.config
     if config is None and Path(DEFAULT_CONFIG).is_file():
         config = DEFAULT_CONFIG
-    from training.distributed import ray_options
+    from training.machinery.distributed import ray_options
 
-    results = evaluate(
+    results = run_evaluation(
         config=config,
         tasks=args.tasks.split(",") if args.tasks else None,
         seeds=args.seeds,
@@ -401,7 +402,7 @@ def main(args) -> int:
         fresh=args.fresh,
     )
     if args.publish:
-        publish(results, args.out, args.publish)
+        publish_evaluation(results, args.out, args.publish)
     print(markdown_table(results))
     print(f"\nresults: {Path(args.out).resolve()}/results.md, results.json" + ("" if args.no_plots else ", eval.png"))
     return 0

@@ -29,15 +29,15 @@ from pathlib import Path
 import proteo_env
 from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml
 from proteo_env.registry import task_class, task_name
-from training.checkpoints import read_meta
-from training.common import checkpoint_kind, out_folder, provenance
-from training.distributed import ray_options
-from training.evaluator import Controller, episode_key, settings_json
-from training.judging.entrants import ENTRANT_FILE, check_factory_name, file_digests, load_entrant
 from training.judging.episodes import Plan
 from training.judging.evaluate import refuse_flags
 from training.judging.protocol import PROTOCOL_DIR, REFERENCE_POLICIES, Protocol, TaskProtocol, load_protocol
 from training.judging.report import BENCHMARK_COLUMNS, INTERVALS, Result, Run, markdown_table, result_of_row
+from training.machinery.checkpoints import checkpoint_kind, provenance, read_meta
+from training.machinery.distributed import ray_options
+from training.machinery.entrants import ENTRANT_FILE, check_factory_name, file_digests, load_entrant
+from training.machinery.evaluator import Controller, episode_key, settings_json
+from training.machinery.runs import out_folder
 
 SCHEMA = "proteo-benchmark-results"
 SCHEMA_VERSION = 1
@@ -46,7 +46,7 @@ SCHEMA_VERSION = 1
 @dataclass
 class Candidate:
     """One policy judged on one task: the rules or random at one level, a recipe's checkpoints, or
-    an entrant from outside (:mod:`training.judging.entrants`)."""
+    an entrant from outside (:mod:`training.machinery.entrants`)."""
 
     task: TaskProtocol
     label: str
@@ -58,7 +58,7 @@ class Candidate:
     """``[(path, meta)]``: one per training seed."""
     recipe: str | None = None
     entrant: object = None
-    """The checked ``entrant.yaml`` (:class:`~training.judging.entrants.EntrantFile`), or a factory's
+    """The checked ``entrant.yaml`` (:class:`~training.machinery.entrants.EntrantFile`), or a factory's
     ``module:function`` (a string) for an entrant without one."""
 
     @property
@@ -209,7 +209,7 @@ def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
             f"--checkpoint: checkpoints of recipes {', '.join(sorted(map(str, recorded)))} are not allowed together; "
             "allowed: the training seeds of one recipe"
         )
-    named = recorded.pop()  # the recipe its checkpoint records (training/study.py writes it), or none
+    named = recorded.pop()  # the recipe its checkpoint records (training/trainers/study.py writes it), or none
     parents = {Path(p).resolve().parent.name for p in paths}
     folder = parents.pop() if len(parents) == 1 and len(paths) > 1 else Path(paths[0]).resolve().name
     if folder.startswith("seed_"):

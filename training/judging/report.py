@@ -6,7 +6,7 @@ summary measures; the judge and the results page read and write the same record.
 table prints a measure as ``value (low–high)``, its 95 % interval (:data:`INTERVALS` says
 which; the interval code is :mod:`training.judging.statistics`). :func:`write_results` writes
 ``results.md``, ``results.json`` (every episode) and ``eval.png``; :func:`load_results` and
-:func:`rerender` read a ``results.json`` back; :func:`publish` puts the tables into a page
+:func:`rerender` read a ``results.json`` back; :func:`publish_evaluation` puts the tables into a page
 between its markers (:data:`PUBLISH_BEGIN` or :data:`PUBLISH_SUMMARY_BEGIN`, then
 :data:`PUBLISH_END`). See :mod:`training.judging.evaluate` for the command.
 """
@@ -45,7 +45,7 @@ class Run:
     agent_steps: int | None = None
     """The agent-steps the checkpoint was trained for (``None`` for a baseline)."""
     sha256: str | None = None
-    """The SHA-256 of an entrant's file (:mod:`training.judging.entrants`; ``None`` otherwise)."""
+    """The SHA-256 of an entrant's file (:mod:`training.machinery.entrants`; ``None`` otherwise)."""
     returns: list = field(default_factory=list)
     successes: list = field(default_factory=list)
     cycles: list = field(default_factory=list)
@@ -483,7 +483,7 @@ def load_results(path) -> tuple[list[Result], dict]:
 def rerender(path, out, *, plots: bool = True, pages=()) -> list[Result]:
     """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out`` from the
     episodes of the ``results.json`` at ``path`` (:func:`load_results`), without running an
-    episode, and publish the tables into ``pages`` (:func:`publish`): the tables of an earlier
+    episode, and publish the tables into ``pages`` (:func:`publish_evaluation`): the tables of an earlier
     evaluation in the current format. Every page is checked before anything is written.
     Returns the results."""
     results, context = load_results(path)
@@ -529,7 +529,7 @@ def summary_table(results: list) -> str:
     return "\n".join(lines)
 
 
-def publish(results: list, out, files) -> None:
+def publish_evaluation(results: list, out, files) -> None:
     """Put the results of ``proteo eval --out OUT`` into each of ``files`` (markdown pages,
     :mod:`training.judging.pages`): the whole table (:func:`markdown_table`, followed by
     :data:`INTERVALS`) between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END`, the summary

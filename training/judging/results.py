@@ -6,7 +6,7 @@
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
 ``ROOT/VERSION/`` (one folder per task and policy, :mod:`training.judging.judge`) and the training
 progress of the protocol's learned runs (``ROOT/VERSION/learning/progress/<recipe>_<task>_<level>_s<k>.csv``,
-written by ``python -m training.study --keep-dir checkpoints/VERSION --docs-dir ROOT/VERSION/learning``),
+written by ``python -m training.trainers.study --keep-dir checkpoints/VERSION --docs-dir ROOT/VERSION/learning``),
 and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``results/``:
 
 - a short answer at the top, in sentences that say only what a paired comparison supports:
@@ -51,9 +51,11 @@ from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
 from training.judging.report import Result, result_of_row, row_label, span, success_cell
+from training.machinery.checkpoints import RULES
 
-RULES, RULES_MOVE, RANDOM = "rules", "rules-move", "random"
-"""The policy names of the reference rows in ``benchmark.json``."""
+RULES_MOVE, RANDOM = "rules-move", "random"
+"""The policy names of the reference rows in ``benchmark.json`` besides :data:`RULES` (the rules at the
+task's own level)."""
 REFERENCE_NAMES = {RULES: "the rules", RULES_MOVE: "the rules at move"}
 DEFAULT_OUT = "docs/results.md"
 """The published results page (``make results``)."""
@@ -295,7 +297,7 @@ def _profiles(agg: dict, tasks: list[str], path: Path) -> None:
 
 def curves(progress: Path, task: str) -> dict[str, list[np.ndarray]]:
     """Per recipe of ``task``: the training seeds' ``(agent_steps, success)`` arrays."""
-    from training.plots import read_progress
+    from training.judging.plots import read_progress
 
     found = defaultdict(list)
     for csv in sorted(progress.glob(f"*_{task}_*_s*.csv")):
@@ -323,7 +325,7 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from training.plots import plot_mean_band
+    from training.judging.plots import plot_mean_band
 
     fig, ax = plt.subplots(figsize=(6.0, 3.4))
     for recipe, runs in sorted(found.items()):
@@ -607,15 +609,15 @@ def marl_eval_layout(rows: list[Result]) -> dict:
     return out
 
 
-PUBLISH_BEGIN = "<!-- make results: the held-out table -->"
-PUBLISH_END = "<!-- end of the results table -->"
+TABLE_BEGIN = "<!-- make results: the held-out table -->"
+TABLE_END = "<!-- end of the results table -->"
 """The markers between which ``--publish FILE`` writes :func:`heldout_table` (the README's)."""
 
 
-def publish(path, table: str) -> None:
-    """Put ``table`` between :data:`PUBLISH_BEGIN` and :data:`PUBLISH_END` in the page ``path``
+def publish_table(path, table: str) -> None:
+    """Put ``table`` between :data:`TABLE_BEGIN` and :data:`TABLE_END` in the page ``path``
     (:mod:`training.judging.pages`)."""
-    publish_pages([path], {PUBLISH_BEGIN: table}, PUBLISH_END)
+    publish_pages([path], {TABLE_BEGIN: table}, TABLE_END)
 
 
 def short_cell(row: Result) -> str:
@@ -654,11 +656,11 @@ def main(argv=None) -> int:
     root, out = Path(args.root), Path(args.out)
     rows, headers = read_rows(root, protocol.lineage)
     for page in args.publish:  # checked before anything is written
-        filled(page, {PUBLISH_BEGIN: ""}, PUBLISH_END)
+        filled(page, {TABLE_BEGIN: ""}, TABLE_END)
     text = render(rows, headers, args.benchmark, root, out, protocol)
     out.write_text(text)
     for page in args.publish:
-        publish(page, heldout_table(rows, protocol))
+        publish_table(page, heldout_table(rows, protocol))
     if args.marl_eval:
         Path(args.marl_eval).write_text(json.dumps(marl_eval_layout(rows), separators=(",", ":")) + "\n")
     print(

@@ -1,6 +1,13 @@
-"""Load any checkpoint by path as a :class:`~baselines.base.Policy`.
+"""The checkpoint folder: its format, written and checked, and every checkpoint loaded by path as a
+:class:`~baselines.base.Policy`.
 
-A checkpoint is a folder with ``proteo.json`` (written by :func:`training.common.write_checkpoint_meta`)
+A checkpoint folder holds ``proteo.json`` (format, algorithm, task, env overrides, observation
+encoding and its version, action ``nvec``, steps, seed, what rebuilds the network exactly (the
+fields its trainer registers in :mod:`training.machinery.registry`: layer sizes, activation, ...),
+the SHA-256 of every payload file (``files``), and the ``proteo_version`` and git ``commit`` that
+wrote it; :func:`write_checkpoint_meta`) beside the algorithm's own files; :func:`read_meta` checks
+every field and every file's digest before anything loads:
+
 and the algorithm's files:
 
 ===================== ======================= ===========================================
@@ -8,12 +15,12 @@ and the algorithm's files:
 ===================== ======================= ===========================================
 ``sb3-maskable-ppo``  ``model.zip``           the SB3 policy network (MaskablePPO)
 ``torchrl-ppo``       ``policy.pt``           the TorchRL actor (IPPO or MAPPO)
-``cma-neural``        ``genome.npy``          the evolved :class:`~training.policies.NumpyMLP`
+``cma-neural``        ``genome.npy``          the evolved :class:`~training.machinery.policies.NumpyMLP`
 ``cma-rules``         (in ``proteo.json``)    the hand-coded policy with evolved parameters
-``program-evolution`` ``program.yaml``        the evolved program (:mod:`training.evolve`)
-``ppo``               ``policy.pt``           the network of :mod:`training.ppo` (shared trunk or MLPs)
-``rllib-ppo``         ``policy.pt``           the policy MLP of :mod:`training.rllib_ppo` (move only)
-``imitation``         ``policy.pt``           the network of :mod:`training.imitate` (as ``ppo``'s)
+``program-evolution`` ``program.yaml``        the evolved program (:mod:`training.trainers.evolve`)
+``ppo``               ``policy.pt``           the network of :mod:`training.trainers.ppo` (shared trunk or MLPs)
+``rllib-ppo``         ``policy.pt``           the policy MLP of :mod:`training.trainers.rllib_ppo` (move only)
+``imitation``         ``policy.pt``           the network of :mod:`training.trainers.imitate` (as ``ppo``'s)
 ===================== ======================= ===========================================
 
 ``load_policy(path, env)`` accepts the folder, a file inside it, or a run folder (its
@@ -30,8 +37,10 @@ one message naming the path, what was found and what is allowed.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import time
 import warnings
 from pathlib import Path
 
@@ -40,9 +49,273 @@ import numpy as np
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
+from training.machinery.policies import LogitsPolicy, NumpyMLP, torch_mlp
+from training.machinery.registry import ALGORITHMS, CHECKPOINT_FIELDS
 
-from .common import CheckpointError, checkpoint_dir, read_meta
-from .policies import LogitsPolicy, NumpyMLP, torch_mlp
+CHECKPOINT_FORMAT = "proteo-checkpoint"
+CHECKPOINT_VERSION = 2
+"""Version 2 records each payload file's SHA-256 and every field that rebuilds the network (version 1:
+neither; :func:`training.machinery.checkpoints.migrate` turns one into the other)."""
+META_FILE = "proteo.json"
+
+
+# ---------------------------------------------------------------------- checkpoints
+def checkpoint_kind(meta: dict) -> str:
+    """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds (its
+    trainer's registration, :mod:`training.machinery.registry`)."""
+    return "evolved" if ALGORITHMS[meta["algorithm"]].evolved else "learned"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be loaded (the message names the path and the problem)."""
+
+
+def checkpoint_dir(path) -> Path:
+    """The checkpoint folder that ``path`` names (folder, file inside it, or run folder)."""
+    p = Path(path)
+    if not p.exists():
+        raise CheckpointError(
+            f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
+            f"(with {META_FILE}), a file in one, or a run folder with final/"
+        )
+    if p.is_file():
+        p = p.parent
+    if not (p / META_FILE).is_file() and (p / "final" / META_FILE).is_file():
+        p = p / "final"
+    if not (p / META_FILE).is_file():
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
+            "allowed: a folder written by a script in training/"
+        )
+    return p
+
+
+def read_meta(path) -> dict:
+    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added): its format
+    and version, its algorithm, every field the algorithm's trainer registers
+    (:data:`training.machinery.registry.CHECKPOINT_FIELDS`) and the SHA-256 of every file it lists; anything
+    else is one :class:`CheckpointError` naming the file and the field."""
+    folder = checkpoint_dir(path)
+    try:
+        meta = json.loads((folder / META_FILE).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
+    return {**check_meta(meta, folder), "dir": str(folder)}
+
+
+def check_meta(meta, folder: Path) -> dict:
+    """``meta``, the contents of the ``proteo.json`` of checkpoint ``folder``, if it passes
+    :func:`read_meta`'s checks (else one :class:`CheckpointError`)."""
+    where = f"checkpoint {str(folder)!r}: {META_FILE}"
+    if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(
+            f"{where} has format {meta.get('format') if isinstance(meta, dict) else None!r}; "
+            f"allowed: {CHECKPOINT_FORMAT!r}"
+        )
+    if meta.get("version") != CHECKPOINT_VERSION:
+        migrate = " (migrate it: proteo migrate PATH)" if meta.get("version") == 1 else ""
+        raise CheckpointError(
+            f"{where}: version = {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}{migrate}"
+        )
+    if meta.get("algorithm") not in ALGORITHMS:
+        raise CheckpointError(
+            f"{where}: algorithm = {meta.get('algorithm')!r} is not allowed; allowed: {', '.join(ALGORITHMS)}"
+        )
+    for key in ("task", "nvec", "files", *CHECKPOINT_FIELDS[meta["algorithm"]]):
+        if key not in meta:
+            raise CheckpointError(
+                f"{where} lacks {key!r}; allowed: a {meta['algorithm']!r} checkpoint records "
+                f"{', '.join(('task', 'nvec', 'files', *CHECKPOINT_FIELDS[meta['algorithm']]))}"
+            )
+    for key, (ok, allowed) in _field_checks().items():
+        if key in meta and not ok(meta[key]):
+            raise CheckpointError(f"{where}: {key} = {meta[key]!r} is not allowed; allowed: {allowed}")
+    files = meta["files"]
+    if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
+        raise CheckpointError(f"{where}: files = {files!r} is not allowed; allowed: {{file name: sha256 hex digest}}")
+    for name, digest in files.items():
+        file = folder / name
+        if Path(name).name != name or not file.is_file():
+            raise CheckpointError(
+                f"{where}: files lists {name!r}, which is not a file in {str(folder)!r}; allowed: the payload files "
+                "the trainer wrote beside proteo.json"
+            )
+        if sha256_of(file) != digest:
+            raise CheckpointError(
+                f"checkpoint {str(file)!r}: SHA-256 {sha256_of(file)[:16]}... differs from the "
+                f"{digest[:16]}... that {META_FILE} records: the file changed after it was written (damaged or "
+                "edited); allowed: the file as its trainer wrote it"
+            )
+    return meta
+
+
+def _field_checks() -> dict:
+    """``{field: (test, what is allowed)}`` of the ``proteo.json`` fields :func:`check_meta` checks
+    (a loader then builds from them without a default)."""
+    from proteo_env.config import CONTROL_LEVELS
+    from proteo_env.registry import TASKS
+    from training.machinery.policies import MEMORIES, SAMPLED
+
+    def sizes(value) -> bool:
+        return isinstance(value, list) and bool(value) and all(_positive_int(v) for v in value)
+
+    return {
+        "task": (lambda v: isinstance(v, str) and v in TASKS, f"a registered task id ({', '.join(sorted(TASKS))})"),
+        "nvec": (sizes, "the action fields' sizes, a list of integers >= 1"),
+        "control": (lambda v: v in CONTROL_LEVELS, ", ".join(CONTROL_LEVELS)),
+        "hidden": (sizes, "the hidden layers' sizes, a list of integers >= 1"),
+        "activation": (
+            lambda v: v in ACTIVATIONS,
+            f"{', '.join(ACTIVATIONS)} (what training/ builds; a network of another activation enters the benchmark "
+            "as a TorchScript or ONNX file, docs/guides/entering.md)",
+        ),
+        "memory": (lambda v: v in MEMORIES, ", ".join(MEMORIES)),
+        "sampled": (lambda v: v in SAMPLED, ", ".join(SAMPLED)),
+        "encoder": (lambda v: v is None or isinstance(v, dict), "the observation encoding's spec, a mapping"),
+        "env": (lambda v: isinstance(v, dict), "the proteo_env.make settings, a mapping"),
+        "params": (lambda v: isinstance(v, dict), "the evolved parameters, a mapping"),
+    }
+
+
+def _positive_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
+ACTIVATIONS = ("tanh",)
+"""The activations of the networks ``training/`` builds (:mod:`training.machinery.networks`,
+:class:`training.machinery.policies.NumpyMLP`, the SB3 and TorchRL actors)."""
+
+
+def sha256_of(file: Path) -> str:
+    """The SHA-256 hex digest of ``file``'s bytes."""
+    digest = hashlib.sha256()
+    with open(file, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def mlp_meta(control: str, hidden) -> dict:
+    """What a checkpoint records of a plain network (:data:`~training.machinery.registry.NETWORK_FIELDS` but
+    the encoder): control level ``control``, tanh layers of sizes ``hidden``, no memory, every field
+    sampled."""
+    return {"control": control, "hidden": list(hidden), "activation": "tanh", "memory": "none", "sampled": "all"}
+
+
+def payload_digests(folder: Path) -> dict[str, str]:
+    """``{name: sha256}`` of every file directly in a checkpoint ``folder`` but ``proteo.json``
+    (what ``files`` in ``proteo.json`` records)."""
+    return {
+        p.name: sha256_of(p)
+        for p in sorted(Path(folder).iterdir())
+        if p.is_file() and p.name != META_FILE and not p.name.endswith(".tmp")
+    }
+
+
+def write_checkpoint_meta(
+    folder: Path,
+    *,
+    algorithm: str,
+    task: str,
+    env_overrides: dict,
+    encoder_spec: dict | None,
+    nvec,
+    agent_steps: int,
+    seed: int,
+    extra: dict | None = None,
+) -> None:
+    """Write ``proteo.json`` into a checkpoint folder, after its payload files (the caller's): it
+    records their SHA-256 (``files``), so the caller writes them first."""
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "algorithm": algorithm,
+        "task": task,
+        "env": env_overrides,
+        "encoder": encoder_spec,
+        "nvec": [int(n) for n in nvec],
+        "agent_steps": int(agent_steps),
+        "seed": seed,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        **provenance(),
+        **(extra or {}),
+        "files": payload_digests(folder),
+    }
+    missing = [key for key in CHECKPOINT_FIELDS[algorithm] if key not in meta]
+    if missing:  # a trainer's own mistake: its checkpoint would not load
+        raise ValueError(f"a {algorithm!r} checkpoint must record {', '.join(missing)}")
+    tmp = folder / (META_FILE + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
+    os.replace(tmp, folder / META_FILE)
+
+
+def provenance() -> dict:
+    """What wrote a checkpoint: ``{"proteo_version": ..., "commit": ...}``.
+
+    ``proteo_version`` is the installed ``proteo-env`` distribution's version (the package's own
+    ``__version__`` when it is not installed); ``commit`` is ``git rev-parse HEAD`` of the
+    repository holding the working directory, or ``None`` when there is none or git is missing
+    (never an error). Every trainer's ``proteo.json`` has both (through
+    :func:`write_checkpoint_meta`); checkpoints written before lack them and load all the same.
+    """
+    return {"proteo_version": package_version(), "commit": git_commit()}
+
+
+def package_version() -> str:
+    """The version of the installed ``proteo-env`` distribution (``proteo --version``)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("proteo-env")
+    except metadata.PackageNotFoundError:  # run from a source tree that is not installed
+        from proteo_env import __version__
+
+        return __version__
+
+
+def git_commit(cwd=None) -> str | None:
+    """``git rev-parse HEAD`` in ``cwd`` (default: the working directory); ``None`` outside a
+    repository, without git, or on any failure."""
+    import subprocess
+
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    commit = done.stdout.strip()
+    return commit if done.returncode == 0 and len(commit) >= 40 else None
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {value!r}")
+
+
+def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt",), **fields) -> None:
+    """Copy the checkpoint ``source`` to ``dest`` (replaced) without the files ``drop`` (what only a
+    resumed run needs), its ``proteo.json`` with ``fields`` added and ``files`` left without them."""
+    import shutil
+
+    if dest.exists():
+        shutil.rmtree(dest)
+    shutil.copytree(source, dest, ignore=shutil.ignore_patterns(*drop))
+    meta = json.loads((dest / META_FILE).read_text())
+    meta.update(fields, files={k: v for k, v in meta["files"].items() if k not in drop})
+    (dest / META_FILE).write_text(json.dumps(meta, indent=2, default=_json_default))
+
+
+# ---------------------------------------------------------------------- loading
 
 
 def _check_compatible(meta: dict, env) -> ObservationEncoder:
@@ -84,8 +357,8 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
 
 def load_policy(path, env, *, seed: int | None = None, deterministic: bool = False):
     """The policy stored at ``path``, ready to act in ``env`` (same task and observation encoding):
-    built by the loader its trainer registered (:mod:`training.trainers`)."""
-    from training.trainers import loader
+    built by the loader its trainer registered (:mod:`training.machinery.registry`)."""
+    from training.machinery.registry import loader
 
     meta = read_meta(path)
     return loader(meta["algorithm"])(meta, env, seed=seed, deterministic=deterministic)
@@ -111,7 +384,7 @@ def cma_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
     if dropped:  # the hand-coded policy changed since: say so loudly, in the warning and the name
         warnings.warn(
             f"checkpoint {folder!r}: evolved parameters {dropped} are no longer parameters of "
-            f"policy {meta['policy']!r} and are ignored; evolve again with training/cma_es.py",
+            f"policy {meta['policy']!r} and are ignored; evolve again with training/trainers/cma_es.py",
             stacklevel=3,
         )
         params = {k: v for k, v in params.items() if k not in dropped}
@@ -124,22 +397,22 @@ def cma_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
 
 
 def ppo_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
-    """The network of training/ppo.py or training/imitate.py (``policy.pt``)."""
+    """The network of training/trainers/ppo.py or training/trainers/imitate.py (``policy.pt``)."""
     return network_policy(meta, env, seed, deterministic, _ppo_logits)
 
 
 def mlp_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
-    """The policy MLP of training/torchrl_ppo.py or training/rllib_ppo.py (``policy.pt``)."""
+    """The policy MLP of training/trainers/torchrl_ppo.py or training/trainers/rllib_ppo.py (``policy.pt``)."""
     return network_policy(meta, env, seed, deterministic, _torch_logits)
 
 
 def sb3_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
-    """The MaskablePPO policy of training/sb3_ppo.py (``model.zip``)."""
+    """The MaskablePPO policy of training/trainers/sb3_ppo.py (``model.zip``)."""
     return network_policy(meta, env, seed, deterministic, _sb3_logits)
 
 
 def network_policy(meta: dict, env, seed: int | None, deterministic: bool, logits_of):
-    """A :class:`~training.policies.LogitsPolicy` over the network of a checkpoint, after checking it
+    """A :class:`~training.machinery.policies.LogitsPolicy` over the network of a checkpoint, after checking it
     was made for ``env``'s task, control level and observation encoding; ``logits_of(folder, meta,
     encoder)`` loads the network as a function from features ``(N, F)`` to logits ``(N, sum(nvec))``."""
     encoder = _check_compatible(meta, env)
@@ -231,7 +504,7 @@ def program_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
 
 
 def _need(file: Path, meta: dict) -> Path:
-    """``file`` of the checkpoint of ``meta``, if ``proteo.json`` lists it (:func:`~training.common.read_meta`
+    """``file`` of the checkpoint of ``meta``, if ``proteo.json`` lists it (:func:`~training.machinery.checkpoints.read_meta`
     has checked its SHA-256 then)."""
     if file.name not in meta["files"]:
         raise CheckpointError(
@@ -306,7 +579,7 @@ def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
     file = folder / "policy.pt"
     import torch
 
-    from training.networks import ARCHS, ActorCritic
+    from training.machinery.networks import ARCHS, ActorCritic
 
     arch = meta["arch"]
     if meta.get("recurrent", 0) or arch not in ARCHS:
@@ -335,9 +608,9 @@ def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
 
 
 def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, where: str) -> dict:
-    """The network weights of checkpoint ``path``, after checking that training/imitate.py or
-    training/ppo.py trained it on task ``task_id`` (any version) with the network settings
-    ``network`` (:func:`training.networks.network_meta`) and the observation encoding
+    """The network weights of checkpoint ``path``, after checking that training/trainers/imitate.py or
+    training/trainers/ppo.py trained it on task ``task_id`` (any version) with the network settings
+    ``network`` (:func:`training.machinery.networks.network_meta`) and the observation encoding
     ``encoder_spec``; a :class:`CheckpointError` that starts with ``where`` and names what differs."""
     import torch
 
@@ -345,7 +618,7 @@ def network_weights(path, task_id: str, network: dict, encoder_spec: dict, *, wh
     if meta["algorithm"] not in ("imitation", "ppo"):
         raise CheckpointError(
             f"{where} is a {meta['algorithm']!r} checkpoint; allowed: a checkpoint of "
-            "training/imitate.py or training/ppo.py"
+            "training/trainers/imitate.py or training/trainers/ppo.py"
         )
     wanted = {"task": task_name(task_id), **network, "encoder": encoder_spec}
     found = {
@@ -394,9 +667,6 @@ def migrate(path) -> bool:
     Only for checkpoints that proteo's trainers wrote: it records what they built (tanh layers),
     which a checkpoint assembled by hand need not have."""
     from proteo_env.adapters.flatten import ENCODING_VERSION
-
-    from .common import CHECKPOINT_VERSION, META_FILE, check_meta, payload_digests
-    from .trainers import CHECKPOINT_FIELDS
 
     folder = checkpoint_dir(path)
     file = folder / META_FILE

@@ -1,17 +1,17 @@
 """Imitation of the hand-coded rules: behaviour cloning with DAgger over the batched array API.
 
-Every module of ``n_envs`` worlds is one sample, as in :mod:`training.ppo`, and the network is
-the same :class:`~training.networks.ActorCritic` (its policy head is trained here; its value head is
+Every module of ``n_envs`` worlds is one sample, as in :mod:`training.trainers.ppo`, and the network is
+the same :class:`~training.machinery.networks.ActorCritic` (its policy head is trained here; its value head is
 left for PPO), so a checkpoint of this script is evaluated by ``proteo eval --checkpoint`` and
-starts ``training/ppo.py --init`` (kickstarting).
+starts ``training/trainers/ppo.py --init`` (kickstarting).
 
-    python -m training.imitate --config configs/train/bc_grasp_move.yaml
-    python -m training.imitate --config configs/train/bc_grasp_move.yaml --rounds 2 --run-dir runs/try
+    python -m training.trainers.imitate --config configs/train/bc_grasp_move.yaml
+    python -m training.trainers.imitate --config configs/train/bc_grasp_move.yaml --rounds 2 --run-dir runs/try
     proteo eval --config configs/eval.yaml --tasks grasp --checkpoint runs/try
 
 The loop (Ross, Gordon & Bagnell's DAgger, with one policy shared by all modules):
 
-- round 0: the teacher (:mod:`training.teachers`, the task's rules by default) drives every
+- round 0: the teacher (:mod:`training.trainers.teachers`, the task's rules by default) drives every
   world for ``cycles_per_round`` cycles; every module's observation is stored with the
   teacher's action for it (plain behaviour cloning);
 - round ``i >= 1``: the learner drives, except that each module plays the teacher's action
@@ -33,8 +33,8 @@ teacher's move, and the whole action at other levels), the loss, and the success
 cycles of the episodes that ended during the round (the learner driving, mixed with the
 teacher at the round's ``beta``).
 
-Writes ``runs/<name>/`` like every training script (:mod:`training.common`), with
-``final/policy.pt`` (the :class:`~training.networks.ActorCritic` weights) and ``proteo.json``
+Writes ``runs/<name>/`` like every training script (:mod:`training.machinery.runs`), with
+``final/policy.pt`` (the :class:`~training.machinery.networks.ActorCritic` weights) and ``proteo.json``
 (algorithm ``imitation``).
 """
 
@@ -50,8 +50,18 @@ from tqdm import tqdm
 
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
-from training.common import (
+from training.machinery.networks import (
+    ActorCritic,
+    check_arch,
+    masked_log_probs,
+    network_meta,
+    sample,
+    teacher_cross_entropy,
+)
+from training.machinery.policies import check_memory, check_sampled
+from training.machinery.runs import (
     ProgressLog,
+    RunArgs,
     check_integers,
     check_numbers,
     make_run_dir,
@@ -61,25 +71,15 @@ from training.common import (
     seed_everything,
     torch_device,
 )
-from training.networks import (
-    ActorCritic,
-    check_arch,
-    masked_log_probs,
-    network_meta,
-    sample,
-    teacher_cross_entropy,
-)
-from training.policies import check_memory, check_sampled
-from training.runs import RunArgs
-from training.teachers import DEFAULT_TEACHER, Teachers
-from training.worlds import TrainingEnvs, WorkerEnvs, WorkerTeachers, check_workers
+from training.trainers.teachers import DEFAULT_TEACHER, Teachers
+from training.trainers.worlds import TrainingEnvs, WorkerEnvs, WorkerTeachers, check_workers
 
 ALGORITHM = "imitation"
 
 
 @dataclass(frozen=True)
 class Args(RunArgs):
-    """Behaviour cloning with DAgger from the hand-coded rules (arguments of training/imitate.py)."""
+    """Behaviour cloning with DAgger from the hand-coded rules (arguments of training/trainers/imitate.py)."""
 
     task: str = "chain-v0"
     """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
@@ -89,12 +89,12 @@ class Args(RunArgs):
     """Overrides passed to ``proteo_env.make_batched`` (size, cycle limit, physics, task parameters)."""
     teacher: str = DEFAULT_TEACHER
     """The policy imitated: ``rules`` (the task's hand-coded policy), the task's name, or a checkpoint of
-    the task at this control level (training/teachers.py)."""
+    the task at this control level (training/trainers/teachers.py)."""
     n_envs: int = 16
     """Worlds stepped together."""
     workers: int = 1
     """Processes that step the worlds and label them with the teacher, each its share at the same time
-    (training/worlds.py: WorkerEnvs); the same run on any number. Not with a checkpoint as the teacher."""
+    (training/trainers/worlds.py: WorkerEnvs); the same run on any number. Not with a checkpoint as the teacher."""
     rounds: int = 4
     """DAgger rounds after round 0 (0: behaviour cloning only)."""
     cycles_per_round: int = 300
@@ -114,12 +114,12 @@ class Args(RunArgs):
     message_encoding: str = "compact"
     """How the features encode the messages received (proteo_env.adapters.flatten)."""
     arch: str = "shared"
-    """Network: shared or mlp (training/networks.py)."""
+    """Network: shared or mlp (training/machinery/networks.py)."""
     hidden: tuple[int, ...] = (128, 128)
     """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
     critic's MLP each (arch=mlp)."""
     memory: str = "none"
-    """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
+    """What the network remembers between cycles: none, last_move or last_action (training/machinery/policies.py)."""
     sampled: str = "move"
     """Which fields the clone samples when it acts, here and in ``proteo eval``: move (the others take
     their arg-max, as the rules' mode, roles and messages are deterministic) or all."""
@@ -322,6 +322,6 @@ def train(args: Args) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

@@ -61,7 +61,7 @@ def with_memory(features: np.ndarray, previous: np.ndarray, memory: str, nvec=(N
 
 SAMPLED = ("all", "move")
 """Which fields a :class:`LogitsPolicy` samples (the others take their arg-max): ``all``, or
-``move`` only. A clone of the rules (:mod:`training.imitate`) at ``move+mode`` or ``full``
+``move`` only. A clone of the rules (:mod:`training.trainers.imitate`) at ``move+mode`` or ``full``
 samples its moves, as the rules' random moves do, and takes the arg-max of the mode, scent
 roles and messages, which the rules choose deterministically: one sampled slip in a seed's
 mode or its broadcast breaks the structure (docs/journal/learning-memory-full-action.md)."""

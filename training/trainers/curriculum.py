@@ -1,6 +1,6 @@
 """Curricula without demonstrations: stages of environment overrides, promoted by success.
 
-A training config's ``curriculum:`` block (``training/ppo.py``)::
+A training config's ``curriculum:`` block (``training/trainers/ppo.py``)::
 
     curriculum:
       stages: [{n_modules: 12}, {n_modules: 24}, {n_modules: 40}]   # each over the config's env

@@ -1,17 +1,17 @@
 """PPO with one policy shared by every module, over the batched array API (no per-agent dicts).
 
 Every module of ``n_envs`` worlds is one sample: the worlds run as one batch
-(:class:`~training.worlds.TrainingEnvs`), one forward pass of the
-:class:`~training.networks.ActorCritic` gives every module's logits and value, illegal moves are
+(:class:`~training.trainers.worlds.TrainingEnvs`), one forward pass of the
+:class:`~training.machinery.networks.ActorCritic` gives every module's logits and value, illegal moves are
 masked out, and the sampled ``(B, A, F)`` actions go back into ``step_arrays``. One categorical
 head per field of the control level (``control``). Every module receives the team reward (plus
 its own ``join_bonus``); the critic is one parameter-shared value per module. ``total_steps``
 counts agent-steps (module-cycles) that enter an update.
 
-    python -m training.ppo --config configs/train/ppo_chain_move.yaml
-    python -m training.ppo --config configs/train/ppo_chain_move.yaml --total-steps 2000000 --run-dir runs/try
-    python -m training.ppo --resume runs/try/checkpoints/step_0001001472 --total-steps 4000000
-    python -m training.ppo --config configs/train/kickstart_grasp_move.yaml --init runs/bc_grasp
+    python -m training.trainers.ppo --config configs/train/ppo_chain_move.yaml
+    python -m training.trainers.ppo --config configs/train/ppo_chain_move.yaml --total-steps 2000000 --run-dir runs/try
+    python -m training.trainers.ppo --resume runs/try/checkpoints/step_0001001472 --total-steps 4000000
+    python -m training.trainers.ppo --config configs/train/kickstart_grasp_move.yaml --init runs/bc_grasp
     tensorboard --logdir runs
 
 Kickstarting (``init``, ``distill_*``), curricula and module credit (``join_bonus``):
@@ -19,7 +19,7 @@ docs/guides/learning.md. A world's episode ends at success (terminal) or at ``ma
 (the value of its last observation is bootstrapped: the observation holds no clock), and the
 world starts its next episode at once, so every sample of every cycle enters the update.
 
-Writes ``runs/<name>/`` (:mod:`training.common`); a checkpoint holds ``policy.pt`` (the network),
+Writes ``runs/<name>/`` (:mod:`training.machinery.runs`); a checkpoint holds ``policy.pt`` (the network),
 ``trainer.pt`` (optimiser and random state) and ``args.yaml`` (for ``--resume``), and ``proteo eval
 --checkpoint runs/<name>`` evaluates it at the control level it was trained at.
 """
@@ -39,8 +39,22 @@ import proteo_env
 from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
-from training.checkpoints import network_weights
-from training.common import (
+from training.machinery.checkpoints import network_weights
+from training.machinery.networks import (
+    ActorCritic,
+    ReturnScale,
+    check_arch,
+    entropy,
+    joint_log_prob,
+    masked_log_probs,
+    network_meta,
+    sample,
+    sampled_fields,
+    teacher_cross_entropy,
+)
+from training.machinery.policies import check_memory, check_sampled
+from training.machinery.runs import (
+    PPOArgs,
     ProgressLog,
     check_integers,
     check_numbers,
@@ -56,32 +70,18 @@ from training.common import (
     torch_device,
     trainer_state,
 )
-from training.networks import (
-    ActorCritic,
-    ReturnScale,
-    check_arch,
-    entropy,
-    joint_log_prob,
-    masked_log_probs,
-    network_meta,
-    sample,
-    sampled_fields,
-    teacher_cross_entropy,
-)
-from training.policies import check_memory, check_sampled
-from training.runs import PPOArgs
-from training.worlds import JOIN_FROM, TrainingEnvs, check_workers
+from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers
 
 ALGORITHM = "ppo"
 
 RETIRED = {"n_groups": 1, "recurrent": 0, "learning_rate_final": None, "ent_coef_final": None}
 """Options of earlier versions, with the value at which they did nothing (checkpoints saved before
-they went still resume; see :func:`training.common.parse_args`)."""
+they went still resume; see :func:`training.machinery.runs.parse_args`)."""
 
 
 @dataclass(frozen=True)
 class Args(PPOArgs):
-    """Native PPO with parameter sharing over all modules (arguments of training/ppo.py)."""
+    """Native PPO with parameter sharing over all modules (arguments of training/trainers/ppo.py)."""
 
     # this trainer's defaults of the shared options (what each means: PPOArgs)
     total_steps: int = 10_000_000
@@ -96,7 +96,7 @@ class Args(PPOArgs):
     vf_coef: float = 0.5
     """Weight of the value loss in the loss."""
     value_norm: bool = False
-    """Train the critic on returns scaled by their running mean and spread (:class:`~training.networks.ReturnScale`)."""
+    """Train the critic on returns scaled by their running mean and spread (:class:`~training.machinery.networks.ReturnScale`)."""
     max_grad_norm: float = 0.5
     """Gradient norm limit (of the actor and of the critic separately at arch=mlp)."""
     message_encoding: str = "compact"
@@ -107,19 +107,19 @@ class Args(PPOArgs):
     """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
     critic's MLP each (arch=mlp)."""
     memory: str = "none"
-    """What the network remembers between cycles: none, last_move or last_action (training/policies.py)."""
+    """What the network remembers between cycles: none, last_move or last_action (training/machinery/policies.py)."""
     sampled: str = "all"
     """Which fields the rollouts draw at random: all, or move (the others take their arg-max); the
     entropy bonus counts the fields drawn."""
     device: str = "cpu"
     """Where the network runs: cpu, cuda, cuda:N or mps; the worlds stay on the CPU."""
     workers: int = 1
-    """Processes that step the worlds, each its share at the same time (training/worlds.py: WorkerEnvs);
+    """Processes that step the worlds, each its share at the same time (training/trainers/worlds.py: WorkerEnvs);
     the same run on any number. Not with a checkpoint as the teacher, nor with a curriculum."""
     init: str | None = None
-    """Start from this checkpoint's network (training/imitate.py or training/ppo.py, the same shape)."""
+    """Start from this checkpoint's network (training/trainers/imitate.py or training/trainers/ppo.py, the same shape)."""
     teacher: str = "rules"
-    """The policy of the distillation term: rules, the task's name, or a checkpoint (training/teachers.py)."""
+    """The policy of the distillation term: rules, the task's name, or a checkpoint (training/trainers/teachers.py)."""
     distill_coef: float = 0.0
     """Weight of the cross-entropy to the teacher's action at the start (0: off)."""
     distill_steps: int = 0
@@ -127,7 +127,7 @@ class Args(PPOArgs):
     distill_final: float = 0.0
     """The distillation weight after distill_steps (at most distill_coef)."""
     curriculum: dict = field(default_factory=dict)
-    """Stages of env overrides promoted by success (training/curriculum.py): {stages: [...], promote_at, window}."""
+    """Stages of env overrides promoted by success (training/trainers/curriculum.py): {stages: [...], promote_at, window}."""
     join_bonus: float = 0.0
     """Module credit: reward of a module on the cycle its mode leaves the join_from modes (0: off)."""
     join_from: tuple[str, ...] = JOIN_FROM
@@ -326,11 +326,11 @@ def train(args: Args) -> Path:
     """Train; returns the final checkpoint's folder."""
     seed_everything(args.seed, threads=args.threads)
     device = torch_device(args.device)
-    resume = read_resume(args.resume, ALGORITHM, "training/ppo.py", needs=("trainer.pt",))
+    resume = read_resume(args.resume, ALGORITHM, "proteo train ppo", needs=("trainer.pt",))
     agent_steps = int(resume["agent_steps"]) if resume else 0
     curriculum = None
     if args.curriculum:
-        from training.curriculum import Curriculum
+        from training.trainers.curriculum import Curriculum
 
         curriculum = Curriculum(
             args.curriculum,
@@ -440,6 +440,6 @@ def train(args: Args) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

@@ -1,9 +1,10 @@
 """The registry of trainers: each registers once what the command line, checkpoint loading, the
 tables and the study need to know of it.
 
-``proteo train NAME`` runs ``training.NAME``'s ``main(argv)``; a checkpoint whose ``proteo.json``
+``proteo train NAME`` runs the ``main(argv)`` of the trainer's ``module`` (one module each in
+:mod:`training.trainers`); a checkpoint whose ``proteo.json``
 says ``algorithm: A`` is loaded by the ``loader`` of the trainer that lists ``A``
-(:func:`training.checkpoints.load_policy`) and is shown as ``evolved`` or ``learned`` in tables.
+(:func:`training.machinery.checkpoints.load_policy`) and is shown as ``evolved`` or ``learned`` in tables.
 docs/guides/adding_a_trainer.md walks through adding one.
 """
 
@@ -17,7 +18,8 @@ class Trainer:
     """One trainer script and the checkpoints it writes.
 
     Attributes:
-        name: ``proteo train NAME``; the script is ``training/NAME.py`` with ``main(argv)``.
+        name: ``proteo train NAME``.
+        module: the trainer's script, a module with ``main(argv)`` (``python -m MODULE`` runs it too).
         summary: one line for ``proteo train --help``.
         algorithms: the ``algorithm`` values its checkpoints record (none: it writes no
             checkpoint of its own, as the study).
@@ -28,6 +30,7 @@ class Trainer:
     """
 
     name: str
+    module: str
     summary: str
     algorithms: tuple[str, ...] = ()
     evolved: bool = False
@@ -37,49 +40,58 @@ class Trainer:
 TRAINERS = (
     Trainer(
         "ppo",
-        "native PPO over the array API (training/ppo.py)",
+        "training.trainers.ppo",
+        "native PPO over the array API (training/trainers/ppo.py)",
         ("ppo",),
-        loader="training.checkpoints:ppo_policy",
+        loader="training.machinery.checkpoints:ppo_policy",
     ),
     Trainer(
         "imitate",
-        "clone the rules: behaviour cloning + DAgger (training/imitate.py)",
+        "training.trainers.imitate",
+        "clone the rules: behaviour cloning + DAgger (training/trainers/imitate.py)",
         ("imitation",),
-        loader="training.checkpoints:ppo_policy",
+        loader="training.machinery.checkpoints:ppo_policy",
     ),
     Trainer(
         "cma_es",
-        "CMA-ES on the rules' parameters or a small network (training/cma_es.py)",
+        "training.trainers.cma_es",
+        "CMA-ES on the rules' parameters or a small network (training/trainers/cma_es.py)",
         ("cma-rules", "cma-neural"),
         evolved=True,
-        loader="training.checkpoints:cma_policy",
+        loader="training.machinery.checkpoints:cma_policy",
     ),
     Trainer(
         "evolve",
-        "evolution of programs of the paper's primitives (training/evolve.py)",
+        "training.trainers.evolve",
+        "evolution of programs of the paper's primitives (training/trainers/evolve.py)",
         ("program-evolution",),
         evolved=True,
-        loader="training.checkpoints:program_policy",
+        loader="training.machinery.checkpoints:program_policy",
     ),
     Trainer(
         "sb3_ppo",
-        "MaskablePPO, Stable-Baselines3 (training/sb3_ppo.py)",
+        "training.trainers.sb3_ppo",
+        "MaskablePPO, Stable-Baselines3 (training/trainers/sb3_ppo.py)",
         ("sb3-maskable-ppo",),
-        loader="training.checkpoints:sb3_policy",
+        loader="training.machinery.checkpoints:sb3_policy",
     ),
     Trainer(
         "torchrl_ppo",
-        "IPPO / MAPPO, TorchRL (training/torchrl_ppo.py)",
+        "training.trainers.torchrl_ppo",
+        "IPPO / MAPPO, TorchRL (training/trainers/torchrl_ppo.py)",
         ("torchrl-ppo",),
-        loader="training.checkpoints:mlp_policy",
+        loader="training.machinery.checkpoints:mlp_policy",
     ),
     Trainer(
         "rllib_ppo",
-        "RLlib's PPO (training/rllib_ppo.py; the distributed extra)",
+        "training.trainers.rllib_ppo",
+        "RLlib's PPO (training/trainers/rllib_ppo.py; the distributed extra)",
         ("rllib-ppo",),
-        loader="training.checkpoints:mlp_policy",
+        loader="training.machinery.checkpoints:mlp_policy",
     ),
-    Trainer("study", "recipes x tasks x seeds, kept in checkpoints/ (training/study.py)"),
+    Trainer(
+        "study", "training.trainers.study", "recipes x tasks x seeds, kept in checkpoints/ (training/trainers/study.py)"
+    ),
 )
 """Every trainer, in the order ``proteo train --help`` lists them."""
 
@@ -101,7 +113,7 @@ CHECKPOINT_FIELDS = {
     "rllib-ppo": NETWORK_FIELDS,
 }
 """The fields of ``proteo.json`` every checkpoint of an ``algorithm`` must have (besides ``task``,
-``nvec`` and ``files``): :func:`training.common.read_meta` refuses one without them, and no loader
+``nvec`` and ``files``): :func:`training.machinery.checkpoints.read_meta` refuses one without them, and no loader
 fills one in with a default."""
 
 

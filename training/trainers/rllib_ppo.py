@@ -19,12 +19,12 @@ parallel (``--env-runners``, each a Ray actor with one CPU), the learner updates
 
 Checkpoints: every ``checkpoint_every`` iterations and at the end, ``checkpoints/step_<N>/`` and
 ``final/`` hold ``proteo.json`` (algorithm ``rllib-ppo``, control ``move``) and ``policy.pt``
-(the policy MLP's ``state_dict``, the layout of :func:`~training.policies.torch_mlp`), which
+(the policy MLP's ``state_dict``, the layout of :func:`~training.machinery.policies.torch_mlp`), which
 ``proteo eval`` loads like every other checkpoint; ``final/rllib/`` is RLlib's own checkpoint
 of the algorithm (``Algorithm.from_checkpoint``).
 
-    python -m training.rllib_ppo --config configs/train/rllib_ppo_chain_move.yaml
-    python -m training.rllib_ppo --iterations 2 --env-runners 2 --address 10.0.0.5:6379
+    python -m training.trainers.rllib_ppo --config configs/train/rllib_ppo_chain_move.yaml
+    python -m training.trainers.rllib_ppo --iterations 2 --env-runners 2 --address 10.0.0.5:6379
 """
 
 from __future__ import annotations
@@ -36,17 +36,16 @@ import numpy as np
 from tqdm import tqdm
 
 from proteo_env.registry import task_name
-from training.common import (
+from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.runs import (
     ProgressLog,
+    RunArgs,
     checkpoint_folder,
     make_run_dir,
-    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
-    write_checkpoint_meta,
 )
-from training.runs import RunArgs
 
 SHARED = "shared"
 """The one policy (RLModule id) every module maps to."""
@@ -54,7 +53,7 @@ SHARED = "shared"
 
 @dataclass(frozen=True)
 class Args(RunArgs):
-    """RLlib PPO with one shared action-masked policy at control level move (training/rllib_ppo.py)."""
+    """RLlib PPO with one shared action-masked policy at control level move (training/trainers/rllib_ppo.py)."""
 
     task: str = "chain-v1"
     """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
@@ -155,7 +154,7 @@ def _masked_module_class():
     from ray.rllib.core.rl_module.apis.value_function_api import ValueFunctionAPI
     from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 
-    from training.policies import torch_mlp
+    from training.machinery.policies import torch_mlp
 
     class MaskedPPOModule(TorchRLModule, ValueFunctionAPI):
         """Policy MLP ``(B, D) -> (B, 13)`` logits, illegal moves masked; value MLP ``(B, D) -> (B,)``.
@@ -252,7 +251,7 @@ def save_checkpoint(
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     from proteo_env.config import ConfigError
-    from training.distributed import connect
+    from training.machinery.distributed import connect
 
     if args.control != "move":
         raise ConfigError(f"control={args.control!r} is not allowed; allowed: move")
@@ -327,6 +326,6 @@ def _finite(value) -> float | None:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

@@ -2,11 +2,11 @@
 
 A (mu + lambda) evolutionary algorithm over programs of the paper's primitives, the
 direction the paper's conclusions propose. The population starts as ``population`` random
-programs (:func:`training.program_variation.random_program`), or as ``seed_program`` (a
+programs (:func:`training.trainers.program_variation.random_program`), or as ``seed_program`` (a
 program name, path or text) and mutants of it. Each generation breeds ``offspring`` children:
 two parents picked by tournaments of ``tournament``, crossed with probability
 ``crossover_rate`` (else a copy of the first), then 1 + Poisson(``mutations`` - 1) mutations
-(:mod:`training.program_variation`). Parents and children are all scored on the
+(:mod:`training.trainers.program_variation`). Parents and children are all scored on the
 generation's worlds and the best ``population`` distinct programs survive (elitism: the best
 is never lost to a child, only to a program that scores better on the same worlds).
 
@@ -28,18 +28,18 @@ A generation's best is chosen on few worlds, so it is partly luck. With
 generation, on that many new worlds per variation (a third stream of the run seed), and the
 best there is the final checkpoint; its ``proteo.json`` records that fitness.
 
-Every generation's episodes run as one list through :mod:`training.evaluator`: the programs
+Every generation's episodes run as one list through :mod:`training.machinery.evaluator`: the programs
 of the population in the rows of batched worlds, on every core (``workers``), or as Ray tasks
 of one batch each (``ray``); the results do not depend on how they are spread.
 
 The best program of each generation is the checkpoint: ``program.yaml`` beside ``proteo.json``
 (algorithm ``program-evolution``), loaded by ``proteo eval --checkpoint`` and
 :func:`training.load_controller`. ``progress.csv`` and TensorBoard log the best and median
-fitness per generation. A run resumes like training/cma_es.py: rerun the same command after
+fitness per generation. A run resumes like training/trainers/cma_es.py: rerun the same command after
 an interruption, or ``--resume CHECKPOINT --generations N`` to go on from a checkpoint.
 
-    python -m training.evolve --config configs/train/evolve_chain_full.yaml
-    python -m training.evolve --config configs/train/evolve_paper_chain_full.yaml --generations 5
+    python -m training.trainers.evolve --config configs/train/evolve_chain_full.yaml
+    python -m training.trainers.evolve --config configs/train/evolve_paper_chain_full.yaml --generations 5
 """
 
 from __future__ import annotations
@@ -51,8 +51,14 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.registry import task_name
-from training.common import check_integers, check_numbers, parse_args, seed_everything
-from training.runs import GenerationalArgs, GenerationalRun
+from training.machinery.runs import (
+    GenerationalArgs,
+    GenerationalRun,
+    check_integers,
+    check_numbers,
+    parse_args,
+    seed_everything,
+)
 
 ALGORITHM = "program-evolution"
 """The ``algorithm`` of an evolved program's checkpoint."""
@@ -60,7 +66,7 @@ ALGORITHM = "program-evolution"
 
 @dataclass(frozen=True)
 class Args(GenerationalArgs):
-    """Evolution of programs of the paper's primitives (arguments of training/evolve.py)."""
+    """Evolution of programs of the paper's primitives (arguments of training/trainers/evolve.py)."""
 
     task: str = "chain-v1"
     """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
@@ -100,15 +106,15 @@ class Args(GenerationalArgs):
 
 
 INDEPENDENT = ("final_episodes_per_variation",)
-"""Options beside :data:`training.runs.RUN_INDEPENDENT` a resumed run may change (the final choice
+"""Options beside :data:`training.machinery.runs.RUN_INDEPENDENT` a resumed run may change (the final choice
 comes after the generations)."""
 
 
 # ---------------------------------------------------------------------- episodes
 def program_episodes(task: str, variations: list[str], programs: list[str], seeds: list[int]) -> list:
-    """The :class:`~training.evaluator.Episode` of every program (text) on every world: program-major,
+    """The :class:`~training.machinery.evaluator.Episode` of every program (text) on every world: program-major,
     then variation (its overrides as JSON), then seed."""
-    from training.evaluator import Controller, Episode
+    from training.machinery.evaluator import Controller, Episode
 
     return [
         Episode(task, overrides, "full", Controller.program(text), seed)
@@ -212,7 +218,7 @@ def check_args(args: Args) -> list[str]:
 # ---------------------------------------------------------------------- the algorithm
 def breed(population: list, space, rng: np.random.Generator, args: Args) -> list:
     """``args.offspring`` children of ``population`` (programs, best first)."""
-    from training.program_variation import crossover, mutate
+    from training.trainers.program_variation import crossover, mutate
 
     def tournament():
         return population[int(rng.integers(len(population), size=args.tournament).min())]
@@ -230,8 +236,8 @@ def breed(population: list, space, rng: np.random.Generator, args: Args) -> list
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    from training.distributed import ray_options
-    from training.evaluator import run_episodes
+    from training.machinery.distributed import ray_options
+    from training.machinery.evaluator import run_episodes
 
     variations = check_args(args)
     ray = ray_options(args)
@@ -239,7 +245,7 @@ def main(argv=None) -> Path:
 
     import proteo_env
     from baselines.program import format_program, load_program
-    from training.program_variation import ProgramSpace, complexity, mutate, random_program
+    from training.trainers.program_variation import ProgramSpace, complexity, mutate, random_program
 
     env = proteo_env.make(args.task, **args.env)
     limits = {"max_rules": args.max_rules, "max_conditions": args.max_conditions, "max_actions": args.max_actions}
@@ -358,6 +364,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

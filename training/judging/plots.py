@@ -1,15 +1,15 @@
 """Learning curves from the ``progress.csv`` of training runs.
 
-    python -m training.plots runs/sb3_ppo_chain_s0 runs/torchrl_ippo_chain_s0 --out docs/learning/curves.png
-    python -m training.plots "MaskablePPO=docs/learning/progress/sb3_ppo_chain_s0.csv" --out curves.png
-    python -m training.plots --evolution "evolve=docs/benchmark/v3/learning/progress/evolve_chain_full_s*.csv" --out e.png
+    python -m training.judging.plots runs/sb3_ppo_chain_s0 runs/torchrl_ippo_chain_s0 --out docs/learning/curves.png
+    python -m training.judging.plots "MaskablePPO=docs/learning/progress/sb3_ppo_chain_s0.csv" --out curves.png
+    python -m training.judging.plots --evolution "evolve=docs/benchmark/v3/learning/progress/evolve_chain_full_s*.csv" --out e.png
 
 One figure: episode return, success rate and cycles per episode against agent-steps, and the
 return against wall-clock minutes; each run is a line (smoothed over ``--window`` log rows),
 with the hand-coded policy's mean as a dashed reference when ``--reference`` is given.
 
 With ``--evolution`` each argument is ``LABEL=GLOB``, the progress of one evolution recipe's
-seeds (training/evolve.py): the best and the median fitness of each generation against the
+seeds (training/trainers/evolve.py): the best and the median fitness of each generation against the
 programs scored so far, the mean over seeds with a 95 % t band.
 """
 

@@ -14,7 +14,7 @@ start point is exactly the hand-coded policy. CMA-ES works in the unit cube. A c
 policy rejects (for example ``f_min > f_max`` for the table rules) scores one below the worst
 valid candidate of its generation and is counted in ``cma/rejected``.
 
-``controller: neural`` evolves the weights of a :class:`~training.policies.NumpyMLP`
+``controller: neural`` evolves the weights of a :class:`~training.machinery.policies.NumpyMLP`
 (observation features -> hidden tanh layer -> logits of every action field) shared by all
 modules, with separable CMA-ES (diagonal covariance) since it has thousands of weights.
 
@@ -23,11 +23,11 @@ same seeds for every candidate of a generation (common random numbers), new seed
 generation. The checkpoint holds the distribution's mean (CMA-ES's best estimate under noise);
 ``progress.csv`` logs the generation's mean and best return. The run folder, resume (rerun the
 same command after an interruption, or ``--resume CHECKPOINT``), the journal of finished
-episodes, logs and time limit are :class:`training.runs.GenerationalRun`'s.
+episodes, logs and time limit are :class:`training.machinery.runs.GenerationalRun`'s.
 
-    python -m training.cma_es --config configs/train/cma_rules_chain_full.yaml
-    python -m training.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
-    python -m training.cma_es --resume runs/cma_rules_chain_s0/checkpoints/step_0000123456 --generations 50
+    python -m training.trainers.cma_es --config configs/train/cma_rules_chain_full.yaml
+    python -m training.trainers.cma_es --config configs/train/cma_neural_chain.yaml --generations 5
+    python -m training.trainers.cma_es --resume runs/cma_rules_chain_s0/checkpoints/step_0000123456 --generations 50
 """
 
 from __future__ import annotations
@@ -41,13 +41,13 @@ import numpy as np
 
 from baselines.base import constructor_parameters
 from proteo_env.registry import task_name
-from training.common import mlp_meta, parse_args, seed_everything
-from training.runs import GenerationalArgs, GenerationalRun
+from training.machinery.checkpoints import mlp_meta
+from training.machinery.runs import GenerationalArgs, GenerationalRun, parse_args, seed_everything
 
 
 @dataclass(frozen=True)
 class Args(GenerationalArgs):
-    """CMA-ES over hand-coded rule parameters or a neural controller (arguments of training/cma_es.py)."""
+    """CMA-ES over hand-coded rule parameters or a neural controller (arguments of training/trainers/cma_es.py)."""
 
     task: str = "chain-v0"
     """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
@@ -186,7 +186,7 @@ class CandidateEpisode:
     """One episode of one neural candidate (picklable; a Ray task when ``--ray``); the rules'
     candidates run through :func:`rules_episodes`.
 
-    ``genome`` is the candidate ``x`` (``(n,)`` weights of a :class:`~training.policies.NumpyMLP`
+    ``genome`` is the candidate ``x`` (``(n,)`` weights of a :class:`~training.machinery.policies.NumpyMLP`
     with ``hidden`` layers).
     """
 
@@ -213,7 +213,7 @@ def _env(task: str, overrides: str):
     if (task, overrides) not in _ENVS:
         import proteo_env
         from proteo_env.adapters.flatten import ObservationEncoder
-        from training.common import limit_threads
+        from training.machinery.runs import limit_threads
 
         limit_threads(1)
         env = proteo_env.make(task, **json.loads(overrides))
@@ -224,7 +224,7 @@ def _env(task: str, overrides: str):
 def build_policy(job: CandidateEpisode):
     """The neural candidate's policy in this process's environment."""
     env, encoder = _env(job.task, job.env)
-    from training.policies import LogitsPolicy, NumpyMLP
+    from training.machinery.policies import LogitsPolicy, NumpyMLP
 
     nvec = env.action_layout.nvec
     net = NumpyMLP(encoder.size, int(nvec.sum()), job.hidden).set_flat(np.asarray(job.genome))
@@ -249,9 +249,9 @@ def candidate_episode(job: CandidateEpisode) -> list:
 def rules_episodes(args, policy_name: str, env, decoded: list[dict], seeds: list[int], ray, journal) -> list:
     """``[return, success, cycles]`` of every candidate's episode on every seed (candidate-major),
     ``None`` for a candidate whose parameters the policy rejects: the accepted candidates' episodes
-    in batches of worlds on every core (:mod:`training.evaluator`)."""
+    in batches of worlds on every core (:mod:`training.machinery.evaluator`)."""
     from baselines import make_policy
-    from training.evaluator import Controller, Episode, run_episodes, settings_json
+    from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
 
     accepted = []
     for params in decoded:
@@ -304,7 +304,7 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     from proteo_env.config import ConfigError
-    from training.distributed import ray_options, run_jobs
+    from training.machinery.distributed import ray_options, run_jobs
 
     if args.controller not in ("rules", "neural"):
         raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
@@ -316,7 +316,7 @@ def main(argv=None) -> Path:
     import proteo_env
     from baselines import POLICIES, make_policy
     from proteo_env.adapters.flatten import ObservationEncoder
-    from training.policies import NumpyMLP
+    from training.machinery.policies import NumpyMLP
 
     env = proteo_env.make(args.task, **args.env)
     encoder = ObservationEncoder.for_env(env)
@@ -461,6 +461,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

@@ -1,6 +1,6 @@
 """Many independent episodes, run in this process or as Ray tasks, journaled as they finish.
 
-``proteo eval``, :mod:`training.cma_es` and ``proteo sweep`` all reduce their work to a list of
+``proteo eval``, :mod:`training.trainers.cma_es` and ``proteo sweep`` all reduce their work to a list of
 *jobs* (small picklable descriptions of one episode) and a module-level function that runs
 one job and returns a small picklable result. :func:`run_jobs` runs them:
 
@@ -50,7 +50,7 @@ def ray_options(args) -> dict | None:
 
     ``--address`` without ``--ray`` is an error, so that a cluster run never silently runs
     locally; ``--workers`` without ``--ray`` is the number of local worker processes (where the
-    command runs its episodes in batches, :mod:`training.evaluator`).
+    command runs its episodes in batches, :mod:`training.machinery.evaluator`).
     """
     use = bool(getattr(args, "ray", False))
     address, workers = getattr(args, "address", None), getattr(args, "workers", None)

@@ -9,11 +9,11 @@ the 13 moves, otherwise :class:`MaskedMultiCategorical`; both mask illegal moves
 (``variant: mappo``, centralised). Losses: TorchRL's ``ClipPPOLoss`` with GAE.
 ``total_steps`` counts agent-steps (module-cycles).
 
-    python -m training.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml
-    python -m training.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml --variant mappo --run-dir runs/mappo
-    python -m training.torchrl_ppo --resume runs/mappo/checkpoints/step_0000049152 --total-steps 100000
+    python -m training.trainers.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml
+    python -m training.trainers.torchrl_ppo --config configs/train/torchrl_ippo_chain.yaml --variant mappo --run-dir runs/mappo
+    python -m training.trainers.torchrl_ppo --resume runs/mappo/checkpoints/step_0000049152 --total-steps 100000
 
-Writes ``runs/<name>/`` (see :mod:`training.common`); ``proteo eval --checkpoint runs/<name>``
+Writes ``runs/<name>/`` (see :mod:`training.machinery.runs`); ``proteo eval --checkpoint runs/<name>``
 evaluates the result.
 """
 
@@ -28,25 +28,24 @@ from tqdm import tqdm
 
 from proteo_env.control import check_level
 from proteo_env.registry import task_name
-from training.common import (
+from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.runs import (
+    PPOArgs,
     ProgressLog,
     checkpoint_folder,
     episode_stats,
     make_run_dir,
-    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
-    write_checkpoint_meta,
 )
-from training.runs import PPOArgs
 
 ALGORITHM = "torchrl-ppo"
 
 
 @dataclass(frozen=True)
 class Args(PPOArgs):
-    """IPPO/MAPPO with TorchRL (arguments of training/torchrl_ppo.py)."""
+    """IPPO/MAPPO with TorchRL (arguments of training/trainers/torchrl_ppo.py)."""
 
     control: str = "full"
     """Control level (``move``, ``move+mode``, ``full``): at ``move`` the actor picks one masked
@@ -114,8 +113,8 @@ def main(argv=None) -> Path:
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
     from proteo_env.adapters.torchrl import ProteoTorchRLEnv
-    from training.checkpoints import read_meta
-    from training.policies import torch_mlp
+    from training.machinery.checkpoints import read_meta
+    from training.machinery.policies import torch_mlp
 
     # ------------------------------------------------------------------ environment
     resume_meta = read_meta(args.resume) if args.resume else None
@@ -304,6 +303,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

@@ -1,7 +1,7 @@
-"""The network of :mod:`training.ppo` and :mod:`training.imitate` (``arch``: ``shared`` or
+"""The network of :mod:`training.trainers.ppo` and :mod:`training.trainers.imitate` (``arch``: ``shared`` or
 ``mlp``), the masked categorical distribution over its action fields, and the scale of the
 critic's returns (:class:`ReturnScale`). Checkpoints of both scripts hold an :class:`ActorCritic`'s
-weights, and :mod:`training.checkpoints` rebuilds it from here."""
+weights, and :mod:`training.machinery.checkpoints` rebuilds it from here."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from torch import nn
 
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
-from training.policies import check_memory
+from training.machinery.policies import check_memory
 
 ARCHS = ("shared", "mlp")
 
@@ -24,7 +24,7 @@ def check_arch(arch) -> str:
 
 
 def network_meta(args) -> dict:
-    """What a checkpoint of :mod:`training.ppo` or :mod:`training.imitate` records of its network
+    """What a checkpoint of :mod:`training.trainers.ppo` or :mod:`training.trainers.imitate` records of its network
     (from the script's ``args``): the control level, the architecture, the layer sizes, their
     activation (tanh: :func:`hidden_layers`) and the memory."""
     return {
@@ -61,8 +61,8 @@ class ActorCritic(nn.Module):
     """The shared policy: logits ``(N, sum(nvec))`` and value ``(N,)`` from flat features
     ``x (N, D)``; ``net(x)`` gives both. ``arch="shared"``: one tanh MLP trunk feeds both heads
     (one pass instead of two); ``arch="mlp"``: separate tanh MLPs for the actor and the critic.
-    With ``memory`` (:data:`training.policies.MEMORIES`) ``D`` is the encoder's size plus the
-    memory's inputs (:func:`training.policies.with_memory`)."""
+    With ``memory`` (:data:`training.machinery.policies.MEMORIES`) ``D`` is the encoder's size plus the
+    memory's inputs (:func:`training.machinery.policies.with_memory`)."""
 
     def __init__(
         self,
@@ -161,7 +161,7 @@ def masked_log_probs(logits: torch.Tensor, move_mask: torch.Tensor, nvec: list[i
 
 def sample(log_probs: list[torch.Tensor], sampled: str = "all") -> tuple[torch.Tensor, torch.Tensor]:
     """Actions ``(N, F)`` (Gumbel-max, torch's generator) and the joint log-probability ``(N,)`` of
-    the fields drawn at random. ``sampled="move"`` (:data:`training.policies.SAMPLED`): the fields
+    the fields drawn at random. ``sampled="move"`` (:data:`training.machinery.policies.SAMPLED`): the fields
     after the move take their arg-max and the log-probability is the move's; the generator is
     drawn from the same either way."""
     noisy = [lp - torch.log(-torch.log(torch.rand_like(lp))) for lp in log_probs]

@@ -5,12 +5,12 @@ Every module of ``n_envs`` worlds (copies of the task) is one sub-env of
 observation, illegal moves are masked out of its move distribution, and every module gets
 the team reward. ``total_steps`` counts agent-steps (module-cycles).
 
-    python -m training.sb3_ppo --config configs/train/sb3_ppo_chain.yaml
-    python -m training.sb3_ppo --config configs/train/sb3_ppo_chain.yaml --total-steps 20000 --run-dir runs/try
-    python -m training.sb3_ppo --resume runs/try/checkpoints/step_0000010240 --total-steps 40000
+    python -m training.trainers.sb3_ppo --config configs/train/sb3_ppo_chain.yaml
+    python -m training.trainers.sb3_ppo --config configs/train/sb3_ppo_chain.yaml --total-steps 20000 --run-dir runs/try
+    python -m training.trainers.sb3_ppo --resume runs/try/checkpoints/step_0000010240 --total-steps 40000
     tensorboard --logdir runs
 
-Writes ``runs/<name>/`` (see :mod:`training.common`): ``progress.csv``, TensorBoard logs,
+Writes ``runs/<name>/`` (see :mod:`training.machinery.runs`): ``progress.csv``, TensorBoard logs,
 checkpoints every ``checkpoint_every`` agent-steps and ``final/``; ``proteo eval --checkpoint
 runs/<name>`` evaluates the result.
 """
@@ -25,26 +25,25 @@ from tqdm import tqdm
 
 from proteo_env.control import check_level
 from proteo_env.registry import task_name
-from training.common import (
+from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.runs import (
+    PPOArgs,
     ProgressLog,
     checkpoint_folder,
     episode_stats,
     make_run_dir,
-    mlp_meta,
     parse_args,
     save_args,
     seed_everything,
     torch_device,
-    write_checkpoint_meta,
 )
-from training.runs import PPOArgs
 
 ALGORITHM = "sb3-maskable-ppo"
 
 
 @dataclass(frozen=True)
 class Args(PPOArgs):
-    """MaskablePPO with parameter sharing over all modules (arguments of training/sb3_ppo.py);
+    """MaskablePPO with parameter sharing over all modules (arguments of training/trainers/sb3_ppo.py);
     ``minibatch_size`` is MaskablePPO's ``batch_size``."""
 
     vf_coef: float = 0.5
@@ -67,7 +66,7 @@ def main(argv=None) -> Path:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from proteo_env.adapters.sb3 import ProteoVecEnv
-    from training.checkpoints import read_meta
+    from training.machinery.checkpoints import read_meta
 
     resume_meta = read_meta(args.resume) if args.resume else None
     run_dir = make_run_dir(
@@ -194,6 +193,6 @@ def main(argv=None) -> Path:
 
 
 if __name__ == "__main__":
-    from training.common import run_script
+    from training.machinery.runs import run_script
 
     raise SystemExit(run_script(main))

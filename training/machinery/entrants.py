@@ -50,7 +50,7 @@ from baselines.base import Policy
 from proteo_env.adapters.flatten import ENCODING_VERSION, MESSAGE_ENCODINGS, SCENT_SCALE, ObservationEncoder
 from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml
 from proteo_env.spaces import N_MOVES, OBSERVATION_FIELDS
-from training.common import sha256_of
+from training.machinery.checkpoints import sha256_of
 
 ENTRANT_INTERFACE = 1
 """The version of the interface above and of ``entrant.yaml``'s format (its ``entrant:`` key)."""
@@ -287,7 +287,7 @@ def factory_function(name: str, *, search: str | None = None):
 # ---------------------------------------------------------------------- building a policy
 def entrant_policy(source: str, env, *, seed: int, training_seed=None, settings: dict | None = None):
     """The policy of entrant ``source`` (an ``entrant.yaml`` path or a factory ``module:function``)
-    for ``env``: a :class:`~training.policies.LogitsPolicy` for a saved network, an
+    for ``env``: a :class:`~training.machinery.policies.LogitsPolicy` for a saved network, an
     :class:`EntrantPolicy` for a factory."""
     settings = {} if settings is None else settings
     if Path(source).suffix in (".yaml", ".yml") or Path(source).is_dir():
@@ -305,8 +305,8 @@ def entrant_policy(source: str, env, *, seed: int, training_seed=None, settings:
 
 
 def saved_network_policy(entry: EntrantFile, file: Path, env, *, seed: int):
-    """A :class:`~training.policies.LogitsPolicy` over the saved network ``file`` (``entry.format``)."""
-    from training.policies import LogitsPolicy
+    """A :class:`~training.machinery.policies.LogitsPolicy` over the saved network ``file`` (``entry.format``)."""
+    from training.machinery.policies import LogitsPolicy
 
     encoder = ObservationEncoder.for_env(env, **entry.observation)
     nvec = [int(n) for n in env.control_nvec]
@@ -368,7 +368,7 @@ def _onnx(file: Path):
 def _sb3(file: Path):
     from sb3_contrib import MaskablePPO
 
-    from training.checkpoints import maskable_ppo_logits
+    from training.machinery.checkpoints import maskable_ppo_logits
 
     return maskable_ppo_logits(MaskablePPO.load(str(file), device="cpu"))
 

@@ -1,5 +1,6 @@
-"""What every training script shares: typed args from YAML and the command line, seeding,
-the run folder, a progress log, and the checkpoint folder format.
+"""What every trainer's run shares: typed options from YAML and the command line, seeding and
+threads, the run folder and its progress log, resuming, and for the trainers that work in
+generations the whole run around their loop.
 
 Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
 
@@ -7,14 +8,42 @@ Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
     progress.csv       one row per log step: agent_steps, seconds, episode return, success, ...
     tb/                TensorBoard event files (``tensorboard --logdir runs``)
     checkpoints/step_<N>/  a checkpoint every ``checkpoint_every`` agent-steps
-    final/             the checkpoint at the end
+    final/             the checkpoint at the end (its format: :mod:`training.machinery.checkpoints`)
 
-Checkpoint folder: ``proteo.json`` (format, algorithm, task, env overrides, observation
-encoding and its version, action ``nvec``, steps, seed, what rebuilds the network exactly (the
-fields its trainer registers: layer sizes, activation, ...), the SHA-256 of every payload file
-(``files``), and the ``proteo_version`` and git ``commit`` that wrote it) beside the algorithm's
-own files. Any checkpoint loads by path with :func:`training.checkpoints.load_policy`, after
-:func:`read_meta` has checked every field and every file's digest.
+What every trainer's run shares: its options, and for the trainers that work in generations the
+whole run around their loop.
+
+:class:`RunArgs` holds the options of every trainer's run (seed, run folder, time limit, threads,
+logs); a trainer's ``Args`` derives from it and declares only its own, and :class:`PPOArgs` adds
+what the PPO trainers share. :class:`GenerationalArgs`
+adds what a population-based trainer (training/trainers/cma_es.py, training/trainers/evolve.py) needs, and
+:class:`GenerationalRun` does the rest of such a run, so that the trainer writes only its
+generation:
+
+- the run folder (``--run-dir``, default ``runs/<name>``) and its ``args.yaml``;
+- resume: rerun the same command after an interruption (the run continues from ``state.pkl``
+  after its last finished generation), or ``--resume CHECKPOINT`` to go on from a checkpoint
+  (every checkpoint holds the same ``state.pkl``); either way the arguments the results depend
+  on (all but :data:`RUN_INDEPENDENT`) must be the run's, checked against the state's
+  fingerprint;
+- the journal of finished episodes (``episodes.jsonl``: an interrupted generation resumes
+  without playing its finished episodes again), the progress log (``progress.csv`` and
+  TensorBoard), the progress bar, the time limit, a checkpoint every ``checkpoint_every``
+  generations and ``final/`` at the end, each with ``proteo.json``.
+
+The loop of a trainer::
+
+    run = GenerationalRun(args, algorithm="program-evolution", name=f"evolve_{task}_s{seed}",
+                          what="evolution run", counter="evolve/generation")
+    state = run.resumed or {"generation": 0, ...}       # the state to go on from
+    run.start(state["generation"])
+    while state["generation"] < args.generations:
+        ... score a generation with run.journal, update state ...
+        if run.end_generation(state["generation"], agent_steps, values, state, write):
+            break                                        # the time limit
+    run.finish(state, write)
+
+where ``write(folder, agent_steps)`` writes the trainer's payload and calls :meth:`GenerationalRun.write_meta`.
 """
 
 from __future__ import annotations
@@ -22,26 +51,21 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import hashlib
-import json
 import os
+import pickle
 import random
 import sys
 import time
 import typing
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
-from training.trainers import ALGORITHMS, CHECKPOINT_FIELDS
-
-CHECKPOINT_FORMAT = "proteo-checkpoint"
-CHECKPOINT_VERSION = 2
-"""Version 2 records each payload file's SHA-256 and every field that rebuilds the network (version 1:
-neither; :func:`training.checkpoints.migrate` turns one into the other)."""
-META_FILE = "proteo.json"
+from training.machinery.checkpoints import CheckpointError, read_meta, write_checkpoint_meta
+from training.machinery.registry import ALGORITHMS
 
 
 # ---------------------------------------------------------------------- args
@@ -314,249 +338,6 @@ class ProgressLog:
             self.writer.close()
 
 
-# ---------------------------------------------------------------------- checkpoints
-def checkpoint_kind(meta: dict) -> str:
-    """``"evolved"`` or ``"learned"``: what kind of controller the checkpoint ``meta`` holds (its
-    trainer's registration, :mod:`training.trainers`)."""
-    return "evolved" if ALGORITHMS[meta["algorithm"]].evolved else "learned"
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be loaded (the message names the path and the problem)."""
-
-
-def checkpoint_dir(path) -> Path:
-    """The checkpoint folder that ``path`` names (folder, file inside it, or run folder)."""
-    p = Path(path)
-    if not p.exists():
-        raise CheckpointError(
-            f"checkpoint {str(p)!r} does not exist; allowed: a checkpoint folder "
-            f"(with {META_FILE}), a file in one, or a run folder with final/"
-        )
-    if p.is_file():
-        p = p.parent
-    if not (p / META_FILE).is_file() and (p / "final" / META_FILE).is_file():
-        p = p / "final"
-    if not (p / META_FILE).is_file():
-        raise CheckpointError(
-            f"checkpoint {str(path)!r} is not a proteo checkpoint: no {META_FILE} in {str(p)!r}; "
-            "allowed: a folder written by a script in training/"
-        )
-    return p
-
-
-def read_meta(path) -> dict:
-    """The checked ``proteo.json`` of the checkpoint at ``path`` (with ``"dir"`` added): its format
-    and version, its algorithm, every field the algorithm's trainer registers
-    (:data:`training.trainers.CHECKPOINT_FIELDS`) and the SHA-256 of every file it lists; anything
-    else is one :class:`CheckpointError` naming the file and the field."""
-    folder = checkpoint_dir(path)
-    try:
-        meta = json.loads((folder / META_FILE).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise CheckpointError(f"checkpoint {str(folder)!r}: {META_FILE} is not valid JSON ({err})") from None
-    return {**check_meta(meta, folder), "dir": str(folder)}
-
-
-def check_meta(meta, folder: Path) -> dict:
-    """``meta``, the contents of the ``proteo.json`` of checkpoint ``folder``, if it passes
-    :func:`read_meta`'s checks (else one :class:`CheckpointError`)."""
-    where = f"checkpoint {str(folder)!r}: {META_FILE}"
-    if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(
-            f"{where} has format {meta.get('format') if isinstance(meta, dict) else None!r}; "
-            f"allowed: {CHECKPOINT_FORMAT!r}"
-        )
-    if meta.get("version") != CHECKPOINT_VERSION:
-        migrate = " (migrate it: proteo migrate PATH)" if meta.get("version") == 1 else ""
-        raise CheckpointError(
-            f"{where}: version = {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}{migrate}"
-        )
-    if meta.get("algorithm") not in ALGORITHMS:
-        raise CheckpointError(
-            f"{where}: algorithm = {meta.get('algorithm')!r} is not allowed; allowed: {', '.join(ALGORITHMS)}"
-        )
-    for key in ("task", "nvec", "files", *CHECKPOINT_FIELDS[meta["algorithm"]]):
-        if key not in meta:
-            raise CheckpointError(
-                f"{where} lacks {key!r}; allowed: a {meta['algorithm']!r} checkpoint records "
-                f"{', '.join(('task', 'nvec', 'files', *CHECKPOINT_FIELDS[meta['algorithm']]))}"
-            )
-    for key, (ok, allowed) in _field_checks().items():
-        if key in meta and not ok(meta[key]):
-            raise CheckpointError(f"{where}: {key} = {meta[key]!r} is not allowed; allowed: {allowed}")
-    files = meta["files"]
-    if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
-        raise CheckpointError(f"{where}: files = {files!r} is not allowed; allowed: {{file name: sha256 hex digest}}")
-    for name, digest in files.items():
-        file = folder / name
-        if Path(name).name != name or not file.is_file():
-            raise CheckpointError(
-                f"{where}: files lists {name!r}, which is not a file in {str(folder)!r}; allowed: the payload files "
-                "the trainer wrote beside proteo.json"
-            )
-        if sha256_of(file) != digest:
-            raise CheckpointError(
-                f"checkpoint {str(file)!r}: SHA-256 {sha256_of(file)[:16]}... differs from the "
-                f"{digest[:16]}... that {META_FILE} records: the file changed after it was written (damaged or "
-                "edited); allowed: the file as its trainer wrote it"
-            )
-    return meta
-
-
-def _field_checks() -> dict:
-    """``{field: (test, what is allowed)}`` of the ``proteo.json`` fields :func:`check_meta` checks
-    (a loader then builds from them without a default)."""
-    from proteo_env.config import CONTROL_LEVELS
-    from proteo_env.registry import TASKS
-    from training.policies import MEMORIES, SAMPLED
-
-    def sizes(value) -> bool:
-        return isinstance(value, list) and bool(value) and all(_positive_int(v) for v in value)
-
-    return {
-        "task": (lambda v: isinstance(v, str) and v in TASKS, f"a registered task id ({', '.join(sorted(TASKS))})"),
-        "nvec": (sizes, "the action fields' sizes, a list of integers >= 1"),
-        "control": (lambda v: v in CONTROL_LEVELS, ", ".join(CONTROL_LEVELS)),
-        "hidden": (sizes, "the hidden layers' sizes, a list of integers >= 1"),
-        "activation": (
-            lambda v: v in ACTIVATIONS,
-            f"{', '.join(ACTIVATIONS)} (what training/ builds; a network of another activation enters the benchmark "
-            "as a TorchScript or ONNX file, docs/guides/entering.md)",
-        ),
-        "memory": (lambda v: v in MEMORIES, ", ".join(MEMORIES)),
-        "sampled": (lambda v: v in SAMPLED, ", ".join(SAMPLED)),
-        "encoder": (lambda v: v is None or isinstance(v, dict), "the observation encoding's spec, a mapping"),
-        "env": (lambda v: isinstance(v, dict), "the proteo_env.make settings, a mapping"),
-        "params": (lambda v: isinstance(v, dict), "the evolved parameters, a mapping"),
-    }
-
-
-def _positive_int(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
-
-
-ACTIVATIONS = ("tanh",)
-"""The activations of the networks ``training/`` builds (:mod:`training.networks`,
-:class:`training.policies.NumpyMLP`, the SB3 and TorchRL actors)."""
-
-
-def sha256_of(file: Path) -> str:
-    """The SHA-256 hex digest of ``file``'s bytes."""
-    digest = hashlib.sha256()
-    with open(file, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def mlp_meta(control: str, hidden) -> dict:
-    """What a checkpoint records of a plain network (:data:`~training.trainers.NETWORK_FIELDS` but
-    the encoder): control level ``control``, tanh layers of sizes ``hidden``, no memory, every field
-    sampled."""
-    return {"control": control, "hidden": list(hidden), "activation": "tanh", "memory": "none", "sampled": "all"}
-
-
-def payload_digests(folder: Path) -> dict[str, str]:
-    """``{name: sha256}`` of every file directly in a checkpoint ``folder`` but ``proteo.json``
-    (what ``files`` in ``proteo.json`` records)."""
-    return {
-        p.name: sha256_of(p)
-        for p in sorted(Path(folder).iterdir())
-        if p.is_file() and p.name != META_FILE and not p.name.endswith(".tmp")
-    }
-
-
-def write_checkpoint_meta(
-    folder: Path,
-    *,
-    algorithm: str,
-    task: str,
-    env_overrides: dict,
-    encoder_spec: dict | None,
-    nvec,
-    agent_steps: int,
-    seed: int,
-    extra: dict | None = None,
-) -> None:
-    """Write ``proteo.json`` into a checkpoint folder, after its payload files (the caller's): it
-    records their SHA-256 (``files``), so the caller writes them first."""
-    folder.mkdir(parents=True, exist_ok=True)
-    meta = {
-        "format": CHECKPOINT_FORMAT,
-        "version": CHECKPOINT_VERSION,
-        "algorithm": algorithm,
-        "task": task,
-        "env": env_overrides,
-        "encoder": encoder_spec,
-        "nvec": [int(n) for n in nvec],
-        "agent_steps": int(agent_steps),
-        "seed": seed,
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        **provenance(),
-        **(extra or {}),
-        "files": payload_digests(folder),
-    }
-    missing = [key for key in CHECKPOINT_FIELDS[algorithm] if key not in meta]
-    if missing:  # a trainer's own mistake: its checkpoint would not load
-        raise ValueError(f"a {algorithm!r} checkpoint must record {', '.join(missing)}")
-    tmp = folder / (META_FILE + ".tmp")
-    tmp.write_text(json.dumps(meta, indent=2, default=_json_default))
-    os.replace(tmp, folder / META_FILE)
-
-
-def provenance() -> dict:
-    """What wrote a checkpoint: ``{"proteo_version": ..., "commit": ...}``.
-
-    ``proteo_version`` is the installed ``proteo-env`` distribution's version (the package's own
-    ``__version__`` when it is not installed); ``commit`` is ``git rev-parse HEAD`` of the
-    repository holding the working directory, or ``None`` when there is none or git is missing
-    (never an error). Every trainer's ``proteo.json`` has both (through
-    :func:`write_checkpoint_meta`); checkpoints written before lack them and load all the same.
-    """
-    return {"proteo_version": package_version(), "commit": git_commit()}
-
-
-def package_version() -> str:
-    """The version of the installed ``proteo-env`` distribution (``proteo --version``)."""
-    from importlib import metadata
-
-    try:
-        return metadata.version("proteo-env")
-    except metadata.PackageNotFoundError:  # run from a source tree that is not installed
-        from proteo_env import __version__
-
-        return __version__
-
-
-def git_commit(cwd=None) -> str | None:
-    """``git rev-parse HEAD`` in ``cwd`` (default: the working directory); ``None`` outside a
-    repository, without git, or on any failure."""
-    import subprocess
-
-    try:
-        done = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=cwd,
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=False,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    commit = done.stdout.strip()
-    return commit if done.returncode == 0 and len(commit) >= 40 else None
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {value!r}")
-
-
 def read_resume(path, algorithm: str, script: str, needs=()) -> dict | None:
     """The checked ``proteo.json`` of the checkpoint a run resumes from (``None`` without one),
     refused unless ``algorithm`` (the trainer ``script``) wrote it with the files ``needs`` (what
@@ -590,19 +371,6 @@ def save_network_checkpoint(folder: Path, net, args, run_dir: Path, *, trainer: 
     cleared = {"resume": None} if hasattr(args, "resume") else {}
     save_args(dataclasses.replace(args, run_dir=str(run_dir), **cleared), folder)
     write_checkpoint_meta(folder, **meta)
-
-
-def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt",), **fields) -> None:
-    """Copy the checkpoint ``source`` to ``dest`` (replaced) without the files ``drop`` (what only a
-    resumed run needs), its ``proteo.json`` with ``fields`` added and ``files`` left without them."""
-    import shutil
-
-    if dest.exists():
-        shutil.rmtree(dest)
-    shutil.copytree(source, dest, ignore=shutil.ignore_patterns(*drop))
-    meta = json.loads((dest / META_FILE).read_text())
-    meta.update(fields, files={k: v for k, v in meta["files"].items() if k not in drop})
-    (dest / META_FILE).write_text(json.dumps(meta, indent=2, default=_json_default))
 
 
 def trainer_state(optimiser, **extra) -> dict:
@@ -641,3 +409,215 @@ def episode_stats(episodes: list[dict]) -> dict:
         "episode/success": float(np.mean([e["success"] for e in episodes])),
         "episode/cycles": float(np.mean([e["l"] for e in episodes])),
     }
+
+
+# ---------------------------------------------------------------------- runs
+@dataclass(frozen=True)
+class RunArgs:
+    """The options of every trainer's run."""
+
+    seed: int = 0
+    """The run's seed: every random stream of the run (worlds, policy, optimiser) derives from it."""
+    run_dir: str | None = None
+    """The run folder (progress.csv, args.yaml, checkpoints/, final/); default: runs/<trainer>_<task>_s<seed>."""
+    time_limit_minutes: float = 0.0
+    """Stop early, with a final checkpoint, after this much wall-clock time; 0: no limit."""
+    threads: int = 1
+    """Threads of torch and of numba's parallel kernels in this process (one is fastest on 2 cores)."""
+    tensorboard: bool = True
+    """Also log the progress to TensorBoard (tb/ in the run folder)."""
+    progress_bar: bool = True
+    """Show a progress bar on the terminal."""
+
+
+@dataclass(frozen=True)
+class PPOArgs(RunArgs):
+    """The options every PPO trainer over proteo's worlds shares (training/trainers/ppo.py,
+    training/trainers/sb3_ppo.py, training/trainers/torchrl_ppo.py); each trainer sets its own defaults and adds
+    its own options."""
+
+    task: str = "chain-v0"
+    """The task: a registered id such as chain-v1 (a bare name such as chain: its newest version)."""
+    env: dict = field(default_factory=lambda: {"n_modules": 12, "max_cycles": 300})
+    """Overrides of the worlds' settings as ``proteo_env.make`` takes them (size, cycle limit, physics, task parameters)."""
+    total_steps: int = 200_000
+    """Agent-steps (module-cycles) to train for, counted across all worlds."""
+    n_envs: int = 4
+    """Worlds stepped together; samples per cycle = n_envs * modules."""
+    n_steps: int = 128
+    """Cycles per world in one rollout (rollout = n_steps * n_envs * modules agent-steps)."""
+    minibatch_size: int = 1024
+    """Agent-steps per minibatch of the update."""
+    n_epochs: int = 4
+    """Passes over each rollout's samples per update."""
+    learning_rate: float = 3e-4
+    """Adam's learning rate (constant)."""
+    gamma: float = 0.99
+    """Discount factor per cycle."""
+    gae_lambda: float = 0.95
+    """The lambda of GAE (0: one-step TD advantages, 1: Monte Carlo returns)."""
+    clip_range: float = 0.2
+    """PPO's clip range: the probability ratio is clipped to [1 - clip_range, 1 + clip_range]."""
+    ent_coef: float = 0.01
+    """Weight of the entropy bonus in the loss."""
+    checkpoint_every: int = 50_000
+    """Agent-steps between checkpoints (checkpoints/step_<N>/ in the run folder)."""
+    resume: str | None = None
+    """A checkpoint of this trainer to continue from (its run folder is reused unless run_dir is set)."""
+
+
+@dataclass(frozen=True)
+class GenerationalArgs(RunArgs):
+    """The options of a trainer that works in generations (and runs its episodes in batches)."""
+
+    generations: int = 50
+    """Generations to run (with ``--resume``: in all, counting the checkpoint's)."""
+    checkpoint_every: int = 10
+    """Generations between checkpoints."""
+    resume: str | None = None
+    """A checkpoint of this trainer to go on from (an interrupted run resumes by rerunning its command)."""
+    ray: bool = False
+    """Run the batches of episodes as Ray tasks (the same results as on this machine)."""
+    address: str | None = None
+    """A running Ray cluster (``HOST:PORT`` or ``auto``); default: a local Ray instance (with ``ray``)."""
+    workers: int | None = None
+    """Worker processes (default: every core); with ``ray``, CPUs of the local Ray instance or tasks at
+    once on a cluster. The results do not depend on it."""
+
+
+RUN_INDEPENDENT = (
+    "generations",
+    "time_limit_minutes",
+    "checkpoint_every",
+    "run_dir",
+    "resume",
+    "threads",
+    "tensorboard",
+    "progress_bar",
+    "ray",
+    "address",
+    "workers",
+)
+"""Options of :class:`GenerationalArgs` a resumed run may change: the results do not depend on them."""
+
+
+class GenerationalRun:
+    """The run of a population-based trainer around its loop (see the module docstring).
+
+    Args:
+        args: the trainer's arguments (a :class:`GenerationalArgs`).
+        algorithm: the ``algorithm`` of its checkpoints, registered in :mod:`training.machinery.registry`
+            (``--resume`` accepts only those).
+        name: the run folder's default name, under ``runs/``.
+        what: the run in messages (``"evolution run"``).
+        counter: the progress log's generation column (rows after a resumed state are dropped).
+        independent: more options a resumed run may change, beside :data:`RUN_INDEPENDENT`.
+
+    Attributes:
+        run_dir: the run folder.
+        resumed: the state to go on from (what the trainer passed to :meth:`end_generation`),
+            or ``None`` for a new run.
+        journal: the run's :class:`~training.machinery.distributed.Journal` of finished episodes.
+        log: its :class:`~training.machinery.runs.ProgressLog`.
+    """
+
+    def __init__(self, args, *, algorithm: str, name: str, what: str, counter: str, independent: tuple = ()):
+        from training.machinery.distributed import Journal
+
+        self.args, self.algorithm, self.counter = args, algorithm, counter
+        script = f"proteo train {ALGORITHMS[algorithm].name}"
+        resume_meta = read_resume(args.resume, algorithm, script)
+        run_dir = Path(args.run_dir or (resume_meta or {}).get("run_dir") or Path("runs") / name)
+        self.state_file = run_dir / "state.pkl"
+        interrupted = self.state_file.is_file() and not (run_dir / "final").exists() and resume_meta is None
+        skip = set(RUN_INDEPENDENT) | set(independent)
+        self.fingerprint = {k: v for k, v in asdict(args).items() if k not in skip}
+        self.resumed = None
+        if interrupted or resume_meta is not None:
+            source = self.state_file if interrupted else Path(resume_meta["dir"]) / "state.pkl"
+            if not source.is_file():
+                raise ConfigError(
+                    f"resume={args.resume!r} has no state.pkl (a checkpoint written before runs could go on "
+                    f"from it); allowed: a checkpoint of {script} that holds state.pkl"
+                )
+            self.resumed = pickle.loads(source.read_bytes())
+            if self.resumed["fingerprint"] != self.fingerprint:
+                saved = self.resumed["fingerprint"]
+                diff = sorted(k for k in set(saved) | set(self.fingerprint) if saved.get(k) != self.fingerprint.get(k))
+                where = (
+                    f"run_dir {str(run_dir)!r} holds an interrupted run"
+                    if interrupted
+                    else f"resume={args.resume!r} is"
+                )
+                raise ConfigError(
+                    f"{where} with other arguments (differing: {', '.join(diff)}); allowed: the same arguments "
+                    "to resume it, or another run_dir"
+                )
+            print(f"resuming the {what} in {run_dir}")
+        self.run_dir = make_run_dir(str(run_dir), run_dir.name, resume=self.resumed is not None)
+        save_args(args, self.run_dir)
+        self.log = ProgressLog(self.run_dir, tensorboard=args.tensorboard)
+        self.journal = Journal(self.run_dir / "episodes.jsonl", self.fingerprint, what=what)
+        self.bar = None
+
+    def start(self, generation: int) -> None:
+        """Open the progress bar at ``generation`` (the one the run goes on from) and drop the
+        progress rows logged after it by an interrupted run."""
+        from tqdm import tqdm
+
+        self.log.drop_after(self.counter, generation)
+        self.bar = tqdm(
+            total=self.args.generations,
+            initial=generation,
+            unit="generation",
+            desc=self.algorithm,
+            disable=not self.args.progress_bar,
+        )
+
+    def end_generation(self, generation: int, agent_steps: int, values: dict, state: dict, write) -> bool:
+        """Log the finished ``generation`` (``values``, with the counter column set, at the end
+        unless ``values`` places it), write a
+        checkpoint when it is due (``write(folder, agent_steps)`` and ``state.pkl``) and the run's
+        state; whether the time limit says stop."""
+        self.bar.update(1)
+        self.log.log(agent_steps, {**values, self.counter: float(generation)})
+        if generation % self.args.checkpoint_every == 0:
+            self.checkpoint(checkpoint_folder(self.run_dir, agent_steps), agent_steps, state, write)
+        tmp = self.state_file.with_suffix(".tmp")
+        tmp.write_bytes(pickle.dumps({**state, "fingerprint": self.fingerprint}))
+        os.replace(tmp, self.state_file)
+        limit = self.args.time_limit_minutes
+        return bool(limit and self.log.seconds > 60 * limit)
+
+    def checkpoint(self, folder: Path, agent_steps: int, state: dict, write) -> Path:
+        """Write a checkpoint into ``folder``: the trainer's files (``write``) and ``state.pkl``."""
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "state.pkl").write_bytes(pickle.dumps({**state, "fingerprint": self.fingerprint}))
+        write(folder, agent_steps)
+        return folder
+
+    def write_meta(self, folder: Path, *, agent_steps: int, generation: int, extra: dict, **meta) -> None:
+        """``proteo.json`` of a checkpoint: :func:`~training.machinery.checkpoints.write_checkpoint_meta` with this
+        run's algorithm, seed, folder and arguments (``meta``: task, env_overrides, encoder_spec, nvec)."""
+        write_checkpoint_meta(
+            folder,
+            algorithm=self.algorithm,
+            agent_steps=agent_steps,
+            seed=self.args.seed,
+            extra={
+                "label": self.algorithm,
+                "run_dir": str(self.run_dir),
+                "generation": generation,
+                **extra,
+                "args": asdict(self.args),
+            },
+            **meta,
+        )
+
+    def finish(self, agent_steps: int, state: dict, write) -> Path:
+        """Write ``final/``, mark the journal complete and close the logs; the final checkpoint's folder."""
+        self.bar.close()
+        final = self.checkpoint(self.run_dir / "final", agent_steps, state, write)
+        self.journal.complete()
+        self.log.close()
+        return final

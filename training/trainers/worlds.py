@@ -1,4 +1,4 @@
-"""The training worlds of :mod:`training.ppo` and :mod:`training.imitate`: ``n_envs`` worlds of one
+"""The training worlds of :mod:`training.trainers.ppo` and :mod:`training.trainers.imitate`: ``n_envs`` worlds of one
 task as one :class:`~proteo_env.batched.BatchedEnv`, each restarted as soon as its episode ends,
 with every module's observation encoded into one row of features; or the same worlds split over
 worker processes (:class:`WorkerEnvs`), which step, observe and encode their shares at once."""
@@ -17,7 +17,7 @@ import proteo_env
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError, world_seeds
 from proteo_env.spaces import ObservationBuffers
-from training.policies import check_memory, with_memory
+from training.machinery.policies import check_memory, with_memory
 
 JOIN_FROM = ("SLEEP", "SEARCH")
 """The modes of a module not yet in the structure, by default (module credit, :class:`TrainingEnvs`)."""
@@ -56,7 +56,7 @@ class TrainingEnvs:
             a single env reset with ``env_seed[w]``: how :class:`WorkerEnvs` gives each worker its
             share of one run's worlds).
         message_encoding: how the features encode the messages received (proteo_env.adapters.flatten).
-        memory: the inputs appended to the features (:data:`training.policies.MEMORIES`).
+        memory: the inputs appended to the features (:data:`training.machinery.policies.MEMORIES`).
         join_bonus: when above zero, :attr:`joined` marks the modules whose mode left ``join_from``.
         join_from: the names of the modes of a module not yet in the structure.
     """
@@ -132,8 +132,8 @@ class TrainingEnvs:
         self.encode_seconds += time.perf_counter() - started
 
     def make_teachers(self, name: str, seed: int, n_fields: int, first_world: int = 0):
-        """The teachers of these worlds (:class:`training.teachers.Teachers`, arguments as there)."""
-        from training.teachers import Teachers
+        """The teachers of these worlds (:class:`training.trainers.teachers.Teachers`, arguments as there)."""
+        from training.trainers.teachers import Teachers
 
         return Teachers(self.batch, self.n_envs, name, seed=seed, n_fields=n_fields, first_world=first_world)
 
@@ -214,7 +214,7 @@ def check_workers(workers: int, n_envs: int, *, teacher: str | None = None, curr
     """Refuse ``workers`` (of :class:`WorkerEnvs`) other than an integer from 1 to ``n_envs``, or above 1 with a checkpoint as
     the ``teacher`` (its draws span every world; ``None``: no teacher) or with a ``curriculum``
     (it rebuilds the worlds in the trainer's process): one :class:`ConfigError` naming both."""
-    from training.teachers import is_checkpoint
+    from training.trainers.teachers import is_checkpoint
 
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= n_envs:
         raise ConfigError(f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: 1 to n_envs")
@@ -236,7 +236,7 @@ class WorkerEnvs:
     The same worlds as one process: world ``w`` is seeded with child ``w`` of the run's seed
     whichever process holds it, and the features, masks, rewards and ended episodes come back in
     world order, so a trainer that draws its actions from them in one process makes the same run
-    on any number of workers, bit for bit. It offers what :func:`training.ppo.collect` reads of
+    on any number of workers, bit for bit. It offers what :func:`training.trainers.ppo.collect` reads of
     :class:`TrainingEnvs`: :meth:`encode`, :meth:`step`, ``final_rows``, ``final_features``,
     ``joined``, ``encoder``, ``nvec``, ``size``, ``task_id``, ``n_envs`` and ``n_agents``, and
     the hand-coded rules as teachers (:meth:`make_teachers`: each process teaches its share,
@@ -291,7 +291,7 @@ class WorkerEnvs:
 
     def make_teachers(self, name: str, seed: int, n_fields: int) -> WorkerTeachers:
         """The rules as teachers of every world, each process teaching its own share
-        (:class:`training.teachers.Teachers` with its first world; arguments as there)."""
+        (:class:`training.trainers.teachers.Teachers` with its first world; arguments as there)."""
         check_workers(len(self.shares), self.n_envs, teacher=name)
         self._teacher_fields = n_fields
         self._command(("teachers", (name, seed, n_fields)))
@@ -363,7 +363,7 @@ class WorkerEnvs:
 class WorkerTeachers:
     """The teachers of a :class:`WorkerEnvs` as the trainer holds them: :meth:`restart` notes the
     worlds whose episodes ended, and the next :meth:`WorkerEnvs.teacher_labels` restarts their
-    teachers in their processes before it labels (as :meth:`training.teachers.Teachers.restart`
+    teachers in their processes before it labels (as :meth:`training.trainers.teachers.Teachers.restart`
     would have, in between)."""
 
     def __init__(self, n_envs: int):
@@ -451,7 +451,7 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
     """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``; on each
     command ``("step", None)``, ``("teachers", (name, seed, n_fields))`` or ``("label", restart)``
     it answers ``("ok", ...)`` or ``("error", ...)``, until ``("close", None)``."""
-    from training.common import limit_threads
+    from training.machinery.runs import limit_threads
 
     limit_threads(1)
     memory = None

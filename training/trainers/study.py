@@ -1,36 +1,36 @@
 """A study: several training recipes on several tasks with several training seeds, kept for ``proteo eval``.
 
-    python -m training.study                                  # plain PPO on every task at move, seeds 0 1 2
-    python -m training.study --tasks "[chain]" --seeds "[0, 1, 2, 3, 4]" --minutes 8 --parallel 2
-    python -m training.study --total-steps 16000000 --minutes 0      # the published PPO study
-    python -m training.study --recipes "[imitation, kickstart]" --minutes 0   # clones, then PPO from them
+    python -m training.trainers.study                                  # plain PPO on every task at move, seeds 0 1 2
+    python -m training.trainers.study --tasks "[chain]" --seeds "[0, 1, 2, 3, 4]" --minutes 8 --parallel 2
+    python -m training.trainers.study --total-steps 16000000 --minutes 0      # the published PPO study
+    python -m training.trainers.study --recipes "[imitation, kickstart]" --minutes 0   # clones, then PPO from them
 
 Recipes (``recipes``), each a script and a config per task and level:
 
 ================ ======================== ====================================================
 recipe           script                   config
 ================ ======================== ====================================================
-``ppo``          ``training/ppo.py``      ``configs/train/ppo_<task>_<level>.yaml``
-``ppo48``        ``training/ppo.py``      the same, for 48 M agent-steps
-``imitation``    ``training/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
-``kickstart``    ``training/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
+``ppo``          ``training/trainers/ppo.py``      ``configs/train/ppo_<task>_<level>.yaml``
+``ppo48``        ``training/trainers/ppo.py``      the same, for 48 M agent-steps
+``imitation``    ``training/trainers/imitate.py``  ``configs/train/bc_<task>_<level>.yaml`` (a clone)
+``kickstart``    ``training/trainers/ppo.py``      ``configs/train/kickstart_<task>_<level>.yaml``, with
                                           ``--init`` the kept clone of the same task and seed
-``curriculum``   ``training/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
+``curriculum``   ``training/trainers/ppo.py``      ``configs/train/curriculum_<task>_<level>.yaml`` (stages
                                           of env overrides, no demonstrations)
-``credit``       ``training/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
+``credit``       ``training/trainers/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
                                           with module credit (``join_bonus``), from the same clone
-``cma``          ``training/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
+``cma``          ``training/trainers/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
                                           the hand-coded rules' parameters (level ``full``, for
                                           the config's generations)
-``evolve``       ``training/evolve.py``   ``configs/train/evolve_<task>_full.yaml``: evolution of
+``evolve``       ``training/trainers/evolve.py``   ``configs/train/evolve_<task>_full.yaml``: evolution of
                                           programs of the paper's primitives from random ones
                                           (level ``full``, for the config's generations)
-``evolve-paper`` ``training/evolve.py``   ``configs/train/evolve_paper_<task>_full.yaml``: the
+``evolve-paper`` ``training/trainers/evolve.py``   ``configs/train/evolve_paper_<task>_full.yaml``: the
                                           same from the paper's program
                                           (``baselines/programs/<task>.yaml``)
-``evolve-large`` ``training/evolve.py``   ``configs/train/evolve_large_<task>_full.yaml``:
+``evolve-large`` ``training/trainers/evolve.py``   ``configs/train/evolve_large_<task>_full.yaml``:
                                           ``evolve`` with ten times the episodes per generation
-``evolve-large-  ``training/evolve.py``   ``configs/train/evolve_large_paper_<task>_full.yaml``:
+``evolve-large-  ``training/trainers/evolve.py``   ``configs/train/evolve_large_paper_<task>_full.yaml``:
 paper``                                   ``evolve-paper`` with ten times the episodes
 ================ ======================== ====================================================
 
@@ -76,7 +76,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from proteo_env.config import CONTROL_LEVELS, ConfigError
-from training.common import check_integers, check_numbers, keep_checkpoint, parse_args
+from training.machinery import registry
+from training.machinery.checkpoints import keep_checkpoint
+from training.machinery.runs import check_integers, check_numbers, parse_args
 
 RECIPES = {
     "ppo": ("ppo", "ppo", 0),
@@ -91,7 +93,7 @@ RECIPES = {
     "evolve-large": ("evolve", "evolve_large", 0),
     "evolve-large-paper": ("evolve", "evolve_large_paper", 0),
 }
-"""Recipe name: (its trainer's name in :mod:`training.trainers`, prefix of its configs in
+"""Recipe name: (its trainer's name in :mod:`training.machinery.registry`, prefix of its configs in
 configs/train, agent-steps of a PPO run unless ``total_steps`` says otherwise; 0: the config's)."""
 FROM_CLONE = ("kickstart", "credit")
 """Recipes whose runs start from the kept clone of the same task and seed (``--init``)."""
@@ -99,7 +101,7 @@ FROM_CLONE = ("kickstart", "credit")
 
 @dataclass(frozen=True)
 class Args:
-    """Train several recipes on several tasks and training seeds (arguments of training/study.py)."""
+    """Train several recipes on several tasks and training seeds (arguments of training/trainers/study.py)."""
 
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     """Task names (no version): each run trains configs/train/<prefix>_<task>_<level>.yaml."""
@@ -163,7 +165,7 @@ class Recipe:
     """The recipe whose kept checkpoint of the same task and seed the run starts from (``--init``; None: none)."""
 
 
-class Plan:
+class StudyPlan:
     """What the study trains: each recipe's config, budget, task id and starting checkpoint, from
     ``configs/train`` (kickstart and credit from the imitation clone) or from a benchmark protocol
     (its ``config``, ``agent_steps`` and ``init``)."""
@@ -213,7 +215,7 @@ class Plan:
         cmd = [
             sys.executable,
             "-m",
-            f"training.{trainer}",
+            registry.trainer(trainer).module,
             "--config",
             str(plan.config),
             "--seed",
@@ -283,7 +285,7 @@ def main(argv=None) -> int:
     def kept(recipe: str, task: str, seed: int) -> Path:
         return keep_dir / task / f"{recipe}_{level}" / f"seed_{seed}"
 
-    plan = Plan(args)
+    plan = StudyPlan(args)
     jobs = [(recipe, task, seed) for recipe in args.recipes for task in args.tasks for seed in args.seeds]
     init = {(recipe, task): plan.recipe(recipe, task).init for recipe, task, _ in jobs}
     for recipe in args.flags:
@@ -338,7 +340,7 @@ def main(argv=None) -> int:
             )
             _record(docs / f"study_{level}.json", summary[-1])
 
-    from training.plots import plot_runs
+    from training.judging.plots import plot_runs
 
     for recipe in args.recipes:
         for task in args.tasks:

@@ -1,7 +1,7 @@
 """A teacher for every world of a batch: the hand-coded rules' action for every module's observation.
 
-Imitation (:mod:`training.imitate`) labels the states the learner visits with the teacher's
-action, and kickstarting (:mod:`training.ppo` with ``distill_coef``) pulls the learner towards
+Imitation (:mod:`training.trainers.imitate`) labels the states the learner visits with the teacher's
+action, and kickstarting (:mod:`training.trainers.ppo` with ``distill_coef``) pulls the learner towards
 it. The teacher is a policy of :data:`baselines.POLICIES` by name: ``"rules"`` (the default)
 is the task's own hand-coded policy with the task's rule parameters, as the ``move`` level's
 autopilot builds it (:func:`baselines.autopilot.hand_coded_rules`); naming the task
@@ -64,7 +64,7 @@ class Teachers:
         seed: teacher ``b``'s ``e``-th episode is seeded from ``(seed, first_world + b, e)``.
         n_fields: how many leading fields of the full action a label holds (the control level's).
         first_world: the number of the first world taught among all the run's worlds (a share of
-            them taught in another process: :class:`training.worlds.WorkerEnvs`).
+            them taught in another process: :class:`training.trainers.worlds.WorkerEnvs`).
     """
 
     def __init__(
@@ -73,10 +73,10 @@ class Teachers:
         self.n_agents, self.n_fields, self.seed, self.first_world = env.n_agents, n_fields, seed, first_world
         self.episodes = np.zeros(n_envs, dtype=np.int64)
         self.checkpoint = None
-        """The learned teacher (a :class:`~training.policies.LogitsPolicy`), when ``name`` is a checkpoint."""
+        """The learned teacher (a :class:`~training.machinery.policies.LogitsPolicy`), when ``name`` is a checkpoint."""
         if is_checkpoint(name):
             from proteo_env.env import ProteoEnv
-            from training.checkpoints import load_policy
+            from training.machinery.checkpoints import load_policy
 
             task = env.tasks[0]
             self.checkpoint = load_policy(name, ProteoEnv(type(task)(task.params), env.config), seed=seed)

@@ -25,7 +25,7 @@ number of workers, the batch size or the order of the records.
 
 Example::
 
-    from training.evaluator import Controller, evaluate
+    from training.machinery.evaluator import Controller, evaluate
 
     programs = [Controller.program(text) for text in texts]
     results = evaluate("chain-v1", programs, seeds=range(100), env={"n_modules": 12})
@@ -64,10 +64,10 @@ class Controller:
             ``checkpoint``, a checkpoint's path.
         params: the policy's keyword parameters as ``(name, value)`` pairs (a program's text as
             ``("program", text)``; evolved rule parameters).
-        checkpoint: ``policy`` is a checkpoint (:func:`training.checkpoints.load_policy`).
+        checkpoint: ``policy`` is a checkpoint (:func:`training.machinery.checkpoints.load_policy`).
         deterministic: a network checkpoint takes each field's arg-max.
         entrant: ``policy`` is an entrant from outside: an ``entrant.yaml`` or a factory
-            ``module:function`` (:mod:`training.judging.entrants`); ``params`` holds its
+            ``module:function`` (:mod:`training.machinery.entrants`); ``params`` holds its
             ``training_seed``.
     """
 
@@ -100,11 +100,11 @@ class Controller:
     def build(self, env, seed: int, settings: dict | None = None):
         """This controller's policy for ``env`` (an env of the episode's task, ``settings`` and level), reset with ``seed``."""
         if self.entrant:
-            from training.judging.entrants import entrant_policy
+            from training.machinery.entrants import entrant_policy
 
             policy = entrant_policy(self.policy, env, seed=seed, settings=settings, **dict(self.params))
         elif self.checkpoint:
-            from training.checkpoints import load_policy
+            from training.machinery.checkpoints import load_policy
 
             policy = load_policy(self.policy, env, seed=seed, deterministic=self.deterministic)
         else:
@@ -117,7 +117,7 @@ class Controller:
     def fresh(self, env, key, seed: int):
         """:meth:`build`, from a policy built once per process and ``key`` (the env's settings) and
         copied: a program is parsed and a checkpoint read once, not once per episode."""
-        from training.policies import LogitsPolicy
+        from training.machinery.policies import LogitsPolicy
 
         if (key, self) not in _BUILT:
             _BUILT[(key, self)] = self.build(env, 0, json.loads(key[1]))
@@ -215,8 +215,8 @@ def batch_kind(policy) -> str:
     ``entrant:<label>`` (an entrant's object, once a cycle over every world) or ``alone`` (its own
     ``act``, world by world). Policies of one kind share a batch."""
     from baselines.base import KernelPolicy
-    from training.judging.entrants import EntrantPolicy
-    from training.policies import LogitsPolicy
+    from training.machinery.entrants import EntrantPolicy
+    from training.machinery.policies import LogitsPolicy
 
     if isinstance(policy, EntrantPolicy):
         return f"entrant:{policy.label}"
@@ -282,9 +282,9 @@ class _Actors:
 
     def _sample(self, buffers) -> np.ndarray:
         """Each network's forward pass over the rows of the worlds it plays, then every world's
-        actions drawn with its own generator (Gumbel-max, as :func:`~training.policies.sample_actions`
+        actions drawn with its own generator (Gumbel-max, as :func:`~training.machinery.policies.sample_actions`
         draws them for one world)."""
-        from training.policies import N_MOVES, sample_actions
+        from training.machinery.policies import N_MOVES, sample_actions
 
         a, first = self.n_agents, self.policies[0]
         features = first.encoder.encode_buffers(buffers)
@@ -312,7 +312,7 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     batched env of up to ``batch_size`` worlds: ``{"return", "success", "cycles", "metrics"}`` each
     (JSON-ready), in order."""
     import proteo_env
-    from training.common import limit_threads
+    from training.machinery.runs import limit_threads
 
     limit_threads(1)
     first = episodes[0]
@@ -438,9 +438,9 @@ def run_episodes(
         workers: processes (default: :func:`default_workers`, every core; 1: this process); with
             ``ray``, the Ray CPUs.
         batch_size: worlds stepped together in one process.
-        ray: ``None`` (local) or ``{"address", "workers"}`` (:func:`training.distributed.ray_options`):
+        ray: ``None`` (local) or ``{"address", "workers"}`` (:func:`training.machinery.distributed.ray_options`):
             each batch a Ray task.
-        journal: a :class:`training.distributed.Journal`: each finished episode is recorded
+        journal: a :class:`training.machinery.distributed.Journal`: each finished episode is recorded
             under its key as its batch lands, and the episodes it holds already are not run again.
         keys: the episodes' names in the journal (default: :func:`episode_key`).
         desc, progress: a progress bar counting episodes.
@@ -450,7 +450,7 @@ def run_episodes(
             task, ``workers`` or ``batch_size`` < 1; a program that fails its checks raises its
             own error. All before any episode runs.
     """
-    from training.distributed import run_jobs
+    from training.machinery.distributed import run_jobs
 
     episodes = list(episodes)
     check_episodes(episodes, workers=workers, batch_size=batch_size)
