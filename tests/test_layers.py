@@ -195,3 +195,89 @@ def test_no_module_of_training_imports_a_room_above_its_own(path):
 def test_rooms_of_training():
     assert room("training.machinery.checkpoints") == 0 and room("training.judging.judge") == 1
     assert room("training.trainers.ppo") == 2 and room("training.cli") == room("training.playback") == 3
+
+
+LAZY_PACKAGES = (
+    "benchmarl", "cma", "gymnasium", "matplotlib", "numba", "onnxruntime", "ray", "sb3_contrib", "scipy",
+    "stable_baselines3", "tensordict", "torch", "torchrl", "tqdm",
+)  # fmt: skip
+"""The optional or heavy packages that ``training/`` imports where it uses them, not at the top of a
+module: so that ``proteo --help`` and the judge of the rules start without torch, a trainer's module
+loads without Ray, and a missing extra is an error only where it is needed. A module of the project
+that loads one of them at import (the engine, through numba; the networks, through torch) is
+imported where used by a module that would not load it otherwise."""
+
+
+def top_level_imports(path: Path) -> list[str]:
+    """The absolute modules ``path`` imports outside any function (``from P import m`` of a
+    project package counts as importing ``P.m``)."""
+    modules = {module_name(p) for p in project_files()}
+    inside = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            inside.update(sub.lineno for sub in ast.walk(node) if isinstance(sub, (ast.Import, ast.ImportFrom)))
+    found = []
+    for node, base in import_statements(path):
+        if node.lineno in inside:
+            continue
+        if isinstance(node, ast.Import):
+            found += [alias.name for alias in node.names]
+        else:
+            subs = [f"{base}.{alias.name}" for alias in node.names if f"{base}.{alias.name}" in modules]
+            found += subs if len(subs) == len(node.names) else [base, *subs]
+    return found
+
+
+def lazy_packages_loaded() -> dict[str, set[str]]:
+    """For each project module, the :data:`LAZY_PACKAGES` that importing it loads (through the
+    imports at the top of it and of the project modules it imports so)."""
+    paths = {module_name(p): p for p in project_files()}
+    direct = {name: top_level_imports(path) for name, path in paths.items()}
+
+    def parents(module):  # importing a.b.c runs a/__init__ and a/b/__init__ first
+        parts = module.split(".")
+        return [".".join(parts[:k]) for k in range(1, len(parts) + 1)]
+
+    def closure(name):  # every project module that importing ``name`` runs: its packages, itself and what they import
+        reached = {module for module in parents(name) if module in paths}
+        frontier = list(reached)
+        while frontier:
+            for target in direct[frontier.pop()]:
+                for module in parents(target):
+                    if module in paths and module not in reached:
+                        reached.add(module)
+                        frontier.append(module)
+        return reached
+
+    lazy = {
+        name: {t.split(".")[0] for t in targets if t.split(".")[0] in LAZY_PACKAGES} for name, targets in direct.items()
+    }
+    return {name: set().union(*(lazy[m] for m in closure(name))) for name in paths}
+
+
+def test_imports_stand_at_the_top_but_those_of_lazy_packages():
+    loaded = lazy_packages_loaded()
+    assert {"numba"} <= loaded["proteo_env.core.world"] and "torch" in loaded["training.machinery.networks"]
+    assert not loaded["training.cli"] and not loaded["training.machinery.registry"]
+    misplaced = []
+    for path in sorted((ROOT / "training").rglob("*.py")):
+        here = module_name(path)
+        tree = ast.parse(path.read_text())
+        guarded = {id(sub) for node in ast.walk(tree) if isinstance(node, ast.Try) for sub in ast.walk(node)}
+        for node in ast.walk(tree):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for sub in ast.walk(node):
+                if sub is node or not isinstance(sub, (ast.Import, ast.ImportFrom)) or id(sub) in guarded:
+                    continue
+                names = [a.name for a in sub.names] if isinstance(sub, ast.Import) else [sub.module or ""]
+                if isinstance(sub, ast.ImportFrom) and sub.module and f"{sub.module}.{sub.names[0].name}" in loaded:
+                    names = [f"{sub.module}.{a.name}" for a in sub.names]
+                needs = set()
+                for name in names:
+                    if name.split(".")[0] in LAZY_PACKAGES:
+                        needs.add(name.split(".")[0])
+                    needs |= loaded.get(name, set())
+                if not needs - loaded[here]:
+                    misplaced.append(f"{path.relative_to(ROOT)}:{sub.lineno} {', '.join(names)}")
+    assert not misplaced, "imports inside functions that could stand at the top: " + "; ".join(misplaced)

@@ -198,8 +198,6 @@ def test_a_recipe_the_protocol_does_not_fix_is_one_error_before_anything_is_writ
 
 
 def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path, monkeypatch):
-    import training.judging.plots
-
     class Finished:  # a training process that writes its final checkpoint and progress log
         returncode = 0
 
@@ -214,9 +212,7 @@ def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path
 
     drawn = []
     monkeypatch.setattr(study.subprocess, "Popen", Finished)
-    monkeypatch.setattr(
-        training.judging.plots, "plot_runs", lambda runs, path, title: drawn.append((path.name, sorted(runs)))
-    )
+    monkeypatch.setattr(study, "plot_runs", lambda runs, path, title: drawn.append((path.name, sorted(runs))))
     for seeds in ("[0, 1]", "[2]"):
         study.main(
             ["--tasks", "[chain]", "--seeds", seeds, "--runs-dir", str(tmp_path / "runs")]

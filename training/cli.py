@@ -13,8 +13,12 @@ version 2). ``proteo --version`` prints the version.
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from pathlib import Path
+
+from training.machinery.registry import TRAINERS, trainer
+from training.playback import demo, replay, run, view
 
 
 def evaluate_command(args) -> int:
@@ -35,10 +39,6 @@ def sweep_command(args) -> int:
 
 def train_command(args) -> int:
     """``proteo train NAME FLAGS...``: the registered trainer's ``main(FLAGS)`` (the flags unchanged)."""
-    import importlib
-
-    from training.machinery.registry import trainer
-
     entry = trainer(args.trainer)
     name = entry.name
     flags = list(args.flags)
@@ -135,8 +135,6 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 
 def main(argv=None) -> int:
     from training.machinery.distributed import add_ray_flags
-    from training.machinery.registry import TRAINERS
-    from training.playback import demo, replay, run, view
 
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     parser.add_argument("--version", action="version", version=f"proteo {version()}")

@@ -40,7 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
-from proteo_env.config import ConfigError
+import proteo_env
+from baselines import POLICIES
+from proteo_env.config import ConfigError, build, load_yaml
+from proteo_env.registry import task_class
+from training.judging.statistics import mean_ci
+from training.machinery.distributed import Journal, ray_options
+from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
 from training.machinery.runs import out_folder
 
 
@@ -81,9 +87,6 @@ def overrides_of(point: dict) -> dict:
 def load_sweep(path) -> SweepConfig:
     """The checked :class:`SweepConfig` in ``path``; any problem is one :class:`ConfigError`
     naming the field, its value and what is allowed."""
-    from proteo_env.config import build, load_yaml
-    from proteo_env.registry import task_class
-
     p = Path(path)
     data = load_yaml(p, "sweep config", "a YAML file such as configs/sweeps/chain_cycles.yaml")
     if not isinstance(data, dict):
@@ -123,7 +126,6 @@ def load_sweep(path) -> SweepConfig:
         raise ConfigError(f"{where}seeds={cfg.seeds!r} is not allowed; allowed: an integer >= 1")
     if not cfg.policies:
         raise ConfigError(f"{where}policies=[] is empty; allowed: registered policy names or 'default'")
-    from baselines import POLICIES
 
     for name in cfg.policies:
         if name != "default" and name not in POLICIES:
@@ -149,11 +151,6 @@ def sweep(
     Returns:
         the rows of ``summary.csv`` (one dict per point and policy).
     """
-    import proteo_env
-    from training.judging.statistics import mean_ci
-    from training.machinery.distributed import Journal
-    from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
-
     cfg = load_sweep(config)
     points = cfg.points()
     seeds = list(range(cfg.first_seed, cfg.first_seed + cfg.seeds))
@@ -274,8 +271,6 @@ def plot_sweep(summary: list[dict], cfg: SweepConfig, path: Path, *, title: str)
 
 def main(args) -> int:
     """Entry point of ``proteo sweep`` (arguments parsed in :mod:`training.cli`)."""
-    from training.machinery.distributed import ray_options
-
     out = args.out or str(Path("out/sweeps") / Path(args.config).stem)
     summary = sweep(
         args.config, out=out, ray=ray_options(args), workers=None if args.ray else args.workers, fresh=args.fresh

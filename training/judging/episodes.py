@@ -16,25 +16,26 @@ then lets the caller write its files before the journal is closed.
 from __future__ import annotations
 
 import base64
+import json
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import proteo_env
 from proteo_env.registry import task_name
+from proteo_env.render.renderer import Renderer
+from proteo_env.render.scene import Scene
+from proteo_env.rollout import run_episode
 from training.judging.report import Result, Run
 from training.machinery.distributed import Journal, run_jobs
 from training.machinery.evaluator import Episode, episode_key, run_episodes
+from training.machinery.runs import limit_threads
 
 
 def _picture_png(env, caption: str) -> str:
     """The world of ``env`` as it is now, as a base64-encoded PNG."""
-    import base64
-    import tempfile
-
-    from proteo_env.render.renderer import Renderer
-    from proteo_env.render.scene import Scene
-
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "picture.png"
         renderer = Renderer()
@@ -51,11 +52,6 @@ def built(episode):
     """The environment and policy ``episode`` runs on its own (cached per process; at most 4 kept)."""
     spec = (episode.task, episode.overrides, episode.level, episode.controller)
     if spec not in _BUILT:
-        import json
-
-        import proteo_env
-        from training.machinery.runs import limit_threads
-
         limit_threads(1)
         while len(_BUILT) >= 4:
             _BUILT.pop(next(iter(_BUILT)))[0].close()
@@ -83,8 +79,6 @@ def run_alone(job: tuple) -> dict:
     ``(Episode, label)``. Returns ``{"return", "success", "cycles", "metrics", "seconds", "picture"}``
     (JSON-ready; ``picture`` ``None`` without a label, else a base64-encoded PNG captioned
     ``task · label (level) · seed · cycle``)."""
-    from proteo_env.rollout import run_episode
-
     episode, label = job
     env, policy = built(episode)
     started = time.perf_counter()

@@ -65,12 +65,19 @@ an interrupted evaluation with the same settings runs only the missing episodes
 
 from __future__ import annotations
 
+import difflib
+import hashlib
 from pathlib import Path
 
-from proteo_env.registry import task_name
+import proteo_env
+from baselines import make_policy
+from proteo_env.config import ConfigError, load_yaml
+from proteo_env.registry import TASKS, newest_tasks, task_class, task_name
 from training.judging.episodes import Plan
 from training.judging.report import Result, Run, markdown_table, publish_evaluation, rerender, write_results
-from training.machinery.checkpoints import checkpoint_kind
+from training.machinery.checkpoints import META_FILE, checkpoint_dir, checkpoint_kind, load_policy, read_meta
+from training.machinery.distributed import ray_options
+from training.machinery.evaluator import Controller, settings_json
 from training.machinery.runs import out_folder
 
 DEFAULT_CONFIG = "configs/eval.yaml"
@@ -102,11 +109,6 @@ def load_config(path) -> dict:
     under ``tasks`` that is not an evaluated task, an unknown key in a task's entry
     (:data:`CONFIG_TASK_KEYS`) or in a training-seed group (:data:`GROUP_KEYS`), and values of the
     wrong kind."""
-    import difflib
-
-    from proteo_env.config import ConfigError, load_yaml
-    from proteo_env.registry import TASKS
-
     if path is None:
         return {"seeds": 10, "first_seed": 0, "tasks": {}}
     p = Path(path)
@@ -190,10 +192,6 @@ def _name_apart(results: list[Result]) -> None:
 
 def _checkpoint_identity(path) -> str:
     """A hash of a checkpoint's ``proteo.json`` (it changes whenever the checkpoint is written again)."""
-    import hashlib
-
-    from training.machinery.checkpoints import META_FILE, checkpoint_dir
-
     return hashlib.sha256((checkpoint_dir(path) / META_FILE).read_bytes()).hexdigest()[:16]
 
 
@@ -239,10 +237,6 @@ def run_evaluation(
     It chooses the tasks and checkpoints, then plans every episode (:func:`plan_episodes`), runs
     them (:meth:`~training.judging.episodes.Plan.execute`) and writes the tables (:func:`write_results`).
     """
-    from proteo_env.config import ConfigError
-    from proteo_env.registry import newest_tasks, task_class
-    from training.machinery.checkpoints import read_meta
-
     out_folder(out)
     cfg = load_config(config)
     n_seeds = seeds if seeds is not None else cfg["seeds"]
@@ -303,11 +297,6 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
         by_task: ``{task name: [(checkpoint path, training-seed group label or "")]}``;
         seed_list: the episodes' seeds; deterministic, pictures: as for :func:`evaluate`.
     """
-    import proteo_env
-    from baselines import make_policy
-    from training.machinery.checkpoints import load_policy, read_meta
-    from training.machinery.evaluator import Controller, settings_json
-
     plan = Plan()
     results = plan.rows
     for cls in classes:
@@ -359,8 +348,6 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
 def refuse_flags(mode: str, flags: dict, why: str, allowed: str) -> None:
     """One :class:`~proteo_env.config.ConfigError` naming the first of ``flags`` (``{flag: value}``)
     that was given with ``mode``, why it is refused and what ``mode`` allows."""
-    from proteo_env.config import ConfigError
-
     given = [flag for flag, value in flags.items() if value]
     if given:
         raise ConfigError(f"{mode} with {given[0]} is not allowed ({why}); allowed with {mode}: {allowed}")
@@ -386,7 +373,6 @@ def main(args) -> int:
     config = args.config
     if config is None and Path(DEFAULT_CONFIG).is_file():
         config = DEFAULT_CONFIG
-    from training.machinery.distributed import ray_options
 
     results = run_evaluation(
         config=config,

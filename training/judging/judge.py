@@ -155,7 +155,6 @@ def check_recipe_run(protocol: Protocol, task: TaskProtocol, recipe: str, path: 
 
 def _checkpoint_candidate(protocol: Protocol, paths, tasks) -> Candidate:
     """The :class:`Candidate` of ``paths`` (the training seeds of one recipe), checked."""
-
     metas = []
     for path in paths:
         try:

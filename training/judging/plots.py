@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import argparse
 import csv
+from glob import glob
 from pathlib import Path
 
 import numpy as np
+
+from training.judging.statistics import t_quantile
 
 
 def read_progress(run_dir) -> dict[str, np.ndarray]:
@@ -80,8 +83,6 @@ def plot_runs(
 def plot_mean_band(ax, x: np.ndarray, ys: np.ndarray, label: str, *, color=None, clip=None) -> None:
     """Plot ``ys`` ``(seeds, points)`` against ``x`` ``(points,)`` as the mean over seeds with a
     95 % Student t band (with two or more seeds), the band cut to ``clip`` ``(low, high)`` if given."""
-    from training.judging.statistics import t_quantile
-
     colour = {} if color is None else {"color": color}
     mean = ys.mean(axis=0)
     if len(ys) > 1:
@@ -135,8 +136,6 @@ def main(argv=None) -> int:
     parser.add_argument("--title", default=None, help="figure title (the task and its size, for example)")
     args = parser.parse_args(argv)
     if args.evolution:
-        from glob import glob
-
         groups = dict(r.split("=", 1) for r in args.runs)
         recipes = {label: sorted(glob(pattern)) for label, pattern in groups.items()}
         for label, paths in recipes.items():

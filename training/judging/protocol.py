@@ -26,7 +26,8 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from proteo_env.config import CONTROL_LEVELS, ConfigError
+from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml, split_overrides
+from proteo_env.registry import TASKS
 
 ROOT = Path(__file__).resolve().parents[2]
 """The repository: protocol files and recipe configs are read relative to it."""
@@ -151,8 +152,6 @@ def _integer(where: str, field_path: str, value, least: int, why: str = "") -> i
 
 def _settings(where: str, at: str, field_path: str, value, cls) -> dict:
     """``value`` checked as ``proteo_env.make`` settings of task class ``cls`` (no ``control``)."""
-    from proteo_env.config import split_overrides
-
     value = _mapping(where, field_path, value, ["proteo_env.make settings"])
     try:
         split_overrides(value, cls.Params, task_name=cls.task_id())
@@ -170,8 +169,6 @@ def _protocol_data(version: str, root: Path, children: tuple) -> tuple[dict, tup
     """The checked top level of ``<version>.yaml`` with the protocols it extends merged in, and
     its lineage (:attr:`Protocol.lineage`). ``children``: the versions that extend it (a cycle
     is an error)."""
-    from proteo_env.config import load_yaml
-
     present = versions(root)
     if not isinstance(version, str) or version not in present:
         field_path = f"{PROTOCOL_DIR}/{children[-1]}.yaml: extends" if children else "--benchmark"
@@ -236,8 +233,6 @@ def load_protocol(version: str, root=None) -> Protocol:
     (worlds, splits, settings, a level or recipe it has) is an error, so every result judged under
     the earlier version holds under this one (:attr:`Protocol.lineage`).
     """
-    from proteo_env.registry import TASKS
-
     root = Path(root or ROOT)
     data, lineage = _protocol_data(version, root, ())
     where = f"benchmark {PROTOCOL_DIR}/{version}.yaml"

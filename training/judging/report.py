@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from proteo_env.config import ConfigError
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
 from training.judging.statistics import group_bootstrap, mean_ci, wilson
@@ -439,8 +440,6 @@ def load_results(path) -> tuple[list[Result], dict]:
     summaries left out: they are computed again). Files from before control levels and
     training-seed groups read with ``level="full"`` and no group. A file that is not such a
     ``results.json`` is a :class:`ConfigError` naming it."""
-    from proteo_env.config import ConfigError
-
     p = Path(path)
     fields = {f.name for f in dataclasses.fields(Run)}
     results: list[Result] = []

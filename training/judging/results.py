@@ -50,6 +50,8 @@ from proteo_env.config import ConfigError
 from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
+from training.judging.plots import plot_mean_band, read_progress
+from training.judging.protocol import load_protocol
 from training.judging.report import Result, result_of_row, row_label, span, success_cell
 from training.machinery.checkpoints import RULES
 
@@ -297,8 +299,6 @@ def _profiles(agg: dict, tasks: list[str], path: Path) -> None:
 
 def curves(progress: Path, task: str) -> dict[str, list[np.ndarray]]:
     """Per recipe of ``task``: the training seeds' ``(agent_steps, success)`` arrays."""
-    from training.judging.plots import read_progress
-
     found = defaultdict(list)
     for csv in sorted(progress.glob(f"*_{task}_*_s*.csv")):
         recipe = csv.stem.split(f"_{task}_")[0]
@@ -324,8 +324,6 @@ def _curve_figure(task: str, found: dict, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from training.judging.plots import plot_mean_band
 
     fig, ax = plt.subplots(figsize=(6.0, 3.4))
     for recipe, runs in sorted(found.items()):
@@ -639,8 +637,6 @@ def heldout_table(rows: list[Result], protocol) -> str:
 
 
 def main(argv=None) -> int:
-    from training.judging.protocol import load_protocol
-
     parser = argparse.ArgumentParser(prog="python -m training.judging.results", description=__doc__.splitlines()[0])
     parser.add_argument("--benchmark", default="v1", help="protocol version (configs/benchmark/<version>.yaml)")
     parser.add_argument("--root", default="docs/benchmark", help="folder holding <version>/<task>/<policy>/")

@@ -40,17 +40,23 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
+import subprocess
 import time
 import warnings
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
-from proteo_env.adapters.flatten import ObservationEncoder
-from proteo_env.config import ConfigError
-from proteo_env.registry import task_name
-from training.machinery.policies import LogitsPolicy, NumpyMLP, torch_mlp
-from training.machinery.registry import ALGORITHMS, CHECKPOINT_FIELDS
+import proteo_env
+from baselines import POLICIES, make_policy
+from baselines.base import constructor_parameters
+from proteo_env.adapters.flatten import ENCODING_VERSION, ObservationEncoder
+from proteo_env.config import CONTROL_LEVELS, ConfigError
+from proteo_env.registry import TASKS, task_name
+from training.machinery.policies import MEMORIES, SAMPLED, LogitsPolicy, NumpyMLP, torch_mlp
+from training.machinery.registry import ALGORITHMS, CHECKPOINT_FIELDS, loader
 
 CHECKPOINT_FORMAT = "proteo-checkpoint"
 CHECKPOINT_VERSION = 2
@@ -152,9 +158,6 @@ def check_meta(meta, folder: Path) -> dict:
 def _field_checks() -> dict:
     """``{field: (test, what is allowed)}`` of the ``proteo.json`` fields :func:`check_meta` checks
     (a loader then builds from them without a default)."""
-    from proteo_env.config import CONTROL_LEVELS
-    from proteo_env.registry import TASKS
-    from training.machinery.policies import MEMORIES, SAMPLED
 
     def sizes(value) -> bool:
         return isinstance(value, list) and bool(value) and all(_positive_int(v) for v in value)
@@ -264,8 +267,6 @@ def provenance() -> dict:
 
 def package_version() -> str:
     """The version of the installed ``proteo-env`` distribution (``proteo --version``)."""
-    from importlib import metadata
-
     try:
         return metadata.version("proteo-env")
     except metadata.PackageNotFoundError:  # run from a source tree that is not installed
@@ -277,8 +278,6 @@ def package_version() -> str:
 def git_commit(cwd=None) -> str | None:
     """``git rev-parse HEAD`` in ``cwd`` (default: the working directory); ``None`` outside a
     repository, without git, or on any failure."""
-    import subprocess
-
     try:
         done = subprocess.run(
             ["git", "rev-parse", "HEAD"],
@@ -305,8 +304,6 @@ def _json_default(value):
 def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt",), **fields) -> None:
     """Copy the checkpoint ``source`` to ``dest`` (replaced) without the files ``drop`` (what only a
     resumed run needs), its ``proteo.json`` with ``fields`` added and ``files`` left without them."""
-    import shutil
-
     if dest.exists():
         shutil.rmtree(dest)
     shutil.copytree(source, dest, ignore=shutil.ignore_patterns(*drop))
@@ -358,8 +355,6 @@ def _check_compatible(meta: dict, env) -> ObservationEncoder:
 def load_policy(path, env, *, seed: int | None = None, deterministic: bool = False):
     """The policy stored at ``path``, ready to act in ``env`` (same task and observation encoding):
     built by the loader its trainer registered (:mod:`training.machinery.registry`)."""
-    from training.machinery.registry import loader
-
     meta = read_meta(path)
     return loader(meta["algorithm"])(meta, env, seed=seed, deterministic=deterministic)
 
@@ -369,8 +364,6 @@ def cma_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
     (``cma-neural``, ``genome.npy``)."""
     if meta["algorithm"] == "cma-neural":
         return network_policy(meta, env, seed, deterministic, _numpy_logits)
-    from baselines import POLICIES, make_policy
-    from baselines.base import constructor_parameters
 
     folder = meta["dir"]
     if meta.get("policy") not in POLICIES:
@@ -436,8 +429,6 @@ RULES = "rules"
 def controller_names() -> list[str]:
     """The policy names :func:`load_controller` accepts before ``:<task>``: ``rules`` and every
     registered policy (``random`` among them)."""
-    from baselines import POLICIES
-
     return [RULES, *sorted(POLICIES)]
 
 
@@ -460,8 +451,6 @@ def load_controller(source, *, seed: int | None = 0, **env_overrides):
         CheckpointError: the path is not a loadable checkpoint, or the overrides make an env
             the checkpoint cannot control (another control level or observation encoding).
     """
-    import proteo_env
-
     allowed = controller_names()
     what = (
         "allowed: a checkpoint folder (with proteo.json), a file in one or a run folder with final/, "
@@ -480,7 +469,6 @@ def load_controller(source, *, seed: int | None = 0, **env_overrides):
             f"controller {str(source)!r} is neither an existing checkpoint path nor '<policy>:<task>' "
             f"with a known policy; {what}"
         )
-    from baselines import make_policy
 
     try:
         env = proteo_env.make(task_id, **env_overrides)
@@ -492,8 +480,6 @@ def load_controller(source, *, seed: int | None = 0, **env_overrides):
 def program_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
     """The program policy of an evolved program's checkpoint (``program.yaml``; a program of
     another task than ``env``'s is a :class:`CheckpointError`)."""
-    from baselines import make_policy
-
     folder = Path(meta["dir"])
     try:
         policy = make_policy("program", env, program=str(_need(folder / "program.yaml", meta)), seed=seed)
@@ -666,8 +652,6 @@ def migrate(path) -> bool:
 
     Only for checkpoints that proteo's trainers wrote: it records what they built (tanh layers),
     which a checkpoint assembled by hand need not have."""
-    from proteo_env.adapters.flatten import ENCODING_VERSION
-
     folder = checkpoint_dir(path)
     file = folder / META_FILE
     try:

@@ -22,6 +22,7 @@ every task records its attempts with a small ledger actor, and the run reports t
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import multiprocessing
 import os
@@ -407,8 +408,6 @@ def project_fingerprint() -> str:
 
 def _probe(modules: tuple[str, ...]) -> dict:
     """Run on one node: which project modules import there, and the project's fingerprint."""
-    import importlib
-
     out = {"host": socket.gethostname(), "missing": {}}
     for name in modules:
         try:

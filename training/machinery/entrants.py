@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import io
+import json
 import math
 import sys
 import tempfile
@@ -46,11 +47,13 @@ from pathlib import Path
 
 import numpy as np
 
+import proteo_env
 from baselines.base import Policy
 from proteo_env.adapters.flatten import ENCODING_VERSION, MESSAGE_ENCODINGS, SCENT_SCALE, ObservationEncoder
 from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml
 from proteo_env.spaces import N_MOVES, OBSERVATION_FIELDS
-from training.machinery.checkpoints import sha256_of
+from training.machinery.checkpoints import maskable_ppo_logits, sha256_of
+from training.machinery.policies import LogitsPolicy
 
 ENTRANT_INTERFACE = 1
 """The version of the interface above and of ``entrant.yaml``'s format (its ``entrant:`` key)."""
@@ -110,10 +113,6 @@ _ENVS: dict = {}
 
 def _env(task: str, settings: dict, level: str):
     """A single env of these settings (cached per process): the static interface entrants are built from."""
-    import json
-
-    import proteo_env
-
     key = (task, json.dumps(settings, sort_keys=True), level)
     if key not in _ENVS:
         _ENVS[key] = proteo_env.make(task, **settings, **({} if level == "full" else {"control": level}))
@@ -306,8 +305,6 @@ def entrant_policy(source: str, env, *, seed: int, training_seed=None, settings:
 
 def saved_network_policy(entry: EntrantFile, file: Path, env, *, seed: int):
     """A :class:`~training.machinery.policies.LogitsPolicy` over the saved network ``file`` (``entry.format``)."""
-    from training.machinery.policies import LogitsPolicy
-
     encoder = ObservationEncoder.for_env(env, **entry.observation)
     nvec = [int(n) for n in env.control_nvec]
     logits_fn = checked_network(load_network(file, entry.format), file, encoder.size, sum(nvec))
@@ -367,8 +364,6 @@ def _onnx(file: Path):
 
 def _sb3(file: Path):
     from sb3_contrib import MaskablePPO
-
-    from training.machinery.checkpoints import maskable_ppo_logits
 
     return maskable_ppo_logits(MaskablePPO.load(str(file), device="cpu"))
 

@@ -46,9 +46,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from proteo_env import batched
+import proteo_env
+from baselines import POLICIES, make_policy
+from baselines.base import KernelPolicy
+from proteo_env import TASKS, batched
 from proteo_env.config import ConfigError
 from proteo_env.rollout import EpisodeResult
+from training.machinery.checkpoints import load_policy
+from training.machinery.distributed import run_jobs
+from training.machinery.entrants import EntrantPolicy, entrant_policy
+from training.machinery.policies import N_MOVES, LogitsPolicy, sample_actions
+from training.machinery.runs import limit_threads
 
 DEFAULT_BATCH = 64
 """Worlds stepped together in one process (``tests`` and ``benchmarks/research_loop.py``
@@ -100,16 +108,10 @@ class Controller:
     def build(self, env, seed: int, settings: dict | None = None):
         """This controller's policy for ``env`` (an env of the episode's task, ``settings`` and level), reset with ``seed``."""
         if self.entrant:
-            from training.machinery.entrants import entrant_policy
-
             policy = entrant_policy(self.policy, env, seed=seed, settings=settings, **dict(self.params))
         elif self.checkpoint:
-            from training.machinery.checkpoints import load_policy
-
             policy = load_policy(self.policy, env, seed=seed, deterministic=self.deterministic)
         else:
-            from baselines import make_policy
-
             policy = make_policy(self.policy, env, seed=seed, **dict(self.params))
         policy.reset(seed)
         return policy
@@ -117,8 +119,6 @@ class Controller:
     def fresh(self, env, key, seed: int):
         """:meth:`build`, from a policy built once per process and ``key`` (the env's settings) and
         copied: a program is parsed and a checkpoint read once, not once per episode."""
-        from training.machinery.policies import LogitsPolicy
-
         if (key, self) not in _BUILT:
             _BUILT[(key, self)] = self.build(env, 0, json.loads(key[1]))
         prototype = _BUILT[(key, self)]
@@ -166,8 +166,6 @@ def _template(task: str, overrides: str, level: str):
     """A single env of these settings (cached per process), for building policies and checking them."""
     key = (task, overrides, level)
     if key not in _CHECKED:
-        import proteo_env
-
         _CHECKED[key] = proteo_env.make(
             task, **json.loads(overrides), **({} if level == "full" else {"control": level})
         )
@@ -185,7 +183,6 @@ def check_episodes(episodes, *, workers=None, batch_size: int = DEFAULT_BATCH) -
             continue
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ConfigError(f"{name}={value!r} is not allowed; allowed: an integer >= 1")
-    from baselines.base import KernelPolicy
 
     built = set()
     for i, e in enumerate(episodes):
@@ -214,10 +211,6 @@ def batch_kind(policy) -> str:
     one call), ``network`` (a network without memory: one forward pass per network and cycle),
     ``entrant:<label>`` (an entrant's object, once a cycle over every world) or ``alone`` (its own
     ``act``, world by world). Policies of one kind share a batch."""
-    from baselines.base import KernelPolicy
-    from training.machinery.entrants import EntrantPolicy
-    from training.machinery.policies import LogitsPolicy
-
     if isinstance(policy, EntrantPolicy):
         return f"entrant:{policy.label}"
     if isinstance(policy, KernelPolicy):
@@ -284,8 +277,6 @@ class _Actors:
         """Each network's forward pass over the rows of the worlds it plays, then every world's
         actions drawn with its own generator (Gumbel-max, as :func:`~training.machinery.policies.sample_actions`
         draws them for one world)."""
-        from training.machinery.policies import N_MOVES, sample_actions
-
         a, first = self.n_agents, self.policies[0]
         features = first.encoder.encode_buffers(buffers)
         networks: dict = {}
@@ -311,9 +302,6 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     """Every episode of ``episodes`` (one task, settings and level; controllers of one :func:`batch_kind`) in one
     batched env of up to ``batch_size`` worlds: ``{"return", "success", "cycles", "metrics"}`` each
     (JSON-ready), in order."""
-    import proteo_env
-    from training.machinery.runs import limit_threads
-
     limit_threads(1)
     first = episodes[0]
     env = _template(first.task, first.overrides, first.level)
@@ -378,9 +366,6 @@ def plugin_modules() -> tuple[tuple[str, str], ...]:
     """``(module name, file)`` of every module outside the project that registered a task or a
     policy in this process (a behaviour of one's own, ``docs/guides/adding_a_behaviour.md``):
     a worker process imports them before it runs a batch, so that it knows them too."""
-    from baselines import POLICIES
-    from proteo_env import TASKS
-
     out = set()
     for cls in [*TASKS.values(), *POLICIES.values()]:
         module = sys.modules.get(cls.__module__)
@@ -450,8 +435,6 @@ def run_episodes(
             task, ``workers`` or ``batch_size`` < 1; a program that fails its checks raises its
             own error. All before any episode runs.
     """
-    from training.machinery.distributed import run_jobs
-
     episodes = list(episodes)
     check_episodes(episodes, workers=workers, batch_size=batch_size)
     workers = default_workers() if workers is None else int(workers)

@@ -10,6 +10,7 @@ docs/guides/adding_a_trainer.md walks through adding one.
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 
 
@@ -127,7 +128,5 @@ def trainer(name: str) -> Trainer:
 
 def loader(algorithm: str):
     """The function that loads a checkpoint of ``algorithm`` (a registered one)."""
-    import importlib
-
     module, _, function = ALGORITHMS[algorithm].loader.partition(":")
     return getattr(importlib.import_module(module), function)

@@ -49,8 +49,10 @@ where ``write(folder, agent_steps)`` writes the trainer's payload and calls :met
 from __future__ import annotations
 
 import argparse
+import ast
 import csv
 import dataclasses
+import inspect
 import os
 import pickle
 import random
@@ -60,11 +62,13 @@ import typing
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 import yaml
 
 from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
 from training.machinery.checkpoints import CheckpointError, read_meta, write_checkpoint_meta
+from training.machinery.distributed import Journal
 from training.machinery.registry import ALGORITHMS
 
 
@@ -72,9 +76,6 @@ from training.machinery.registry import ALGORITHMS
 def field_docs(args_cls) -> dict[str, str]:
     """The docstring written under each field of the dataclass ``args_cls`` (and its bases), by
     field name, whitespace folded: what ``--help`` says about each option."""
-    import ast
-    import inspect
-
     docs: dict[str, str] = {}
     for cls in reversed(args_cls.__mro__):
         if not dataclasses.is_dataclass(cls):
@@ -181,8 +182,6 @@ def limit_threads(n: int | None = 1) -> None:
     """Use at most ``n`` threads in numba's parallel kernels and in torch (``None``: leave them)."""
     if not n:
         return
-    import numba
-
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
     try:
         import torch
@@ -522,8 +521,6 @@ class GenerationalRun:
     """
 
     def __init__(self, args, *, algorithm: str, name: str, what: str, counter: str, independent: tuple = ()):
-        from training.machinery.distributed import Journal
-
         self.args, self.algorithm, self.counter = args, algorithm, counter
         script = f"proteo train {ALGORITHMS[algorithm].name}"
         resume_meta = read_resume(args.resume, algorithm, script)

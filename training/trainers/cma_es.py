@@ -32,6 +32,7 @@ episodes, logs and time limit are :class:`training.machinery.runs.GenerationalRu
 
 from __future__ import annotations
 
+import hashlib
 import inspect
 import json
 from dataclasses import dataclass, field
@@ -39,10 +40,17 @@ from pathlib import Path
 
 import numpy as np
 
+import proteo_env
+from baselines import POLICIES, make_policy
 from baselines.base import constructor_parameters
+from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
 from training.machinery.checkpoints import mlp_meta
-from training.machinery.runs import GenerationalArgs, GenerationalRun, parse_args, seed_everything
+from training.machinery.distributed import ray_options, run_jobs
+from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
+from training.machinery.policies import LogitsPolicy, NumpyMLP
+from training.machinery.runs import GenerationalArgs, GenerationalRun, limit_threads, parse_args, seed_everything
 
 
 @dataclass(frozen=True)
@@ -111,8 +119,6 @@ def rule_params(policy_cls, args: Args, defaults: dict | None = None) -> list[Pa
     ``defaults`` maps parameter names to the values the policy uses in the environment at
     hand (they replace the constructor's defaults as start point and range centre).
     """
-    from proteo_env.config import ConfigError
-
     skip = {"self", "action_layout", "modes", "scent_max", "seed", *args.fixed}
     candidates = {
         name: p
@@ -200,8 +206,6 @@ class CandidateEpisode:
     @property
     def key(self) -> str:
         """The journal key: a hash of the candidate and the seed (generation-independent)."""
-        import hashlib
-
         return f"{hashlib.sha256(np.asarray(self.genome, dtype=np.float64).tobytes()).hexdigest()[:16]}|{self.seed}"
 
 
@@ -211,10 +215,6 @@ _ENVS: dict = {}
 
 def _env(task: str, overrides: str):
     if (task, overrides) not in _ENVS:
-        import proteo_env
-        from proteo_env.adapters.flatten import ObservationEncoder
-        from training.machinery.runs import limit_threads
-
         limit_threads(1)
         env = proteo_env.make(task, **json.loads(overrides))
         _ENVS[(task, overrides)] = (env, ObservationEncoder.for_env(env))
@@ -224,7 +224,6 @@ def _env(task: str, overrides: str):
 def build_policy(job: CandidateEpisode):
     """The neural candidate's policy in this process's environment."""
     env, encoder = _env(job.task, job.env)
-    from training.machinery.policies import LogitsPolicy, NumpyMLP
 
     nvec = env.action_layout.nvec
     net = NumpyMLP(encoder.size, int(nvec.sum()), job.hidden).set_flat(np.asarray(job.genome))
@@ -250,9 +249,6 @@ def rules_episodes(args, policy_name: str, env, decoded: list[dict], seeds: list
     """``[return, success, cycles]`` of every candidate's episode on every seed (candidate-major),
     ``None`` for a candidate whose parameters the policy rejects: the accepted candidates' episodes
     in batches of worlds on every core (:mod:`training.machinery.evaluator`)."""
-    from baselines import make_policy
-    from training.machinery.evaluator import Controller, Episode, run_episodes, settings_json
-
     accepted = []
     for params in decoded:
         try:
@@ -303,8 +299,6 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    from proteo_env.config import ConfigError
-    from training.machinery.distributed import ray_options, run_jobs
 
     if args.controller not in ("rules", "neural"):
         raise ConfigError(f"controller={args.controller!r} is not allowed; allowed: rules, neural")
@@ -312,11 +306,6 @@ def main(argv=None) -> Path:
     seed_everything(args.seed, threads=args.threads)
 
     import cma
-
-    import proteo_env
-    from baselines import POLICIES, make_policy
-    from proteo_env.adapters.flatten import ObservationEncoder
-    from training.machinery.policies import NumpyMLP
 
     env = proteo_env.make(args.task, **args.env)
     encoder = ObservationEncoder.for_env(env)

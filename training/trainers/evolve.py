@@ -50,7 +50,12 @@ from pathlib import Path
 
 import numpy as np
 
+import proteo_env
+from baselines.program import format_program, load_program
+from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
+from training.machinery.distributed import ray_options
+from training.machinery.evaluator import Controller, Episode, run_episodes
 from training.machinery.runs import (
     GenerationalArgs,
     GenerationalRun,
@@ -59,6 +64,7 @@ from training.machinery.runs import (
     parse_args,
     seed_everything,
 )
+from training.trainers.program_variation import ProgramSpace, complexity, crossover, mutate, random_program
 
 ALGORITHM = "program-evolution"
 """The ``algorithm`` of an evolved program's checkpoint."""
@@ -114,8 +120,6 @@ comes after the generations)."""
 def program_episodes(task: str, variations: list[str], programs: list[str], seeds: list[int]) -> list:
     """The :class:`~training.machinery.evaluator.Episode` of every program (text) on every world: program-major,
     then variation (its overrides as JSON), then seed."""
-    from training.machinery.evaluator import Controller, Episode
-
     return [
         Episode(task, overrides, "full", Controller.program(text), seed)
         for text in programs
@@ -174,9 +178,6 @@ def generation_seeds(world_stream: np.random.SeedSequence, generation: int, n: i
 # ---------------------------------------------------------------------- checking the arguments
 def check_args(args: Args) -> list[str]:
     """The env overrides of every variation as JSON, after checking the arguments (``ConfigError``)."""
-    import proteo_env
-    from proteo_env.config import ConfigError
-
     check_integers(
         args,
         {
@@ -218,7 +219,6 @@ def check_args(args: Args) -> list[str]:
 # ---------------------------------------------------------------------- the algorithm
 def breed(population: list, space, rng: np.random.Generator, args: Args) -> list:
     """``args.offspring`` children of ``population`` (programs, best first)."""
-    from training.trainers.program_variation import crossover, mutate
 
     def tournament():
         return population[int(rng.integers(len(population), size=args.tournament).min())]
@@ -236,16 +236,10 @@ def breed(population: list, space, rng: np.random.Generator, args: Args) -> list
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    from training.machinery.distributed import ray_options
-    from training.machinery.evaluator import run_episodes
 
     variations = check_args(args)
     ray = ray_options(args)
     seed_everything(args.seed, threads=args.threads)
-
-    import proteo_env
-    from baselines.program import format_program, load_program
-    from training.trainers.program_variation import ProgramSpace, complexity, mutate, random_program
 
     env = proteo_env.make(args.task, **args.env)
     limits = {"max_rules": args.max_rules, "max_conditions": args.max_conditions, "max_actions": args.max_actions}

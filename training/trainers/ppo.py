@@ -70,6 +70,7 @@ from training.machinery.runs import (
     torch_device,
     trainer_state,
 )
+from training.trainers.curriculum import Curriculum
 from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers
 
 ALGORITHM = "ppo"
@@ -330,8 +331,6 @@ def train(args: Args) -> Path:
     agent_steps = int(resume["agent_steps"]) if resume else 0
     curriculum = None
     if args.curriculum:
-        from training.trainers.curriculum import Curriculum
-
         curriculum = Curriculum(
             args.curriculum,
             lambda stage: proteo_env.make_batched(args.task, 1, control=args.control, **{**args.env, **stage}),

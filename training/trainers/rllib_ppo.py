@@ -32,11 +32,18 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
+import proteo_env
+from proteo_env.adapters.flatten import ObservationEncoder
+from proteo_env.config import ConfigError
 from proteo_env.registry import task_name
+from proteo_env.spaces import N_MOVES
 from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.distributed import connect
+from training.machinery.policies import torch_mlp
 from training.machinery.runs import (
     ProgressLog,
     RunArgs,
@@ -85,12 +92,7 @@ class Args(RunArgs):
 
 def _rllib_env_class():
     """:class:`ProteoMultiAgentEnv`, defined when RLlib is imported (it subclasses RLlib's MultiAgentEnv)."""
-    import gymnasium as gym
     from ray.rllib.env.multi_agent_env import MultiAgentEnv
-
-    import proteo_env
-    from proteo_env.adapters.flatten import ObservationEncoder
-    from proteo_env.spaces import N_MOVES
 
     class ProteoMultiAgentEnv(MultiAgentEnv):
         """One proteo episode at control level ``move`` as an RLlib multi-agent env.
@@ -154,8 +156,6 @@ def _masked_module_class():
     from ray.rllib.core.rl_module.apis.value_function_api import ValueFunctionAPI
     from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 
-    from training.machinery.policies import torch_mlp
-
     class MaskedPPOModule(TorchRLModule, ValueFunctionAPI):
         """Policy MLP ``(B, D) -> (B, 13)`` logits, illegal moves masked; value MLP ``(B, D) -> (B,)``.
 
@@ -218,9 +218,6 @@ def save_checkpoint(
     also RLlib's own checkpoint into ``folder/rllib``."""
     import torch
 
-    import proteo_env
-    from proteo_env.adapters.flatten import ObservationEncoder
-
     env = proteo_env.make(args.task, **{**args.env, "control": "move"})
     module = algo.get_module(SHARED)
     folder.mkdir(parents=True, exist_ok=True)
@@ -250,8 +247,6 @@ def save_checkpoint(
 
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
-    from proteo_env.config import ConfigError
-    from training.machinery.distributed import connect
 
     if args.control != "move":
         raise ConfigError(f"control={args.control!r} is not allowed; allowed: move")

@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from proteo_env.control import check_level
 from proteo_env.registry import task_name
-from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.checkpoints import mlp_meta, read_meta, write_checkpoint_meta
 from training.machinery.runs import (
     PPOArgs,
     ProgressLog,
@@ -66,7 +66,6 @@ def main(argv=None) -> Path:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from proteo_env.adapters.sb3 import ProteoVecEnv
-    from training.machinery.checkpoints import read_meta
 
     resume_meta = read_meta(args.resume) if args.resume else None
     run_dir = make_run_dir(

@@ -76,6 +76,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from proteo_env.config import CONTROL_LEVELS, ConfigError
+from training.judging.plots import plot_runs
+from training.judging.protocol import load_protocol
 from training.machinery import registry
 from training.machinery.checkpoints import keep_checkpoint
 from training.machinery.runs import check_integers, check_numbers, parse_args
@@ -174,8 +176,6 @@ class StudyPlan:
         self.args = args
         self.protocol = None
         if args.benchmark is not None:
-            from training.judging.protocol import load_protocol
-
             self.protocol = load_protocol(args.benchmark)
 
     def recipe(self, recipe: str, task: str) -> Recipe:
@@ -339,8 +339,6 @@ def main(argv=None) -> int:
                 }
             )
             _record(docs / f"study_{level}.json", summary[-1])
-
-    from training.judging.plots import plot_runs
 
     for recipe in args.recipes:
         for task in args.tasks:

@@ -27,6 +27,8 @@ from baselines import POLICIES
 from baselines.autopilot import hand_coded_rules
 from baselines.base import PolicyBatch
 from proteo_env.config import ConfigError
+from proteo_env.env import ProteoEnv
+from training.machinery.checkpoints import load_policy
 
 DEFAULT_TEACHER = "rules"
 
@@ -75,9 +77,6 @@ class Teachers:
         self.checkpoint = None
         """The learned teacher (a :class:`~training.machinery.policies.LogitsPolicy`), when ``name`` is a checkpoint."""
         if is_checkpoint(name):
-            from proteo_env.env import ProteoEnv
-            from training.machinery.checkpoints import load_policy
-
             task = env.tasks[0]
             self.checkpoint = load_policy(name, ProteoEnv(type(task)(task.params), env.config), seed=seed)
             self.policies = []

@@ -26,9 +26,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from proteo_env.config import ConfigError
 from proteo_env.control import check_level
 from proteo_env.registry import task_name
-from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
+from training.machinery.checkpoints import mlp_meta, read_meta, write_checkpoint_meta
+from training.machinery.policies import torch_mlp
 from training.machinery.runs import (
     PPOArgs,
     ProgressLog,
@@ -98,8 +100,6 @@ def make_distribution_class(nvec):
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
     if args.variant not in ("ippo", "mappo"):
-        from proteo_env.config import ConfigError
-
         raise ConfigError(f"variant={args.variant!r} is not allowed; allowed: ippo, mappo")
     check_level(args.control)
     seed_everything(args.seed, threads=args.threads)
@@ -113,8 +113,6 @@ def main(argv=None) -> Path:
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
     from proteo_env.adapters.torchrl import ProteoTorchRLEnv
-    from training.machinery.checkpoints import read_meta
-    from training.machinery.policies import torch_mlp
 
     # ------------------------------------------------------------------ environment
     resume_meta = read_meta(args.resume) if args.resume else None

@@ -18,6 +18,8 @@ from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError, world_seeds
 from proteo_env.spaces import ObservationBuffers
 from training.machinery.policies import check_memory, with_memory
+from training.machinery.runs import limit_threads
+from training.trainers.teachers import Teachers, is_checkpoint
 
 JOIN_FROM = ("SLEEP", "SEARCH")
 """The modes of a module not yet in the structure, by default (module credit, :class:`TrainingEnvs`)."""
@@ -133,8 +135,6 @@ class TrainingEnvs:
 
     def make_teachers(self, name: str, seed: int, n_fields: int, first_world: int = 0):
         """The teachers of these worlds (:class:`training.trainers.teachers.Teachers`, arguments as there)."""
-        from training.trainers.teachers import Teachers
-
         return Teachers(self.batch, self.n_envs, name, seed=seed, n_fields=n_fields, first_world=first_world)
 
     def teacher_labels(self, teachers) -> np.ndarray:
@@ -214,8 +214,6 @@ def check_workers(workers: int, n_envs: int, *, teacher: str | None = None, curr
     """Refuse ``workers`` (of :class:`WorkerEnvs`) other than an integer from 1 to ``n_envs``, or above 1 with a checkpoint as
     the ``teacher`` (its draws span every world; ``None``: no teacher) or with a ``curriculum``
     (it rebuilds the worlds in the trainer's process): one :class:`ConfigError` naming both."""
-    from training.trainers.teachers import is_checkpoint
-
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= n_envs:
         raise ConfigError(f"workers={workers!r} is not allowed with n_envs={n_envs}; allowed: 1 to n_envs")
     learned = teacher if teacher is not None and is_checkpoint(teacher) else None
@@ -451,8 +449,6 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
     """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``; on each
     command ``("step", None)``, ``("teachers", (name, seed, n_fields))`` or ``("label", restart)``
     it answers ``("ok", ...)`` or ``("error", ...)``, until ``("close", None)``."""
-    from training.machinery.runs import limit_threads
-
     limit_threads(1)
     memory = None
     try:
