@@ -13,8 +13,9 @@ Beside them: the command line (:mod:`training.cli`), playback (``proteo demo``/`
 way: trainers -> judging -> machinery (``tests/test_layers.py``), and stand at the top of each module
 but those of the optional or heavy packages listed in that test's ``LAZY_PACKAGES`` (torch, Ray,
 SB3, TorchRL, ONNX Runtime, BenchMARL, matplotlib, ...) and of our modules that load them, imported
-where used so that ``proteo --help`` and the judge of the rules start without them. Checkpoints load by path as ordinary policies with
-:func:`training.machinery.checkpoints.load_policy`; :func:`load_controller` gives the environment
+where used so that ``proteo --help`` and the judge of the rules start without them.
+
+Checkpoints load by path as ordinary policies with :func:`training.machinery.checkpoints.load_policy`; :func:`load_controller` gives the environment
 and the policy of a checkpoint (or of the rules or the random policy of a task,
 ``"rules:chain-v1"``) in one call. Needs the ``train`` extra (``pip install -e ".[train]"``).
 """

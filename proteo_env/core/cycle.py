@@ -15,6 +15,7 @@ from .jit import kernel
 from .lattice import EMPTY, OBJECT, SOLID, WALL
 from .motion import LOCAL_ADJACENCY_BITS
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
+from .structure import BARRED, UNREACHED, breadth_first
 
 SILENT, RELAY, EMIT = 0, 1, 2
 KIND_EMPTY, KIND_MODULE, KIND_SOLID, KIND_OBJECT = 0, 1, 2, 3
@@ -480,32 +481,26 @@ def relax_scent(grid, cell, n_modules, role, surface, values, buffer, sweeps, sc
 
 
 @kernel
-def exact_scent(grid, cell, n_modules, role, surface, values, queue, scent_max, dir_delta):
-    """True hop distances from the emitters through relaying modules (multi-source BFS)."""
+def exact_scent(grid, cell, n_modules, role, surface, values, reach, queue, scent_max, dir_delta):
+    """True hop distances from the emitters through relaying modules (multi-source
+    :func:`~.structure.breadth_first`; ``reach`` and ``queue`` (N,) scratch)."""
     tail = 0
     for n in range(n_modules):
+        values[n] = scent_max
         if role[n] == EMIT:
             values[n] = 0
+            reach[n] = -1
             queue[tail] = n
             tail += 1
+        elif role[n] == RELAY and not (surface and not _has_empty_neighbour(grid, cell[n], dir_delta)):
+            reach[n] = UNREACHED
         else:
-            values[n] = scent_max
-    head = 0
-    while head < tail:
-        n = queue[head]
-        head += 1
-        if values[n] + 1 >= scent_max:
-            continue
-        cn = cell[n]
-        for k in range(12):
-            nb = grid[cn + dir_delta[k]]
-            if nb < 0 or role[nb] != RELAY or values[nb] != scent_max:
-                continue
-            if surface and not _has_empty_neighbour(grid, cell[nb], dir_delta):
-                continue
-            values[nb] = values[n] + 1
-            queue[tail] = nb
-            tail += 1
+            reach[n] = BARRED
+    sources = tail
+    tail = breadth_first(grid, cell, dir_delta, reach, queue, tail, scent_max - 1)
+    for i in range(sources, tail):  # parents before children
+        n = queue[i]
+        values[n] = values[reach[n]] + 1
 
 
 # ---------------------------------------------------------------- observations
@@ -632,6 +627,7 @@ def run_cycle(state, settings, geometry, actions, moved, scratch):
                 channel_role,
                 surface,
                 scent[ch],
+                scratch.scent_buffer,
                 scratch.queue,
                 settings.scent_max,
                 geometry.dir_delta,

@@ -13,6 +13,10 @@ import numba
 kernel = numba.njit(cache=True, nogil=True, boundscheck=False)
 """Decorator for the compute kernels: nopython, cached, GIL released."""
 
+inline_kernel = numba.njit(cache=True, nogil=True, boundscheck=False, inline="always")
+"""Decorator for a small kernel that other kernels share, compiled into each of them rather than
+called (a call in a hot loop costs as much as the work it does)."""
+
 generated_kernel = numba.njit(nogil=True, boundscheck=False)
 """Decorator for kernels made at run time that close over other kernels (the compiled rollout's
 loop, one per behaviour): compiled once per process, since numba caches no closure on disk."""

@@ -115,7 +115,7 @@ class Scratch(NamedTuple):
         search: ``(13,)`` int64 the connectivity search's epoch and stack tops.
         adjacency: ``(N, 13)`` int32 neighbour lists of the cut-module search.
         disc, low, stack_node, stack_k: ``(N,)`` int32 the cut-module search's arrays.
-        scent_buffer: ``(N,)`` int32 the previous relaxation sweep.
+        scent_buffer: ``(N,)`` int32 the previous relaxation sweep (the exact scent's ``reach``).
         is_cut: ``(N,)`` bool, modules whose removal disconnects the others.
     """
 

@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .jit import kernel
+from .jit import inline_kernel, kernel
 
 
 @kernel
@@ -20,32 +20,54 @@ def module_degrees(grid, cell, n_modules, dir_delta, degree):
         degree[n] = d
 
 
+UNREACHED, BARRED = -2, -3
+""":func:`breadth_first`'s ``reach`` values of a module it has not reached yet and of one it may not enter."""
+
+
+@inline_kernel
+def breadth_first(grid, cell, dir_delta, reach, queue, tail, max_hops):
+    """The breadth-first search of the core: from the modules ``queue[:tail]`` through face
+    neighbours, in the order of ``dir_delta``, into modules whose ``reach`` is :data:`UNREACHED`.
+
+    ``reach`` (N,) int: set by the caller to -1 for the sources, :data:`UNREACHED` for a module
+    the search may enter and :data:`BARRED` for one it may not; the search sets each module it
+    reaches to the module it was reached from. A module ``max_hops`` hops from the nearest
+    source is not expanded. Returns the number of modules in ``queue`` (sources included), in
+    the order reached: parents before children, nearer before farther.
+    """
+    head, hops = 0, 0
+    while head < tail and hops < max_hops:
+        level_end = tail  # the modules ``hops`` hops away are queue[head:level_end]
+        while head < level_end:
+            n = queue[head]
+            head += 1
+            c = cell[n]
+            for k in range(12):
+                nb = grid[c + dir_delta[k]]
+                if nb >= 0 and reach[nb] == UNREACHED:
+                    reach[nb] = n
+                    queue[tail] = nb
+                    tail += 1
+        hops += 1
+    return tail
+
+
 @kernel
 def largest_thin_piece(grid, cell, n_modules, dir_delta, degree, mark, queue):
     """Size of the largest connected piece made only of modules with at most 2 neighbours.
 
     Such a piece is a one-module-thick chain (or ring). ``degree`` from :func:`module_degrees`;
-    ``mark`` and ``queue`` are (N,) scratch.
+    ``mark`` and ``queue`` are (N,) scratch (``mark``: :func:`breadth_first`'s ``reach``).
     """
     for n in range(n_modules):
-        mark[n] = 0
+        mark[n] = UNREACHED if degree[n] <= 2 else BARRED
     best = 0
     for root in range(n_modules):
-        if mark[root] or degree[root] > 2:
+        if mark[root] != UNREACHED:
             continue
-        mark[root] = 1
+        mark[root] = -1
         queue[0] = root
-        head, tail = 0, 1
-        while head < tail:
-            n = queue[head]
-            head += 1
-            for k in range(12):
-                nb = grid[cell[n] + dir_delta[k]]
-                if nb >= 0 and not mark[nb] and degree[nb] <= 2:
-                    mark[nb] = 1
-                    queue[tail] = nb
-                    tail += 1
-        best = max(best, tail)
+        best = max(best, breadth_first(grid, cell, dir_delta, mark, queue, 1, n_modules))
     return best
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
+from ..core.structure import BARRED, UNREACHED, breadth_first
 from ..core.world import check_module_memory
 from ..layouts import Layout, blob_sites, place_in_box
 from .base import Task, TaskKernels, no_sensor
@@ -60,12 +61,13 @@ def measure_tree(
     any_d,
     level,
 ):
-    """Breadth-first search of the grown piece from ``root`` and its branching levels (O(N)).
+    """The grown piece reached from ``root`` (:func:`~proteo_env.core.structure.breadth_first`)
+    and its branching levels (O(N)).
 
     A module is grown when its mode is SEED, FINAL, NODE or INODE. Scratch (N,) arrays are
     filled for grown modules reached from the root: ``degree`` (neighbours in the piece),
-    ``parent`` (-2 when not reached, -1 for the root), ``arm`` (modules from here down the
-    branch to the next branching point or leaf, both included), ``longc`` (child arms of at
+    ``parent`` (the module it was reached from, -1 for the root, below -1 when not reached),
+    ``arm`` (modules from here down the branch to the next branching point or leaf, both included), ``longc`` (child arms of at
     least ``min_gap`` modules), ``real_up``/``real_d`` (nearest *real* branching point above
     and its distance), ``any_d`` (distance to the nearest branching point above, 0 if none),
     ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
@@ -74,31 +76,23 @@ def measure_tree(
     for the definitions.
     """
     for n in range(n_modules):
-        parent[n] = -2
+        m = mode[n]
+        parent[n] = UNREACHED if (m == 2 or m == 3 or m == 4 or m == 5) else BARRED
         degree[n] = 0
         arm[n] = 0
         longc[n] = 0
         level[n] = 0
-    m = mode[root]
-    if not (m == 2 or m == 3 or m == 4 or m == 5):
+    if parent[root] == BARRED:
         return 0, 0, 0, 0, 0, 0, 0, 0, 0
     parent[root] = -1
     queue[0] = root
-    head, tail = 0, 1
-    while head < tail:
-        n = queue[head]
-        head += 1
+    size = breadth_first(grid, cell, dir_delta, parent, queue, 1, n_modules)
+    for i in range(size):  # neighbours in the piece: every grown neighbour of a reached module is reached
+        n = queue[i]
         for k in range(12):
             nb = grid[cell[n] + dir_delta[k]]
-            if nb >= 0:
-                mb = mode[nb]
-                if mb == 2 or mb == 3 or mb == 4 or mb == 5:
-                    degree[n] += 1
-                    if parent[nb] == -2:
-                        parent[nb] = n
-                        queue[tail] = nb
-                        tail += 1
-    size = tail
+            if nb >= 0 and parent[nb] >= -1:
+                degree[n] += 1
     # children before parents: arm lengths and long child arms
     for i in range(size - 1, -1, -1):
         n = queue[i]
