@@ -72,6 +72,13 @@ def plot_runs(
         ax.set_title(panel_title)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    _save(fig, out, title)
+
+
+def _save(fig, out, title: str | None) -> None:
+    """Title ``fig``, write it to ``out`` (its folder made) and close it."""
+    import matplotlib.pyplot as plt
+
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -116,12 +123,7 @@ def plot_evolution(recipes: dict[str, list[str]], out, *, title: str | None = No
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("fitness (mean episode score - complexity penalty)")
     axes[0].legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    _save(fig, out, title)
 
 
 def main(argv=None) -> int:

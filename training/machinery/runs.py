@@ -395,6 +395,16 @@ def load_trainer_state(meta: dict, net, optimiser, *, learning_rate: float, devi
     return state
 
 
+def finish_run(run_dir: Path, save, log: ProgressLog, agent_steps: int) -> Path:
+    """End a run: its final checkpoint written by ``save(folder)`` to ``RUN/final``, its progress log
+    closed, and where the checkpoint is said; returns ``RUN/final``."""
+    final = run_dir / "final"
+    save(final)
+    log.close()
+    print(f"final checkpoint: {final}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
+    return final
+
+
 def checkpoint_folder(run_dir: Path, agent_steps: int) -> Path:
     return run_dir / "checkpoints" / f"step_{agent_steps:010d}"
 

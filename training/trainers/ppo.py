@@ -60,6 +60,7 @@ from training.machinery.runs import (
     check_numbers,
     checkpoint_folder,
     episode_stats,
+    finish_run,
     load_trainer_state,
     make_run_dir,
     parse_args,
@@ -432,10 +433,7 @@ def train(args: Args) -> Path:
             save(checkpoint_folder(run_dir, agent_steps))
     bar.close()
     worlds.close()
-    save(run_dir / "final")
-    log.close()
-    print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
-    return run_dir / "final"
+    return finish_run(run_dir, save, log, agent_steps)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ from training.machinery.runs import (
     ProgressLog,
     checkpoint_folder,
     episode_stats,
+    finish_run,
     make_run_dir,
     parse_args,
     save_args,
@@ -184,11 +185,9 @@ def main(argv=None) -> Path:
         reset_num_timesteps=resume_meta is None,
         tb_log_name="sb3_ppo",
     )
-    save(run_dir / "final")
-    log.close()
+    final = finish_run(run_dir, save, log, model.num_timesteps)
     venv.close()
-    print(f"final checkpoint: {run_dir / 'final'}  ({model.num_timesteps} agent-steps, {log.seconds:.0f} s)")
-    return run_dir / "final"
+    return final
 
 
 if __name__ == "__main__":

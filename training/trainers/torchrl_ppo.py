@@ -36,6 +36,7 @@ from training.machinery.runs import (
     ProgressLog,
     checkpoint_folder,
     episode_stats,
+    finish_run,
     make_run_dir,
     parse_args,
     save_args,
@@ -294,10 +295,7 @@ def main(argv=None) -> Path:
         env_seconds = env.step_seconds
     bar.close()
     collector.shutdown()
-    save(run_dir / "final")
-    log.close()
-    print(f"final checkpoint: {run_dir / 'final'}  ({agent_steps} agent-steps, {log.seconds:.0f} s)")
-    return run_dir / "final"
+    return finish_run(run_dir, save, log, agent_steps)
 
 
 if __name__ == "__main__":
