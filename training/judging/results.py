@@ -436,17 +436,69 @@ def entrant_lines(entrants: list[Result], rows: list[Result], protocol) -> list[
 def render(rows: list[Result], headers: list[dict], version: str, root: Path, out: Path, protocol) -> str:
     """The page's markdown (figures written beside ``out``); ``protocol`` a
     :class:`training.judging.protocol.Protocol`. Entrants (:attr:`Result.entered`) have a section
-    of their own; every other section is the recipes' and references'."""
+    of their own; every other section is the recipes' and references'. In order: the header,
+    the short answer and the comparisons with the rules (:func:`short_answer`), the seeds nobody
+    trained on, a section per task (:func:`task_section`), the aggregates
+    (:func:`aggregate_section`), the entrants and the commits that judged."""
     entrants = [r for r in rows if r.entered]
     everything, rows = rows, [r for r in rows if not r.entered]
     figures = out.parent / "results"
     figures.mkdir(parents=True, exist_ok=True)
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
     by_key = {(r.task, r.split, r.policy): r for r in rows}
-    agg = aggregate(rows, protocol.per_training_seed)
+    usable = {k: v for k, v in aggregate(rows, protocol.per_training_seed).items() if "error" not in v}
+    answer, details = short_answer(rows, tasks, by_key, usable, protocol)
+    commits = sorted({h.get("commit") or "unknown" for h in headers})
+    lines = [
+        *header_lines(version, out, protocol),
+        "## The short answer",
+        "",
+        *(answer or ["- No learned or evolved recipe has been judged under this protocol yet."]),
+        "",
+        "Each recipe is compared with the rules at its own control level (`rules-move` for `move`, the rules "
+        "at `full` otherwise) on the same worlds: the difference in success rate (recipe minus rules) with the "
+        "95 % interval of a bootstrap that draws training seeds and worlds jointly; a difference is stated "
+        "where that interval excludes 0, and cycles are compared on the worlds where both succeeded.",
+        "",
+        *(["## Against the rules, task by task", "", *details, ""] if details else []),
+        *new_seed_lines(rows, tasks),
+    ]
+    for task in tasks:
+        lines += task_section(task, rows, by_key, protocol, root, figures)
+    if usable:
+        lines += aggregate_section(usable, tasks, figures)
+    lines += entrant_lines(entrants, everything, protocol)
+    lines += [f"Judged by commit(s): {', '.join(c[:10] for c in commits)}.", ""]
+    return "\n".join(lines)
 
+
+def header_lines(version: str, out: Path, protocol) -> list[str]:
+    """The page's title and what it holds: the protocol's files, its worlds, how to regenerate it."""
+
+    def link(path: str) -> str:  # a link from the page to ``path`` (relative to the repository's root)
+        return Path(os.path.relpath(Path(path).resolve(), out.resolve().parent)).as_posix()
+
+    files = " extended by ".join(
+        f"[configs/benchmark/{v}.yaml]({link(f'configs/benchmark/{v}.yaml')})" for v, _ in protocol.lineage
+    )
+    return [
+        "# Results",
+        "",
+        f"Every controller judged under benchmark protocol **{version}** ({files}, "
+        f"[the guide]({link('docs/guides/benchmark.md')})): the rules and random on "
+        f"{protocol.reference} worlds per split, a learned or evolved recipe on {protocol.per_training_seed} worlds per "
+        f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
+        f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
+        f"Regenerate: `python -m training.judging.results --benchmark {version} --out {out.as_posix()}`"
+        + (" (`make results`)." if out == Path(DEFAULT_OUT) else "."),
+        "",
+    ]
+
+
+def short_answer(rows, tasks, by_key, usable, protocol) -> tuple[list[str], list[str]]:
+    """``(answer, details)``: a line per recipe (its IQM per task) and the held-out verdict over all
+    of them; a line per task and recipe comparing it with the rules at its level on the same worlds."""
     answer, details, above, below = [], [], [], []
-    usable = {k: v for k, v in agg.items() if "error" not in v}
     for recipe in sorted({recipe for recipe, _ in usable}):
         per_task = [(task, usable[(recipe, task)]) for task in tasks if (recipe, task) in usable]
         seeds = min(entry["training_seeds"] for _, entry in per_task)
@@ -482,99 +534,76 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
             + (" (matching them within the protocol's margin where said)" if protocol.equivalence_margin else "")
             + " (each with its interval below)."
         )
-    commits = sorted({h.get("commit") or "unknown" for h in headers})
+    return answer, details
 
-    def link(path: str) -> str:  # a link from the page to ``path`` (relative to the repository's root)
-        return Path(os.path.relpath(Path(path).resolve(), out.resolve().parent)).as_posix()
 
-    files = " extended by ".join(
-        f"[configs/benchmark/{v}.yaml]({link(f'configs/benchmark/{v}.yaml')})" for v, _ in protocol.lineage
-    )
-    lines = [
-        "# Results",
+def task_section(task: str, rows, by_key, protocol, root: Path, figures: Path) -> list[str]:
+    """A task's table (policies x splits), what each split is, and its learning curves (the figure
+    written into ``figures``)."""
+    about = {split.name: split.about for split in protocol.tasks[task].splits}
+    splits = [s for s in about if any(r.task == task and r.split == s for r in rows)]
+    policies = _policy_order({r.policy for r in rows if r.task == task})
+    lines = [f"## {task} ({protocol.tasks[task].task_id})", ""]
+    lines += ["| policy | " + " | ".join(splits) + " |", "|---|" + "---|" * len(splits)]
+    for policy in policies:
+        some = next(r for r in rows if r.task == task and r.policy == policy)
+        seeds = f", {len(some.runs)} seeds" if some.kind in ("learned", "evolved") else ""
+        cells = [cell(by_key[(task, s, policy)]) if (task, s, policy) in by_key else "-" for s in splits]
+        lines.append(f"| {policy} ({some.level}{seeds}) | " + " | ".join(cells) + " |")
+    lines += [
         "",
-        f"Every controller judged under benchmark protocol **{version}** ({files}, "
-        f"[the guide]({link('docs/guides/benchmark.md')})): the rules and random on "
-        f"{protocol.reference} worlds per split, a learned or evolved recipe on {protocol.per_training_seed} worlds per "
-        f"split for each of its independent training seeds (the protocol asks for {protocol.training_seeds}); "
-        f"every policy on the same world seeds from {protocol.first_seed}. Intervals are 95 %. "
-        f"Regenerate: `python -m training.judging.results --benchmark {version} --out {out.as_posix()}`"
-        + (" (`make results`)." if out == Path(DEFAULT_OUT) else "."),
+        "Each cell: successes / worlds (95 % interval of the success rate), mean cycles to success (its interval).",
         "",
-        "## The short answer",
-        "",
-        *(answer or ["- No learned or evolved recipe has been judged under this protocol yet."]),
-        "",
-        "Each recipe is compared with the rules at its own control level (`rules-move` for `move`, the rules "
-        "at `full` otherwise) on the same worlds: the difference in success rate (recipe minus rules) with the "
-        "95 % interval of a bootstrap that draws training seeds and worlds jointly; a difference is stated "
-        "where that interval excludes 0, and cycles are compared on the worlds where both succeeded.",
-        "",
-        *(["## Against the rules, task by task", "", *details, ""] if details else []),
-        *new_seed_lines(rows, tasks),
     ]
-    for task in tasks:
-        about = {split.name: split.about for split in protocol.tasks[task].splits}
-        splits = [s for s in about if any(r.task == task and r.split == s for r in rows)]
-        policies = _policy_order({r.policy for r in rows if r.task == task})
-        lines += [f"## {task} ({protocol.tasks[task].task_id})", ""]
-        lines += ["| policy | " + " | ".join(splits) + " |", "|---|" + "---|" * len(splits)]
-        for policy in policies:
-            some = next(r for r in rows if r.task == task and r.policy == policy)
-            seeds = f", {len(some.runs)} seeds" if some.kind in ("learned", "evolved") else ""
-            cells = [cell(by_key[(task, s, policy)]) if (task, s, policy) in by_key else "-" for s in splits]
-            lines.append(f"| {policy} ({some.level}{seeds}) | " + " | ".join(cells) + " |")
+    lines += [f"- `{s}`: {about[s]}" for s in splits]
+    lines.append("")
+    found = {}
+    for earlier, _ in protocol.lineage:
+        found.update(curves(root / earlier / "learning" / "progress", task))
+    if found:
+        picture = figures / f"curves_{task}.png"
+        _curve_figure(task, found, picture)
         lines += [
-            "",
-            "Each cell: successes / worlds (95 % interval of the success rate), mean cycles to success (its interval).",
+            f"![Training success of {task}: mean over training seeds with a 95 % band](results/{picture.name})",
             "",
         ]
-        lines += [f"- `{s}`: {about[s]}" for s in splits]
+    return lines
+
+
+def aggregate_section(usable: dict, tasks: list[str], figures: Path) -> list[str]:
+    """Each recipe's IQM of normalised scores and its probability of beating the rules, task by task,
+    with the performance profiles' figure (written into ``figures``)."""
+    with_scores = [t for t in tasks if any(task == t for _, task in usable)]
+    _profiles(usable, with_scores, figures / "profiles.png")
+    lines = [
+        "## Aggregate, task by task",
+        "",
+        "Normalised score per training seed and split: (rate - random) / (rules - random) on the "
+        "reference worlds; IQM: the mean of the middle half of training seeds x splits of the task (every "
+        "recipe of a task over the same splits); P(beats): the probability that a training seed's success on "
+        "the first worlds of a split exceeds that of the rules at its level on the same worlds, averaged over "
+        "splits, ties apart (P(tie)). Bootstrap intervals that draw whole training seeds.",
+        "",
+    ]
+    for task in with_scores:
+        lines += [
+            f"**{task}**",
+            "",
+            "| recipe | training seeds | IQM (95 % interval) | P(beats the rules) (95 % interval) | P(tie) |",
+            "|---|---|---|---|---|",
+        ]
+        for (recipe, of), entry in usable.items():
+            if of != task:
+                continue
+            m, lo, hi = entry["iqm"]
+            p, plo, phi = entry["improvement"]
+            lines.append(
+                f"| {recipe} (against {entry['reference']}) | {entry['training_seeds']} | {m:.2f} ({_interval(lo, hi)}) "
+                f"| {p:.2f} ({_interval(plo, phi)}) | {entry['ties']:.2f} |"
+            )
         lines.append("")
-        found = {}
-        for earlier, _ in protocol.lineage:
-            found.update(curves(root / earlier / "learning" / "progress", task))
-        if found:
-            picture = figures / f"curves_{task}.png"
-            _curve_figure(task, found, picture)
-            lines += [
-                f"![Training success of {task}: mean over training seeds with a 95 % band](results/{picture.name})",
-                "",
-            ]
-    if usable:
-        with_scores = [t for t in tasks if any(task == t for _, task in usable)]
-        _profiles(usable, with_scores, figures / "profiles.png")
-        lines += [
-            "## Aggregate, task by task",
-            "",
-            "Normalised score per training seed and split: (rate - random) / (rules - random) on the "
-            "reference worlds; IQM: the mean of the middle half of training seeds x splits of the task (every "
-            "recipe of a task over the same splits); P(beats): the probability that a training seed's success on "
-            "the first worlds of a split exceeds that of the rules at its level on the same worlds, averaged over "
-            "splits, ties apart (P(tie)). Bootstrap intervals that draw whole training seeds.",
-            "",
-        ]
-        for task in with_scores:
-            lines += [
-                f"**{task}**",
-                "",
-                "| recipe | training seeds | IQM (95 % interval) | P(beats the rules) (95 % interval) | P(tie) |",
-                "|---|---|---|---|---|",
-            ]
-            for (recipe, of), entry in usable.items():
-                if of != task:
-                    continue
-                m, lo, hi = entry["iqm"]
-                p, plo, phi = entry["improvement"]
-                lines.append(
-                    f"| {recipe} (against {entry['reference']}) | {entry['training_seeds']} | {m:.2f} ({_interval(lo, hi)}) "
-                    f"| {p:.2f} ({_interval(plo, phi)}) | {entry['ties']:.2f} |"
-                )
-            lines.append("")
-        lines += ["![Performance profiles per task with bootstrap bands](results/profiles.png)", ""]
-    lines += entrant_lines(entrants, everything, protocol)
-    lines += [f"Judged by commit(s): {', '.join(c[:10] for c in commits)}.", ""]
-    return "\n".join(lines)
+    lines += ["![Performance profiles per task with bootstrap bands](results/profiles.png)", ""]
+    return lines
 
 
 def marl_eval_layout(rows: list[Result]) -> dict:
