@@ -134,11 +134,35 @@ def _picture_args(p, *, movie_default_frames: int = 300) -> None:
 
 
 def main(argv=None) -> int:
-    from training.machinery.distributed import add_ray_flags
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as err:
+        print(f"proteo: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            f"proteo {args.command}: interrupted; what finished is kept: proteo eval and sweep resume from "
+            "OUT/episodes.jsonl with the same command, a study from its runs folder, a trainer with --resume "
+            "RUN/checkpoints/step_N",
+            file=sys.stderr,
+        )
+        return 130
 
+
+def parser() -> argparse.ArgumentParser:
+    """The command line: ``proteo COMMAND``, its commands added by topic."""
     parser = argparse.ArgumentParser(prog="proteo", description="Proteo lattice robot simulator")
     parser.add_argument("--version", action="version", version=f"proteo {version()}")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_playback_commands(sub)
+    _add_judging_commands(sub)
+    _add_training_commands(sub)
+    return parser
+
+
+def _add_playback_commands(sub) -> None:
+    """``demo``, ``run``, ``replay``, ``view`` and ``figures``: episodes played, recorded and shown."""
     p = sub.add_parser("demo", help="run every registered task with its default policy")
     p.add_argument("--seed", type=at_least(0), default=0)
     p.add_argument("--out", default="out/demo", help="folder for the pictures and plots")
@@ -189,6 +213,11 @@ def main(argv=None) -> int:
     )
     p.add_argument("--redraw", action="store_true", help="draw again from the recordings in --out (no episodes run)")
     p.set_defaults(func=figures_command)
+
+
+def _add_judging_commands(sub) -> None:
+    """``eval`` (with ``--benchmark``) and ``sweep``: many episodes, tables and plots."""
+    from training.machinery.distributed import add_ray_flags
 
     p = sub.add_parser("eval", help="compare hand-coded, random, learned and evolved policies over seeds")
     p.add_argument(
@@ -265,9 +294,12 @@ def main(argv=None) -> int:
     add_ray_flags(p)
     p.set_defaults(func=sweep_command)
 
+
+def _add_training_commands(sub) -> None:
+    """``train`` (any registered trainer) and ``migrate`` (old checkpoints)."""
     p = sub.add_parser(
         "train",
-        help="train a controller: proteo train TRAINER [flags] runs python -m training.TRAINER [flags]",
+        help="train a controller: proteo train TRAINER [flags] runs python -m training.trainers.TRAINER [flags]",
         description="Run a trainer of training/ with the flags that follow, unchanged "
         "(see docs/guides/learning.md; 'proteo train ppo --help' lists ppo's). Trainers: "
         + "; ".join(f"{t.name}: {t.summary}" for t in TRAINERS),
@@ -282,20 +314,6 @@ def main(argv=None) -> int:
     )
     p.add_argument("paths", nargs="+", help="checkpoint folders, or folders holding checkpoints at any depth")
     p.set_defaults(func=migrate_command)
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except ValueError as err:
-        print(f"proteo: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(
-            f"proteo {args.command}: interrupted; what finished is kept: proteo eval and sweep resume from "
-            "OUT/episodes.jsonl with the same command, a study from its runs folder, a trainer with --resume "
-            "RUN/checkpoints/step_N",
-            file=sys.stderr,
-        )
-        return 130
 
 
 if __name__ == "__main__":
