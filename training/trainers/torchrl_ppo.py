@@ -98,35 +98,16 @@ def make_distribution_class(nvec):
     return MaskedMultiCategorical
 
 
-def main(argv=None) -> Path:
-    args = parse_args(Args, argv)
-    if args.variant not in ("ippo", "mappo"):
-        raise ConfigError(f"variant={args.variant!r} is not allowed; allowed: ippo, mappo")
-    check_level(args.control)
-    seed_everything(args.seed, threads=args.threads)
-
+def actor_critic(env, args: Args):
+    """``(actor_net, actor, critic_net, loss)``: the shared policy MLP from the flat observation
+    to every field's logits and its masked sampling actor, the critic (per module; ``mappo``: over
+    every module's observation), and TorchRL's clipped PPO loss over both with GAE."""
     import torch
     from tensordict.nn import TensorDictModule
-    from torchrl.collectors import Collector
-    from torchrl.data import LazyTensorStorage, ReplayBuffer
-    from torchrl.data.replay_buffers.samplers import SamplerWithoutReplacement
     from torchrl.modules import MaskedCategorical, MultiAgentMLP, ProbabilisticActor
     from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
-    from proteo_env.adapters.torchrl import ProteoTorchRLEnv
-
-    # ------------------------------------------------------------------ environment
-    resume_meta = read_meta(args.resume) if args.resume else None
-    run_dir = make_run_dir(
-        args.run_dir or (resume_meta or {}).get("run_dir"),
-        f"torchrl_{args.variant}_{task_name(args.task)}_s{args.seed}",
-        resume=resume_meta is not None,
-    )
-    save_args(args, run_dir)
-    env = ProteoTorchRLEnv(args.task, n_copies=args.n_envs, seed=args.seed, control=args.control, **args.env)
     n_agents, obs_size, nvec = env.n_agents, env.encoder.size, env.nvec
-
-    # ------------------------------------------------------------------ actor and critic
     actor_net = torch_mlp(obs_size, int(nvec.sum()), args.hidden)
     actor = ProbabilisticActor(
         TensorDictModule(actor_net, in_keys=[("agents", "observation")], out_keys=[("agents", "logits")]),
@@ -163,6 +144,71 @@ def main(argv=None) -> Path:
         terminated=("agents", "terminated"),
     )
     loss.make_value_estimator(ValueEstimators.GAE, gamma=args.gamma, lmbda=args.gae_lambda)
+    return actor_net, actor, critic_net, loss
+
+
+def finished_episodes(data, running_return: np.ndarray, running_cycles: np.ndarray) -> list[dict]:
+    """The episodes that ended in a collected batch (``data`` is [world, time]), each ``{"r", "l",
+    "success"}``; ``running_return`` and ``running_cycles`` (worlds,) carry unfinished ones over."""
+    rewards = data.get(("next", "agents", "reward"))[..., 0, 0].numpy()
+    done = data.get(("next", "done"))[..., 0].numpy()
+    terminated = data.get(("next", "terminated"))[..., 0].numpy()
+    episodes = []
+    for c in range(rewards.shape[0]):
+        for t in range(rewards.shape[1]):
+            running_return[c] += rewards[c, t]
+            running_cycles[c] += 1
+            if done[c, t]:
+                episodes.append({"r": running_return[c], "l": running_cycles[c], "success": terminated[c, t]})
+                running_return[c], running_cycles[c] = 0.0, 0
+    return episodes
+
+
+def ppo_update(loss, optimizer, buffer, data, args: Args) -> dict:
+    """One PPO update on a collected batch: advantages by the loss's estimator, then ``n_epochs``
+    passes over minibatches of the batch; returns the last minibatch's loss terms."""
+    import torch
+
+    with torch.no_grad():
+        loss.value_estimator(data, params=loss.critic_network_params, target_params=loss.target_critic_network_params)
+    buffer.extend(data.reshape(-1))
+    for _ in range(args.n_epochs):
+        for _ in range(max(1, len(buffer) // buffer._batch_size)):
+            parts = loss(buffer.sample())
+            total = parts["loss_objective"] + parts["loss_critic"] + parts["loss_entropy"]
+            optimizer.zero_grad()
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(loss.parameters(), args.max_grad_norm)
+            optimizer.step()
+    return parts
+
+
+def main(argv=None) -> Path:
+    args = parse_args(Args, argv)
+    if args.variant not in ("ippo", "mappo"):
+        raise ConfigError(f"variant={args.variant!r} is not allowed; allowed: ippo, mappo")
+    check_level(args.control)
+    seed_everything(args.seed, threads=args.threads)
+
+    import torch
+    from torchrl.collectors import Collector
+    from torchrl.data import LazyTensorStorage, ReplayBuffer
+    from torchrl.data.replay_buffers.samplers import SamplerWithoutReplacement
+
+    from proteo_env.adapters.torchrl import ProteoTorchRLEnv
+
+    # ------------------------------------------------------------------ environment
+    resume_meta = read_meta(args.resume) if args.resume else None
+    run_dir = make_run_dir(
+        args.run_dir or (resume_meta or {}).get("run_dir"),
+        f"torchrl_{args.variant}_{task_name(args.task)}_s{args.seed}",
+        resume=resume_meta is not None,
+    )
+    save_args(args, run_dir)
+    env = ProteoTorchRLEnv(args.task, n_copies=args.n_envs, seed=args.seed, control=args.control, **args.env)
+    n_agents, nvec = env.n_agents, env.nvec
+
+    actor_net, actor, critic_net, loss = actor_critic(env, args)
     optimizer = torch.optim.Adam(loss.parameters(), lr=args.learning_rate)
     agent_steps = 0
     if resume_meta is not None:
@@ -240,33 +286,9 @@ def main(argv=None) -> Path:
         for key in ("done", "terminated"):
             data.set(("next", "agents", key), data.get(("next", key)).unsqueeze(-1).expand(reward_shape))
 
-        # episode statistics (data is [world, time])
-        rewards = data.get(("next", "agents", "reward"))[..., 0, 0].numpy()
-        done = data.get(("next", "done"))[..., 0].numpy()
-        terminated = data.get(("next", "terminated"))[..., 0].numpy()
-        episodes = []
-        for c in range(rewards.shape[0]):
-            for t in range(rewards.shape[1]):
-                running_return[c] += rewards[c, t]
-                running_cycles[c] += 1
-                if done[c, t]:
-                    episodes.append({"r": running_return[c], "l": running_cycles[c], "success": terminated[c, t]})
-                    running_return[c], running_cycles[c] = 0.0, 0
+        episodes = finished_episodes(data, running_return, running_cycles)
 
-        # PPO update
-        with torch.no_grad():
-            loss.value_estimator(
-                data, params=loss.critic_network_params, target_params=loss.target_critic_network_params
-            )
-        buffer.extend(data.reshape(-1))
-        for _ in range(args.n_epochs):
-            for _ in range(max(1, len(buffer) // buffer._batch_size)):
-                parts = loss(buffer.sample())
-                total = parts["loss_objective"] + parts["loss_critic"] + parts["loss_entropy"]
-                optimizer.zero_grad()
-                total.backward()
-                torch.nn.utils.clip_grad_norm_(loss.parameters(), args.max_grad_norm)
-                optimizer.step()
+        parts = ppo_update(loss, optimizer, buffer, data, args)
         collector.update_policy_weights_()
         update_s = time.perf_counter() - update_started
 
