@@ -297,6 +297,42 @@ def episode_return(env, policy, seed: int) -> tuple[float, bool, int]:
             return total, bool(result.terminated[0]), env.cycle
 
 
+def neural_episodes(args, overrides: str, candidates, seeds: list[int], ray, journal, generation: int) -> list:
+    """``[return, success, cycles]`` of every candidate network's episode on every seed
+    (candidate-major), run as journaled jobs here or on Ray (:func:`candidate_episode`)."""
+    jobs = [
+        CandidateEpisode(
+            task=args.task, env=overrides, hidden=tuple(args.hidden), genome=tuple(float(v) for v in x), seed=s
+        )
+        for x in candidates
+        for s in seeds
+    ]
+    return run_jobs(
+        candidate_episode,
+        jobs,
+        [j.key for j in jobs],
+        ray=ray,
+        workers=args.workers if ray is None else None,
+        journal=journal,
+        desc=f"generation {generation}",
+        progress=args.progress_bar,
+    )
+
+
+def candidate_fitness(episodes: list, n_candidates: int, n_seeds: int) -> tuple[list, list]:
+    """``(fitness, outcomes)``: each candidate's mean return over its seeds (``None`` for one the
+    policy rejected) and the episodes of the scored candidates, in order."""
+    fitness, outcomes = [], []
+    for c in range(n_candidates):
+        results = episodes[c * n_seeds : (c + 1) * n_seeds]
+        if any(r is None for r in results):
+            fitness.append(None)
+            continue
+        outcomes += results
+        fitness.append(float(np.mean([r[0] for r in results])))
+    return fitness, outcomes
+
+
 def main(argv=None) -> Path:
     args = parse_args(Args, argv)
 
@@ -389,36 +425,9 @@ def main(argv=None) -> Path:
         if args.controller == "rules":
             episodes = rules_episodes(args, policy_name, env, [decode(x) for x in candidates], seeds, ray, run.journal)
         else:
-            jobs = [
-                CandidateEpisode(
-                    task=args.task,
-                    env=overrides,
-                    hidden=tuple(args.hidden),
-                    genome=tuple(float(v) for v in x),
-                    seed=s,
-                )
-                for x in candidates
-                for s in seeds
-            ]
-            episodes = run_jobs(
-                candidate_episode,
-                jobs,
-                [j.key for j in jobs],
-                ray=ray,
-                workers=args.workers if ray is None else None,
-                journal=run.journal,
-                desc=f"generation {es.countiter + 1}",
-                progress=args.progress_bar,
-            )
-        fitness, outcomes = [], []
-        for c in range(len(candidates)):
-            results = episodes[c * len(seeds) : (c + 1) * len(seeds)]
-            if any(r is None for r in results):
-                fitness.append(None)
-                continue
-            agent_steps += sum(r[2] for r in results) * n_agents
-            outcomes += results
-            fitness.append(float(np.mean([r[0] for r in results])))
+            episodes = neural_episodes(args, overrides, candidates, seeds, ray, run.journal, es.countiter + 1)
+        fitness, outcomes = candidate_fitness(episodes, len(candidates), len(seeds))
+        agent_steps += sum(r[2] for r in outcomes) * n_agents
         valid = [f for f in fitness if f is not None]
         if not valid:
             raise ValueError(
