@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import proteo_env
@@ -138,6 +138,8 @@ PUBLISHED = {
     value=values,
     drop=st.booleans(),
 )  # fmt: skip
+@example(which="cma-rules", key="algorithm", value=[], drop=False)  # a value a dict cannot hold as a key
+@example(which="cma-rules", key="policy", value={}, drop=False)
 def test_any_checkpoint_metadata_loads_or_one_clear_error(tmp_path_factory, which, key, value, drop):
     from training.machinery.checkpoints import CheckpointError, load_controller
 

@@ -123,7 +123,7 @@ def check_meta(meta, folder: Path) -> dict:
         raise CheckpointError(
             f"{where}: version = {meta.get('version')!r} is not allowed; allowed: {CHECKPOINT_VERSION}{migrate}"
         )
-    if meta.get("algorithm") not in ALGORITHMS:
+    if not isinstance(meta.get("algorithm"), str) or meta["algorithm"] not in ALGORITHMS:
         raise CheckpointError(
             f"{where}: algorithm = {meta.get('algorithm')!r} is not allowed; allowed: {', '.join(ALGORITHMS)}"
         )
@@ -366,7 +366,7 @@ def cma_policy(meta: dict, env, *, seed: int | None, deterministic: bool):
         return network_policy(meta, env, seed, deterministic, _numpy_logits)
 
     folder = meta["dir"]
-    if meta.get("policy") not in POLICIES:
+    if not isinstance(meta.get("policy"), str) or meta["policy"] not in POLICIES:
         raise CheckpointError(
             f"checkpoint {folder!r}: policy {meta.get('policy')!r} is not registered; "
             f"allowed: {', '.join(sorted(POLICIES))}"
