@@ -6,9 +6,7 @@ encoding and its version, action ``nvec``, steps, seed, what rebuilds the networ
 fields its trainer registers in :mod:`training.machinery.registry`: layer sizes, activation, ...),
 the SHA-256 of every payload file (``files``), and the ``proteo_version`` and git ``commit`` that
 wrote it; :func:`write_checkpoint_meta`) beside the algorithm's own files; :func:`read_meta` checks
-every field and every file's digest before anything loads:
-
-and the algorithm's files:
+every field and every file's digest before anything loads. The algorithms and their files:
 
 ===================== ======================= ===========================================
 ``algorithm``         files                   policy
@@ -30,9 +28,10 @@ checkpoint's own settings, or names the hand-coded rules or the random policy of
 
     env, policy = load_controller("checkpoints/v1/chain/ppo_move/seed_0")
     result = run_episode(env, policy, seed=0)   # proteo_env.rollout.run_episode
- Anything wrong (no such path, not a checkpoint, a damaged
-file, a checkpoint of another task, control level or observation encoding) raises :class:`CheckpointError`,
-one message naming the path, what was found and what is allowed.
+
+Anything wrong (no such path, not a checkpoint, a damaged file, a checkpoint of another task,
+control level or observation encoding) raises :class:`CheckpointError`, one message naming the
+path, what was found and what is allowed.
 """
 
 from __future__ import annotations

@@ -10,15 +10,11 @@ Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
     checkpoints/step_<N>/  a checkpoint every ``checkpoint_every`` agent-steps
     final/             the checkpoint at the end (its format: :mod:`training.machinery.checkpoints`)
 
-What every trainer's run shares: its options, and for the trainers that work in generations the
-whole run around their loop.
-
 :class:`RunArgs` holds the options of every trainer's run (seed, run folder, time limit, threads,
 logs); a trainer's ``Args`` derives from it and declares only its own, and :class:`PPOArgs` adds
-what the PPO trainers share. :class:`GenerationalArgs`
-adds what a population-based trainer (training/trainers/cma_es.py, training/trainers/evolve.py) needs, and
-:class:`GenerationalRun` does the rest of such a run, so that the trainer writes only its
-generation:
+what the PPO trainers share. :class:`GenerationalArgs` adds what a population-based trainer
+(training/trainers/cma_es.py, training/trainers/evolve.py) needs, and :class:`GenerationalRun`
+does the rest of such a run, so that the trainer writes only its generation:
 
 - the run folder (``--run-dir``, default ``runs/<name>``) and its ``args.yaml``;
 - resume: rerun the same command after an interruption (the run continues from ``state.pkl``
