@@ -10,6 +10,10 @@ protocol -> episodes -> one result model -> statistics -> pages:
   :mod:`~training.judging.evaluate` runs ``proteo eval``, :mod:`~training.judging.judge`
   ``proteo eval --benchmark``;
 - :mod:`~training.judging.statistics`: the intervals and the paired comparisons;
-- :mod:`~training.judging.results`: the results page;
+- :mod:`~training.judging.results`: the results page, with the learning curves of
+  :mod:`~training.judging.plots`;
 - :mod:`~training.judging.pages`: the one way to publish a table into a markdown file.
+
+A policy from outside (an entrant) is loaded by :mod:`training.machinery.entrants`, beside the
+checkpoints' loaders, since the batched evaluator builds it.
 """
