@@ -492,7 +492,7 @@ def exact_scent(grid, cell, n_modules, role, surface, values, reach, queue, scen
             reach[n] = -1
             queue[tail] = n
             tail += 1
-        elif role[n] == RELAY and not (surface and not _has_empty_neighbour(grid, cell[n], dir_delta)):
+        elif role[n] == RELAY and (not surface or _has_empty_neighbour(grid, cell[n], dir_delta)):
             reach[n] = UNREACHED
         else:
             reach[n] = BARRED

@@ -67,17 +67,17 @@ def measure_tree(
     A module is grown when its mode is SEED, FINAL, NODE or INODE. Scratch (N,) arrays are
     filled for grown modules reached from the root: ``degree`` (neighbours in the piece),
     ``parent`` (the module it was reached from, -1 for the root, below -1 when not reached),
-    ``arm`` (modules from here down the branch to the next branching point or leaf, both included), ``longc`` (child arms of at
-    least ``min_gap`` modules), ``real_up``/``real_d`` (nearest *real* branching point above
-    and its distance), ``any_d`` (distance to the nearest branching point above, 0 if none),
-    ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
+    ``arm`` (modules from here down the branch to the next branching point or leaf, both
+    included), ``longc`` (child arms of at least ``min_gap`` modules), ``real_up``/``real_d``
+    (nearest *real* branching point above and its distance), ``any_d`` (distance to the nearest
+    branching point above, 0 if none), ``level`` (at real branching points). Returns ``(size, edges, points, levels, children,
     most_children, distance_sum, distance_count, leaves)`` (``children``: summed over the
     branching points, ``most_children``: the largest at one point); see docs/tasks/branch.md
     for the definitions.
     """
     for n in range(n_modules):
         m = mode[n]
-        parent[n] = UNREACHED if (m == 2 or m == 3 or m == 4 or m == 5) else BARRED
+        parent[n] = UNREACHED if (m == SEED or m == FINAL or m == NODE or m == INODE) else BARRED
         degree[n] = 0
         arm[n] = 0
         longc[n] = 0
