@@ -45,6 +45,8 @@ import numpy as np
 import proteo_env
 from baselines import make_policy
 from proteo_env.config import ConfigError, parse_yaml
+from training.judging import record
+from training.judging.report import Run
 
 VARIANTS = (
     "full, as proteo eval seeds them",
@@ -106,40 +108,37 @@ def table(results: dict, n: int) -> str:
     return "\n".join(lines)
 
 
-def load_evaluation(path: Path, task: str, overrides: dict) -> list[dict]:
-    """The rows of ``proteo eval``'s ``results.json`` at ``path`` that run ``task`` at level
-    ``move`` (random moves left out), checked against ``overrides``; raises ``ValueError``."""
+def load_evaluation(path: Path, task: str, overrides: dict) -> list[Run]:
+    """The runs of the rows of ``proteo eval``'s ``results.json`` at ``path`` that run ``task`` at
+    level ``move`` (random moves left out), checked against ``overrides``; raises ``ValueError``."""
     try:
-        evaluation = json.loads(path.read_text())
-        settings, rows = evaluation["settings"], evaluation["results"]
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        raise ValueError(
-            f"--split={str(path)!r} is not allowed ({error}); allowed: a results.json of proteo eval"
-        ) from None
-    if overrides not in settings.values():
-        raise ValueError(
-            f"--split={str(path)!r} evaluated other settings ({settings}); allowed: an evaluation with --env {overrides}"
-        )
-    rows = [r for r in rows if r["task"] == task and r["level"] == "move" and r["kind"] != "random"]
+        rows = record.results_of(record.load(path, field="--split"))
+    except ConfigError as error:
+        raise ValueError(str(error)) from None
+    rows = [r for r in rows if r.task == task and r.level == "move" and r.kind != "random"]
     if not rows:
         raise ValueError(f"--split={str(path)!r} has no row of {task} at control level move; allowed: one that has")
-    return rows
+    if any(r.env != overrides for r in rows):
+        raise ValueError(
+            f"--split={str(path)!r} evaluated other settings ({rows[0].env}); allowed: an evaluation with --env {overrides}"
+        )
+    return [run for r in rows for run in r.runs]
 
 
-def split(results: dict, seeds: list[int], rows: list[dict]) -> list[dict]:
-    """Each row's successes split by the verdict of ``full, the autopilot's stream`` on the
+def split(results: dict, seeds: list[int], runs: list[Run]) -> list[dict]:
+    """Each run's successes split by the verdict of ``full, the autopilot's stream`` on the
     worlds both ran: ``{"policy", "where_rules_succeed": [successes, worlds], "where_rules_fail":
     [successes, worlds], "agree": [worlds agreeing, worlds]}``."""
     verdict = dict(zip(seeds, results[VARIANTS[2]]["success"]))
     out = []
-    for row in rows:
-        pairs = [(verdict[s], ok) for s, ok in zip(row["seeds"], row["successes"]) if s in verdict]
+    for run in runs:
+        pairs = [(verdict[s], ok) for s, ok in zip(run.seeds, run.successes) if s in verdict]
         succeed = [ok for v, ok in pairs if v]
         fail = [ok for v, ok in pairs if not v]
         agree = [v == ok for v, ok in pairs]
         out.append(
             {
-                "policy": row["source"],
+                "policy": run.source,
                 "where_rules_succeed": [sum(succeed), len(succeed)],
                 "where_rules_fail": [sum(fail), len(fail)],
                 "agree": [sum(agree), len(agree)],
@@ -184,23 +183,23 @@ def main(argv=None) -> int:
         proteo_env.make(args.task, **overrides, control="move")
     except (ConfigError, ValueError) as error:
         parser.error(f"--task/--env: {error}")
-    rows = None
+    runs = None
     if args.split is not None:
         try:
-            rows = load_evaluation(args.split, args.task, overrides)
+            runs = load_evaluation(args.split, args.task, overrides)
         except ValueError as error:
             parser.error(str(error))
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     results = measure(args.task, overrides, seeds)
     print(table(results, len(seeds)))
-    record = {"task": args.task, "env": overrides, "seeds": seeds, "results": results}
-    if rows is not None:
-        record["split"] = split(results, seeds, rows)
+    measured = {"task": args.task, "env": overrides, "seeds": seeds, "results": results}
+    if runs is not None:
+        measured["split"] = split(results, seeds, runs)
         print()
-        print(split_table(record["split"]))
+        print(split_table(measured["split"]))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(record, indent=1) + "\n")
+        args.out.write_text(json.dumps(measured, indent=1) + "\n")
     return 0
 
 

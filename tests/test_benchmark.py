@@ -379,13 +379,25 @@ def _direct(source: str, task_id: str, env: dict, level: str, seed: int):
 
 
 def _check_schema(doc: dict) -> None:
-    assert doc["schema"] == "proteo-benchmark-results" and doc["schema_version"] == 1
+    assert doc["schema"] == "proteo-results" and doc["schema_version"] == 2 and doc["judgement"] == "benchmark"
     assert doc["protocol"] == "v1" and doc["protocol_file"] == "configs/benchmark/v1.yaml"
     assert len(doc["protocol_sha256"]) == 64
     for key in ("proteo_version", "commit", "created", "worlds_cap", "complete", "notes", "rows"):
         assert key in doc
     for row in doc["rows"]:
-        for key in ("task", "split", "about", "env", "policy", "kind", "level", "recipe", "world_seeds", "runs"):
+        for key in (
+            "task",
+            "split",
+            "about",
+            "env",
+            "policy",
+            "kind",
+            "level",
+            "group",
+            "recipe",
+            "world_seeds",
+            "runs",
+        ):
             assert key in row
         for run in row["runs"]:
             assert len(run["successes"]) == len(run["cycles"]) == len(run["returns"]) == len(row["world_seeds"])

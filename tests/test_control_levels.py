@@ -310,6 +310,8 @@ def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path
     from pathlib import Path
 
     from proteo_env.rollout import run_episode
+    from training.judging import record
+    from training.judging.report import Result, Run
 
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
     benchmark = importlib.import_module("rules_random_streams")
@@ -342,17 +344,23 @@ def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path
         assert (as_autopilot["success"][i], as_autopilot["cycles"][i]) == (bool(result.terminated[0]), move.cycle)
     # --split: proteo eval's rows at move, split by the autopilot's rules' verdict per world
     verdict = results[benchmark.VARIANTS[2]]["success"]
-    row = {"task": "chain-v0", "level": "move", "kind": "learned", "source": "checkpoints/x"}
-    evaluation = {
-        "settings": {"chain": overrides},
-        "results": [
-            {**row, "seeds": [5, 4, 99], "successes": [not verdict[1], verdict[0], True]},
-            {**row, "level": "full", "seeds": [4], "successes": [True]},
-        ],
-    }
+
+    def evaluation(settings, levels=("move", "full")):
+        """A results.json of two rows of one checkpoint (at ``move``: worlds 5, 4 and 99; at
+        ``full``: world 4) evaluated with ``settings``."""
+        played = {"move": ([5, 4, 99], [not verdict[1], verdict[0], True]), "full": ([4], [True])}
+        rows = [
+            Result("chain-v0", "x", "learned", level, env=settings, runs=[
+                Run("checkpoints/x", seeds=played[level][0], successes=played[level][1],
+                    returns=[0.0] * len(played[level][0]), cycles=[1] * len(played[level][0]))
+            ])
+            for level in levels
+        ]  # fmt: skip
+        return json.dumps(record.document(rows, judgement="evaluation", seconds=0.0))
+
     evaluated = tmp_path / "eval" / "results.json"
     evaluated.parent.mkdir()
-    evaluated.write_text(json.dumps(evaluation))
+    evaluated.write_text(evaluation(overrides))
     assert benchmark.main([*args, "--out", str(out), "--split", str(evaluated)]) == 0
     (split,) = json.loads(out.read_text())["split"]  # the full row and the unrun seed 99 left out
     succeed = [v for v in verdict if v]
@@ -361,8 +369,8 @@ def test_the_rules_random_streams_benchmark_runs_the_rules_as_eval_does(tmp_path
     assert "| checkpoints/x | " in capsys.readouterr().out
     bad = tmp_path / "bad" / "streams.json"
     other, full_only = tmp_path / "eval" / "other.json", tmp_path / "eval" / "full_only.json"
-    other.write_text(json.dumps({**evaluation, "settings": {"chain": {**overrides, "max_cycles": 7}}}))
-    full_only.write_text(json.dumps({**evaluation, "results": evaluation["results"][1:]}))
+    other.write_text(evaluation({**overrides, "max_cycles": 7}))
+    full_only.write_text(evaluation(overrides, levels=("full",)))
     env = ["--env", json.dumps(overrides)]
     for flags, message in (
         (["--env", "{n_modules: 6"], "--env='{n_modules: 6' is not allowed; allowed: a YAML mapping"),

@@ -57,7 +57,11 @@ def _eval_config(tmp_path):
 def _episodes(out) -> list:
     """Every episode of an evaluation, without its wall-clock time."""
     data = json.loads((out / "results.json").read_text())
-    return [{k: v for k, v in r.items() if k not in ("seconds", "summary")} for r in data["results"]]
+    return [
+        {k: v for k, v in run.items() if k != "seconds"} | {"task": row["task"], "policy": row["policy"]}
+        for row in data["rows"]
+        for run in row["runs"]
+    ]
 
 
 def _progress(run_dir) -> list:

@@ -5,6 +5,8 @@ episodes, and a bad eval config is one clear error."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import yaml
@@ -187,30 +189,44 @@ def test_a_group_of_three_seeds_of_8_10_gets_an_interval_not_a_zero_half_width()
 
 def _written(tmp_path, results, name="first"):
     """A results.json as proteo eval writes it, of ``results``, in ``tmp_path / name``."""
-    from training.judging.report import write_results
+    from training.judging import record
 
     out = tmp_path / name
-    write_results(
-        results, out, seed_list=list(range(1000, 1010)), settings={"grasp": {}}, deterministic=False, plots=False
+    record.write(record.document(results, judgement="evaluation", seconds=1.0), out)
+    return out
+
+
+def _written_before_version_2(tmp_path, results):
+    """A results.json as proteo eval wrote it before its schema was versioned: a row per run,
+    its group's label beside it; the first row also from before control levels and groups."""
+    from dataclasses import asdict
+
+    rows = [
+        {"task": r.task, "policy": r.policy, "kind": r.kind, "level": r.level, "group": r.policy if r.group else "",
+         **asdict(run), "summary": {}}
+        for r in results
+        for run in r.runs
+    ]  # fmt: skip
+    rows[0].pop("level")
+    rows[0].pop("group")
+    out = tmp_path / "before"
+    out.mkdir()
+    seeds = results[0].world_seeds
+    (out / "results.json").write_text(
+        json.dumps({"seeds": seeds, "settings": {"grasp": {}}, "deterministic": False, "results": rows, "groups": []})
     )
+    (out / "results.md").write_text("an old table\n")
     return out
 
 
 def test_from_results_re_renders_the_tables_and_the_published_pages_without_running_episodes(tmp_path, monkeypatch):
-    import json
-
     import training.judging.report as ev
     from training.cli import main
     from training.judging import episodes
     from training.machinery import evaluator
 
     results = [_rules(), _kickstart()]
-    first = _written(tmp_path, results)
-    old = json.loads((first / "results.json").read_text())
-    old["results"][0].pop("level")  # as written before control levels
-    old["results"][0].pop("group")
-    (first / "results.json").write_text(json.dumps(old))
-    (first / "results.md").write_text("an old table\n")
+    first = _written_before_version_2(tmp_path, results)
     page = tmp_path / "page.md"
     page.write_text(f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\nold\n{ev.PUBLISH_END}\nb\n")
     monkeypatch.setattr(episodes, "run_alone", lambda job: pytest.fail("no episode may run"))
@@ -218,12 +234,20 @@ def test_from_results_re_renders_the_tables_and_the_published_pages_without_runn
     argv = ["eval", "--from-results", str(first / "results.json"), "--out", str(first), "--no-plots"]
     assert main([*argv, "--publish", str(page)]) == 0
     again = _written(tmp_path, results, "again")
-    assert (first / "results.md").read_text() == (again / "results.md").read_text()
-    written = json.loads((first / "results.json").read_text())
-    assert written == json.loads((again / "results.json").read_text())  # every episode kept, summaries anew
+    # the same tables; only the header's provenance differs (a file from before records none)
+    assert (first / "results.md").read_text().split("\n", 1)[1] == (again / "results.md").read_text().split("\n", 1)[1]
+    written, direct = (json.loads((folder / "results.json").read_text()) for folder in (first, again))
+    assert written["schema"] == "proteo-results" and written["schema_version"] == 2
+    assert written["rows"] == direct["rows"]  # every episode kept, one row per group, summaries anew
     assert page.read_text() == f"a\n{ev.PUBLISH_SUMMARY_BEGIN.format(out=first.as_posix())}\n" + (
         f"{ev.summary_table(results)}\n{ev.PUBLISH_END}\nb\n"
     )
+    # written again from the current version: the same file, bit for bit
+    assert (
+        main(["eval", "--from-results", str(again / "results.json"), "--out", str(tmp_path / "third"), "--no-plots"])
+        == 0
+    )
+    assert (tmp_path / "third" / "results.json").read_text() == (again / "results.json").read_text()
     # a page without markers: nothing written, not even results.md
     (first / "results.md").write_text("kept\n")
     bare = tmp_path / "bare.md"
@@ -254,7 +278,8 @@ def test_from_results_refuses_a_file_that_is_not_a_results_json(tmp_path, capsys
     bad.write_text('{"seeds": [1]}')
     assert main(["eval", "--from-results", str(bad), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
-    assert f"--from-results={str(bad)!r} is not allowed (KeyError" in err and "allowed: a results.json" in err
+    assert f"--from-results={str(bad)!r} is not allowed (ValueError: schema None" in err
+    assert "allowed: a results.json or benchmark.json written by proteo eval (schema proteo-results version 2" in err
     assert not (tmp_path / "out").exists()
 
 

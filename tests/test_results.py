@@ -38,7 +38,8 @@ def _summary(runs: list[dict]) -> dict:
 
 
 def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dict, protocol: str = "v1") -> None:
-    """A benchmark.json of one policy: ``per_split`` maps a split to a list of runs' success lists."""
+    """A benchmark.json of one policy as the v1 to v7 judgements were published (schema version 1):
+    ``per_split`` maps a split to a list of runs' success lists."""
     rows = []
     for split, runs in per_split.items():
         run_dicts = [
@@ -58,12 +59,14 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
                 "task": task,
                 "task_name": task,
                 "split": split,
+                "about": "",
                 "policy": policy,
                 "kind": kind,
                 "level": level,
                 "recipe": policy if kind in ("learned", "evolved") else None,
                 "env": {"max_cycles": 300},
                 "world_seeds": list(range(1000, 1000 + len(runs[0]))),
+                "complete": True,
                 "runs": run_dicts,
                 "summary": _summary(run_dicts),
             }
@@ -71,6 +74,8 @@ def _write(folder, task: str, policy: str, kind: str, level: str, per_split: dic
     out = folder / task / policy
     out.mkdir(parents=True)
     document = {
+        "schema": "proteo-benchmark-results",
+        "schema_version": 1,
         "protocol": protocol,
         "protocol_sha256": load_protocol(protocol).sha256,
         "commit": "abc",

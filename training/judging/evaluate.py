@@ -51,7 +51,7 @@ at ``move``). Writes ``results.md`` (the tables), ``results.json`` (every episod
 ``eval.png`` (the three measures per task) into ``--out``; ``--publish PAGE.md`` also puts the
 tables into a page between its markers (:func:`~training.judging.report.publish_evaluation`). ``--from-results RESULTS.json`` runs
 no episode: it writes the tables of an earlier ``results.json`` again, in the current format,
-into ``--out`` and the ``--publish`` pages (:func:`~training.judging.report.rerender`), e.g.::
+into ``--out`` and the ``--publish`` pages (:func:`~training.judging.record.rerender`), e.g.::
 
     proteo eval --from-results docs/eval/study/results.json --out docs/eval/study \\
         --publish README.md --publish docs/guides/learning.md
@@ -73,8 +73,9 @@ import proteo_env
 from baselines import make_policy
 from proteo_env.config import ConfigError, load_yaml
 from proteo_env.registry import TASKS, newest_tasks, task_class, task_name
+from training.judging import record
 from training.judging.episodes import Plan
-from training.judging.report import Result, Run, markdown_table, publish_evaluation, rerender, write_results
+from training.judging.report import Result, Run, markdown_table, publish_evaluation
 from training.machinery.checkpoints import META_FILE, checkpoint_dir, checkpoint_kind, load_policy, read_meta
 from training.machinery.distributed import ray_options
 from training.machinery.evaluator import Controller, settings_json
@@ -235,7 +236,8 @@ def run_evaluation(
         one :class:`~training.judging.report.Result` per policy or training-seed group.
 
     It chooses the tasks and checkpoints, then plans every episode (:func:`plan_episodes`), runs
-    them (:meth:`~training.judging.episodes.Plan.execute`) and writes the tables (:func:`write_results`).
+    them (:meth:`~training.judging.episodes.Plan.execute`) and writes them
+    (:func:`training.judging.record.document`, :func:`training.judging.record.write`).
     """
     out_folder(out)
     cfg = load_config(config)
@@ -273,18 +275,16 @@ def run_evaluation(
         "jobs": len(plan.jobs),
         "checkpoints": {p: _checkpoint_identity(p) for ps in by_task.values() for p, _ in ps},
     }
+
+    def write(seconds: float) -> list[Result]:
+        doc = record.document(plan.rows, judgement="evaluation", deterministic=deterministic, seconds=seconds)
+        record.write(doc, out, plots=plots)
+        return plan.rows
+
     return plan.execute(
-        Path(out),
-        fingerprint=fingerprint,
-        fresh=fresh,
-        what="evaluation",
-        ray=ray,
-        workers=workers,
-        progress=progress,
-        write=lambda seconds: write_results(
-            plan.rows, Path(out), seed_list=seed_list, settings=settings, deterministic=deterministic, plots=plots
-        ),
-    )
+        Path(out), fingerprint=fingerprint, fresh=fresh, what="evaluation", ray=ray, workers=workers,
+        progress=progress, write=write,
+    )  # fmt: skip
 
 
 def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, deterministic: bool, pictures: bool) -> Plan:
@@ -327,8 +327,9 @@ def plan_episodes(cfg: dict, classes, by_task: dict, seed_list: list, *, determi
             first_of_group = result is None
             if result is None:
                 result = Result(
-                    task=cls.task_id(), policy=group or policy.name, kind=kind, level=level, group=bool(group)
-                )
+                    task=cls.task_id(), policy=group or policy.name, kind=kind, level=level, group=bool(group),
+                    env=overrides,
+                )  # fmt: skip
                 results.append(result)
             result.runs.append(run)
             label = group or (policy.name if path is None else Path(path).name)
@@ -366,7 +367,7 @@ def main(args) -> int:
             "--fresh": args.fresh,
         }
         refuse_flags("--from-results", running, "no episode runs", "--out, --publish, --no-plots")
-        results = rerender(args.from_results, args.out, plots=not args.no_plots, pages=args.publish or ())
+        results = record.rerender(args.from_results, args.out, plots=not args.no_plots, pages=args.publish or ())
         print(markdown_table(results))
         print(f"\nre-rendered {args.from_results} into {Path(args.out).resolve()}")
         return 0

@@ -14,26 +14,26 @@ protocol, the checkpoints' task and control level, the flags) before anything is
     proteo eval --benchmark v1 --policy rules --tasks chain --level full --out docs/benchmark/v1/chain/rules_full
     proteo eval --benchmark v7 --entrant my_policy/entrant.yaml --out out/mine    # an entrant from outside
 
-``benchmark.json`` (schema ``proteo-benchmark-results``, ``schema_version`` 1) is written by
-:func:`benchmark_document`, whose fields are the schema; ``benchmark.md`` is the table of its rows
-with the intervals (:func:`markdown`). See docs/guides/benchmark.md.
+``benchmark.json`` and ``benchmark.md`` are the one file format and table of every judgement,
+``proteo eval``'s included (:mod:`training.judging.record`). See docs/guides/benchmark.md.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import proteo_env
 from proteo_env.config import CONTROL_LEVELS, ConfigError, load_yaml
-from proteo_env.registry import task_class, task_name
+from proteo_env.registry import task_class
+from training.judging import record
 from training.judging.episodes import Plan
 from training.judging.evaluate import refuse_flags
-from training.judging.protocol import PROTOCOL_DIR, REFERENCE_POLICIES, Protocol, TaskProtocol, load_protocol
-from training.judging.report import BENCHMARK_COLUMNS, INTERVALS, Result, Run, markdown_table, result_of_row
-from training.machinery.checkpoints import checkpoint_kind, provenance, read_meta
+from training.judging.protocol import REFERENCE_POLICIES, Protocol, TaskProtocol, load_protocol
+from training.judging.record import document
+from training.judging.report import Result, Run
+from training.machinery.checkpoints import checkpoint_kind, read_meta
 from training.machinery.distributed import ray_options
 from training.machinery.entrants import ENTRANT_FILE, check_factory_name, file_digests, load_entrant
 from training.machinery.evaluator import Controller, episode_key, settings_json
@@ -345,10 +345,10 @@ def judge(
     root=None,
 ) -> dict:
     """Judge a controller on every split of its task(s) under protocol ``version``; write
-    ``out/benchmark.json`` (:func:`benchmark_document`) and ``out/benchmark.md``; return the
-    ``benchmark.json`` document. In four steps: check (:func:`candidates`, :func:`check_loads`),
-    plan (:func:`plan_protocol`), run (:meth:`~training.judging.episodes.Plan.execute`), write
-    (:func:`benchmark_document`, :func:`markdown`).
+    ``out/benchmark.json`` and ``out/benchmark.md`` (:mod:`training.judging.record`) and return the
+    document. In four steps: check (:func:`candidates`, :func:`check_loads`), plan
+    (:func:`plan_protocol`), run (:meth:`~training.judging.episodes.Plan.execute`), write
+    (:func:`training.judging.record.document`, :func:`training.judging.record.write`).
 
     Args:
         checkpoints: the training seeds of one recipe (checkpoint folders), or
@@ -374,7 +374,7 @@ def judge(
             )
     judged = candidates(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks, entrant=entrant)
     check_loads(protocol, judged)
-    plan, judged_rows = plan_protocol(protocol, judged, worlds_cap)
+    plan = plan_protocol(protocol, judged, worlds_cap)
     fingerprint = {
         "protocol": protocol.version,
         "sha256": protocol.sha256,
@@ -385,11 +385,9 @@ def judge(
 
     def write(seconds: float) -> dict:
         notes = notes_on(protocol, judged, worlds_cap)
-        document = benchmark_document(protocol, judged_rows, notes, worlds_cap=worlds_cap, seconds=seconds)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "benchmark.json").write_text(json.dumps(document, indent=1, default=float) + "\n")
-        (out_dir / "benchmark.md").write_text(markdown(document))
-        return document
+        doc = document(plan.rows, judgement="benchmark", protocol=protocol, worlds_cap=worlds_cap, notes=notes,
+                       seconds=seconds)  # fmt: skip
+        return record.write(doc, out_dir)
 
     return plan.execute(
         out_dir, fingerprint=fingerprint, fresh=fresh, what="benchmark run", ray=ray, workers=workers,
@@ -415,10 +413,8 @@ def check_loads(protocol: Protocol, judged: list[Candidate]) -> None:
 def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None):
     """The :class:`~training.judging.episodes.Plan` of a protocol: for each candidate and split of
     its task, one row whose runs (one per training seed) play the protocol's world seeds for its
-    kind (the first ``worlds_cap`` of them where given). Returns ``(plan, [(Candidate, Split,
-    Result)])``, one per row in the plan's order."""
+    kind (the first ``worlds_cap`` of them where given)."""
     plan = Plan()
-    rows = []
     for e in judged:
         seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
         for split in e.task.splits:
@@ -429,7 +425,10 @@ def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int |
                 level=e.level,
                 group=e.training != "reference",
                 split=split.name,
-                max_cycles=split.env.get("max_cycles"),
+                about=split.about,
+                env=split.env,
+                recipe=e.recipe,
+                complete=worlds_cap is None and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
                 training=e.training,
                 declared=e.entrant.declared() if e.training == "declared" else None,
             )
@@ -438,8 +437,7 @@ def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int |
                 result.runs.append(run)
                 plan.add_run(run, controller, e.task.task_id, settings_json(split.env), e.level, seeds)
             plan.rows.append(result)
-            rows.append((e, split, result))
-    return plan, rows
+    return plan
 
 
 def notes_on(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None) -> list[str]:
@@ -458,88 +456,6 @@ def notes_on(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None
                 f"asks for at least {protocol.training_seeds} (the rows are not complete)"
             )
     return notes
-
-
-def benchmark_document(
-    protocol: Protocol, judged_rows: list, notes: list[str], *, worlds_cap: int | None, seconds: float
-) -> dict:
-    """The ``benchmark.json`` document (schema :data:`SCHEMA`, version :data:`SCHEMA_VERSION`) of
-    the judged rows ``[(Candidate, Split, Result)]`` (:func:`plan_protocol`), every episode played,
-    and the ``notes`` (:func:`notes_on`).
-
-    A row's ``summary`` is :meth:`training.judging.report.Result.summary`: ``episodes``,
-    ``successes``, ``success_rate``, ``success_lo``/``success_hi`` (the 95 % interval),
-    ``cycles_to_success`` with ``cycles_lo``/``cycles_hi`` (over the successful episodes),
-    ``return_mean`` with ``return_lo``/``return_hi``, ``training_seeds`` and ``interval`` (one run:
-    Wilson and Student t; several training seeds: the stratified bootstrap of
-    :func:`training.judging.statistics.group_bootstrap`). The fields, as written below, are the
-    schema (docs/guides/benchmark.md reads them)."""
-    rows = [
-        {
-            "task": e.task.task_id,
-            "task_name": task_name(e.task.task_id),
-            "split": split.name,
-            "about": split.about,
-            "env": split.env,  # the proteo_env.make settings of the split
-            "policy": e.label,  # rules, rules-move, random, the recipe's or the entrant's label
-            "kind": e.kind,  # hand-coded, random, learned, evolved
-            "level": e.level,
-            "recipe": e.recipe,  # the protocol recipe its checkpoints ran, or None
-            # reference (rules, random), protocol (a recipe's checkpoints, checked), declared (an
-            # entrant.yaml), undeclared (a bare factory), unchecked (checkpoints of no recipe); absent in
-            # files written before entrants (read from kind and recipe)
-            "training": e.training,
-            "declared": result.declared,  # an entrant's {name, training_seeds, budget, code}
-            "world_seeds": result.world_seeds,  # the worlds every training seed was judged on
-            "complete": worlds_cap is None and (not e.checkpoints or len(e.checkpoints) >= protocol.training_seeds),
-            "runs": [  # one per training seed (one for the rules and random)
-                {
-                    "source": r.source,  # the checkpoint, the entrant's file, or baselines.<policy>
-                    "training_seed": r.training_seed,
-                    "agent_steps": r.agent_steps,  # None for the rules and random
-                    **({"sha256": r.sha256} if r.sha256 else {}),  # an entrant's file
-                    "successes": [bool(s) for s in r.successes],
-                    "cycles": [int(c) for c in r.cycles],
-                    "returns": [float(x) for x in r.returns],
-                    "seconds": r.seconds,
-                }
-                for r in result.runs
-            ],
-            "summary": result.summary(),
-        }
-        for e, split, result in judged_rows
-    ]
-    return {
-        "schema": SCHEMA,
-        "schema_version": SCHEMA_VERSION,
-        "protocol": protocol.version,
-        "protocol_file": f"{PROTOCOL_DIR}/{protocol.version}.yaml",
-        "protocol_sha256": protocol.sha256,  # the protocol file judged by
-        **provenance(),  # proteo_version, commit
-        "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "worlds_cap": worlds_cap,  # --worlds-cap (quick checks only; a published run has None)
-        "complete": all(r["complete"] for r in rows),  # every row judged as the protocol asks (else: notes)
-        "notes": notes,  # why a row is not complete (fewer training seeds, a cap)
-        "wall_seconds": seconds,
-        "rows": rows,  # one per task, split and policy
-    }
-
-
-def markdown(document: dict) -> str:
-    """A ``benchmark.json`` document as ``benchmark.md``: what was judged, the table of its rows
-    (:func:`~training.judging.report.markdown_table`, :data:`~training.judging.report.BENCHMARK_COLUMNS`)
-    with 95 % intervals, and the notes."""
-    lines = [
-        f"Benchmark {document['protocol']} ({document['protocol_file']}, sha256 {document['protocol_sha256'][:12]}); "
-        f"proteo {document['proteo_version']}, commit {(document['commit'] or 'unknown')[:12]}; "
-        f"{'complete' if document['complete'] else 'NOT complete (see the notes)'}.",
-        "",
-        markdown_table([result_of_row(row) for row in document["rows"]], BENCHMARK_COLUMNS),
-    ]
-    lines += ["", INTERVALS]
-    if document["notes"]:
-        lines += ["", "Notes:", "", *[f"- {n}" for n in document["notes"]]]
-    return "\n".join(lines) + "\n"
 
 
 def main(args) -> int:
@@ -572,7 +488,7 @@ def main(args) -> int:
         worlds_cap=args.worlds_cap,
         fresh=args.fresh,
     )
-    print(markdown(document))
+    print(record.markdown(document))
     print(f"benchmark {document['protocol']}: {Path(args.out).resolve()}/benchmark.json, benchmark.md")
     return 0
 

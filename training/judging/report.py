@@ -2,26 +2,23 @@
 
 :class:`Result` is one policy, or one recipe's training seeds, on one task (and split): its
 :class:`Run` of episodes per training seed (one for a policy without training seeds) and the
-summary measures; the judge and the results page read and write the same record. Every
-table prints a measure as ``value (low–high)``, its 95 % interval (:data:`INTERVALS` says
-which; the interval code is :mod:`training.judging.statistics`). :func:`write_results` writes
-``results.md``, ``results.json`` (every episode) and ``eval.png``; :func:`load_results` and
-:func:`rerender` read a ``results.json`` back; :func:`publish_evaluation` puts the tables into a page
-between its markers (:data:`PUBLISH_BEGIN` or :data:`PUBLISH_SUMMARY_BEGIN`, then
-:data:`PUBLISH_END`). See :mod:`training.judging.evaluate` for the command.
+summary measures; ``proteo eval``, the judge and the results page read and write the same
+record (its file format is :mod:`training.judging.record`). Every table prints a measure as
+``value (low–high)``, its 95 % interval (:data:`INTERVALS` says which; the interval code is
+:mod:`training.judging.statistics`); :func:`plot` draws ``eval.png``; :func:`publish_evaluation`
+puts the tables into a page between its markers (:data:`PUBLISH_BEGIN` or
+:data:`PUBLISH_SUMMARY_BEGIN`, then :data:`PUBLISH_END`). See :mod:`training.judging.evaluate`
+for the command.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from proteo_env.config import ConfigError
-from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
 from training.judging.statistics import group_bootstrap, mean_ci, wilson
 
@@ -101,17 +98,30 @@ class Result:
     of one run included; ``results.md`` lists them one by one under the groups)."""
     split: str = ""
     """The protocol split (``""`` outside a benchmark)."""
-    max_cycles: int | None = None
-    """The episodes' cycle limit: a failure's time in a paired comparison (``None`` outside a benchmark)."""
+    about: str = ""
+    """What the split asks (``""`` outside a benchmark)."""
+    env: dict = field(default_factory=dict)
+    """The :func:`proteo_env.make` settings of its episodes (an evaluation: its config's settings)."""
+    recipe: str | None = None
+    """The protocol recipe its checkpoints ran (``None``: not a recipe's)."""
+    complete: bool = True
+    """Judged on every world and training seed its protocol asks for."""
     recorded: dict | None = None
-    """The summary a ``benchmark.json`` row holds, as it was judged; :meth:`summary` returns it
-    rather than computing it again."""
+    """The summary a written row holds, as it was judged; :meth:`summary` returns it rather than
+    computing it again."""
     training: str | None = None
     """Under a benchmark protocol, how its training is known (a ``benchmark.json`` row's
     ``training``: ``reference``, ``protocol``, ``declared``, ``undeclared`` or ``unchecked``);
     ``None`` outside one."""
     declared: dict | None = None
     """An entrant's declared training (``name``, ``training_seeds``, ``budget``, ``code``)."""
+
+    @property
+    def max_cycles(self) -> int | None:
+        """The episodes' cycle limit where its settings give it: a failure's time in a paired
+        comparison."""
+        value = self.env.get("max_cycles")
+        return None if value is None else int(value)
 
     @property
     def entered(self) -> bool:
@@ -296,41 +306,6 @@ def markdown_table(results: list, columns=EVALUATION_COLUMNS) -> str:
     return "\n".join(lines)
 
 
-def result_of_row(row: dict) -> Result:
-    """A ``benchmark.json`` row (:func:`training.judging.judge.benchmark_document`) as a
-    :class:`Result` with its recorded summary (``task``: the task id). Rows judged before entrants
-    have no ``training``: it is read from the kind and the recipe."""
-    training = row.get("training") or (
-        "reference" if row["kind"] in ("hand-coded", "random") else "protocol" if row.get("recipe") else "unchecked"
-    )
-    return Result(
-        task=row["task"],
-        policy=row["policy"],
-        kind=row["kind"],
-        level=row["level"],
-        runs=[
-            Run(
-                source=run["source"],
-                training_seed=run.get("training_seed"),
-                agent_steps=run.get("agent_steps"),
-                sha256=run.get("sha256"),
-                returns=run["returns"],
-                successes=run["successes"],
-                cycles=run["cycles"],
-                seeds=row["world_seeds"],
-                seconds=run["seconds"],
-            )
-            for run in row["runs"]
-        ],
-        group=training != "reference",
-        split=row["split"],
-        max_cycles=int(row["env"]["max_cycles"]),
-        recorded=row["summary"],
-        training=training,
-        declared=row.get("declared"),
-    )
-
-
 def plot(results: list[Result], path: Path) -> None:
     """One row per task: mean return, success rate and cycles to success per policy, with 95 % intervals."""
     import matplotlib
@@ -378,119 +353,6 @@ def plot(results: list[Result], path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def write_results(
-    results: list[Result], out_dir: Path, *, seed_list: list, settings: dict, deterministic: bool, plots: bool
-) -> list[Result]:
-    """Write ``results.md``, ``results.json`` (a row per run, with its ``group`` label, and the
-    groups' summaries) and (``plots``) ``eval.png`` into ``out_dir``; returns ``results``."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    groups = [r for r in results if r.group]
-    per_run = (
-        ""
-        if not groups
-        else (
-            "\n\nEach training seed on its own (the rows the groups above summarise):\n\n"
-            + markdown_table([one for g in groups for one in g.each_run()])
-        )
-    )
-    (out_dir / "results.md").write_text(
-        f"{markdown_table(results)}{per_run}\n\n{INTERVALS}\n\n"
-        f"Seeds {seed_list[0]}..{seed_list[-1]}; settings per task: {json.dumps(settings)}\n"
-    )
-    rows = [
-        {
-            "task": r.task,
-            "policy": r.policy,
-            "kind": r.kind,
-            "level": r.level,
-            "group": r.policy if r.group else "",
-            **asdict(run),
-            "summary": one.summary(),
-        }
-        for r in results
-        for one, run in zip(r.each_run() if r.group else [r], r.runs)
-    ]
-    (out_dir / "results.json").write_text(
-        json.dumps(
-            {
-                "seeds": seed_list,
-                "settings": settings,
-                "deterministic": deterministic,
-                "results": rows,
-                "groups": [
-                    {"label": g.policy, "task": g.task, "runs": [r.source for r in g.runs], "summary": g.summary()}
-                    for g in groups
-                ],
-            },
-            indent=1,
-            default=float,
-        )
-    )
-    if plots:
-        plot(results, out_dir / "eval.png")
-    return results
-
-
-def load_results(path) -> tuple[list[Result], dict]:
-    """The episodes of a ``results.json`` that :func:`write_results` wrote:
-    ``(results, {"seed_list", "settings", "deterministic"})``, one :class:`Result` per policy or
-    training-seed group (the runs of a ``group`` label gathered at the place of its first; the
-    summaries left out: they are computed again). Files from before control levels and
-    training-seed groups read with ``level="full"`` and no group. A file that is not such a
-    ``results.json`` is a :class:`ConfigError` naming it."""
-    p = Path(path)
-    fields = {f.name for f in dataclasses.fields(Run)}
-    results: list[Result] = []
-    groups: dict = {}
-    try:
-        data = json.loads(p.read_text())
-        for row in data["results"]:
-            run = Run(**{k: v for k, v in row.items() if k in fields})
-            label = row.get("group") or ""
-            if (row["task"], label) not in groups:
-                result = Result(
-                    row["task"], label or row["policy"], row["kind"], row.get("level", "full"), group=bool(label)
-                )
-                results.append(result)
-                if label:
-                    groups[(row["task"], label)] = result
-            (groups.get((row["task"], label)) or results[-1]).runs.append(run)
-        context = {
-            "seed_list": list(data["seeds"]),
-            "settings": data["settings"],
-            "deterministic": data["deterministic"],
-        }
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        raise ConfigError(
-            f"--from-results={str(p)!r} is not allowed ({type(error).__name__}: {error}); "
-            "allowed: a results.json written by proteo eval"
-        ) from None
-    for r in results:
-        for run in r.runs:
-            lengths = {len(run.returns), len(run.successes), len(run.cycles)}
-            if len(lengths) != 1 or not run.returns:
-                raise ConfigError(
-                    f"--from-results={str(p)!r}: the row {r.task} / {r.policy} has returns, successes and cycles of "
-                    f"lengths {len(run.returns)}, {len(run.successes)}, {len(run.cycles)}; allowed: one of each per "
-                    "episode"
-                )
-    return results, context
-
-
-def rerender(path, out, *, plots: bool = True, pages=()) -> list[Result]:
-    """Write ``results.md``, ``results.json`` and (``plots``) ``eval.png`` into ``out`` from the
-    episodes of the ``results.json`` at ``path`` (:func:`load_results`), without running an
-    episode, and publish the tables into ``pages`` (:func:`publish_evaluation`): the tables of an earlier
-    evaluation in the current format. Every page is checked before anything is written.
-    Returns the results."""
-    results, context = load_results(path)
-    texts = {Path(f): filled(f, page_tables(results, out), PUBLISH_END) for f in pages}
-    write_results(results, Path(out), plots=plots, **context)
-    for f, text in texts.items():
-        f.write_text(text)
-    return results
 
 
 PUBLISH_BEGIN = "<!-- proteo eval --out {out} -->"

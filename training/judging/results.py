@@ -47,12 +47,13 @@ from pathlib import Path
 import numpy as np
 
 from proteo_env.config import ConfigError
+from training.judging import record
 from training.judging import statistics as st
 from training.judging.pages import filled
 from training.judging.pages import publish as publish_pages
 from training.judging.plots import plot_mean_band, read_progress
 from training.judging.protocol import load_protocol
-from training.judging.report import Result, result_of_row, row_label, span, success_cell
+from training.judging.report import Result, row_label, span, success_cell
 from training.machinery.checkpoints import RULES
 
 RULES_MOVE, RANDOM = "rules-move", "random"
@@ -80,7 +81,7 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
             "written by proteo eval --benchmark VERSION --out ROOT/VERSION/<task>/<policy>"
         )
     for file in files:
-        data = json.loads(file.read_text())
+        data = record.load(file, field="benchmark file")
         judged_by = (data.get("protocol"), data.get("protocol_sha256"))
         if shas.get(judged_by[0]) != judged_by[1]:
             raise ConfigError(
@@ -95,7 +96,7 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
                 f"--worlds-cap; its notes: {'; '.join(data.get('notes') or []) or 'none'})"
             )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
-        rows += [dataclasses.replace(result_of_row(r), task=r["task_name"]) for r in data["rows"]]
+        rows += [dataclasses.replace(r, task=row["task_name"]) for r, row in zip(record.results_of(data), data["rows"])]
     return rows, headers
 
 
