@@ -39,9 +39,6 @@ from training.machinery.entrants import ENTRANT_FILE, check_factory_name, file_d
 from training.machinery.evaluator import Controller, episode_key, settings_json
 from training.machinery.runs import out_folder
 
-SCHEMA = "proteo-benchmark-results"
-SCHEMA_VERSION = 1
-
 
 @dataclass
 class Candidate:

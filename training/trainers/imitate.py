@@ -162,7 +162,7 @@ def agreement(net: ActorCritic, features, move_mask, labels, nvec) -> tuple[floa
     return float(same[:, 0].float().mean()), float(same.all(dim=1).float().mean()), same.float().mean(0).numpy()
 
 
-def collect(
+def collect_labelled(
     worlds: TrainingEnvs | WorkerEnvs,
     teachers: Teachers | WorkerTeachers,
     net: ActorCritic,
@@ -238,7 +238,7 @@ def train(args: Args) -> Path:
         started = time.perf_counter()
         beta = round_beta(args, round_index)
         net.eval()
-        x, m, y, finished = collect(worlds, teachers, net, beta, args.cycles_per_round, rng, args, bar)
+        x, m, y, finished = collect_labelled(worlds, teachers, net, beta, args.cycles_per_round, rng, args, bar)
         agent_steps += args.cycles_per_round * worlds.n_envs * worlds.n_agents
         x_t, m_t, y_t = torch.from_numpy(x), torch.from_numpy(m), torch.from_numpy(y)
         held_out = (

@@ -220,7 +220,7 @@ class Samples(NamedTuple):
         return Samples(*(column[index].to(device) for column in self))
 
 
-def collect(
+def collect_rollout(
     rollout: Rollout, worlds: TrainingEnvs, net: ActorCritic, scale: ReturnScale, teachers, distill: float, args: Args
 ) -> tuple[torch.Tensor, list[dict]]:
     """Fill ``rollout`` with ``n_steps`` cycles of every world; returns the value of the
@@ -398,7 +398,7 @@ def train(args: Args) -> Path:
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
         distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
         with torch.no_grad():
-            last_value, finished = collect(rollout, worlds, net, scale, teachers, distill, args)
+            last_value, finished = collect_rollout(rollout, worlds, net, scale, teachers, distill, args)
         collected = time.perf_counter()
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)

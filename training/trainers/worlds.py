@@ -234,7 +234,7 @@ class WorkerEnvs:
     The same worlds as one process: world ``w`` is seeded with child ``w`` of the run's seed
     whichever process holds it, and the features, masks, rewards and ended episodes come back in
     world order, so a trainer that draws its actions from them in one process makes the same run
-    on any number of workers, bit for bit. It offers what :func:`training.trainers.ppo.collect` reads of
+    on any number of workers, bit for bit. It offers what :func:`training.trainers.ppo.collect_rollout` reads of
     :class:`TrainingEnvs`: :meth:`encode`, :meth:`step`, ``final_rows``, ``final_features``,
     ``joined``, ``encoder``, ``nvec``, ``size``, ``task_id``, ``n_envs`` and ``n_agents``, and
     the hand-coded rules as teachers (:meth:`make_teachers`: each process teaches its share,
