@@ -294,8 +294,28 @@ def _extension(tmp_path: Path, text: str) -> Path:
     [
         ("version: v2\nextends: v1\nworlds: {reference: 200}\n", ["top level", "'worlds'", "version, extends, tasks"]),
         (
-            "version: v2\nextends: v1\ntasks: {chain: {splits: {tiny: {env: {n_modules: 4}}}}}\n",
-            ["tasks.chain", "'splits'", "levels, recipes"],
+            "version: v2\nextends: v1\ntasks: {chain: {env: {n_modules: 4}}}\n",
+            ["tasks.chain", "'env'", "levels, recipes, splits"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {larger: {env: {n_modules: 30}}}}}\n",
+            ["tasks.chain.splits.larger", "v1 already fixes it"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {x10: {worlds: {reference: 5, per_training_seed: 5}}}}}\n",
+            ["tasks.chain.splits.x10.worlds.reference = 5", "from 20 to 100", "may take fewer, not more"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {x10: {worlds: {reference: 20, per_training_seed: 50}}}}}\n",
+            ["tasks.chain.splits.x10.worlds.per_training_seed = 50", "from 5 to 20"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {x10: {worlds: {reference: 20}}}}}\n",
+            ["tasks.chain.splits.x10.worlds.per_training_seed = None", "from 5 to 20"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {x10: {worlds: {referense: 20}}}}}\n",
+            ["tasks.chain.splits.x10.worlds", "'referense'", "did you mean 'reference'"],
         ),
         (
             "version: v2\nextends: v1\ntasks: {chain: {levels: {learned: [full]}}}\n",
@@ -321,6 +341,34 @@ def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, name
     for name in names:
         assert name in str(err.value), (name, str(err.value))
     assert not (tmp_path / "out").exists()
+
+
+def test_an_extension_adds_splits_with_fewer_worlds_and_the_judge_judges_them_alone(tmp_path):
+    """A protocol may add splits to the one it extends, each with its own (smaller) world counts;
+    ``--splits`` judges those splits only, on their own worlds, and a split a task lacks is refused."""
+    text = (
+        "version: v2\nextends: v1\ntasks:\n  chain:\n    splits:\n"
+        "      wider: {about: fourteen modules, env: {n_modules: 14}, worlds: {reference: 20, per_training_seed: 5}}\n"
+    )
+    root = _extension(tmp_path, text)
+    protocol = load_protocol("v2", root=root)
+    wider = protocol.tasks["chain"].splits[-1]
+    assert wider.name == "wider" and wider.env["n_modules"] == 14 and wider.worlds["reference"] == 20
+    assert [s.name for s in protocol.tasks["chain"].splits[:-1]] == [
+        s.name for s in load_protocol("v1").tasks["chain"].splits
+    ]
+    assert protocol.worlds("hand-coded", split=wider) == 20 and protocol.worlds("learned", split=wider) == 5
+    assert protocol.worlds("hand-coded") == protocol.reference and protocol.worlds("learned", 3, wider) == 3
+    doc = judge.judge(
+        "v2", policy="rules", tasks=["chain"], level="full", splits=["wider"], out=tmp_path / "out", root=root,
+        progress=False, workers=1,
+    )  # fmt: skip
+    (row,) = doc["rows"]
+    assert (row["split"], row["world_seeds"], row["complete"]) == ("wider", list(range(1000, 1020)), True)
+    assert len(row["runs"][0]["successes"]) == 20
+    with pytest.raises(ConfigError, match=r"--splits 'wider' is not allowed for branch; allowed: its splits"):
+        judge.judge("v2", policy="rules", tasks=["branch"], splits=["wider"], out=tmp_path / "o2", root=root)
+    assert not (tmp_path / "o2").exists()
 
 
 @pytest.mark.parametrize(
@@ -349,6 +397,11 @@ def test_bad_extension_is_one_config_error_naming_the_field(tmp_path, text, name
         ),
         (["--benchmark", "v1", "--checkpoint", CHAIN_CHECKPOINT, "--checkpoint", CHAIN_CHECKPOINT], ["twice"]),
         (["--policy", "rules"], ["without --benchmark"]),
+        (["--splits", "x10"], ["--splits 'x10' without --benchmark is not allowed"]),
+        (
+            ["--benchmark", "v1", "--policy", "rules", "--splits", "x10"],
+            ["--splits 'x10' is not allowed for", "heldout"],
+        ),
     ],
 )
 def test_bad_command_line_is_one_error_and_nothing_is_written(tmp_path, capsys, monkeypatch, argv, names):

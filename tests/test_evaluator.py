@@ -107,6 +107,32 @@ def test_results_do_not_depend_on_batch_size_workers_or_order():
     assert [row[::-1] for row in reversed_seeds[::-1]] == reference
 
 
+def test_a_batch_holds_as_many_worlds_as_each_worker_s_memory_share_and_a_world_too_large_is_refused(monkeypatch):
+    """Batches shrink to what each worker's share of the memory holds (the results do not change);
+    a world larger than that share is one error naming its task, settings and size, before any
+    episode runs."""
+    from proteo_env.core.world import world_bytes
+    from training.machinery import evaluator
+
+    overrides = small_overrides("chain-v1", max_cycles=30)
+    episode = Episode("chain-v1", settings_json(overrides), "full", Controller.rules("chain"), 3)
+    env = proteo_env.make("chain-v1", **overrides)
+    env.reset(seed=3)
+    need = world_bytes(env.engine.shape.size, env.engine.shape.extent, env.engine.n_modules, env.max_cycles)
+    reference = evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1)
+    monkeypatch.setattr(evaluator, "machine_memory", lambda: 2 * (3 * need) + 2)  # three worlds for one worker
+    assert evaluator.worlds_per_batch(episode, 64, 1) == 3 and evaluator.worlds_per_batch(episode, 2, 1) == 2
+    assert evaluator.worlds_per_batch(episode, 64, 2) == 1
+    chunks = []
+    run_chunk = evaluator._run_chunk
+    monkeypatch.setattr(evaluator, "_run_chunk", lambda chunk: chunks.append(chunk[:2]) or run_chunk(chunk))
+    assert evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1) == reference
+    assert sorted(len(episodes) for episodes, _ in chunks) == [2, 3] and {size for _, size in chunks} == {3}
+    monkeypatch.setattr(evaluator, "machine_memory", lambda: 2 * need - 2)
+    with pytest.raises(ConfigError, match=r"chain-v1 with .*: a world needs up to about .* 12 modules, 30 cycles\); allowed: worlds that fit"):
+        run_episodes([episode], workers=1)
+
+
 def test_episodes_of_several_settings_and_tasks_in_one_call():
     chain, grasp = small_overrides("chain-v1", max_cycles=40), small_overrides("grasp-v0", max_cycles=40)
     episodes = [

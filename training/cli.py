@@ -270,6 +270,12 @@ def _add_judging_commands(sub) -> None:
     b.add_argument("--policy", default=None, help="with --benchmark: rules or random (every task, or --tasks)")
     b.add_argument("--level", default=None, help="with --benchmark --policy (or a factory): only this control level")
     b.add_argument(
+        "--splits",
+        default=None,
+        metavar="A,B",
+        help="with --benchmark: only these splits (such as the ones a protocol adds to the one it extends)",
+    )
+    b.add_argument(
         "--worlds-cap",
         type=int,
         default=None,

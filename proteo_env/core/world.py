@@ -94,6 +94,18 @@ def gib(n_bytes: float) -> str:
     return f"{value:.3g} GiB" if value < 1e5 else f"{value:.2g} GiB"
 
 
+def world_bytes(size, extent, n_modules: int, cycles: int) -> int:
+    """Bytes a world can come to hold in ``cycles`` cycles, from a grid window of ``extent`` in a box
+    of ``size`` sites with ``n_modules`` modules: its grid over the window it can grow to
+    (:data:`GRID_BYTES_PER_CELL` a cell) and its modules (:data:`MODULE_BYTES` each). A module moves
+    at most one site a cycle and a window grows by at least half of itself, so per axis the window
+    stays within twice its extent at reset plus four sites a cycle, and within the box. An upper
+    bound that a long structure nears: a chain of 1,200 modules spans its box's diagonal (3.4 GiB
+    measured, 4.4 GiB bound)."""
+    reach = np.minimum(np.asarray(size, dtype=np.int64), 2 * (np.asarray(extent, dtype=np.int64) + 2 * int(cycles)))
+    return GridShape(tuple(int(v) for v in reach)).n_cells * GRID_BYTES_PER_CELL + int(n_modules) * MODULE_BYTES
+
+
 def grid_memory(shape: GridShape) -> tuple[int, int]:
     """``(bytes the grid of shape needs, bytes available)``."""
     return shape.n_cells * GRID_BYTES_PER_CELL, machine_memory()

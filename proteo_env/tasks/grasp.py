@@ -291,6 +291,11 @@ def nearest_fcc_site(point) -> np.ndarray:
     return q
 
 
+PAIRS_PER_BLOCK = 1 << 20
+"""Pairs of base sites :func:`spread_seeds` compares at once (a block of rows against every site:
+24 MiB of differences), so that its memory grows with the modules, not their square."""
+
+
 def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seed_modules: int, spread: float) -> np.ndarray:
     """Indices of ``n_seed_modules`` base sites on the front of the base, spread out across ``direction``.
 
@@ -303,10 +308,13 @@ def spread_seeds(sites: np.ndarray, direction: np.ndarray, n_seed_modules: int, 
     rel = sites - sites.mean(axis=0)
     ahead = rel @ direction
     lateral = rel - ahead[:, None] * direction[None, :]
-    diff = sites[None, :, :] - sites[:, None, :]  # diff[i, j] = j - i
-    along = diff @ direction
-    across = np.linalg.norm(diff - along[..., None] * direction, axis=2)
-    blocked = ((along > 0) & (across < 1.5)).any(axis=1)
+    blocked = np.zeros(len(sites), dtype=bool)
+    rows = max(1, PAIRS_PER_BLOCK // max(1, len(sites)))  # memory in blocks of rows, not (N, N, 3) at once
+    for start in range(0, len(sites), rows):
+        diff = sites[None, :, :] - sites[start : start + rows, None, :]  # diff[i, j] = j - i
+        along = diff @ direction
+        across = np.linalg.norm(diff - along[..., None] * direction, axis=2)
+        blocked[start : start + rows] = ((along > 0) & (across < 1.5)).any(axis=1)
     front = np.flatnonzero(~blocked)
     radius = np.linalg.norm(lateral, axis=1)
     pool = front[radius[front] <= spread]

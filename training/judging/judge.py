@@ -337,6 +337,7 @@ def judge(
     ray: dict | None = None,
     workers: int | None = None,
     worlds_cap: int | None = None,
+    splits=None,
     fresh: bool = False,
     progress: bool = True,
     root=None,
@@ -357,6 +358,8 @@ def judge(
         workers: processes on this machine (default: every core; the results do not depend on it).
         worlds_cap: judge on at most this many worlds per split and training seed (the first
             ones). For quick checks only: the file records it and is not ``complete``.
+        splits: judge these splits of the task(s) only (default: every split), such as the
+            splits a protocol adds to the one it extends.
         fresh: discard the episodes of an interrupted run in ``out`` instead of resuming it.
 
     Everything is checked before anything is written (a :class:`ConfigError` otherwise).
@@ -370,8 +373,9 @@ def judge(
                 "training seed: a success rate needs at least one)"
             )
     judged = candidates(protocol, checkpoints=checkpoints, policy=policy, level=level, tasks=tasks, entrant=entrant)
+    check_splits(protocol, judged, splits)
     check_loads(protocol, judged)
-    plan = plan_protocol(protocol, judged, worlds_cap)
+    plan = plan_protocol(protocol, judged, worlds_cap, splits)
     fingerprint = {
         "protocol": protocol.version,
         "sha256": protocol.sha256,
@@ -392,6 +396,19 @@ def judge(
     )  # fmt: skip
 
 
+def check_splits(protocol: Protocol, judged: list[Candidate], splits) -> None:
+    """Every name in ``splits`` (``None``: every split) is a split of every task judged, else one
+    :class:`ConfigError` naming it and the task's splits."""
+    for name in splits or ():
+        for e in judged:
+            names = [s.name for s in e.task.splits]
+            if name not in names:
+                raise ConfigError(
+                    f"--splits {name!r} is not allowed for {e.task.name}; allowed: its splits under benchmark "
+                    f"{protocol.version} ({', '.join(names)}), or --tasks with the tasks that have it"
+                )
+
+
 def check_loads(protocol: Protocol, judged: list[Candidate]) -> None:
     """Every checkpoint and entrant of ``judged`` loads on its task's first split (a
     :class:`ConfigError` naming what does not), before anything is written."""
@@ -407,14 +424,16 @@ def check_loads(protocol: Protocol, judged: list[Candidate]) -> None:
             env.close()
 
 
-def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None):
+def plan_protocol(protocol: Protocol, judged: list[Candidate], worlds_cap: int | None, splits=None):
     """The :class:`~training.judging.episodes.Plan` of a protocol: for each candidate and split of
-    its task, one row whose runs (one per training seed) play the protocol's world seeds for its
-    kind (the first ``worlds_cap`` of them where given)."""
+    its task (those named in ``splits`` only, where given), one row whose runs (one per training
+    seed) play the split's world seeds for its kind (the first ``worlds_cap`` of them where given)."""
     plan = Plan()
     for e in judged:
-        seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap))
         for split in e.task.splits:
+            if splits is not None and split.name not in splits:
+                continue
+            seeds = protocol.world_seeds(protocol.worlds(e.kind, worlds_cap, split))
             result = Result(
                 task=e.task.task_id,
                 policy=e.label,
@@ -469,8 +488,8 @@ def main(args) -> int:
         "--benchmark",
         conflicting,
         "the protocol fixes the worlds and settings",
-        "--checkpoint, --entrant, --policy, --level, --tasks, --out, --worlds-cap, --fresh, --ray, --workers, --address, "
-        "--no-plots",
+        "--checkpoint, --entrant, --policy, --level, --tasks, --splits, --out, --worlds-cap, --fresh, --ray, --workers, "
+        "--address, --no-plots",
     )
     document = judge(
         args.benchmark,
@@ -483,6 +502,7 @@ def main(args) -> int:
         ray=ray_options(args),
         workers=None if args.ray else args.workers,
         worlds_cap=args.worlds_cap,
+        splits=args.splits.split(",") if args.splits else None,
         fresh=args.fresh,
     )
     print(record.markdown(document))
@@ -493,7 +513,7 @@ def main(args) -> int:
 def check_flags(args) -> None:
     """``--policy``, ``--entrant``, ``--level`` and ``--worlds-cap`` belong to ``--benchmark``: without
     it, a :class:`ConfigError` (so that a flag is never silently ignored)."""
-    flags = ("--policy", args.policy), ("--entrant", args.entrant), ("--level", args.level)
+    flags = ("--policy", args.policy), ("--entrant", args.entrant), ("--level", args.level), ("--splits", args.splits)
     for flag, value in (*flags, ("--worlds-cap", args.worlds_cap)):
         if value is not None:
             raise ConfigError(

@@ -42,18 +42,27 @@ MIN_WORLDS_PER_TRAINING_SEED = 20
 """A learned or evolved recipe is judged on at least this many worlds per training seed and split."""
 MIN_TRAINING_SEEDS = 5
 """A learned or evolved recipe is judged with at least this many training seeds."""
+MIN_SPLIT_REFERENCE_WORLDS = 20
+"""A split that takes fewer worlds than the protocol's (a split of large worlds, ``worlds`` in its
+entry) judges the rules and random on at least this many: a success rate known to +-0.22 at
+worst (the 95 % Wilson interval at 10/20 is 0.30-0.70), to +-0.09 from 18/20 on."""
+MIN_SPLIT_WORLDS_PER_TRAINING_SEED = 5
+"""Such a split judges a learned or evolved recipe on at least this many worlds per training seed:
+with ten training seeds, 50 episodes (the pooled 95 % Wilson interval at 25/50 is 0.36-0.64)."""
 
 PROTOCOL_KEYS = ("version", "worlds", "equivalence_margin", "tasks")
 EXTENSION_KEYS = ("version", "extends", "tasks")
 """The keys of a protocol that extends another: it only adds levels and recipes to its tasks."""
 WORLDS_KEYS = ("first_seed", "reference", "per_training_seed", "training_seeds")
 TASK_KEYS = ("task", "trained_on", "levels", "env", "recipes", "splits")
-EXTENSION_TASK_KEYS = ("levels", "recipes")
+EXTENSION_TASK_KEYS = ("levels", "recipes", "splits")
 LEVEL_KEYS = ("learned", "rules", "random")
 OPTIONAL_LEVEL_KEYS = ("evolved",)
 """``evolved``: the levels evolved controllers are judged at (without it: ``learned``'s)."""
 RECIPE_KEYS = ("config", "agent_steps", "init")
-SPLIT_KEYS = ("about", "env")
+SPLIT_KEYS = ("about", "env", "worlds")
+SPLIT_WORLDS_KEYS = ("reference", "per_training_seed")
+"""A split's own world counts (fewer than the protocol's, for splits of large worlds)."""
 REQUIRED_SPLITS = ("heldout", "larger")
 REFERENCE_POLICIES = ("rules", "random")
 """The names ``--policy`` takes: the task's hand-coded rules, and the random policy."""
@@ -66,6 +75,9 @@ class Split:
     name: str
     about: str
     env: dict
+    worlds: dict | None = None
+    """``{"reference", "per_training_seed"}``: this split's own world counts, fewer than the
+    protocol's (a split of large worlds); ``None``: the protocol's."""
 
 
 @dataclass(frozen=True)
@@ -110,10 +122,15 @@ class Protocol:
         """The first ``n`` world seeds: every policy judged on ``n`` worlds gets these."""
         return list(range(self.first_seed, self.first_seed + n))
 
-    def worlds(self, kind: str, cap: int | None = None) -> int:
-        """Worlds per split (per training seed for a learned or evolved policy) for ``kind``,
-        at most ``cap`` (quick checks only)."""
-        n = self.reference if kind in ("hand-coded", "random") else self.per_training_seed
+    def worlds(self, kind: str, cap: int | None = None, split: Split | None = None) -> int:
+        """Worlds of ``split`` (per training seed for a learned or evolved policy) for ``kind``:
+        the split's own count where it has one, else the protocol's; at most ``cap`` (quick
+        checks only)."""
+        counts = (split.worlds if split is not None else None) or {
+            "reference": self.reference,
+            "per_training_seed": self.per_training_seed,
+        }
+        n = counts["reference"] if kind in ("hand-coded", "random") else counts["per_training_seed"]
         return n if cap is None else min(n, cap)
 
 
@@ -165,6 +182,27 @@ def _settings(where: str, at: str, field_path: str, value, cls) -> dict:
     return dict(value)
 
 
+def _split_worlds(where: str, field_path: str, value, counts: dict) -> dict | None:
+    """A split's own world counts, checked: each at least its minimum
+    (:data:`MIN_SPLIT_REFERENCE_WORLDS`, :data:`MIN_SPLIT_WORLDS_PER_TRAINING_SEED`) and at most the
+    protocol's; ``None`` without them."""
+    if value is None:
+        return None
+    value = _mapping(where, field_path, value, SPLIT_WORLDS_KEYS)
+    _unknown(f"{where}: {field_path}", value, SPLIT_WORLDS_KEYS)
+    least = {"reference": MIN_SPLIT_REFERENCE_WORLDS, "per_training_seed": MIN_SPLIT_WORLDS_PER_TRAINING_SEED}
+    own = {}
+    for key in SPLIT_WORLDS_KEYS:
+        n = value.get(key)
+        if isinstance(n, bool) or not isinstance(n, int) or not least[key] <= n <= counts[key]:
+            raise ConfigError(
+                f"{where}: {field_path}.{key} = {n!r} is not allowed; allowed: an integer from {least[key]} to "
+                f"{counts[key]} (the protocol's worlds.{key}: a split of large worlds may take fewer, not more)"
+            )
+        own[key] = n
+    return own
+
+
 def _protocol_data(version: str, root: Path, children: tuple) -> tuple[dict, tuple]:
     """The checked top level of ``<version>.yaml`` with the protocols it extends merged in, and
     its lineage (:attr:`Protocol.lineage`). ``children``: the versions that extend it (a cycle
@@ -201,7 +239,7 @@ def _protocol_data(version: str, root: Path, children: tuple) -> tuple[dict, tup
     for name, entry in tasks.items():
         at = f"tasks.{name}"
         entry = _mapping(where, at, entry, EXTENSION_TASK_KEYS)
-        _unknown(f"{where}: {at} (an extension only adds levels and recipes)", entry, EXTENSION_TASK_KEYS)
+        _unknown(f"{where}: {at} (an extension only adds levels, recipes and splits)", entry, EXTENSION_TASK_KEYS)
         into = merged["tasks"][name]
         for key in EXTENSION_TASK_KEYS:
             added = _mapping(where, f"{at}.{key}", entry.get(key), ["new names"])
@@ -229,9 +267,13 @@ def load_protocol(version: str, root=None) -> Protocol:
     :data:`MIN_TRAINING_SEEDS`.
 
     A file with ``extends: <earlier version>`` holds only what it adds to that version: new
-    levels (``evolved``) and new recipes of its tasks; changing anything the earlier version fixes
-    (worlds, splits, settings, a level or recipe it has) is an error, so every result judged under
-    the earlier version holds under this one (:attr:`Protocol.lineage`).
+    levels (``evolved``), new recipes and new splits of its tasks; changing anything the earlier
+    version fixes (worlds, settings, a level, recipe or split it has) is an error, so every result
+    judged under the earlier version holds under this one (:attr:`Protocol.lineage`).
+
+    A split may take fewer worlds than the protocol (``worlds: {reference, per_training_seed}``
+    in its entry, for splits of large worlds), at least :data:`MIN_SPLIT_REFERENCE_WORLDS` and
+    :data:`MIN_SPLIT_WORLDS_PER_TRAINING_SEED`.
     """
     root = Path(root or ROOT)
     data, lineage = _protocol_data(version, root, ())
@@ -331,7 +373,8 @@ def load_protocol(version: str, root=None) -> Protocol:
             if not isinstance(about, str):
                 raise ConfigError(f"{where}: {sat}.about = {about!r} is not allowed; allowed: a string")
             merged = _settings(where, at, f"{sat}.env", {**env, **(spec.get("env") or {})}, cls)
-            splits.append(Split(name=str(split), about=about, env=merged))
+            own = _split_worlds(where, f"{sat}.worlds", spec.get("worlds"), counts)
+            splits.append(Split(name=str(split), about=about, env=merged, worlds=own))
         tasks[name] = TaskProtocol(
             name=name,
             task_id=task_id,

@@ -70,9 +70,9 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
     sha256)`` of a protocol's :attr:`~training.judging.protocol.Protocol.lineage`, and each file's
     header. A file judged under another protocol, or under a protocol file that has changed
     since (its ``protocol_sha256``), or one that is not complete (fewer training seeds or worlds
-    than the protocol asks, a ``--worlds-cap``), is a :class:`ConfigError`: nothing is published
-    from it."""
-    rows, headers = [], []
+    than the protocol asks, a ``--worlds-cap``), or a row judged in two files (the same task, split
+    and policy), is a :class:`ConfigError`: nothing is published from it."""
+    rows, headers, judged_in = [], [], {}
     shas = dict(lineage)
     files = [f for version in shas for f in sorted((root / version).rglob("benchmark.json"))]
     if not files:
@@ -96,7 +96,15 @@ def read_rows(root: Path, lineage) -> tuple[list[Result], list[dict]]:
                 f"--worlds-cap; its notes: {'; '.join(data.get('notes') or []) or 'none'})"
             )
         headers.append({k: v for k, v in data.items() if k != "rows"} | {"file": str(file)})
-        rows += [dataclasses.replace(r, task=row["task_name"]) for r, row in zip(record.results_of(data), data["rows"])]
+        for r, row in zip(record.results_of(data), data["rows"]):
+            key = (row["task_name"], r.split, r.policy)
+            if key in judged_in:
+                raise ConfigError(
+                    f"{file}: the row {' / '.join(key)} is not allowed: {judged_in[key]} holds it already; allowed: each "
+                    "task, split and policy judged once (judge a protocol's added splits alone, with --splits)"
+                )
+            judged_in[key] = file
+            rows.append(dataclasses.replace(r, task=row["task_name"]))
     return rows, headers
 
 

@@ -51,6 +51,7 @@ from baselines import POLICIES, make_policy
 from baselines.base import KernelPolicy
 from proteo_env import TASKS, batched
 from proteo_env.config import ConfigError
+from proteo_env.core.world import gib, machine_memory, world_bytes
 from proteo_env.rollout import EpisodeResult
 from training.machinery.checkpoints import load_policy
 from training.machinery.distributed import run_jobs
@@ -464,12 +465,12 @@ def run_episodes(
         groups.setdefault((e.task, e.overrides, e.level, kind), []).append(i)
     # One batch a chunk: every worker kept busy, each batch full, and the journal written as each batch lands
     # (an interrupted run loses at most the batches in flight), whatever the number of workers.
-    per_chunk = batch_size
     chunks, members = [], []
     for indices in groups.values():
+        per_chunk = worlds_per_batch(episodes[indices[0]], batch_size, workers)
         for part in np.array_split(np.array(indices), math.ceil(len(indices) / per_chunk)):
             members.append(part.tolist())
-            chunks.append((tuple(episodes[i] for i in part), batch_size, plugins))
+            chunks.append((tuple(episodes[i] for i in part), per_chunk, plugins))
 
     def landed(c: int, results: list) -> None:
         if journal is not None:
@@ -496,6 +497,32 @@ def run_episodes(
             else:
                 out[i] = out[first_of[k]]
     return out
+
+
+BATCH_MEMORY_SHARE = 0.5
+"""The part of a worker's share of the memory available that its batch of worlds may take (the
+rest: the policy, observations, the process itself and whatever else runs on the machine)."""
+
+
+def worlds_per_batch(episode: Episode, batch_size: int, workers: int) -> int:
+    """How many worlds of ``episode``'s task and settings one batch steps together: ``batch_size``,
+    or fewer where :data:`BATCH_MEMORY_SHARE` of each of ``workers`` processes' share of the memory
+    available holds fewer (:func:`proteo_env.core.world.world_bytes` of its world, drawn once, over
+    its cycle limit); a world larger than that is one :class:`ConfigError` before any episode runs."""
+    env = proteo_env.make(episode.task, **json.loads(episode.overrides))
+    env.reset(seed=int(episode.seed))
+    shape, n_modules = env.engine.shape, env.engine.n_modules
+    need = world_bytes(shape.size, shape.extent, n_modules, env.max_cycles)
+    env.close()
+    share = int(machine_memory() * BATCH_MEMORY_SHARE) // max(1, workers)
+    if need > share:
+        raise ConfigError(
+            f"{episode.task} with {episode.overrides}: a world needs up to about {gib(need)} (a box of "
+            f"{' x '.join(map(str, shape.size))} sites, {n_modules} modules, {env.max_cycles} cycles); allowed: worlds "
+            f"that fit in each worker's share of the memory available ({gib(share)} for {workers} worker(s)): "
+            "fewer workers, or a split of fewer modules or cycles"
+        )
+    return int(max(1, min(batch_size, share // need)))
 
 
 def episode_key(episode: Episode) -> str:
