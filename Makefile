@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all fuzz lint results bench learning-results learning-results-v7 benchmark-references benchmarl test-benchmarl
+.PHONY: install install-distributed demo test test-all fuzz lint results bench learning-results learning-results-v7 benchmark-references benchmark-references-v8 scale-results-v8 benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -101,6 +101,25 @@ learning-results-v7: install
 		$(BIN)/proteo eval --benchmark v7 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 			--out docs/benchmark/v7/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
 	$(MAKE) results
+
+# Every v7 recipe's ten checkpoints on protocol v8's scale splits (hours on 2 cores; a recipe judged
+# already is skipped, an interrupted one resumes from its episodes.jsonl), then the results page.
+scale-results-v8: install
+	for recipe in checkpoints/v7/chain/kickstart_move checkpoints/v7/*/*_*; do \
+		task=$$(basename $$(dirname $$recipe)); out=docs/benchmark/v8/$$task/$$(basename $$recipe); \
+		case $$task in chain|branch) splits=x10,x100;; *) splits=x10;; esac; \
+		test -f $$out/benchmark.json || $(BIN)/proteo eval --benchmark v8 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
+			--splits $$splits --out $$out || exit 1; done
+	$(MAKE) results
+
+# The references on protocol v8's scale splits (configs/benchmark/v8.yaml), about an hour on 2 cores; a
+# reference judged already is skipped, an interrupted one resumes from its episodes.jsonl.
+benchmark-references-v8: install
+	for task in chain branch table grasp locomotion; do \
+		case $$task in chain|branch) splits=x10,x100;; *) splits=x10;; esac; \
+		for who in "rules full rules_full" "rules move rules_move" "random move random"; do set -- $$who; \
+			test -f docs/benchmark/v8/$$task/$$3/benchmark.json || $(BIN)/proteo eval --benchmark v8 --policy $$1 --level $$2 \
+				--tasks $$task --splits $$splits --out docs/benchmark/v8/$$task/$$3 || exit 1; done; done
 
 benchmark-references: install
 	for version in v1 v7; do for task in chain branch table grasp locomotion; do \

@@ -318,6 +318,14 @@ def _extension(tmp_path: Path, text: str) -> Path:
             ["tasks.chain.splits.x10.worlds", "'referense'", "did you mean 'reference'"],
         ),
         (
+            "version: v2\nextends: v1\ntasks: {chain: {splits: {x10: {env: {n_modules: 120, max_cycles: 0}}}}}\n",
+            ["tasks.chain.splits.x10.env", "max_cycles=0 is not allowed; allowed: an integer >= 1"],
+        ),
+        (
+            "version: v2\nextends: v1\ntasks: {table: {splits: {x10: {env: {n_modules: 120}}}}}\n",
+            ["tasks.table.splits.x10.env", "unknown key 'n_modules'", "board_size"],
+        ),
+        (
             "version: v2\nextends: v1\ntasks: {chain: {levels: {learned: [full]}}}\n",
             ["tasks.chain.levels.learned", "v1 already fixes it"],
         ),

@@ -213,6 +213,28 @@ def test_the_rules_and_the_random_policy_by_name():
     assert run_episode(env, policy, seed=0).cycles == 5
 
 
+@pytest.mark.parametrize("level", ["move", "full"])
+def test_the_random_policy_draws_what_uniform_choices_over_its_fields_and_legal_moves_draw(level):
+    """The random policy's actions, cycle by cycle, are those of its first form: per agent
+    ``integers(0, nvec)`` then ``choice(legal moves)`` from one generator (its published episodes
+    stay as they were)."""
+    from baselines import make_policy
+
+    env = proteo_env.make("chain-v1", n_modules=20, max_cycles=40, control=level)
+    policy = make_policy("random", env, seed=7)
+    reference = np.random.default_rng(7)
+    observations, _ = env.reset(seed=3)
+    policy.reset(7)
+    while env.agents:
+        actions = policy.act(observations)
+        for agent, obs in observations.items():
+            expected = reference.integers(0, policy.nvec)
+            expected[env.action_layout.move] = reference.choice(obs["action_mask"].nonzero()[0])
+            assert np.array_equal(actions[agent], expected), (agent, env.cycle)
+        observations, *_ = env.step(actions)
+    assert env.cycle == 40
+
+
 @pytest.mark.parametrize(
     "source, named",
     [

@@ -129,7 +129,10 @@ def test_a_batch_holds_as_many_worlds_as_each_worker_s_memory_share_and_a_world_
     assert evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1) == reference
     assert sorted(len(episodes) for episodes, _ in chunks) == [2, 3] and {size for _, size in chunks} == {3}
     monkeypatch.setattr(evaluator, "machine_memory", lambda: 2 * need - 2)
-    with pytest.raises(ConfigError, match=r"chain-v1 with .*: a world needs up to about .* 12 modules, 30 cycles\); allowed: worlds that fit"):
+    with pytest.raises(
+        ConfigError,
+        match=r"chain-v1 with .*: a world needs up to about .* 12 modules, 30 cycles\); allowed: worlds that fit",
+    ):
         run_episodes([episode], workers=1)
 
 

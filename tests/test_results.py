@@ -168,7 +168,7 @@ def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
     """Every seed at 0.85 against rules 0.9 and random 0: every score 0.85 / 0.9, so the IQM is
     that; the rules' first 20 worlds are all successes, so no seed beats them."""
     rows, _ = results.read_rows(_bench(tmp_path, 0.85).parent, load_protocol("v1").lineage)
-    agg = results.aggregate(rows, per_training_seed=20)[("clone", "grasp")]
+    agg = results.aggregate(rows)[("clone", "grasp")]
     assert agg["scores"].shape == (5, 2) and agg["splits"] == ["heldout", "larger"]
     assert agg["iqm"][0] == pytest.approx(0.85 / 0.9)
     assert agg["improvement"][0] == pytest.approx(0.0) and agg["ties"] == pytest.approx(0.0)
@@ -183,7 +183,7 @@ def test_the_aggregate_is_per_task_and_reports_ties_apart(tmp_path):
     seeds = [[True] * 10 + [False] * 10 for _ in range(5)]
     _write(folder, "chain", "clone", "learned", "move", {"heldout": seeds, "larger": seeds})
     rows, headers = results.read_rows(folder.parent, load_protocol("v1").lineage)
-    agg = results.aggregate(rows, per_training_seed=20)
+    agg = results.aggregate(rows)
     assert set(agg) == {("clone", "grasp"), ("clone", "chain")}
     grasp, chain = agg[("clone", "grasp")], agg[("clone", "chain")]
     assert grasp["improvement"][0] == 0.0 and grasp["ties"] == 1.0  # 20/20 against the rules' 20/20
@@ -381,3 +381,30 @@ def test_an_entrant_is_published_in_its_own_section_and_named_as_declared_everyw
     assert "-0.05 (-0.15 to +0.00) (rules)" in section  # 0.95 against the rules' 1.00 on the same 20 worlds
     assert "| outside (declared) |" in results.heldout_table(rows, protocol)
     assert "outside (declared)" in results.marl_eval_layout(rows)["proteo-grasp"]["heldout"]
+
+
+def test_the_scale_section_shows_success_against_size_with_paired_differences(tmp_path):
+    """Under v8 the page reads v7's judgements and v8's scale splits together and shows, per task,
+    every policy's success at each size with a recipe's paired difference from the rules there."""
+    root = tmp_path / "bench"
+    everywhere = {"heldout": [[True] * 100], "larger": [[True] * 100]}
+    _write(root / "v7", "chain", "rules", "hand-coded", "full", everywhere, protocol="v7")
+    _write(root / "v7", "chain", "random", "random", "move", {"heldout": [[False] * 100]}, protocol="v7")
+    _write(root / "v7", "chain", "kick", "learned", "move", {"heldout": [[True] * 100] * 5}, protocol="v7")
+    _write(root / "v8", "chain", "rules", "hand-coded", "full", {"x10": [[True] * 100], "x100": [[True] * 20]}, "v8")
+    _write(root / "v8", "chain", "kick", "learned", "move", {"x10": [[True] * 20] * 5, "x100": [[False] * 5] * 5}, "v8")
+    protocol = load_protocol("v8")
+    rows, headers = results.read_rows(root, protocol.lineage)
+    text = results.render(rows, headers, "v8", root, tmp_path / "docs" / "results.md", protocol)
+    section = text.split("## Scale: trained small, judged at ten and a hundred times the size")[1]
+    assert "| policy | heldout (12) | larger (24) | x10 (120) | x100 (1,200) |" in section
+    assert "| rules (full) | 100/100 (0.96-1.00), 50 (50-50) | 100/100 (0.96-1.00), 50 (50-50) | " in section
+    kick = next(line for line in section.splitlines() if line.startswith("| kick (move) |"))
+    assert kick.startswith(
+        "| kick (move) | 500/500 (1.00-1.00), 50 (50-50); +0.00 (+0.00 to +0.00) | - | "
+    )  # no larger
+    assert kick.endswith("| 0/25 (0.00-0.00); -1.00 (-1.00 to -1.00) |")  # the rules won those five worlds
+    assert (tmp_path / "docs" / "results" / "scale.png").is_file()
+    assert "## Scale" not in results.render(
+        [r for r in rows if r.split in ("heldout", "larger")], headers, "v8", root, tmp_path / "p.md", protocol
+    )  # no scale split judged: no section

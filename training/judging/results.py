@@ -22,11 +22,14 @@ and writes ``OUT`` (markdown) with its figures in ``OUT``'s folder under ``resul
   95 % interval of the success rate and the mean cycles to success with its interval (Wilson
   and Student t for one run, the stratified bootstrap over training seeds and worlds for a
   learned recipe: :mod:`training.judging.statistics`);
+- where the protocol has scale splits (``x10``, ``x100``), success and cycles against size, task by
+  task, with each recipe's paired difference from the rules at each size and a log-scale figure
+  (``results/scale.png``, :func:`scale_section`);
 - the aggregate per task (every recipe of a task over the same splits; never over a recipe's
   own mix of tasks), after rliable: the interquartile mean of the normalised score (rules at
   ``full`` = 1, random = 0, on the 100 reference worlds) over training seeds x splits with its
   bootstrap interval; the probability that a training seed beats the rules at its level on the
-  same worlds (its first ``per_training_seed`` worlds), ties reported apart; performance
+  same worlds (the worlds the recipe played), ties reported apart; performance
   profiles per task (``results/profiles.png``); the bootstraps draw whole training seeds, since
   a seed's splits share its checkpoint;
 - learning curves: the training success rate against agent-steps, the mean over training seeds
@@ -41,6 +44,7 @@ import argparse
 import dataclasses
 import json
 import os
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -244,11 +248,11 @@ def verdicts(task: str, recipe: str, by_key: dict, splits: list[str], margin: fl
     return "; ".join(parts)
 
 
-def aggregate(rows: list[Result], per_training_seed: int) -> dict[tuple[str, str], dict]:
+def aggregate(rows: list[Result]) -> dict[tuple[str, str], dict]:
     """Per learned or evolved recipe and task, over the task's splits (which every recipe of the
     task is judged on, so recipes of one task are compared over the same set): normalised scores
     ``(training seeds, splits)``, their IQM, and the probability that a training seed beats the
-    rules at its level on the same worlds (its first ``per_training_seed``), ties apart. The
+    rules at its level on the same worlds (the worlds the recipe played), ties apart. The
     bootstraps draw whole training seeds (a seed's splits share its checkpoint)."""
     by_key = {(r.task, r.split, r.policy): r for r in rows}
     out = {}
@@ -264,7 +268,9 @@ def aggregate(rows: list[Result], per_training_seed: int) -> dict[tuple[str, str
             rates = np.stack([r.rates[:n_runs] for r in learned], axis=1)  # (runs, splits)
             rules = np.array([by_key[(task, s, RULES)].rates[0] for s in splits])
             random = np.array([by_key[(task, s, RANDOM)].rates[0] for s in splits])
-            same_worlds = np.array([r.rates_on_first(per_training_seed)[0] for r in references])[None, :]
+            same_worlds = np.array([ref.rates_on_first(len(r.world_seeds))[0] for r, ref in zip(learned, references)])[
+                None, :
+            ]
             entry = {
                 "splits": splits,
                 "scores": st.normalized_score(rates, random, rules),
@@ -455,7 +461,7 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
     figures.mkdir(parents=True, exist_ok=True)
     tasks = [t for t in protocol.tasks if any(r.task == t for r in rows)]
     by_key = {(r.task, r.split, r.policy): r for r in rows}
-    usable = {k: v for k, v in aggregate(rows, protocol.per_training_seed).items() if "error" not in v}
+    usable = {k: v for k, v in aggregate(rows).items() if "error" not in v}
     answer, details = short_answer(rows, tasks, by_key, usable, protocol)
     commits = sorted({h.get("commit") or "unknown" for h in headers})
     lines = [
@@ -474,6 +480,7 @@ def render(rows: list[Result], headers: list[dict], version: str, root: Path, ou
     ]
     for task in tasks:
         lines += task_section(task, rows, by_key, protocol, root, figures)
+    lines += scale_section(rows, by_key, protocol, figures)
     if usable:
         lines += aggregate_section(usable, tasks, figures)
     lines += entrant_lines(entrants, everything, protocol)
@@ -577,6 +584,93 @@ def task_section(task: str, rows, by_key, protocol, root: Path, figures: Path) -
             "",
         ]
     return lines
+
+
+SCALE_SPLIT = re.compile(r"x\d+")
+"""The names of scale splits: ``x10``, ``x100`` (the factor over the training size)."""
+
+
+def split_size(env: dict) -> int:
+    """The size of a split's worlds: its board's area in sites where it has a board, else its modules."""
+    return int(env["board_size"]) ** 2 if "board_size" in env else int(env["n_modules"])
+
+
+def scale_section(rows, by_key, protocol, figures: Path) -> list[str]:
+    """Success and cycles against size, task by task, on the training size, ``larger`` and the scale
+    splits (:data:`SCALE_SPLIT`): a table per task (each learned or evolved row with its paired
+    difference from the rules at its level on the same worlds) and one figure, success against size
+    on a log scale (written into ``figures``). Empty without a judged scale split."""
+    sized = {}
+    for task, entry in protocol.tasks.items():
+        splits = [s for s in entry.splits if s.name in ("heldout", "larger") or SCALE_SPLIT.fullmatch(s.name)]
+        if any(
+            SCALE_SPLIT.fullmatch(s.name) and any(r.task == task and r.split == s.name for r in rows) for s in splits
+        ):
+            sized[task] = sorted(splits, key=lambda s: split_size(s.env))
+    if not sized:
+        return []
+    lines = [
+        "## Scale: trained small, judged at ten and a hundred times the size",
+        "",
+        "Every controller runs on each module's own neighbourhood, so it runs on a robot of any size. Each cell: "
+        "successes / worlds (95 % interval), mean cycles to success; for a learned or evolved recipe then its "
+        "difference in success rate from the rules at its level on the same worlds (95 % interval, training seeds "
+        "and worlds drawn jointly). Sizes in modules (table: the board's sites). The scale splits take fewer worlds "
+        "where their episodes are long (the protocol says how many).",
+        "",
+    ]
+    for task, splits in sized.items():
+        unit = "board sites" if "board_size" in splits[0].env else "modules"
+        head = [f"{s.name} ({split_size(s.env):,})" for s in splits]
+        lines += [f"**{task}** ({unit})", "", "| policy | " + " | ".join(head) + " |", "|---|" + "---|" * len(head)]
+        for policy in _policy_order({r.policy for r in rows if r.task == task}):
+            cells = []
+            for split in splits:
+                row = by_key.get((task, split.name, policy))
+                if row is None:
+                    cells.append("-")
+                    continue
+                text = cell(row)
+                reference = reference_of(row, by_key) if row.kind in ("learned", "evolved") else None
+                pair = paired(row, reference) if reference is not None else None
+                cells.append(text + (f"; {_difference(pair['success'])}" if pair else ""))
+            some = next(r for r in rows if r.task == task and r.policy == policy)
+            lines.append(f"| {policy} ({some.level}) | " + " | ".join(cells) + " |")
+        lines.append("")
+    _scale_figure(sized, rows, by_key, figures / "scale.png")
+    lines += ["![Success against size per task, every policy, with 95 % intervals](results/scale.png)", ""]
+    return lines
+
+
+def _scale_figure(sized: dict, rows, by_key, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(sized), figsize=(3.4 * len(sized), 3.4), squeeze=False)
+    for ax, (task, splits) in zip(axes[0], sized.items()):
+        for policy in _policy_order({r.policy for r in rows if r.task == task}):
+            points = [(split_size(s.env), by_key[(task, s.name, policy)].summary()) for s in splits
+                      if (task, s.name, policy) in by_key]  # fmt: skip
+            if not points:
+                continue
+            x = np.array([size for size, _ in points], dtype=float)
+            y = np.array([s["success_rate"] for _, s in points])
+            err = np.array(
+                [[s["success_rate"] - s["success_lo"], s["success_hi"] - s["success_rate"]] for _, s in points]
+            ).T
+            style = "--" if policy.startswith(RULES) else "-"
+            ax.errorbar(x, y, yerr=err, fmt=f"o{style}", markersize=3, capsize=2, label=policy, linewidth=1)
+        ax.set_xscale("log")
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title(task)
+        ax.set_xlabel("board sites" if "board_size" in splits[0].env else "modules")
+        ax.legend(fontsize=5)
+    axes[0][0].set_ylabel("success rate")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def aggregate_section(usable: dict, tasks: list[str], figures: Path) -> list[str]:

@@ -35,6 +35,7 @@ Example::
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import importlib
 import importlib.util
@@ -509,20 +510,27 @@ def worlds_per_batch(episode: Episode, batch_size: int, workers: int) -> int:
     or fewer where :data:`BATCH_MEMORY_SHARE` of each of ``workers`` processes' share of the memory
     available holds fewer (:func:`proteo_env.core.world.world_bytes` of its world, drawn once, over
     its cycle limit); a world larger than that is one :class:`ConfigError` before any episode runs."""
-    env = proteo_env.make(episode.task, **json.loads(episode.overrides))
-    env.reset(seed=int(episode.seed))
-    shape, n_modules = env.engine.shape, env.engine.n_modules
-    need = world_bytes(shape.size, shape.extent, n_modules, env.max_cycles)
-    env.close()
+    need, size, n_modules, cycles = _world_need(episode.task, episode.overrides, int(episode.seed))
     share = int(machine_memory() * BATCH_MEMORY_SHARE) // max(1, workers)
     if need > share:
         raise ConfigError(
             f"{episode.task} with {episode.overrides}: a world needs up to about {gib(need)} (a box of "
-            f"{' x '.join(map(str, shape.size))} sites, {n_modules} modules, {env.max_cycles} cycles); allowed: worlds "
+            f"{' x '.join(map(str, size))} sites, {n_modules} modules, {cycles} cycles); allowed: worlds "
             f"that fit in each worker's share of the memory available ({gib(share)} for {workers} worker(s)): "
             "fewer workers, or a split of fewer modules or cycles"
         )
     return int(max(1, min(batch_size, share // need)))
+
+
+@functools.lru_cache(maxsize=64)
+def _world_need(task: str, overrides: str, seed: int) -> tuple:
+    """``(bytes, box size, modules, cycle limit)`` of the world ``seed`` of ``task`` with ``overrides``
+    (:func:`proteo_env.core.world.world_bytes`; drawn once per process)."""
+    env = proteo_env.make(task, **json.loads(overrides))
+    env.reset(seed=seed)
+    shape, n_modules, cycles = env.engine.shape, env.engine.n_modules, env.max_cycles
+    env.close()
+    return world_bytes(shape.size, shape.extent, n_modules, cycles), shape.size, n_modules, cycles
 
 
 def episode_key(episode: Episode) -> str:
