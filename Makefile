@@ -54,11 +54,12 @@ bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
 
-# docs/results.md: every controller judged under benchmark protocol v7 (docs/benchmark/v7, written by
-# proteo eval --benchmark v7; docs/guides/benchmark.md), with paired intervals, the aggregate and learning
-# curves; the README's held-out table and marl-eval's file from the same judgements.
+# docs/results.md: every controller judged under benchmark protocol v8 (v7 and its scale splits:
+# docs/benchmark/v7 and v8, written by proteo eval --benchmark; docs/guides/benchmark.md), with paired
+# intervals, the aggregate, learning curves and success against size; the README's held-out table and
+# marl-eval's file from the same judgements.
 results: install
-	$(BIN)/python -m training.judging.results --benchmark v7 --publish README.md --marl-eval docs/results/marl_eval.json
+	$(BIN)/python -m training.judging.results --benchmark v8 --publish README.md --marl-eval docs/results/marl_eval.json
 
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe of

@@ -6,7 +6,8 @@ peak resident memory, ``ru_maxrss``, is its own), one process at a time or ``--w
 Each world is one episode of the judge's evaluator (a batch of one world). Reported per world:
 success, cycles to the end, wall-clock seconds (the first world of a process includes compiling)
 and peak memory; per size: successes, the largest cycles to
-success and the cycle limit a protocol would set from it (:func:`cycle_limit`). The protocol's
+success and the cycle limit a protocol sets from it (:func:`cycle_limit`: the training split's slack
+kept). The protocol's
 scale splits take their cycle limits from this table.
 
 Usage::
@@ -56,13 +57,37 @@ SIZES = {
 """Name: (task id, settings, a generous cycle limit to measure under)."""
 
 
-def cycle_limit(worst: int) -> int:
-    """The cycle limit a protocol sets from the rules' slowest success ``worst``: one and a half
-    times it, rounded up to two significant figures (v7's limits are about 1.5 to 3 times the
-    rules' slowest success at the training size)."""
-    value = 1.5 * worst
-    scale = 10 ** max(0, int(math.log10(value)) - 1)
-    return int(math.ceil(value / scale) * scale)
+ROOT = Path(__file__).resolve().parents[1]
+TRAINING = {
+    "chain-v1": "chain",
+    "branch-v0": "branch",
+    "grasp-v0": "grasp",
+    "table-v2": "table",
+    "locomotion-v0": "locomotion",
+}
+"""The protocol's task names of the measured task ids (their v7 judgements hold the training split)."""
+
+
+def training_split(task: str) -> tuple[int, int | None]:
+    """``(cycle limit, the rules' slowest success)`` of the training split (``heldout``) of ``task``,
+    from the rules' published v7 judgement (``docs/benchmark/v7/<task>/rules_full``, 100 worlds)."""
+    path = ROOT / "docs/benchmark/v7" / TRAINING[task] / "rules_full/benchmark.json"
+    row = next(r for r in json.loads(path.read_text())["rows"] if r["split"] == "heldout")
+    run = row["runs"][0]
+    won = [c for c, ok in zip(run["cycles"], run["successes"]) if ok]
+    return int(row["env"]["max_cycles"]), max(won) if won else None
+
+
+def cycle_limit(worst: int | None, training_limit: int, training_worst: int | None, scale: int) -> int:
+    """The cycle limit of a scale split that keeps the training split's slack: ``training_limit``
+    times the ratio of the rules' slowest success at that size (``worst``) to their slowest at the
+    training size, rounded up to two significant figures, never below ``training_limit``; where the
+    rules succeeded on no measured world, ``training_limit`` times ``scale``."""
+    if worst is None or training_worst is None:
+        return training_limit * scale
+    value = training_limit * worst / training_worst
+    unit = 10 ** max(0, int(math.log10(value)) - 1)
+    return max(training_limit, int(math.ceil(value / unit) * unit))
 
 
 def play(job: tuple) -> dict:
@@ -93,6 +118,8 @@ def measure(name: str, worlds: int, first_seed: int, workers: int) -> dict:
     with context.Pool(workers, maxtasksperchild=1) as pool:
         episodes = pool.map(play, jobs, chunksize=1)
     won = [e["cycles"] for e in episodes if e["success"]]
+    training_limit, training_worst = training_split(task)
+    scale = int(name.rsplit("-x", 1)[1])
     return {
         "task": task,
         "settings": settings,
@@ -100,7 +127,9 @@ def measure(name: str, worlds: int, first_seed: int, workers: int) -> dict:
         "episodes": episodes,
         "successes": len(won),
         "worst_cycles_to_success": max(won) if won else None,
-        "cycle_limit": cycle_limit(max(won)) if won else None,
+        "training_limit": training_limit,
+        "training_worst_cycles_to_success": training_worst,
+        "cycle_limit": cycle_limit(max(won) if won else None, training_limit, training_worst, scale),
     }
 
 

@@ -1,6 +1,6 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
-    python -m training.judging.results --benchmark v7 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
+    python -m training.judging.results --benchmark v8 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
     python -m training.judging.results --benchmark v6 --root docs/benchmark --out docs/benchmark/v6/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under
@@ -644,6 +644,7 @@ def scale_section(rows, by_key, protocol, figures: Path) -> list[str]:
 
 def _scale_figure(sized: dict, rows, by_key, path: Path) -> None:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -663,6 +664,9 @@ def _scale_figure(sized: dict, rows, by_key, path: Path) -> None:
             style = "--" if policy.startswith(RULES) else "-"
             ax.errorbar(x, y, yerr=err, fmt=f"o{style}", markersize=3, capsize=2, label=policy, linewidth=1)
         ax.set_xscale("log")
+        sizes = [split_size(s.env) for s in splits]
+        ax.set_xticks(sizes, [f"{v:,}" for v in sizes], fontsize=6)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_ylim(-0.05, 1.05)
         ax.set_title(task)
         ax.set_xlabel("board sites" if "board_size" in splits[0].env else "modules")
