@@ -170,7 +170,7 @@ def markdown(doc: dict) -> str:
     of its rows with 95 % intervals (a protocol's splits and worlds as columns), each training
     seed of a group on its own, what the intervals are, the settings of an evaluation and the notes."""
     results = results_of(doc)
-    commit = f"proteo {doc['proteo_version']}, commit {(doc['commit'] or 'unknown')[:12]}"
+    commit = f"proteo {doc['proteo_version'] or 'unknown'}, commit {(doc['commit'] or 'unknown')[:12]}"
     if doc["judgement"] == "benchmark":
         head = (
             f"Benchmark {doc['protocol']} ({doc['protocol_file']}, sha256 {doc['protocol_sha256'][:12]}); {commit}; "
