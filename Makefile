@@ -103,14 +103,17 @@ learning-results-v7: install
 			--out docs/benchmark/v7/$$(basename $$(dirname $$recipe))/$$(basename $$recipe) || exit 1; done
 	$(MAKE) results
 
-# Every v7 recipe's ten checkpoints on protocol v8's scale splits (hours on 2 cores; a recipe judged
-# already is skipped, an interrupted one resumes from its episodes.jsonl), then the results page.
+# Every v7 recipe's ten checkpoints on protocol v8's scale splits, each split in its own folder
+# (OUT/x10, OUT/x100: judged apart, so that the short x10 is published before the long x100):
+# hours on 2 cores; a split judged already is skipped, an interrupted one resumes from its
+# episodes.jsonl; then the results page.
 scale-results-v8: install
 	for recipe in checkpoints/v7/chain/kickstart_move checkpoints/v7/*/*_*; do \
-		task=$$(basename $$(dirname $$recipe)); out=docs/benchmark/v8/$$task/$$(basename $$recipe); \
-		case $$task in chain|branch) splits=x10,x100;; *) splits=x10;; esac; \
-		test -f $$out/benchmark.json || $(BIN)/proteo eval --benchmark v8 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
-			--splits $$splits --out $$out || exit 1; done
+		task=$$(basename $$(dirname $$recipe)); \
+		case $$task in chain|branch) splits="x10 x100";; *) splits=x10;; esac; \
+		for split in $$splits; do out=docs/benchmark/v8/$$task/$$(basename $$recipe)/$$split; \
+			test -f $$out/benchmark.json || $(BIN)/proteo eval --benchmark v8 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
+				--splits $$split --out $$out || exit 1; done; done
 	$(MAKE) results
 
 # The references on protocol v8's scale splits (configs/benchmark/v8.yaml), about an hour on 2 cores; a
