@@ -174,6 +174,19 @@ def test_the_aggregate_normalises_by_the_rules_and_random(tmp_path):
     assert agg["improvement"][0] == pytest.approx(0.0) and agg["ties"] == pytest.approx(0.0)
 
 
+def test_the_aggregate_leaves_the_scale_splits_to_their_own_section(tmp_path):
+    """A recipe judged on a scale split too (x10) is aggregated over the splits every recipe of
+    the task is judged on, so that it compares with one judged on those alone."""
+    folder = _bench(tmp_path, 0.85)
+    _write(folder / "x10", "grasp", "rules", "hand-coded", "full", {"x10": [[True] * 20]})
+    _write(folder / "x10", "grasp", "random", "random", "move", {"x10": [[False] * 20]})
+    _write(folder / "x10", "grasp", "clone", "learned", "move", {"x10": [[False] * 20 for _ in range(5)]})
+    rows, _ = results.read_rows(folder.parent, load_protocol("v1").lineage)
+    assert any(r.split == "x10" and r.policy == "clone" for r in rows)
+    agg = results.aggregate(rows)[("clone", "grasp")]
+    assert agg["splits"] == ["heldout", "larger"] and agg["iqm"][0] == pytest.approx(0.85 / 0.9)
+
+
 def test_the_aggregate_is_per_task_and_reports_ties_apart(tmp_path):
     """A recipe judged on two tasks gets one aggregate per task, never one over its own mix of
     tasks; a seed that equals the rules on the same worlds is a tie, not half a win."""

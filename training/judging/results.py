@@ -248,9 +248,14 @@ def verdicts(task: str, recipe: str, by_key: dict, splits: list[str], margin: fl
     return "; ".join(parts)
 
 
+SCALE_SPLIT = re.compile(r"x\d+")
+"""The names of scale splits: ``x10``, ``x100`` (the factor over the training size)."""
+
+
 def aggregate(rows: list[Result]) -> dict[tuple[str, str], dict]:
-    """Per learned or evolved recipe and task, over the task's splits (which every recipe of the
-    task is judged on, so recipes of one task are compared over the same set): normalised scores
+    """Per learned or evolved recipe and task, over the task's splits but the scale splits (every
+    recipe of the task is judged on those, so recipes of one task are compared over the same set;
+    the scale splits have their own section, :func:`scale_section`): normalised scores
     ``(training seeds, splits)``, their IQM, and the probability that a training seed beats the
     rules at its level on the same worlds (the worlds the recipe played), ties apart. The
     bootstraps draw whole training seeds (a seed's splits share its checkpoint)."""
@@ -259,7 +264,11 @@ def aggregate(rows: list[Result]) -> dict[tuple[str, str], dict]:
     for recipe in sorted({r.policy for r in rows if r.kind in ("learned", "evolved")}):
         for task in dict.fromkeys(r.task for r in rows if r.policy == recipe):
             splits = [r.split for r in rows if r.task == task and r.policy == recipe]
-            splits = [s for s in splits if (task, s, RULES) in by_key and (task, s, RANDOM) in by_key]
+            splits = [
+                s
+                for s in splits
+                if not SCALE_SPLIT.fullmatch(s) and (task, s, RULES) in by_key and (task, s, RANDOM) in by_key
+            ]
             if not splits:
                 continue
             learned = [by_key[(task, s, recipe)] for s in splits]
@@ -586,10 +595,6 @@ def task_section(task: str, rows, by_key, protocol, root: Path, figures: Path) -
     return lines
 
 
-SCALE_SPLIT = re.compile(r"x\d+")
-"""The names of scale splits: ``x10``, ``x100`` (the factor over the training size)."""
-
-
 def split_size(env: dict) -> int:
     """The size of a split's worlds: its board's area in sites where it has a board, else its modules."""
     return int(env["board_size"]) ** 2 if "board_size" in env else int(env["n_modules"])
@@ -687,7 +692,7 @@ def aggregate_section(usable: dict, tasks: list[str], figures: Path) -> list[str
         "",
         "Normalised score per training seed and split: (rate - random) / (rules - random) on the "
         "reference worlds; IQM: the mean of the middle half of training seeds x splits of the task (every "
-        "recipe of a task over the same splits); P(beats): the probability that a training seed's success on "
+        "recipe of a task over the same splits; the scale splits apart, in their own section); P(beats): the probability that a training seed's success on "
         "the first worlds of a split exceeds that of the rules at its level on the same worlds, averaged over "
         "splits, ties apart (P(tie)). Bootstrap intervals that draw whole training seeds.",
         "",
