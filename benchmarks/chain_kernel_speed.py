@@ -160,6 +160,12 @@ def profile(n: int, cycles: int) -> dict:
 
     def run(n: int, cycles: int) -> dict:
         env, policy = fresh(n, cycles, room=cycles + 4)
+        # The kernels are called here one by one, without the env's step that grows a world's grid
+        # window as its modules near the window's edge: the grid covers the whole box instead
+        # (walls cycles + 4 sites away: no module reaches them in the cycles).
+        env.task.window_room = None
+        env.reset(seed=0)
+        policy.reset(0)
         w, s = env.engine, env.engine.scratch
         obs = env.observe_arrays()
         memory, rules, slots = policy.memory_rows(env.possible_agents), policy.rule_params, np.arange(n)
