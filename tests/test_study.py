@@ -4,6 +4,7 @@ configs/eval_study.yaml and the docs read them (a tiny budget)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -219,3 +220,43 @@ def test_a_study_for_more_seeds_draws_the_curves_of_every_recorded_seed(tmp_path
             + ["--keep-dir", str(tmp_path / "checkpoints"), "--docs-dir", str(tmp_path / "docs")]
         )
     assert drawn[-1] == ("curves_ppo_chain_move.png", ["seed 0", "seed 1", "seed 2"])
+
+
+def test_the_sizes_recipe_kickstarts_from_a_published_clone_through_a_curriculum_of_sizes(tmp_path, monkeypatch):
+    """kickstart-sizes: the kickstart config's settings and budget, a curriculum whose stages grow
+    the chain, started from the clone of the same seed found under --clone-dir (not --keep-dir)."""
+    started = []
+
+    class Finished:  # a training process that writes its final checkpoint at once
+        def __init__(self, cmd, *a, **k):
+            started.append(cmd)
+            run_dir = Path(cmd[cmd.index("--run-dir") + 1])
+            (run_dir / "final").mkdir(parents=True)
+            (run_dir / "final" / "proteo.json").write_text(json.dumps({"agent_steps": 123, "files": {}}))
+            (run_dir / "progress.csv").write_text(
+                "seconds,agent_steps,episode/return,episode/success,episode/cycles\n1.0,123,0.5,1.0,90\n"
+            )
+            self.returncode = 0
+
+        def poll(self):
+            return self.returncode
+
+    monkeypatch.setattr(study.subprocess, "Popen", Finished)
+    argv = ["--tasks", "[chain]", "--seeds", "[3]", "--recipes", "[kickstart-sizes]", "--minutes", "0"]
+    argv += ["--runs-dir", str(tmp_path / "runs"), "--keep-dir", str(tmp_path / "kept"), "--docs-dir", str(tmp_path)]
+    study.main(argv + ["--clone-dir", "checkpoints/v7"])
+    [cmd] = started
+    assert cmd[cmd.index("--init") + 1] == str(Path("checkpoints/v7/chain/imitation_move/seed_3"))
+    config = cmd[cmd.index("--config") + 1]
+    assert config == "configs/train/kickstart_sizes_chain_move.yaml"
+    assert (tmp_path / "kept" / "chain" / "kickstart-sizes_move" / "seed_3" / "proteo.json").is_file()
+
+    from training.machinery.runs import parse_args
+    from training.trainers.ppo import Args
+
+    sizes = parse_args(Args, ["--config", config])
+    kickstart = parse_args(Args, ["--config", "configs/train/kickstart_chain_move.yaml"])
+    assert sizes.curriculum and not kickstart.curriculum
+    assert replace(sizes, curriculum=None) == replace(kickstart, curriculum=None)
+    stages = [s["n_modules"] for s in sizes.curriculum["stages"]]
+    assert stages[0] == kickstart.env["n_modules"] and stages == sorted(stages) and len(set(stages)) == 3

@@ -19,6 +19,9 @@ recipe           script                   config
                                           of env overrides, no demonstrations)
 ``credit``       ``training/trainers/ppo.py``      ``configs/train/credit_<task>_<level>.yaml``: kickstarting
                                           with module credit (``join_bonus``), from the same clone
+``kickstart-     ``training/trainers/ppo.py``      ``configs/train/kickstart_sizes_<task>_<level>.yaml``:
+sizes``                                   kickstarting through a curriculum of sizes (the scale
+                                          track), from the same clone
 ``cma``          ``training/trainers/cma_es.py``   ``configs/train/cma_rules_<task>_full.yaml``: CMA-ES over
                                           the hand-coded rules' parameters (level ``full``, for
                                           the config's generations)
@@ -89,6 +92,7 @@ RECIPES = {
     "kickstart": ("ppo", "kickstart", 0),
     "curriculum": ("ppo", "curriculum", 0),
     "credit": ("ppo", "credit", 0),
+    "kickstart-sizes": ("ppo", "kickstart_sizes", 0),
     "cma": ("cma_es", "cma_rules", 0),
     "evolve": ("evolve", "evolve", 0),
     "evolve-paper": ("evolve", "evolve_paper", 0),
@@ -97,7 +101,7 @@ RECIPES = {
 }
 """Recipe name: (its trainer's name in :mod:`training.machinery.registry`, prefix of its configs in
 configs/train, agent-steps of a PPO run unless ``total_steps`` says otherwise; 0: the config's)."""
-FROM_CLONE = ("kickstart", "credit")
+FROM_CLONE = ("kickstart", "credit", "kickstart-sizes")
 """Recipes whose runs start from the kept clone of the same task and seed (``--init``)."""
 
 
@@ -108,7 +112,7 @@ class Args:
     tasks: tuple[str, ...] = ("chain", "branch", "table", "grasp", "locomotion")
     """Task names (no version): each run trains configs/train/<prefix>_<task>_<level>.yaml."""
     recipes: tuple[str, ...] = ("ppo",)
-    """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit, cma, evolve,
+    """Training recipes (ppo, ppo48, imitation, kickstart, curriculum, credit, kickstart-sizes, cma, evolve,
     evolve-paper, evolve-large, evolve-large-paper); see the module docstring."""
     level: str = "move"
     """Control level; the config of each run is configs/train/<prefix>_<task>_<level>.yaml."""
@@ -131,6 +135,9 @@ class Args:
     """A benchmark protocol version (``v7``): each recipe's config, budget and clone are the protocol's
     (recipe ``kickstart`` at level ``move`` is its ``kickstart-move``) and each run trains on the protocol's
     task id (``--task``); default: the configs configs/train/<prefix>_<task>_<level>.yaml as they are."""
+    clone_dir: str | None = None
+    """Where the recipes that start from a clone (kickstart, credit, kickstart-sizes) find it, as
+    <task>/imitation_<level>/seed_<S>/ (None: ``keep_dir``; ``checkpoints/v7``: the published clones)."""
     docs_dir: str = "runs/study/docs"
     """Where the progress logs (progress/), the learning-curve figures and study_<level>.json are written (the
     protocol's studies: ``docs/benchmark/v6/learning``)."""
@@ -282,8 +289,8 @@ def main(argv=None) -> int:
     level = args.level.replace("+", "-")
     keep_dir, docs = Path(args.keep_dir), Path(args.docs_dir)
 
-    def kept(recipe: str, task: str, seed: int) -> Path:
-        return keep_dir / task / f"{recipe}_{level}" / f"seed_{seed}"
+    def kept(recipe: str, task: str, seed: int, root: Path = keep_dir) -> Path:
+        return root / task / f"{recipe}_{level}" / f"seed_{seed}"
 
     plan = StudyPlan(args)
     jobs = [(recipe, task, seed) for recipe in args.recipes for task in args.tasks for seed in args.seeds]
@@ -308,7 +315,8 @@ def main(argv=None) -> int:
                 print(f"already trained {recipe} {task} seed {seed}: {run_dir}", flush=True)
                 running.append((recipe, task, seed, run_dir, None))
                 continue
-            cmd = plan.command(recipe, task, seed, run_dir, kept(start, task, seed) if start else None)
+            clones = keep_dir if args.clone_dir is None else Path(args.clone_dir)
+            cmd = plan.command(recipe, task, seed, run_dir, kept(start, task, seed, clones) if start else None)
             print(f"started {recipe} {task} seed {seed}: {' '.join(cmd)}", flush=True)
             running.append((recipe, task, seed, run_dir, subprocess.Popen(cmd)))
         time.sleep(1.0)
