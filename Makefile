@@ -3,7 +3,7 @@
 PY ?= python3
 BIN := .venv/bin
 
-.PHONY: install install-distributed demo test test-all fuzz lint results bench learning-results learning-results-v7 benchmark-references benchmark-references-v8 scale-results-v8 benchmarl test-benchmarl
+.PHONY: install install-distributed demo test test-all fuzz lint results bench learning-results learning-results-v7 benchmark-references benchmark-references-v8 scale-results-v8 size-results-v9 benchmarl test-benchmarl
 
 $(BIN)/python:
 	$(PY) -m venv .venv
@@ -54,12 +54,13 @@ bench: install
 	NUMBA_NUM_THREADS=1 $(BIN)/python benchmarks/step_speed.py --sizes 1000 10000
 	$(BIN)/python benchmarks/mobility.py
 
-# docs/results.md: every controller judged under benchmark protocol v8 (v7 and its scale splits:
-# docs/benchmark/v7 and v8, written by proteo eval --benchmark; docs/guides/benchmark.md), with paired
+# docs/results.md: every controller judged under benchmark protocol v9 (v7, v8's scale splits and v9's
+# recipe trained for size: docs/benchmark/v7, v8 and v9, written by proteo eval --benchmark;
+# docs/guides/benchmark.md), with paired
 # intervals, the aggregate, learning curves and success against size; the README's held-out table and
 # marl-eval's file from the same judgements.
 results: install
-	$(BIN)/python -m training.judging.results --benchmark v8 --publish README.md --marl-eval docs/results/marl_eval.json
+	$(BIN)/python -m training.judging.results --benchmark v9 --publish README.md --marl-eval docs/results/marl_eval.json
 
 # The study under benchmark protocols v1 to v6 (configs/benchmark/, docs/guides/benchmark.md),
 # about 230 minutes on 2 cores: five independent training (or evolution) seeds of each recipe of
@@ -114,6 +115,22 @@ scale-results-v8: install
 		for split in $$splits; do out=docs/benchmark/v8/$$task/$$(basename $$recipe)/$$split; \
 			test -f $$out/benchmark.json || $(BIN)/proteo eval --benchmark v8 $$(printf -- '--checkpoint %s ' $$recipe/seed_*) \
 				--splits $$split --out $$out || exit 1; done; done
+	$(MAKE) results
+
+# Protocol v9's recipe trained for size, kickstart-sizes-move, on chain and grasp: ten training seeds from
+# the published clones (about 1.4 minutes a seed on one core), kept in checkpoints/v9, then judged on
+# every split (chain's x100 apart, in OUT/x100: about two hours on one core), then the results page.
+size-results-v9: install
+	$(BIN)/python -m training.trainers.study --benchmark v9 --recipes "[kickstart-sizes]" --tasks "[chain, grasp]" \
+		--seeds "[0, 1, 2, 3, 4, 5, 6, 7, 8, 9]" --minutes 0 --clone-dir checkpoints/v7 --keep-dir checkpoints/v9 \
+		--docs-dir docs/benchmark/v9/learning --runs-dir runs/v9
+	for task in chain grasp; do out=docs/benchmark/v9/$$task/kickstart-sizes_move; \
+		case $$task in chain) splits="--splits heldout,larger,x10";; *) splits="";; esac; \
+		test -f $$out/benchmark.json || $(BIN)/proteo eval --benchmark v9 \
+			$$(printf -- '--checkpoint %s ' checkpoints/v9/$$task/kickstart-sizes_move/seed_*) $$splits --out $$out || exit 1; done
+	test -f docs/benchmark/v9/chain/kickstart-sizes_move/x100/benchmark.json || $(BIN)/proteo eval --benchmark v9 \
+		$$(printf -- '--checkpoint %s ' checkpoints/v9/chain/kickstart-sizes_move/seed_*) --splits x100 \
+		--out docs/benchmark/v9/chain/kickstart-sizes_move/x100
 	$(MAKE) results
 
 # The references on protocol v8's scale splits (configs/benchmark/v8.yaml), about an hour on 2 cores; a
