@@ -334,7 +334,7 @@ def _extension(tmp_path: Path, text: str) -> Path:
             ["tasks.chain.recipes.ppo-move", "v1 already fixes it"],
         ),
         ("version: v2\nextends: v1\ntasks: {chian: {}}\n", ["tasks", "'chian'", "did you mean 'chain'"]),
-        ("version: v2\nextends: v9\ntasks: {}\n", ["extends 'v9'", "allowed: v1"]),
+        ("version: v2\nextends: v99\ntasks: {}\n", ["extends 'v99'", "allowed: v1"]),
         ("version: v2\nextends: v2\ntasks: {}\n", ["extends = 'v2'", "a cycle (v2 -> v2)"]),
         (
             "version: v2\nextends: v1\ntasks: {chain: {levels: {evolved: [fast]}}}\n",
@@ -382,7 +382,7 @@ def test_an_extension_adds_splits_with_fewer_worlds_and_the_judge_judges_them_al
 @pytest.mark.parametrize(
     "argv, names",
     [
-        (["--benchmark", "v9", "--policy", "rules"], ["'v9'", "allowed: v1"]),
+        (["--benchmark", "v99", "--policy", "rules"], ["'v99'", "allowed: v1"]),
         (["--benchmark", "v1", "--checkpoint", "checkpoints/exhibits/winding_chain"], ["'chain-v0'", "chain-v1"]),
         (["--benchmark", "v1", "--checkpoint", "checkpoints/v2/chain/cma_full/seed_0"], ["'full'", "move"]),
         (["--benchmark", "v1", "--policy", "ppo"], ["--policy 'ppo'", "rules, random"]),
