@@ -1,6 +1,6 @@
 """The results page: every controller judged under a benchmark protocol, on one page.
 
-    python -m training.judging.results --benchmark v8 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
+    python -m training.judging.results --benchmark v9 --publish README.md --marl-eval docs/results/marl_eval.json  # make results
     python -m training.judging.results --benchmark v6 --root docs/benchmark --out docs/benchmark/v6/results.md
 
 It reads every ``benchmark.json`` that ``proteo eval --benchmark VERSION`` wrote under

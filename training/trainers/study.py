@@ -288,6 +288,7 @@ def main(argv=None) -> int:
     check_args(args)
     level = args.level.replace("+", "-")
     keep_dir, docs = Path(args.keep_dir), Path(args.docs_dir)
+    clones = keep_dir if args.clone_dir is None else Path(args.clone_dir)
 
     def kept(recipe: str, task: str, seed: int, root: Path = keep_dir) -> Path:
         return root / task / f"{recipe}_{level}" / f"seed_{seed}"
@@ -315,7 +316,6 @@ def main(argv=None) -> int:
                 print(f"already trained {recipe} {task} seed {seed}: {run_dir}", flush=True)
                 running.append((recipe, task, seed, run_dir, None))
                 continue
-            clones = keep_dir if args.clone_dir is None else Path(args.clone_dir)
             cmd = plan.command(recipe, task, seed, run_dir, kept(start, task, seed, clones) if start else None)
             print(f"started {recipe} {task} seed {seed}: {' '.join(cmd)}", flush=True)
             running.append((recipe, task, seed, run_dir, subprocess.Popen(cmd)))
