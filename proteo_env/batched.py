@@ -422,18 +422,10 @@ class BatchedEnv:
         self._make_room()
         self.cycles += 1
         self._observed = None
-        terms, max_cycles = [], self.config.max_cycles
-        reward, terminated, truncated = np.empty(self.n_envs), np.empty(self.n_envs, bool), np.empty(self.n_envs, bool)
-        for b, (task, world, moved, cycle) in enumerate(
-            zip(self.tasks, self.worlds, self.last_moved, self.cycles.tolist())
-        ):
-            task.after_cycle(world, cycle)
-            terms.append(task.reward_terms(world, moved))
-            reward[b] = sum(terms[b].values())
-            terminated[b] = success = task.success(world)
-            truncated[b] = cycle >= max_cycles and not success
-        self.ended = terminated | truncated
-        return StepResult(reward, terminated, truncated, terms)
+        scores = type(self.tasks[0]).score_cycle(self.tasks, self.world_batch, self.last_moved, self.cycles)
+        truncated = (self.cycles >= self.config.max_cycles) & ~scores.success
+        self.ended = scores.success | truncated
+        return StepResult(scores.reward, scores.success, truncated, scores.terms)
 
     def observe_arrays(self) -> ObservationBuffers:
         """Fresh observation arrays of every agent of every world (``B * A`` rows, world-major)."""

@@ -177,3 +177,34 @@ def test_reset_worlds_with_seeds_starts_each_as_a_single_env_reset_with_its_seed
         np.testing.assert_array_equal(env.worlds[b].positions, alone.engine.positions)
     with pytest.raises(ConfigError, match="world_seeds=\\[1\\] is not allowed; allowed: a list of 2 seeds"):
         env.reset_worlds([0, 1], world_seeds=[1])
+
+
+@pytest.mark.parametrize("task_id", ["chain-v0", "chain-v1"])
+def test_the_chains_one_call_scoring_is_the_per_world_hooks_bit_for_bit(task_id):
+    """The chain scores every world of a batch in one kernel call (``Chain.score_cycle``); the
+    per-world hooks (``Task.score_cycle``, the default) on copies of the same tasks give the same
+    rewards, terms and success, and leave the tasks in the same state, over episodes the rules
+    complete (straightness paid on chain-v1) and restarts."""
+    import copy
+
+    from proteo_env.tasks.base import Task
+
+    env = proteo_env.make_batched(task_id, 8, control="move", n_modules=6, max_cycles=60)
+    env.reset(seed=3)
+    rng, completed = np.random.default_rng(1), 0
+    for _ in range(150):
+        mask = env.last_observation().action_mask.reshape(8, env.n_agents, -1)
+        moves = np.where(rng.random((8, env.n_agents)) < 0.8, 0, np.argmax(mask * rng.random(mask.shape), axis=2))
+        before = copy.deepcopy(env.tasks)
+        result = env.step_arrays(moves[..., None])
+        per_world = Task.score_cycle.__func__(type(before[0]), before, env.world_batch, env.last_moved, env.cycles)
+        assert result.terms == per_world.terms
+        assert result.reward.tobytes() == per_world.reward.tobytes()
+        assert result.terminated.tolist() == per_world.success.tolist()
+        for mine, theirs in zip(env.tasks, before):
+            assert (mine._last, mine._previous) == (theirs._last, theirs._previous)
+            np.testing.assert_array_equal(mine._probe.degree, theirs._probe.degree)
+        completed += int(result.terminated.sum())
+        if result.done.any():
+            env.reset_worlds(result.done)
+    assert completed >= 3  # random legal moves of a fifth of the modules string six modules into chains

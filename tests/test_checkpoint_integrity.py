@@ -90,7 +90,7 @@ def test_the_judge_refuses_corrupted_weights_before_writing_anything(tmp_path):
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"activation": "relu"}, r"activation = 'relu' is not allowed; allowed: tanh"),
+        ({"activation": "sigmoid"}, r"activation = 'sigmoid' is not allowed; allowed: tanh, relu"),
         ({"activation": None}, r"proteo.json lacks 'activation'"),
         ({"hidden": None}, r"proteo.json lacks 'hidden'"),
         ({"arch": None}, r"proteo.json lacks 'arch'"),
@@ -156,3 +156,13 @@ def test_migrate_refuses_what_it_cannot_vouch_for(tmp_path):
     with pytest.raises(CheckpointError, match="activation = 'relu' is not allowed"):
         migrate(folder2)
     assert (folder2 / "proteo.json").read_text() == before  # nothing written
+
+
+def test_an_activation_the_trainer_does_not_build_is_refused_naming_its_own(tmp_path):
+    """A ReLU recorded in a checkpoint whose loader builds only tanh layers (here MaskablePPO's) is
+    refused, not played with tanh; native PPO's and the clone's loader builds either."""
+    folder = copy_of(tmp_path, ROOT / "checkpoints/exhibits/winding_chain")
+    assert read_meta(folder)["algorithm"] == "sb3-maskable-ppo"
+    edit_meta(folder, activation="relu")
+    with pytest.raises(CheckpointError, match=r"activation = 'relu' is not allowed; allowed: tanh \(what this trainer"):
+        read_meta(folder)

@@ -325,3 +325,39 @@ def test_module_credit_refuses_modes_the_task_does_not_have(tmp_path):
     with pytest.raises(ValueError, match=r"join_bonus=-1.*allowed: a number >= 0"):
         tiny_run(tmp_path / "b", "--join-bonus", "-1")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_relu_network_is_trained_recorded_and_loaded_as_relu(tmp_path):
+    """``activation: relu`` builds ReLU layers, the checkpoint records it, and the loader rebuilds
+    them: the loaded policy's logits are the trained network's, which a tanh network with the same
+    weights does not give."""
+    from proteo_env.adapters.flatten import ObservationEncoder
+    from training.machinery.checkpoints import _ppo_logits
+
+    final = tiny_run(tmp_path / "relu", "--activation", "relu", steps=1)
+    meta = read_meta(final)
+    assert meta["activation"] == "relu"
+    env = proteo_env.make("chain-v0", control="move", **SMALL_ENV)
+    encoder = ObservationEncoder.for_env(env, message_encoding=meta["encoder"]["message_encoding"])
+    weights = torch.load(final / "policy.pt")
+    nets = {a: ppo.ActorCritic(encoder, env.control_nvec, "shared", (64, 64), activation=a) for a in ("relu", "tanh")}
+    for net in nets.values():
+        net.load_state_dict(weights)
+    assert isinstance(nets["relu"].trunk[1], torch.nn.ReLU)
+    x = torch.randn(7, encoder.size)
+    loaded = _ppo_logits(final, meta, encoder)(x.numpy())
+    with torch.no_grad():
+        assert np.array_equal(loaded, nets["relu"].logits(x).numpy())
+        assert not np.allclose(loaded, nets["tanh"].logits(x).numpy())
+    assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name
+
+
+def test_the_update_on_two_threads_makes_the_same_run_twice(tmp_path):
+    runs = [tiny_run(tmp_path / name, "--update-threads", "2") for name in ("a", "b")]
+    first, second = (torch.load(final / "policy.pt") for final in runs)
+    assert all(torch.equal(first[k], second[k]) for k in first)
+    assert torch.get_num_threads() == 1  # the rollouts' count came back after each update
+    with pytest.raises(ValueError, match="update_threads=0 is not allowed; allowed: an integer >= 1"):
+        tiny_run(tmp_path / "c", "--update-threads", "0")
+    with pytest.raises(ValueError, match="activation='gelu' is not allowed; allowed: tanh, relu"):
+        tiny_run(tmp_path / "d", "--activation", "gelu")

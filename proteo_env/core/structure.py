@@ -87,6 +87,17 @@ def graph_shape(grid, cell, n_modules, dir_delta, degree, mark, queue):
     return edges // 2, thin_piece, thin, max_degree
 
 
+@kernel
+def graph_shapes(grid, cell, n_modules, dir_delta, degree, mark, queue, out):
+    """:func:`graph_shape` of every world of a batch (one grid layout, ``B`` rows): ``grid``
+    ``(B, cells)``, ``cell`` ``(B, N)``; ``degree``, ``mark`` and ``queue`` ``(B, N)`` scratch
+    (``degree[b]`` filled as :func:`module_degrees` does); ``out`` ``(B, 4)`` int64 gets each
+    world's ``(edges, thin_piece, thin, max_degree)``."""
+    for b in range(grid.shape[0]):
+        edges, piece, thin, most = graph_shape(grid[b], cell[b], n_modules, dir_delta, degree[b], mark[b], queue[b])
+        out[b, 0], out[b, 1], out[b, 2], out[b, 3] = edges, piece, thin, most
+
+
 class GraphShape(NamedTuple):
     """The shape of a world's module graph (:meth:`StructureProbe.measure`)."""
 

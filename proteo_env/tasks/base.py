@@ -9,6 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..core.batch import WorldBatch
 from ..core.jit import kernel
 from ..core.world import World
 from ..layouts import Layout
@@ -37,6 +38,17 @@ class TaskKernels(NamedTuple):
     sense: Callable
     update_and_test: Callable
     state: object
+
+
+class CycleScores(NamedTuple):
+    """What a batch's worlds scored in the cycle just run (:meth:`Task.score_cycle`)."""
+
+    reward: np.ndarray
+    """``(B,)`` float64: each world's reward, the sum of its terms."""
+    success: np.ndarray
+    """``(B,)`` bool: each world's success test."""
+    terms: list[dict[str, float]]
+    """Each world's named reward terms."""
 
 
 class Task(abc.ABC):
@@ -68,8 +80,9 @@ class Task(abc.ABC):
     :meth:`after_cycle`, :meth:`regrid`, :meth:`load`, :meth:`hint`, :meth:`reward_terms`,
     :meth:`metrics`, :meth:`success`, :meth:`kernels`. The environment calls them in this
     order: at ``reset``, ``build_layout``, ``initial_modes``, then ``reset`` on the new world;
-    after each cycle, ``after_cycle``, then ``success``, ``reward_terms`` and ``metrics``;
-    ``load`` and ``hint`` whenever observations are built.
+    after each cycle, ``after_cycle``, then ``reward_terms`` and ``success`` (through
+    :meth:`score_cycle`, which a task may override to score every world of a batch at once),
+    and ``metrics`` when they are asked for; ``load`` and ``hint`` whenever observations are built.
 
     Example (a complete task: a ball of modules on the ground, achieved when every module
     touches the ground; ``tests/test_plugin.py`` runs it)::
@@ -188,6 +201,27 @@ class Task(abc.ABC):
     def success(self, world: World) -> bool:
         """The task is achieved: sets ``terminated`` for every agent (default: never)."""
         return False
+
+    @classmethod
+    def score_cycle(cls, tasks: list[Task], worlds: WorldBatch, moved: np.ndarray, cycles: np.ndarray) -> CycleScores:
+        """Every world of a batch after its cycle: ``tasks[b]`` runs ``worlds.worlds[b]``, whose
+        cycle ``cycles[b]`` (``(B,)``, counted like ``env.cycle``) just ran; ``moved`` ``(B, A)``
+        bool: who moved. The default calls, world by world, :meth:`after_cycle`,
+        :meth:`reward_terms` (the reward is their sum, in order) and :meth:`success`.
+
+        A task whose per-world Python costs more than its worlds' cycle (small worlds, many of
+        them: the trainers' case) overrides it to score every world in one compiled call
+        (:class:`~proteo_env.tasks.chain.Chain`). An override must leave every task as the
+        per-world hooks would and give the same scores, bit for bit (``tests/test_batched.py``
+        checks the chain's against this default).
+        """
+        reward, success, terms = np.empty(len(tasks)), np.empty(len(tasks), dtype=bool), []
+        for b, (task, world, cycle) in enumerate(zip(tasks, worlds.worlds, cycles.tolist())):
+            task.after_cycle(world, cycle)
+            terms.append(task.reward_terms(world, moved[b]))
+            reward[b] = sum(terms[b].values())
+            success[b] = task.success(world)
+        return CycleScores(reward, success, terms)
 
     def kernels(self, world: World) -> TaskKernels | None:
         """The task's bookkeeping and success test as numba kernels (:class:`TaskKernels`), for

@@ -17,10 +17,10 @@ import numpy as np
 
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
-from ..core.structure import StructureProbe, largest_thin_piece
+from ..core.structure import StructureProbe, graph_shapes, largest_thin_piece
 from ..core.world import check_module_memory
 from ..layouts import Layout, blob_sites, place_in_box
-from .base import Task, TaskKernels, no_sensor
+from .base import CycleScores, Task, TaskKernels, no_sensor
 
 
 class ChainMode(IntEnum):
@@ -142,14 +142,7 @@ class Chain(Task):
         self._previous = self._last
 
     def _measure(self, world):
-        shape, n = self._probe.measure(world), world.n_modules
-        return {
-            "thin": shape.thin,
-            "max_degree": shape.max_degree,
-            "chain_length": shape.thin_piece,
-            # is_chain's test: N - 1 contacts, no module with 3 neighbours, one thin piece of all N
-            "complete": shape.max_degree <= 2 and shape.edges == n - 1 and shape.thin_piece == n,
-        }
+        return shape_measures(*self._probe.measure(world), world.n_modules)
 
     def after_cycle(self, world, cycle):
         self._previous, self._last = self._last, self._measure(world)
@@ -158,9 +151,37 @@ class Chain(Task):
         n = world.n_modules
         return {
             "thin": (self._last["thin"] - self._previous["thin"]) / n,
-            "success": 1.0 if self._last["complete"] else 0.0,
+            "success": self.success_bonus(world),
             "time": -self.params.time_penalty,
         }
+
+    def success_bonus(self, world) -> float:
+        """The ``success`` term: 1 once the chain is complete."""
+        return 1.0 if self._last["complete"] else 0.0
+
+    @classmethod
+    def score_cycle(cls, tasks, worlds, moved, cycles):
+        """Every world's graph measured in one kernel call (:func:`~proteo_env.core.structure.graph_shapes`);
+        the same bookkeeping, terms, rewards and success as the per-world hooks, bit for bit."""
+        first = worlds.worlds[0]
+        n, state = first.n_modules, worlds.state
+        scratch = np.empty((3, len(tasks), n), dtype=np.int64)
+        shapes = np.empty((len(tasks), 4), dtype=np.int64)
+        graph_shapes(state.grid, state.cell, n, first.dir_delta, scratch[0], scratch[1], scratch[2], shapes)
+        terms, success = [], np.empty(len(tasks), dtype=bool)
+        for b, (task, world, shape) in enumerate(zip(tasks, worlds.worlds, shapes.tolist())):
+            task._probe.degree[:] = scratch[0, b]
+            task._previous, task._last = task._last, shape_measures(*shape, n)
+            success[b] = task._last["complete"]
+            terms.append(
+                {
+                    "thin": (task._last["thin"] - task._previous["thin"]) / n,
+                    "success": task.success_bonus(world) if success[b] else 0.0,
+                    "time": -task.params.time_penalty,
+                }
+            )
+        reward = np.array([sum(t.values()) for t in terms], dtype=np.float64)
+        return CycleScores(reward, success, terms)
 
     def metrics(self, world):
         m = self._last
@@ -177,6 +198,17 @@ class Chain(Task):
 
     def kernels(self, world):
         return TaskKernels(no_sensor, chain_update_and_test, np.zeros((3, world.n_modules), dtype=np.int64))
+
+
+def shape_measures(edges: int, thin_piece: int, thin: int, max_degree: int, n_modules: int) -> dict:
+    """The chain's measures of a world from its graph's shape (:class:`~proteo_env.core.structure.GraphShape`)."""
+    return {
+        "thin": thin,
+        "max_degree": max_degree,
+        "chain_length": thin_piece,
+        # is_chain's test: N - 1 contacts, no module with 3 neighbours, one thin piece of all N
+        "complete": max_degree <= 2 and edges == n_modules - 1 and thin_piece == n_modules,
+    }
 
 
 def fcc_hops(a: np.ndarray, b: np.ndarray) -> int:
@@ -206,10 +238,9 @@ class ChainV1(Chain):
         ends = np.flatnonzero(self._probe.degree[: world.n_modules] == 1)
         return fcc_hops(world.positions[ends[0]], world.positions[ends[-1]]) / (world.n_modules - 1)
 
-    def reward_terms(self, world, moved):
-        terms = super().reward_terms(world, moved)
-        terms["success"] = self.straightness(world) if self._last["complete"] else 0.0
-        return terms
+    def success_bonus(self, world) -> float:
+        """The ``success`` term: the chain's straightness once it is complete."""
+        return self.straightness(world) if self._last["complete"] else 0.0
 
     def metrics(self, world):
         return {**super().metrics(world), "straightness": self.straightness(world)}

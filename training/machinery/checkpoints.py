@@ -132,7 +132,7 @@ def check_meta(meta, folder: Path) -> dict:
                 f"{where} lacks {key!r}; allowed: a {meta['algorithm']!r} checkpoint records "
                 f"{', '.join(('task', 'nvec', 'files', *CHECKPOINT_FIELDS[meta['algorithm']]))}"
             )
-    for key, (ok, allowed) in _field_checks().items():
+    for key, (ok, allowed) in _field_checks(ALGORITHMS[meta["algorithm"]].activations).items():
         if key in meta and not ok(meta[key]):
             raise CheckpointError(f"{where}: {key} = {meta[key]!r} is not allowed; allowed: {allowed}")
     files = meta["files"]
@@ -154,9 +154,10 @@ def check_meta(meta, folder: Path) -> dict:
     return meta
 
 
-def _field_checks() -> dict:
+def _field_checks(activations: tuple[str, ...]) -> dict:
     """``{field: (test, what is allowed)}`` of the ``proteo.json`` fields :func:`check_meta` checks
-    (a loader then builds from them without a default)."""
+    (a loader then builds from them without a default); ``activations``: those the checkpoint's
+    trainer builds (:class:`~training.machinery.registry.Trainer`)."""
 
     def sizes(value) -> bool:
         return isinstance(value, list) and bool(value) and all(_positive_int(v) for v in value)
@@ -167,9 +168,9 @@ def _field_checks() -> dict:
         "control": (lambda v: v in CONTROL_LEVELS, ", ".join(CONTROL_LEVELS)),
         "hidden": (sizes, "the hidden layers' sizes, a list of integers >= 1"),
         "activation": (
-            lambda v: v in ACTIVATIONS,
-            f"{', '.join(ACTIVATIONS)} (what training/ builds; a network of another activation enters the benchmark "
-            "as a TorchScript or ONNX file, docs/guides/entering.md)",
+            lambda v: v in activations,
+            f"{', '.join(activations)} (what this trainer builds; a network of another activation enters the "
+            "benchmark as a TorchScript or ONNX file, docs/guides/entering.md)",
         ),
         "memory": (lambda v: v in MEMORIES, ", ".join(MEMORIES)),
         "sampled": (lambda v: v in SAMPLED, ", ".join(SAMPLED)),
@@ -181,11 +182,6 @@ def _field_checks() -> dict:
 
 def _positive_int(value) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and value >= 1
-
-
-ACTIVATIONS = ("tanh",)
-"""The activations of the networks ``training/`` builds (:mod:`training.machinery.networks`,
-:class:`training.machinery.policies.NumpyMLP`, the SB3 and TorchRL actors)."""
 
 
 def sha256_of(file: Path) -> str:
@@ -573,7 +569,9 @@ def _ppo_logits(folder: Path, meta: dict, encoder: ObservationEncoder):
             f"feed-forward network of arch {', '.join(ARCHS)} (the lattice and recurrent networks were removed)"
         )
     try:
-        net = ActorCritic(encoder, meta["nvec"], arch, tuple(meta["hidden"]), memory=meta["memory"])
+        net = ActorCritic(
+            encoder, meta["nvec"], arch, tuple(meta["hidden"]), memory=meta["memory"], activation=meta["activation"]
+        )
         net.load_state_dict(torch.load(_need(file, meta), map_location="cpu", weights_only=True))
     except CheckpointError:
         raise
@@ -666,6 +664,11 @@ def migrate(path) -> bool:
     if meta["version"] == CHECKPOINT_VERSION:
         read_meta(folder)
         return False
+    if meta.get("activation", V1_DEFAULTS["activation"]) != V1_DEFAULTS["activation"]:
+        raise CheckpointError(
+            f"checkpoint {str(folder)!r}: {META_FILE} activation = {meta['activation']!r} is not allowed; allowed: "
+            f"{V1_DEFAULTS['activation']} (every version-1 network was built with it)"
+        )
     fields = CHECKPOINT_FIELDS.get(meta.get("algorithm"), ())
     for key in fields:
         if key in V1_DEFAULTS:

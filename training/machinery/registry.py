@@ -28,6 +28,8 @@ class Trainer:
         loader: ``"module:function"`` that builds the policy of one of its checkpoints,
             ``function(meta, env, *, seed, deterministic) -> Policy`` (``meta``: the checked
             ``proteo.json`` with ``"dir"``).
+        activations: the hidden layers' activations its loader builds (a network checkpoint
+            recording another is refused, not played with the wrong one).
     """
 
     name: str
@@ -36,6 +38,7 @@ class Trainer:
     algorithms: tuple[str, ...] = ()
     evolved: bool = False
     loader: str = ""
+    activations: tuple[str, ...] = ("tanh",)
 
 
 TRAINERS = (
@@ -45,6 +48,7 @@ TRAINERS = (
         "native PPO over the array API (training/trainers/ppo.py)",
         ("ppo",),
         loader="training.machinery.checkpoints:ppo_policy",
+        activations=("tanh", "relu"),
     ),
     Trainer(
         "imitate",
@@ -52,6 +56,7 @@ TRAINERS = (
         "clone the rules: behaviour cloning + DAgger (training/trainers/imitate.py)",
         ("imitation",),
         loader="training.machinery.checkpoints:ppo_policy",
+        activations=("tanh", "relu"),
     ),
     Trainer(
         "cma_es",

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import csv
 import dataclasses
 import inspect
@@ -184,6 +185,19 @@ def limit_threads(n: int | None = 1) -> None:
     except ImportError:
         return
     torch.set_num_threads(n)
+
+
+@contextlib.contextmanager
+def torch_threads(n: int):
+    """Run the block with ``n`` torch threads, then restore the count before it (numba's is not touched)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def check_integers(args, least: dict[str, int]) -> None:

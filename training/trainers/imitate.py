@@ -52,6 +52,7 @@ from proteo_env.registry import task_name
 from proteo_env.spaces import N_MOVES
 from training.machinery.networks import (
     ActorCritic,
+    check_activation,
     check_arch,
     masked_log_probs,
     network_meta,
@@ -116,8 +117,10 @@ class Args(RunArgs):
     arch: str = "shared"
     """Network: shared or mlp (training/machinery/networks.py)."""
     hidden: tuple[int, ...] = (128, 128)
-    """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
+    """Widths of the hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
     critic's MLP each (arch=mlp)."""
+    activation: str = "tanh"
+    """The hidden layers' activation: tanh or relu (training/machinery/networks.py: ACTIVATIONS)."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/machinery/policies.py)."""
     sampled: str = "move"
@@ -142,6 +145,7 @@ class Args(RunArgs):
         check_numbers(self, {"beta": (0, 1), "beta_decay": (0, 1)})
         check_workers(self.workers, self.n_envs, teacher=self.teacher)
         check_arch(self.arch)
+        check_activation(self.activation)
         check_memory(self.memory)
         check_sampled(self.sampled)
 
@@ -224,7 +228,7 @@ def train(args: Args) -> Path:
     enc, nvec = worlds.encoder, [int(n) for n in worlds.nvec]
     fields = worlds.control_fields
     teachers = worlds.make_teachers(args.teacher, seed=args.seed, n_fields=len(nvec))
-    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory).to(device)
+    net = ActorCritic(enc, nvec, args.arch, args.hidden, args.memory, args.activation).to(device)
     optimiser = torch.optim.Adam(net.parameters(), lr=args.learning_rate)
     rng = np.random.default_rng(args.seed)
     log = ProgressLog(run_dir, tensorboard=args.tensorboard)

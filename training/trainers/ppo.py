@@ -43,6 +43,7 @@ from training.machinery.checkpoints import network_weights
 from training.machinery.networks import (
     ActorCritic,
     ReturnScale,
+    check_activation,
     check_arch,
     entropy,
     joint_log_prob,
@@ -69,6 +70,7 @@ from training.machinery.runs import (
     save_network_checkpoint,
     seed_everything,
     torch_device,
+    torch_threads,
     trainer_state,
 )
 from training.trainers.curriculum import Curriculum
@@ -106,8 +108,13 @@ class Args(PPOArgs):
     arch: str = "shared"
     """Network: shared (one trunk for the policy and the value) or mlp (separate MLPs)."""
     hidden: tuple[int, ...] = (64, 64)
-    """Widths of the tanh hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
+    """Widths of the hidden layers: of the shared trunk (arch=shared) or of the actor's and of the
     critic's MLP each (arch=mlp)."""
+    activation: str = "tanh"
+    """The hidden layers' activation: tanh or relu (training/machinery/networks.py: ACTIVATIONS)."""
+    update_threads: int = 1
+    """Torch threads of the update (the rollouts keep ``threads``): 2 runs the update on both cores of a
+    machine with nothing else to do, the same run bit for bit at the same count (docs/speed/ppo_throughput.md)."""
     memory: str = "none"
     """What the network remembers between cycles: none, last_move or last_action (training/machinery/policies.py)."""
     sampled: str = "all"
@@ -136,9 +143,10 @@ class Args(PPOArgs):
     """The task's modes of a module not yet in the structure."""
 
     def __post_init__(self):
-        positive = ("n_envs", "n_steps", "minibatch_size", "n_epochs", "checkpoint_every", "workers")
+        positive = ("n_envs", "n_steps", "minibatch_size", "n_epochs", "checkpoint_every", "workers", "update_threads")
         check_integers(self, {"total_steps": 0, **dict.fromkeys(positive, 1), "distill_steps": 0})
         check_arch(self.arch)
+        check_activation(self.activation)
         check_memory(self.memory)
         check_sampled(self.sampled)
         if not 0.0 <= self.distill_final <= self.distill_coef:
@@ -339,7 +347,7 @@ def train(args: Args) -> Path:
         )
     env = args.env if curriculum is None else curriculum.overrides(args.env)
     worlds = TrainingEnvs.for_run(args, env, agent_steps)
-    net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory)
+    net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory, args.activation)
     if args.init and resume is None:
         weights = network_weights(
             args.init, worlds.task_id, network_meta(args), worlds.encoder.spec(), where=f"init={args.init!r}"
@@ -402,7 +410,8 @@ def train(args: Args) -> Path:
         collected = time.perf_counter()
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)
-        stats = update(net, optimiser, rollout.samples(advantages, returns), scale, distill, args)
+        with torch_threads(args.update_threads):
+            stats = update(net, optimiser, rollout.samples(advantages, returns), scale, distill, args)
         updated = time.perf_counter()
         agent_steps += returns.numel()
         bar.update(returns.numel())

@@ -1,22 +1,25 @@
-"""Native PPO on every core: agent-steps per second with the worlds split over 1 to K processes,
-beside the batched engine on the same worlds, measured in one run.
+"""Native PPO's throughput: agent-steps per second of the trainer's settings that buy speed (worlds
+split over worker processes, the update on both cores, ReLU hidden layers), beside the batched
+engine on the same worlds, measured in one run.
 
-    NUMBA_NUM_THREADS=1 python benchmarks/ppo_workers.py --out docs/speed/ppo_workers
+    NUMBA_NUM_THREADS=1 python benchmarks/ppo_throughput.py --out docs/speed/ppo_throughput
 
 The worlds are those of ``configs/train/ppo_chain_move.yaml`` (64 chain-v1 worlds of 12
-modules at ``move``). For each ``--workers`` count it trains ``training/trainers/ppo.py`` with the
-config's settings and seed 0 for ``--steps`` agent-steps (``--workers K``, one torch thread)
-and takes its rate from ``progress.csv`` over the rows after ``--warmup`` agent-steps (before
-them each process compiles its worlds' batched autopilot: :data:`proteo_env.batched.ONE_CALL_AFTER`
-world-cycles, the more the fewer worlds it holds), split as the trainer logs it into the
-environment step (with the encoding of the observations), the forward passes of the rollouts and
-the update. Every run must end with the same network, bit for bit (the script fails otherwise).
-The engine's rate is the batched env alone (``step_arrays`` and ``observe_arrays`` of the same
-64 worlds at ``full``, one process), timed after a warm-up of the same length, with uniformly
-random actions (the speed suite's workload: most moves are refused at once) and with the move
-drawn among the legal ones (every module that can move does: more connectivity checks); the
-ratio "of the engine" is taken against the faster of the two. Beside them, 341 sandbox worlds
-of 12 modules with uniformly random actions: the engine without a task's scoring. The machine and its load average at the end are written beside the figures.
+modules at ``move``). Each run (:data:`RUNS`: a label, the trainer's flags on top of the config's
+and seed 0, and a group) trains ``training/trainers/ppo.py`` for ``--steps`` agent-steps with one
+torch thread for the rollouts and takes its rate from ``progress.csv`` over the rows after
+``--warmup`` agent-steps (before them each process compiles its worlds' batched autopilot:
+:data:`proteo_env.batched.ONE_CALL_AFTER` world-cycles, the more the fewer worlds it holds), split
+as the trainer logs it into the environment step (with the encoding of the observations), the
+forward passes of the rollouts and the update. Runs of one group must end with the same network,
+bit for bit (the script fails otherwise): worker processes do not change a run. The engine's
+rate is the batched env alone (``step_arrays`` and ``observe_arrays`` of the same 64 worlds at
+``full``, one process), timed after a warm-up of the same length, with uniformly random actions
+(the speed suite's workload: most moves are refused at once) and with the move drawn among the
+legal ones (every module that can move does: more connectivity checks); the ratio "of the
+engine" is taken against the faster of the two. Beside them, 341 sandbox worlds of 12 modules
+with uniformly random actions: the engine without a task's scoring. The machine and its load
+average at the end are written beside the figures.
 """
 
 from __future__ import annotations
@@ -37,6 +40,20 @@ from machine_info import describe
 from proteo_env.config import load_yaml
 
 CONFIG = "configs/train/ppo_chain_move.yaml"
+RUNS = (
+    ("the config", (), "tanh, 1 thread"),
+    ("2 workers", ("--workers", "2"), "tanh, 1 thread"),
+    ("update on 2 threads", ("--update-threads", "2"), "tanh, 2 threads"),
+    ("relu", ("--activation", "relu"), "relu, 1 thread"),
+    ("relu, update on 2 threads", ("--activation", "relu", "--update-threads", "2"), "relu, 2 threads"),
+    (
+        "relu, update on 2 threads, 2 workers",
+        ("--activation", "relu", "--update-threads", "2", "--workers", "2"),
+        "relu, 2 threads",
+    ),
+)
+"""``(label, flags, group)`` of every run: the trainer's flags on top of the config's; runs of a group
+make the same run."""
 
 
 def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
@@ -70,10 +87,10 @@ def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
     return cycles * env.n_envs * env.n_agents / (time.perf_counter() - started)
 
 
-def train(workers: int, steps: int, run_dir: Path) -> dict:
-    """One PPO run of the config split over ``workers`` processes; its rows of ``progress.csv``."""
+def train(flags: tuple[str, ...], steps: int, run_dir: Path) -> dict:
+    """One PPO run of the config with the trainer's ``flags`` on top; its rows of ``progress.csv``."""
     cmd = [sys.executable, "-m", "training.trainers.ppo", "--config", CONFIG, "--seed", "0", "--run-dir", str(run_dir)]
-    cmd += ["--total-steps", str(steps), "--time-limit-minutes", "0", "--workers", str(workers), "--threads", "1"]
+    cmd += ["--total-steps", str(steps), "--time-limit-minutes", "0", "--threads", "1", *flags]
     cmd += ["--progress-bar", "false", "--tensorboard", "false", "--checkpoint-every", str(10 * steps)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     with open(run_dir / "progress.csv") as f:
@@ -93,33 +110,39 @@ def steady(rows: list[dict], warmup: int) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--runs", nargs="+", default=[label for label, _, _ in RUNS], help="labels of RUNS to run")
     parser.add_argument("--steps", type=int, default=4_000_000, help="agent-steps of each run")
     parser.add_argument("--warmup", type=int, default=2_000_000, help="agent-steps left out of the rate")
     parser.add_argument("--engine-cycles", type=int, default=2000)
-    parser.add_argument("--out", default="docs/speed/ppo_workers", help="writes OUT.json and OUT.md")
+    parser.add_argument("--out", default="docs/speed/ppo_throughput", help="writes OUT.json and OUT.md")
     args = parser.parse_args(argv)
     engines = {"uniform": engine_rate(args.engine_cycles, False), "legal": engine_rate(args.engine_cycles, True)}
     engine = max(engines.values())
     engines["sandbox"] = engine_rate(args.engine_cycles, False, sandbox=True)
+    unknown = sorted(set(args.runs) - {label for label, _, _ in RUNS})
+    if unknown:
+        parser.error(f"--runs {unknown} is not allowed; allowed: {', '.join(label for label, _, _ in RUNS)}")
     runs, digests = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for k in args.workers:
-            rows = train(k, args.steps, Path(tmp) / f"w{k}")
-            runs[k] = steady(rows, args.warmup)
-            digests[k] = hashlib.sha256((Path(tmp) / f"w{k}" / "final" / "policy.pt").read_bytes()).hexdigest()
-    same = len(set(digests.values())) == 1
+        for i, (label, flags, group) in enumerate(RUNS):
+            if label not in args.runs:
+                continue
+            rows = train(flags, args.steps, Path(tmp) / str(i))
+            runs[label] = {**steady(rows, args.warmup), "flags": list(flags), "group": group}
+            digest = hashlib.sha256((Path(tmp) / str(i) / "final" / "policy.pt").read_bytes()).hexdigest()
+            digests.setdefault(group, set()).add(digest)
+    same = all(len(d) == 1 for d in digests.values())
     machine = describe("torch", "numba")
     result = {"engine_module_cycles_per_s": engines, "runs": runs, "same_network": same, "machine": machine}
     result["config"], result["steps"], result["warmup"] = CONFIG, args.steps, args.warmup
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(result, indent=1))
-    one = runs[args.workers[0]]["agent_steps_per_s"]
+    one = next(iter(runs.values()))["agent_steps_per_s"]
     lines = [
-        "# Native PPO on every core",
+        "# Native PPO's throughput",
         "",
-        f"`NUMBA_NUM_THREADS=1 python benchmarks/ppo_workers.py --out {args.out}` (one run; {machine['cpu']}, "
+        f"`NUMBA_NUM_THREADS=1 python benchmarks/ppo_throughput.py --out {args.out}` (one run; {machine['cpu']}, "
         f"{machine['cores']} cores, load average {machine['load_average_1min']} at the end; torch {machine['torch']}, "
         f"numba {machine['numba']}). `{CONFIG}`, seed 0, {args.steps:,} agent-steps a run, the rate over those after "
         f"{args.warmup:,}; the batched engine alone on the same 64 worlds (one process): {engines['uniform']:,.0f} "
@@ -127,21 +150,23 @@ def main(argv=None) -> int:
         f"(the chain task scores every world after every cycle, in Python); 341 sandbox worlds of 12 modules, "
         f"which no task scores: {engines['sandbox']:,.0f}.",
         "",
-        "| workers | agent-steps/s | x 1 worker | of the engine | of the sandbox engine | env step + encoding s "
-        "| forward s | update s |",
-        "|---|---|---|---|---|---|---|---|",
+        "| run | the trainer's flags | agent-steps/s | x the first | of the engine | of the sandbox engine "
+        "| env step + encoding s | forward s | update s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for k, run in runs.items():
+    for label, run in runs.items():
         s = run["seconds"]
+        flags = " ".join(run["flags"]) or "none"
         lines.append(
-            f"| {k} | {run['agent_steps_per_s']:,.0f} | {run['agent_steps_per_s'] / one:.2f} | "
+            f"| {label} | `{flags}` | {run['agent_steps_per_s']:,.0f} | {run['agent_steps_per_s'] / one:.2f} | "
             f"{run['agent_steps_per_s'] / engine:.3f} | {run['agent_steps_per_s'] / engines['sandbox']:.3f} | "
             f"{s['env'] + s['encode']:.2f} | {s['forward']:.2f} | "
             f"{s['update']:.2f} |"
         )
     lines += [
         "",
-        "Every run ends with the same network, bit for bit: " + ("yes." if same else "**no**."),
+        "Runs that must make the same run (the same activation and update threads, any workers) end with the same "
+        "network, bit for bit: " + ("yes." if same else "**no**."),
         "",
     ]
     out.with_suffix(".md").write_text("\n".join(lines))
