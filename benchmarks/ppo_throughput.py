@@ -43,6 +43,7 @@ CONFIG = "configs/train/ppo_chain_move.yaml"
 RUNS = (
     ("the config", (), "tanh, 1 thread"),
     ("2 workers", ("--workers", "2"), "tanh, 1 thread"),
+    ("2 threads everywhere", ("--threads", "2"), "tanh, 2 threads everywhere"),
     ("update on 2 threads", ("--update-threads", "2"), "tanh, 2 threads"),
     ("relu", ("--activation", "relu"), "relu, 1 thread"),
     ("relu, update on 2 threads", ("--activation", "relu", "--update-threads", "2"), "relu, 2 threads"),
@@ -90,7 +91,15 @@ def engine_rate(cycles: int, legal: bool, sandbox: bool = False) -> float:
 def train(flags: tuple[str, ...], steps: int, run_dir: Path) -> dict:
     """One PPO run of the config with the trainer's ``flags`` on top; its rows of ``progress.csv``."""
     cmd = [sys.executable, "-m", "training.trainers.ppo", "--config", CONFIG, "--seed", "0", "--run-dir", str(run_dir)]
-    cmd += ["--total-steps", str(steps), "--time-limit-minutes", "0", "--threads", "1", *flags]
+    cmd += [
+        "--total-steps",
+        str(steps),
+        "--time-limit-minutes",
+        "0",
+        "--threads",
+        "1",
+        *flags,
+    ]  # a flag given twice: the last
     cmd += ["--progress-bar", "false", "--tensorboard", "false", "--checkpoint-every", str(10 * steps)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     with open(run_dir / "progress.csv") as f:
@@ -147,7 +156,7 @@ def main(argv=None) -> int:
         f"numba {machine['numba']}). `{CONFIG}`, seed 0, {args.steps:,} agent-steps a run, the rate over those after "
         f"{args.warmup:,}; the batched engine alone on the same 64 worlds (one process): {engines['uniform']:,.0f} "
         f"module-cycles/s with uniformly random actions, {engines['legal']:,.0f} with random legal moves "
-        f"(the chain task scores every world after every cycle, in Python); 341 sandbox worlds of 12 modules, "
+        f"(the chain task scores every world after every cycle, in one kernel call); 341 sandbox worlds of 12 modules, "
         f"which no task scores: {engines['sandbox']:,.0f}.",
         "",
         "| run | the trainer's flags | agent-steps/s | x the first | of the engine | of the sandbox engine "

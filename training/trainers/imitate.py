@@ -261,7 +261,7 @@ def train(args: Args) -> Path:
             order = torch.randperm(len(all_x))
             for start in range(0, len(order), args.minibatch_size):
                 mb = order[start : start + args.minibatch_size]
-                x_mb, m_mb, y_mb = all_x[mb].to(device), all_m[mb].to(device), all_y[mb].to(device)
+                x_mb, m_mb, y_mb = (torch.index_select(t, 0, mb).to(device) for t in (all_x, all_m, all_y))
                 loss = teacher_cross_entropy(masked_log_probs(net.logits(x_mb), m_mb, nvec), y_mb, m_mb)
                 optimiser.zero_grad(set_to_none=True)
                 loss.backward()
