@@ -173,13 +173,7 @@ class Chain(Task):
             task._probe.degree[:] = scratch[0, b]
             task._previous, task._last = task._last, shape_measures(*shape, n)
             success[b] = task._last["complete"]
-            terms.append(
-                {
-                    "thin": (task._last["thin"] - task._previous["thin"]) / n,
-                    "success": task.success_bonus(world) if success[b] else 0.0,
-                    "time": -task.params.time_penalty,
-                }
-            )
+            terms.append(task.reward_terms(world, moved[b]))
         reward = np.array([sum(t.values()) for t in terms], dtype=np.float64)
         return CycleScores(reward, success, terms)
 
