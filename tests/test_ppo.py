@@ -408,3 +408,30 @@ def test_slots_judge_every_direction_by_the_same_weights_and_its_checkpoint_load
         assert np.array_equal(_ppo_logits(final, meta, encoder)(features.numpy()), trained.logits(features).numpy())
     assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name
 
+
+def test_a_learning_curve_plays_every_checkpoint_on_the_protocols_worlds_and_resumes(trained, tmp_path, monkeypatch):
+    """benchmarks/learning_curve.py: one row per kept checkpoint, each on the same worlds (its
+    per-world outcomes kept for pairing), the wall-clock from the run's log; a rerun plays nothing
+    again; a run folder without checkpoints is one error naming it."""
+    import importlib
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    curve = importlib.import_module("learning_curve")
+    run = trained.parent
+    steps = [s for s, _ in curve.checkpoints(run, 0)]
+    assert len(steps) >= 2 and steps == sorted(steps)
+    assert [s for s, _ in curve.checkpoints(run, 10**9)] == [steps[0], steps[-1]]
+    out = tmp_path / "curve"
+    argv = ["--task", "chain", "--runs", str(run), "--worlds", "2", "--out", str(out)]
+    curve.main(argv)
+    with open(out.with_suffix(".csv")) as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["agent_steps"]) for r in rows] == steps
+    assert all(len(json.loads(r["won"])) == 2 and r["seconds"] for r in rows)
+    before = out.with_suffix(".csv").read_text()
+    monkeypatch.setattr(curve, "evaluate", lambda *a, **k: pytest.fail("a kept row was played again"))
+    curve.main(argv)
+    assert out.with_suffix(".csv").read_text() == before
+    with pytest.raises(SystemExit, match="has no checkpoints"):
+        curve.main(["--runs", str(tmp_path), "--out", str(out)])
