@@ -152,7 +152,7 @@ def test_workers_are_refused_beyond_the_worlds_and_with_a_learned_teacher(tmp_pa
 
 
 def test_bad_arguments_are_refused(tmp_path):
-    with pytest.raises(ValueError, match="arch='conv'.*allowed: shared, mlp, slots"):
+    with pytest.raises(ValueError, match="arch='conv'.*allowed: shared, mlp"):
         tiny_run(tmp_path / "a", "--arch", "conv")
     config = tmp_path / "old.yaml"
     config.write_text("n_groups: 3\n")  # a removed option, at another value than the one that did nothing
@@ -361,52 +361,6 @@ def test_the_update_on_two_threads_makes_the_same_run_twice(tmp_path):
         tiny_run(tmp_path / "c", "--update-threads", "0")
     with pytest.raises(ValueError, match="activation='gelu' is not allowed; allowed: tanh, relu"):
         tiny_run(tmp_path / "d", "--activation", "gelu")
-
-
-def test_slots_judge_every_direction_by_the_same_weights_and_its_checkpoint_loads(tmp_path):
-    """``arch: slots``: mirroring the neighbours' features (x -> -x, which maps directions that are
-    next to each other to directions that are next to each other) mirrors the move logits (the
-    directions' own embeddings start at zero), staying and the value do not change, the memory's inputs reach the context, and a trained checkpoint is rebuilt by
-    the loader with the same logits."""
-    from proteo_env.adapters.flatten import ObservationEncoder
-    from training.machinery.checkpoints import _ppo_logits
-    from training.machinery.networks import SlotTrunk
-
-    env = proteo_env.make("chain-v1", control="move", **SMALL_ENV)
-    encoder = ObservationEncoder.for_env(env, message_encoding="compact")
-    net = ppo.ActorCritic(encoder, env.control_nvec, "slots", (16, 24), memory="last_move")
-    x = torch.rand(4, encoder.size + 13)
-    from proteo_env.core.lattice import DIRECTIONS
-
-    mirrored = [tuple(d * (-1, 1, 1)) for d in DIRECTIONS]  # x -> -x maps neighbouring directions to neighbouring ones
-    swap = [next(j for j, e in enumerate(DIRECTIONS) if tuple(e) == m) for m in mirrored]
-    y = x.clone()
-    for name, block in encoder.slices.items():
-        if name in ("action_mask", *SlotTrunk.SITE_BLOCKS, "message_from"):
-            offset = 1 if name == "action_mask" else 0
-            per_site = (block.stop - block.start - offset) // 12
-            sites = x[:, block.start + offset : block.stop].reshape(4, 12, per_site)
-            y[:, block.start + offset : block.stop] = sites[:, swap].reshape(4, -1)
-    with torch.no_grad():
-        (lx, vx), (ly, vy) = net(x), net(y)
-        assert lx.shape == (4, 13) and vx.shape == (4,)
-        assert torch.allclose(ly[:, 1:], lx[:, 1:][:, swap], atol=1e-6)
-        assert torch.allclose(ly[:, 0], lx[:, 0], atol=1e-6) and torch.allclose(vy, vx, atol=1e-6)
-        remembered = x.clone()
-        remembered[:, encoder.size :] = 1 - remembered[:, encoder.size :]
-        assert not torch.allclose(net.value(remembered), vx)
-    with pytest.raises(ValueError, match="arch='slots' needs the 12 face neighbours.*obs_radius=1"):
-        wide = proteo_env.make("chain-v1", control="move", obs_radius=2, **SMALL_ENV)
-        ppo.ActorCritic(ObservationEncoder.for_env(wide), wide.control_nvec, "slots", (16, 24))
-    final = tiny_run(tmp_path / "slots", "--arch", "slots", "--hidden", "[16, 24]")
-    meta = read_meta(final)
-    assert meta["arch"] == "slots"
-    trained = ppo.ActorCritic(encoder, env.control_nvec, "slots", (16, 24))
-    trained.load_state_dict(torch.load(final / "policy.pt"))
-    features = torch.rand(6, encoder.size)
-    with torch.no_grad():
-        assert np.array_equal(_ppo_logits(final, meta, encoder)(features.numpy()), trained.logits(features).numpy())
-    assert load_policy(final, proteo_env.make("chain-v0", control="move", **SMALL_ENV)).name
 
 
 def test_a_learning_curve_plays_every_checkpoint_on_the_protocols_worlds_and_resumes(trained, tmp_path, monkeypatch):

@@ -1,5 +1,5 @@
-"""The network of :mod:`training.trainers.ppo` and :mod:`training.trainers.imitate` (``arch``: ``shared``,
-``mlp`` or ``slots``), the masked categorical distribution over its action fields, and the scale of the
+"""The network of :mod:`training.trainers.ppo` and :mod:`training.trainers.imitate` (``arch``: ``shared`` or
+``mlp``), the masked categorical distribution over its action fields, and the scale of the
 critic's returns (:class:`ReturnScale`). Checkpoints of both scripts hold an :class:`ActorCritic`'s
 weights, and :mod:`training.machinery.checkpoints` rebuilds it from here."""
 
@@ -11,12 +11,9 @@ from torch import nn
 
 from proteo_env.adapters.flatten import ObservationEncoder
 from proteo_env.config import ConfigError
-from proteo_env.core.lattice import DIRECTIONS
 from training.machinery.policies import check_memory
 
-ARCHS = ("shared", "mlp", "slots")
-"""``shared``: one MLP trunk under the actor's and the critic's heads; ``mlp``: an MLP each;
-``slots``: one encoder shared by the 12 neighbour directions (:class:`SlotTrunk`)."""
+ARCHS = ("shared", "mlp")
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 """The hidden layers' activations, by the name a checkpoint records. ``tanh`` is what every published
 network uses; ``relu`` costs about a thirtieth of it per element on a CPU without AVX-512 (tanh is
@@ -69,103 +66,17 @@ def mlp(
 
 def _orthogonal(layer: nn.Linear, gain: float) -> nn.Linear:
     nn.init.orthogonal_(layer.weight, gain=gain)
-    if layer.bias is not None:
-        nn.init.zeros_(layer.bias)
+    nn.init.zeros_(layer.bias)
     return layer
-
-
-class SlotTrunk(nn.Module):
-    """The lattice's structure in the network: one encoder shared by the 12 neighbour directions,
-    and one round of message passing between the directions that are neighbours themselves.
-
-    Direction ``k``'s token is site ``k``'s columns of every per-site block of the encoding (its
-    kind, mode and scent blocks, the message received from it) and whether the move towards it is
-    legal; each token is embedded by one shared layer plus a learned embedding of its direction
-    (``(N, 12, E)``). A module's own features (its mode, scent, contact, load, the task's hint,
-    the messages' values, the memory's inputs and whether staying is legal) join every token in
-    the message-passing round, where token ``k`` also reads the mean of the four directions next
-    to it on the cuboctahedron of the 12 face neighbours (the sites a roll towards ``k`` pivots
-    on). The own features ask a query of the 12 tokens (one head of scaled dot-product
-    attention); the tokens' mean, the attended one and the own features make the context
-    ``(N, H)`` through the hidden layers. The logit of "move towards ``k``" is token ``k``'s dot
-    product with a vector the context chooses, plus a shared bias head on the token (so every
-    direction is judged by the same weights, and the context decides which wins); staying, the
-    other action fields and the value are linear heads on the context.
-
-    ``hidden = (E, H, ...)``: the tokens' width, then the context's layers (``(E,)`` alone: one
-    context layer of ``E``). Needs the 12 face neighbours (``obs_radius=1``).
-    """
-
-    SITE_BLOCKS = (
-        "neighbour_kind",
-        "neighbour_mode",
-        "neighbour_scent_present",
-        "neighbour_scent_value",
-        "neighbour_scent_delta",
-    )
-    OWN_BLOCKS = ("own_mode", "own_scent_present", "own_scent_value", "contact", "load", "hint")
-
-    def __init__(self, encoder: ObservationEncoder, in_dim: int, hidden: tuple[int, ...], activation: str):
-        super().__init__()
-        if encoder.n_sites != 12:
-            raise ConfigError(
-                f"arch='slots' needs the 12 face neighbours (obs_radius=1); the observation has "
-                f"{encoder.n_sites} sites; allowed: obs_radius=1, or arch 'shared' or 'mlp'"
-            )
-        embed, context = hidden[0], (tuple(hidden[1:]) or (hidden[0],))
-        slices, compact = encoder.slices, encoder.message_encoding == "compact"
-        site_blocks = (*self.SITE_BLOCKS, "message_from" if compact else "messages")
-        own_blocks = (*self.OWN_BLOCKS, *(("message_value",) if compact else ()))
-        columns = []  # token k: site k's columns of every per-site block (site-major), then "move k+1 is legal"
-        for k in range(12):
-            for name in site_blocks:
-                block = slices[name]
-                width = (block.stop - block.start) // 12
-                columns += range(block.start + k * width, block.start + (k + 1) * width)
-            columns.append(slices["action_mask"].start + 1 + k)
-        own = [c for name in own_blocks for c in range(slices[name].start, slices[name].stop)]
-        own += [slices["action_mask"].start, *range(encoder.size, in_dim)]  # staying is legal; the memory's inputs
-        self.register_buffer("token_columns", torch.tensor(columns))
-        self.register_buffer("own_columns", torch.tensor(own))
-        gap = ((DIRECTIONS[:, None, :] - DIRECTIONS[None, :, :]) ** 2).sum(axis=2)
-        self.register_buffer("next_to", torch.tensor((gap == 2) / 4.0, dtype=torch.float32))
-        self.token_dim = len(columns) // 12
-        self.act = ACTIVATIONS[check_activation(activation)]()
-        self.embed = _orthogonal(nn.Linear(self.token_dim, embed), np.sqrt(2))
-        self.direction = nn.Parameter(torch.zeros(12, embed))
-        self.own_in = _orthogonal(nn.Linear(len(own), embed), np.sqrt(2))
-        self.neighbours_in = _orthogonal(nn.Linear(embed, embed, bias=False), np.sqrt(2))
-        self.token_in = _orthogonal(nn.Linear(embed, embed, bias=False), np.sqrt(2))
-        self.query = _orthogonal(nn.Linear(len(own), embed), 1.0)
-        self.context = nn.Sequential(*hidden_layers(2 * embed + len(own), context, activation))
-        self.move_query = _orthogonal(nn.Linear(context[-1], embed), 1.0)
-        self.move_bias = _orthogonal(nn.Linear(embed, 1), 0.01)
-        self.width = context[-1]
-
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(context (N, H), move logits (N, 12))`` from features ``(N, D)``."""
-        n = x.shape[0]
-        tokens = self.act(
-            self.embed(x.index_select(1, self.token_columns).reshape(n, 12, self.token_dim)) + self.direction
-        )
-        own = x.index_select(1, self.own_columns)
-        around = torch.matmul(self.next_to, tokens)  # (N, 12, E): the mean of each direction's four neighbours
-        tokens = self.act(self.token_in(tokens) + self.neighbours_in(around) + self.own_in(own)[:, None, :])
-        scores = torch.einsum("nke,ne->nk", tokens, self.query(own)) / tokens.shape[2] ** 0.5
-        attended = torch.einsum("nk,nke->ne", torch.softmax(scores, dim=1), tokens)
-        context = self.context(torch.cat([tokens.mean(dim=1), attended, own], dim=1))
-        moves = torch.einsum("nke,ne->nk", tokens, self.move_query(context)) + self.move_bias(tokens)[..., 0]
-        return context, moves
 
 
 class ActorCritic(nn.Module):
     """The shared policy: logits ``(N, sum(nvec))`` and value ``(N,)`` from flat features
     ``x (N, D)``; ``net(x)`` gives both. ``arch="shared"``: one MLP trunk feeds both heads
-    (one pass instead of two); ``arch="mlp"``: separate MLPs for the actor and the critic;
-    ``arch="slots"``: :class:`SlotTrunk` feeds the move's logits per direction and, from its
-    context, staying, the other fields and the value. The hidden layers' ``activation`` is one of
-    :data:`ACTIVATIONS`. With ``memory`` (:data:`training.machinery.policies.MEMORIES`) ``D`` is the
-    encoder's size plus the memory's inputs (:func:`training.machinery.policies.with_memory`)."""
+    (one pass instead of two); ``arch="mlp"``: separate MLPs for the actor and the critic; the hidden
+    layers' ``activation`` is one of :data:`ACTIVATIONS`.
+    With ``memory`` (:data:`training.machinery.policies.MEMORIES`) ``D`` is the encoder's size plus the
+    memory's inputs (:func:`training.machinery.policies.with_memory`)."""
 
     def __init__(
         self,
@@ -181,11 +92,7 @@ class ActorCritic(nn.Module):
         self.nvec = [int(n) for n in nvec]
         hidden = tuple(hidden)
         in_dim = encoder.size + check_memory(memory, self.nvec)
-        if arch == "slots":
-            self.trunk = SlotTrunk(encoder, in_dim, hidden, activation)
-            self.actor = _orthogonal(nn.Linear(self.trunk.width, 1 + sum(self.nvec[1:])), 0.01)  # stay, other fields
-            self.critic = _orthogonal(nn.Linear(self.trunk.width, 1), 1.0)
-        elif arch == "shared":
+        if arch == "shared":
             self.trunk = nn.Sequential(*hidden_layers(in_dim, hidden, activation))
             self.actor = _orthogonal(nn.Linear(hidden[-1], sum(self.nvec)), 0.01)
             self.critic = _orthogonal(nn.Linear(hidden[-1], 1), 1.0)
@@ -196,31 +103,23 @@ class ActorCritic(nn.Module):
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(logits (N, sum(nvec)), value (N,))`` from features ``(N, D)``."""
-        if self.arch == "slots":
-            context, moves = self.trunk(x)
-            heads = self.actor(context)
-            return torch.cat([heads[:, :1], moves, heads[:, 1:]], dim=1), self.critic(context)[:, 0]
         h = self.trunk(x)
         return self.actor(h), self.critic(h)[:, 0]
 
     def logits(self, x: torch.Tensor) -> torch.Tensor:
-        if self.arch == "slots":
-            return self(x)[0]
         return self.actor(self.trunk(x))
 
     def value(self, x: torch.Tensor) -> torch.Tensor:
-        if self.arch == "slots":
-            return self(x)[1]
         return self.critic(self.trunk(x))[:, 0]
 
     def clip_gradients(self, max_norm: float) -> None:
-        """Scale the gradients down to norm ``max_norm``: of the whole network at ``arch="shared"``
-        and ``"slots"``, of the actor and of the critic separately at ``arch="mlp"``."""
-        if self.arch == "mlp":
+        """Scale the gradients down to norm ``max_norm``: of the whole network at ``arch="shared"``,
+        of the actor and of the critic separately at ``arch="mlp"``."""
+        if self.arch == "shared":
+            nn.utils.clip_grad_norm_(self.parameters(), max_norm)
+        else:
             nn.utils.clip_grad_norm_(self.actor.parameters(), max_norm)
             nn.utils.clip_grad_norm_(self.critic.parameters(), max_norm)
-        else:
-            nn.utils.clip_grad_norm_(self.parameters(), max_norm)
 
 
 class ReturnScale:
