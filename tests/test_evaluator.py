@@ -244,3 +244,49 @@ def test_the_default_workers_come_from_proteo_workers_when_set(monkeypatch):
     monkeypatch.setenv("PROTEO_WORKERS", "0")
     with pytest.raises(ConfigError, match="PROTEO_WORKERS='0' is not allowed; allowed: an integer >= 1"):
         evaluate("chain-v1", [Controller.rules("chain")], [0], env=small_overrides("chain-v1"))
+
+
+def test_at_move_a_network_sees_only_the_modules_with_a_choice_and_the_episodes_stay_the_same(tmp_path, monkeypatch):
+    """At control level ``move`` a module with one legal move takes it whatever the network says,
+    so the batched forward pass skips those rows: the episodes are still the ones ``run_episode``
+    plays (which feeds every module to the network), and the network saw fewer rows."""
+    from proteo_env.adapters.flatten import ObservationEncoder
+    from training.machinery import evaluator
+    from training.machinery.checkpoints import load_policy, mlp_meta, write_checkpoint_meta
+    from training.machinery.policies import NumpyMLP
+
+    overrides = small_overrides("chain-v1", max_cycles=40)
+    env = proteo_env.make("chain-v1", control="move", **overrides)
+    encoder = ObservationEncoder.for_env(env)
+    folder = tmp_path / "net"
+    folder.mkdir()
+    net = NumpyMLP(encoder.size, int(np.sum(env.control_nvec)), (16,))
+    np.save(folder / "genome.npy", net.init_genome(np.random.default_rng(5)) * 10)
+    write_checkpoint_meta(
+        folder,
+        algorithm="cma-neural",
+        task=env.task.task_id(),
+        env_overrides=overrides,
+        encoder_spec=encoder.spec(),
+        nvec=env.control_nvec,
+        agent_steps=0,
+        seed=5,
+        extra=mlp_meta("move", [16]),
+    )
+    seen = {"rows": 0, "modules": 0}
+    sample = evaluator._Actors._sample
+
+    def counting(actors, buffers):
+        seen["modules"] += len(buffers.action_mask)
+        fn = actors.policies[0].logits_fn
+        actors.policies[0].logits_fn = lambda x: (seen.__setitem__("rows", seen["rows"] + len(x)), fn(x))[1]
+        try:
+            return sample(actors, buffers)
+        finally:
+            actors.policies[0].logits_fn = fn
+
+    monkeypatch.setattr(evaluator._Actors, "_sample", counting)
+    (row,) = evaluate("chain-v1", [Controller.from_checkpoint(folder)], SEEDS, env=overrides, level="move", workers=1)
+    for seed, batched in zip(SEEDS, row):
+        assert _same(run_episode(env, load_policy(folder, env, seed=seed), seed=seed), batched)
+    assert 0 < seen["rows"] < seen["modules"]
