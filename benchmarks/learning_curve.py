@@ -13,7 +13,10 @@ worlds by default, as ``proteo eval`` deals them; sampled actions,
 successes, the mean cycles of the successes and, per world, whether it succeeded (so that two
 checkpoints can be paired on the same worlds). A rerun skips the rows already written, so that
 a curve grows as its runs go on. ``--rules`` adds the task's hand-coded rules at the same level
-on the same worlds as the reference row. ``<out>.md`` is the table.
+on the same worlds as the reference row. ``<out>.md`` is the table, and where every run has a
+checkpoint at the same agent-steps, their success together, paired on the same worlds (the
+runs as training seeds; :func:`training.judging.statistics.paired_difference`) with the first
+such checkpoint and with the rules.
 
 The judge (``proteo eval``) refuses a checkpoint trained for another budget than the
 protocol's; this script is how such runs (the budget study) are judged on the protocol's worlds.
@@ -31,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from training.judging.protocol import load_protocol
+from training.judging.statistics import paired_difference
 from training.machinery.evaluator import Controller, evaluate
 
 FIELDS = ("run", "agent_steps", "seconds", "successes", "worlds", "mean_cycles", "won")
@@ -142,7 +146,36 @@ def main(argv=None) -> None:
         lines.append(
             f"| {r['run']} | {int(r['agent_steps']):,} | {r['seconds']} | {r['successes']}/{r['worlds']} | {r['mean_cycles']} |"
         )
-    md_path.write_text("\n".join(lines) + "\n")
+    md_path.write_text("\n".join(lines + paired_lines(rows)) + "\n")
+
+
+def paired_lines(rows: list[dict]) -> list[str]:
+    """The table of the runs together at every agent-step count they all reached (see the module docstring)."""
+    won = {(r["run"], int(r["agent_steps"])): np.array(json.loads(r["won"]), dtype=float) for r in rows}
+    runs = sorted({run for run, _ in won if run != "rules"})
+    common = sorted(set.intersection(*({s for r, s in won if r == run} for run in runs))) if runs else []
+    if not common:
+        return []
+    first = np.stack([won[(run, common[0])] for run in runs])
+    rules = won.get(("rules", 0))
+    lines = [
+        "",
+        f"The {len(runs)} runs together, paired on the same worlds (difference in success, 95 % interval):",
+        "",
+        f"| agent-steps | successes | against {common[0]:,} | against the rules |",
+        "|---|---|---|---|",
+    ]
+    for steps in common:
+        x = np.stack([won[(run, steps)] for run in runs])
+        cells = [f"{steps:,}", f"{int(x.sum())}/{x.size}"]
+        for reference in (first, None if rules is None else np.broadcast_to(rules, x.shape)):
+            if reference is None or (steps == common[0] and reference is first):
+                cells.append("")
+                continue
+            d = paired_difference(x - reference, np.zeros(x.shape[1]))
+            cells.append(f"{d['difference']:+.2f} ({d['lo']:+.2f} to {d['hi']:+.2f})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
 
 
 if __name__ == "__main__":

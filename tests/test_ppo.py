@@ -383,6 +383,8 @@ def test_a_learning_curve_plays_every_checkpoint_on_the_protocols_worlds_and_res
         rows = list(csv.DictReader(f))
     assert [int(r["agent_steps"]) for r in rows] == steps
     assert all(len(json.loads(r["won"])) == 2 and r["seconds"] for r in rows)
+    paired = out.with_suffix(".md").read_text().split("paired on the same worlds")[1]
+    assert f"| {steps[-1]:,} |" in paired and f"against {steps[0]:,}" in paired
     before = out.with_suffix(".csv").read_text()
     monkeypatch.setattr(curve, "evaluate", lambda *a, **k: pytest.fail("a kept row was played again"))
     curve.main(argv)
