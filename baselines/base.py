@@ -427,6 +427,11 @@ class PolicyBatch:
         self._synced: list[tuple] = []
         """Per world: the generator, memory and memory version that the typed lists hold."""
 
+    def __getstate__(self) -> dict:
+        """Pickled without the typed lists, which only hold the policies' own generators, memories
+        and parameters (not picklable; :meth:`_sync` builds them again at the next call)."""
+        return {**self.__dict__, "_rngs": None, "_memories": None, "_rules": None, "_synced": []}
+
     def _check(self, policy) -> None:
         first = self.policies[0]
         if type(policy) is not type(first):

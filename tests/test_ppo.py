@@ -409,3 +409,68 @@ def test_the_learning_rate_falls_linearly_to_its_final_value_and_a_bad_one_is_re
         ValueError, match=r"learning_rate_final=0.01 is not allowed; allowed: a number in \[0.0, 0.001\]"
     ):
         tiny_run(tmp_path / "bad", "--learning-rate", "0.001", "--learning-rate-final", "0.01")
+
+
+def test_a_run_resumed_from_a_checkpoint_ends_as_the_uninterrupted_run_bit_for_bit(tmp_path):
+    """A checkpoint keeps the training worlds in the middle of their episodes (``worlds.pkl.gz``),
+    so a run stopped after it and resumed from it (into another folder here) gives the same
+    network and the same log as the run that never stopped; a checkpoint without them goes on
+    from fresh worlds, and ends elsewhere."""
+    straight = tiny_run(tmp_path / "straight", steps=6000)
+    middle = sorted((straight.parent / "checkpoints").iterdir())[1]
+    assert (middle / "worlds.pkl.gz").exists()
+    resumed = ppo.main(
+        ["--resume", str(middle), "--run-dir", str(tmp_path / "resumed"), "--tensorboard", "false"]
+        + ["--progress-bar", "false"]
+    )
+
+    def losses(final):
+        with open(final.parent / "progress.csv") as f:
+            return [{k: v for k, v in r.items() if k.startswith(("loss/", "episode/"))} for r in csv.DictReader(f)]
+
+    assert torch.load(resumed / "policy.pt").keys() == torch.load(straight / "policy.pt").keys()
+    assert all(
+        torch.equal(a, b)
+        for a, b in zip(torch.load(resumed / "policy.pt").values(), torch.load(straight / "policy.pt").values())
+    )
+    assert losses(resumed) == losses(straight)[-len(losses(resumed)) :]
+    from training.machinery.checkpoints import keep_checkpoint
+
+    keep_checkpoint(middle, tmp_path / "without", drop=("worlds.pkl.gz",))  # as one written before worlds were kept
+    fresh = ppo.main(
+        ["--resume", str(tmp_path / "without"), "--run-dir", str(tmp_path / "fresh"), "--tensorboard", "false"]
+        + ["--progress-bar", "false"]
+    )
+    assert not all(
+        torch.equal(a, b)
+        for a, b in zip(torch.load(fresh / "policy.pt").values(), torch.load(straight / "policy.pt").values())
+    )
+
+
+def test_training_worlds_kept_while_the_rules_act_in_one_call_go_on_as_the_originals(monkeypatch):
+    """The autopilot's one call over every world (after ``ONE_CALL_AFTER`` world-cycles) holds
+    typed lists that do not pickle; the kept worlds rebuild them from the rules' own state and
+    go on draw for draw as the worlds that were never kept."""
+    import pickle
+
+    import proteo_env.batched
+    from training.trainers.worlds import TrainingEnvs
+
+    monkeypatch.setattr(proteo_env.batched, "ONE_CALL_AFTER", 20)
+    args = ppo.Args(task="chain-v1", n_envs=4, env={"n_modules": 12, "max_cycles": 30})
+    worlds = TrainingEnvs.for_run(args, args.env, 0)
+    rng = np.random.default_rng(0)
+
+    def cycle(w, actions):
+        finished = []
+        reward, terminal, truncated = w.step(actions, finished)
+        return reward, terminal, truncated, w.buffers.own_mode.copy(), w.buffers.neighbour_kind.copy(), len(finished)
+
+    for _ in range(10):
+        cycle(worlds, rng.integers(0, 13, size=(4, worlds.n_agents, 1)))
+    assert worlds.batch._autopilot_batch is not None
+    copy = pickle.loads(pickle.dumps(worlds))
+    for _ in range(40):  # past an episode's end, so that worlds restart in both
+        actions = rng.integers(0, 13, size=(4, worlds.n_agents, 1))
+        for a, b in zip(cycle(worlds, actions), cycle(copy, actions)):
+            assert np.array_equal(a, b)

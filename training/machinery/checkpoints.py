@@ -296,7 +296,12 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {value!r}")
 
 
-def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt",), **fields) -> None:
+WORLDS_STATE = "worlds.pkl.gz"
+"""The file of a PPO checkpoint that holds its training worlds as they were, so that a resumed run
+goes on bit for bit (:func:`training.machinery.runs.save_worlds_state`); only a resumed run reads it."""
+
+
+def keep_checkpoint(source: Path, dest: Path, *, drop=("trainer.pt", WORLDS_STATE), **fields) -> None:
     """Copy the checkpoint ``source`` to ``dest`` (replaced) without the files ``drop`` (what only a
     resumed run needs), its ``proteo.json`` with ``fields`` added and ``files`` left without them."""
     if dest.exists():

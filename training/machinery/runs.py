@@ -7,7 +7,8 @@ Run folder (``--run-dir``, default ``runs/<algorithm>_<task>_<seed>``)::
     args.yaml          the arguments the run was started with
     progress.csv       one row per log step: agent_steps, seconds, episode return, success, ...
     tb/                TensorBoard event files (``tensorboard --logdir runs``)
-    checkpoints/step_<N>/  a checkpoint every ``checkpoint_every`` agent-steps
+    checkpoints/step_<N>/  a checkpoint every ``checkpoint_every`` agent-steps (PPO's also keep the
+                       training worlds, ``worlds.pkl.gz``, for a resume that goes on bit for bit)
     final/             the checkpoint at the end (its format: :mod:`training.machinery.checkpoints`)
 
 :class:`RunArgs` holds the options of every trainer's run (seed, run folder, time limit, threads,
@@ -49,6 +50,7 @@ import ast
 import contextlib
 import csv
 import dataclasses
+import gzip
 import inspect
 import os
 import pickle
@@ -64,7 +66,7 @@ import numpy as np
 import yaml
 
 from proteo_env.config import ConfigError, build, load_yaml, parse_yaml
-from training.machinery.checkpoints import CheckpointError, read_meta, write_checkpoint_meta
+from training.machinery.checkpoints import WORLDS_STATE, CheckpointError, read_meta, write_checkpoint_meta
 from training.machinery.distributed import Journal
 from training.machinery.registry import ALGORITHMS
 
@@ -403,6 +405,32 @@ def load_trainer_state(meta: dict, net, optimiser, *, learning_rate: float, devi
         group["lr"] = learning_rate
     torch.set_rng_state(state["torch_rng"])
     return state
+
+
+def save_worlds_state(folder: Path, fingerprint: dict, objects: dict) -> None:
+    """Keep ``objects`` (the training worlds in the middle of their episodes, and what reads them)
+    in checkpoint ``folder``, with the ``fingerprint`` of the settings that built them, so that a
+    run resumed from it goes on as the uninterrupted run would (:func:`load_worlds_state`).
+    Written whole or not at all."""
+    tmp = folder / f"{WORLDS_STATE}.tmp"
+    with gzip.open(tmp, "wb", compresslevel=1) as f:
+        pickle.dump({"fingerprint": fingerprint, **objects}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(tmp, folder / WORLDS_STATE)
+
+
+def load_worlds_state(meta: dict, fingerprint: dict) -> dict | None:
+    """What :func:`save_worlds_state` kept in the checkpoint of ``meta`` (:func:`read_resume`), or
+    ``None`` where it kept nothing or the settings differ from ``fingerprint`` (then the run goes
+    on from fresh worlds, which is said on stdout)."""
+    path = Path(meta["dir"]) / WORLDS_STATE
+    if not path.exists():
+        return None
+    with gzip.open(path, "rb") as f:
+        kept = pickle.load(f)
+    if kept.pop("fingerprint") != fingerprint:
+        print(f"{path}: the worlds were built with other settings; the run goes on from fresh worlds")
+        return None
+    return kept
 
 
 def finish_run(run_dir: Path, save, log: ProgressLog, agent_steps: int) -> Path:

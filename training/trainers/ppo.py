@@ -63,22 +63,24 @@ from training.machinery.runs import (
     episode_stats,
     finish_run,
     load_trainer_state,
+    load_worlds_state,
     make_run_dir,
     parse_args,
     read_resume,
     save_args,
     save_network_checkpoint,
+    save_worlds_state,
     seed_everything,
     torch_device,
     torch_threads,
     trainer_state,
 )
 from training.trainers.curriculum import Curriculum
-from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers
+from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers, run_settings
 
 ALGORITHM = "ppo"
 
-RETIRED = {"n_groups": 1, "recurrent": 0, "learning_rate_final": None, "ent_coef_final": None}
+RETIRED = {"n_groups": 1, "recurrent": 0, "ent_coef_final": None}
 """Options of earlier versions, with the value at which they did nothing (checkpoints saved before
 they went still resume; see :func:`training.machinery.runs.parse_args`)."""
 
@@ -340,6 +342,14 @@ def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
     return worlds.make_teachers(args.teacher, seed=args.seed + agent_steps, n_fields=len(worlds.nvec))
 
 
+def keeps_worlds(args: Args) -> bool:
+    """Whether the run's checkpoints keep its worlds (:func:`~training.machinery.runs.save_worlds_state`),
+    so that a run resumed from one goes on bit for bit as if never stopped: with the worlds in
+    this process (``workers`` 1), without a curriculum (which rebuilds them) and without a
+    teacher (the rules' compiled state does not pickle)."""
+    return args.workers == 1 and not args.curriculum and args.distill_coef <= 0
+
+
 def main(argv=None) -> Path:
     """Parse the arguments and train. ``--resume CHECKPOINT`` without ``--config`` starts from the
     arguments the checkpoint was trained with (its ``args.yaml``); flags given override them."""
@@ -360,7 +370,9 @@ def train(args: Args) -> Path:
             stage=int((resume or {}).get("curriculum_stage", 0)),
         )
     env = args.env if curriculum is None else curriculum.overrides(args.env)
-    worlds = TrainingEnvs.for_run(args, env, agent_steps)
+    fingerprint = {k: v for k, v in run_settings(args, env, 0).items() if k != "env_seed"}
+    kept = load_worlds_state(resume, fingerprint) if resume is not None and keeps_worlds(args) else None
+    worlds = kept["worlds"] if kept else TrainingEnvs.for_run(args, env, agent_steps)
     net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory, args.activation)
     if args.init and resume is None:
         weights = network_weights(
@@ -384,6 +396,9 @@ def train(args: Args) -> Path:
             scale.load_state_dict(state["return_scale"])
 
     def save(folder: Path) -> None:
+        if keeps_worlds(args):  # before proteo.json, which records every file's digest
+            folder.mkdir(parents=True, exist_ok=True)
+            save_worlds_state(folder, fingerprint, {"worlds": worlds})
         save_network_checkpoint(
             folder,
             net,
