@@ -474,36 +474,3 @@ def test_training_worlds_kept_while_the_rules_act_in_one_call_go_on_as_the_origi
         actions = rng.integers(0, 13, size=(4, worlds.n_agents, 1))
         for a, b in zip(cycle(worlds, actions), cycle(copy, actions)):
             assert np.array_equal(a, b)
-
-
-def test_scent_shaping_pays_the_potentials_difference_and_nothing_past_an_episodes_end():
-    """``scent_shaping``: a module is paid ``gamma * phi(next) - phi(now)`` (times the weight), the
-    potential after an episode's end counting 0, and phi is minus its own scent value on channel 0
-    while its mode is SLEEP or SEARCH (0 in any other mode)."""
-    from training.trainers.worlds import TrainingEnvs
-
-    args = ppo.Args(task="branch-v0", n_envs=1, scent_shaping=2.0, gamma=0.5, gae_lambda=0.0, env={"n_modules": 8})
-    t, n = 2, 1
-    rollout = ppo.Rollout(
-        *(torch.zeros((t, n, 1)) for _ in range(4)),
-        *(torch.zeros((t, n)) for _ in range(4)),
-        potential=torch.tensor([[-1.0], [-0.5], [-0.25]]),
-        rewards=torch.zeros((t, 1)),
-        terminal=torch.zeros((t, 1), dtype=torch.bool),
-        truncated=torch.zeros((t, 1), dtype=torch.bool),
-    )
-    advantages, _ = ppo.advantages_and_returns(rollout, torch.zeros(n), n, args)
-    assert torch.allclose(advantages[:, 0], torch.tensor([2.0 * (0.5 * -0.5 + 1.0), 2.0 * (0.5 * -0.25 + 0.5)]))
-    rollout.terminal[0] = True
-    advantages, _ = ppo.advantages_and_returns(rollout, torch.zeros(n), n, args)
-    assert advantages[0, 0] == 2.0 * 1.0
-    worlds = TrainingEnvs.for_run(args, args.env, 0)
-    features = torch.zeros((worlds.n_agents, worlds.size))
-    worlds.encode(features.numpy(), np.zeros((worlds.n_agents, 13), dtype=bool))
-    phi = ppo.scent_potential(worlds, args.join_from)(features)
-    scent = features[:, worlds.encoder.slices["own_scent_value"].start]
-    mode = np.asarray(worlds.buffers.own_mode).reshape(-1)
-    outside = np.isin(mode, [0, 1])  # SLEEP, SEARCH
-    assert outside.any() and (~outside).any()
-    assert torch.equal(phi[torch.from_numpy(outside)], -scent[torch.from_numpy(outside)])
-    assert torch.all(phi[torch.from_numpy(~outside)] == 0)

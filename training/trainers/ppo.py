@@ -27,7 +27,6 @@ Writes ``runs/<name>/`` (:mod:`training.machinery.runs`); a checkpoint holds ``p
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -77,7 +76,7 @@ from training.machinery.runs import (
     trainer_state,
 )
 from training.trainers.curriculum import Curriculum
-from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers, join_modes, run_settings
+from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers, run_settings
 
 ALGORITHM = "ppo"
 
@@ -140,11 +139,6 @@ class Args(PPOArgs):
     """The distillation weight after distill_steps (at most distill_coef)."""
     curriculum: dict = field(default_factory=dict)
     """Stages of env overrides promoted by success (training/trainers/curriculum.py): {stages: [...], promote_at, window}."""
-    scent_shaping: float = 0.0
-    """Potential-based shaping per module (0: off): each module is paid ``scent_shaping * (gamma *
-    phi(next) - phi(now))`` with ``phi = -`` its own scent value on channel 0 (the hop distance to
-    the scent's source, scaled to 0..1) while its mode is one of join_from, else 0, and 0 after its
-    episode ends; a potential's difference cannot change which policies are optimal."""
     learning_rate_final: float | None = None
     """The learning rate at total_steps: it falls linearly from learning_rate over the run, counted
     from agent-step 0 also when the run resumes (None: it stays learning_rate)."""
@@ -169,13 +163,7 @@ class Args(PPOArgs):
         check_workers(self.workers, self.n_envs, teacher=teacher, curriculum=self.curriculum)
         bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
         loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
-        check_numbers(
-            self,
-            {
-                **bounds,
-                **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus", "scent_shaping"), (0.0, None)),
-            },
-        )
+        check_numbers(self, {**bounds, **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus"), (0.0, None))})
         if self.learning_rate_final is not None:
             check_numbers(self, {"learning_rate_final": (0.0, self.learning_rate)})
 
@@ -211,7 +199,6 @@ class Rollout:
     values: torch.Tensor  # (T, N): the critic's values, in return units
     bootstrap: torch.Tensor  # (T, N): the value of the last observation of an episode truncated there
     joined: torch.Tensor  # (T, N): 1 where a module joined the structure (module credit only)
-    potential: torch.Tensor  # (T + 1, N): each module's shaping potential before each cycle and after the last
     rewards: torch.Tensor  # (T, n_envs) float32: the team reward
     terminal: torch.Tensor  # (T, n_envs) bool: the episode succeeded
     truncated: torch.Tensor  # (T, n_envs) bool: the episode hit max_cycles
@@ -229,7 +216,6 @@ class Rollout:
             values=torch.zeros((t_steps, n)),
             bootstrap=torch.zeros((t_steps, n)),
             joined=torch.zeros((t_steps, n)),
-            potential=torch.zeros((t_steps + 1, n)),
             rewards=torch.zeros(per_world),
             terminal=torch.zeros(per_world, dtype=torch.bool),
             truncated=torch.zeros(per_world, dtype=torch.bool),
@@ -258,33 +244,14 @@ class Samples(NamedTuple):
         return Samples(*(torch.index_select(column, 0, index).to(device) for column in self))
 
 
-def scent_potential(worlds: TrainingEnvs, join_from) -> Callable[[torch.Tensor], torch.Tensor]:
-    """``phi(features (N, D)) -> (N,)`` of :attr:`Args.scent_shaping`: minus the own scent value on
-    channel 0 where the module's own mode is one of ``join_from``, else 0."""
-    slices = worlds.encoder.slices
-    scent = slices["own_scent_value"].start
-    modes = torch.as_tensor(slices["own_mode"].start + join_modes(proteo_env.TASKS[worlds.task_id], join_from))
-    return lambda x: -x[:, scent] * x.index_select(1, modes).sum(dim=1)
-
-
 def collect_rollout(
-    rollout: Rollout,
-    worlds: TrainingEnvs,
-    net: ActorCritic,
-    scale: ReturnScale,
-    teachers,
-    distill: float,
-    args: Args,
-    potential: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    rollout: Rollout, worlds: TrainingEnvs, net: ActorCritic, scale: ReturnScale, teachers, distill: float, args: Args
 ) -> tuple[torch.Tensor, list[dict]]:
-    """Fill ``rollout`` with ``n_steps`` cycles of every world (and with ``potential`` each module's
-    shaping potential); returns the value of the observation after the last cycle ``(N,)`` and
-    the episodes that ended."""
+    """Fill ``rollout`` with ``n_steps`` cycles of every world; returns the value of the
+    observation after the last cycle ``(N,)`` and the episodes that ended."""
     device, finished = next(net.parameters()).device, []
     for t in range(args.n_steps):
         worlds.encode(rollout.obs[t].numpy(), rollout.mask[t].numpy())
-        if potential is not None:
-            rollout.potential[t] = potential(rollout.obs[t])
         if distill > 0:
             rollout.labels[t] = torch.from_numpy(worlds.teacher_labels(teachers))
         logits, values = net(rollout.obs[t].to(device))
@@ -303,8 +270,6 @@ def collect_rollout(
             rollout.bootstrap[t, worlds.final_rows] = scale.value(final_values).cpu()
     last = torch.zeros(rollout.obs.shape[1:])
     worlds.encode(last.numpy(), np.zeros((len(last), N_MOVES), dtype=bool))
-    if potential is not None:
-        rollout.potential[-1] = potential(last)
     return scale.value(net.value(last.to(device))).cpu(), finished
 
 
@@ -324,9 +289,6 @@ def advantages_and_returns(
     values = rollout.values
     next_values = torch.where(truncated, rollout.bootstrap, torch.cat([values[1:], last_value[None]]))
     terminal, done = terminal.float(), (terminal | truncated).float()
-    if args.scent_shaping:  # the potential after an episode's end is 0 (the next row is a new episode's)
-        phi = rollout.potential
-        rewards = rewards + args.scent_shaping * (args.gamma * phi[1:] * (1.0 - done) - phi[:-1])
     advantages = torch.zeros_like(values)
     carry = torch.zeros_like(values[0])
     for t in reversed(range(len(values))):
@@ -461,7 +423,6 @@ def train(args: Args) -> Path:
         )
 
     rollout = Rollout.allocate(args.n_steps, worlds)
-    potential = scent_potential(worlds, args.join_from) if args.scent_shaping else None
     log = ProgressLog(run_dir, tensorboard=args.tensorboard, resumed_at=agent_steps if resume is not None else None)
     bar = tqdm(
         total=args.total_steps, initial=agent_steps, unit="agent-step", desc=ALGORITHM, disable=not args.progress_bar
@@ -474,7 +435,7 @@ def train(args: Args) -> Path:
         env_s, enc_s = worlds.env_seconds, worlds.encode_seconds
         distill = args.distill_weight(agent_steps) if teachers is not None else 0.0
         with torch.no_grad():
-            last_value, finished = collect_rollout(rollout, worlds, net, scale, teachers, distill, args, potential)
+            last_value, finished = collect_rollout(rollout, worlds, net, scale, teachers, distill, args)
         collected = time.perf_counter()
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)
