@@ -148,14 +148,15 @@ def test_episodes_of_several_settings_and_tasks_in_one_call():
         assert _same(_alone(e.task, json.loads(e.overrides), e.level, e.controller, e.seed), batched)
 
 
-def _network_checkpoint(folder, env, overrides, seed: int):
-    """A checkpoint of a 16-unit NumPy MLP (CMA-ES's neural controller) with random weights."""
+def _network_checkpoint(folder, env, overrides, seed: int, control: str = "full"):
+    """A checkpoint of a 16-unit NumPy MLP (CMA-ES's neural controller) with random weights, at
+    ``control`` (``env`` made at that level)."""
     from proteo_env.adapters.flatten import ObservationEncoder
     from training.machinery.checkpoints import mlp_meta, write_checkpoint_meta
     from training.machinery.policies import NumpyMLP
 
     encoder = ObservationEncoder.for_env(env)
-    net = NumpyMLP(encoder.size, int(env.action_layout.nvec.sum()), (16,))
+    net = NumpyMLP(encoder.size, int(np.sum(env.control_nvec)), (16,))
     folder.mkdir()
     np.save(folder / "genome.npy", net.init_genome(np.random.default_rng(seed)) * 10)  # its choices matter
     write_checkpoint_meta(
@@ -164,10 +165,10 @@ def _network_checkpoint(folder, env, overrides, seed: int):
         task=env.task.task_id(),
         env_overrides=overrides,
         encoder_spec=encoder.spec(),
-        nvec=env.action_layout.nvec,
+        nvec=env.control_nvec,
         agent_steps=0,
         seed=seed,
-        extra=mlp_meta("full", [16]),
+        extra=mlp_meta(control, [16]),
     )
     return folder
 
@@ -250,29 +251,12 @@ def test_at_move_a_network_sees_only_the_modules_with_a_choice_and_the_episodes_
     """At control level ``move`` a module with one legal move takes it whatever the network says,
     so the batched forward pass skips those rows: the episodes are still the ones ``run_episode``
     plays (which feeds every module to the network), and the network saw fewer rows."""
-    from proteo_env.adapters.flatten import ObservationEncoder
     from training.machinery import evaluator
-    from training.machinery.checkpoints import load_policy, mlp_meta, write_checkpoint_meta
-    from training.machinery.policies import NumpyMLP
+    from training.machinery.checkpoints import load_policy
 
     overrides = small_overrides("chain-v1", max_cycles=40)
     env = proteo_env.make("chain-v1", control="move", **overrides)
-    encoder = ObservationEncoder.for_env(env)
-    folder = tmp_path / "net"
-    folder.mkdir()
-    net = NumpyMLP(encoder.size, int(np.sum(env.control_nvec)), (16,))
-    np.save(folder / "genome.npy", net.init_genome(np.random.default_rng(5)) * 10)
-    write_checkpoint_meta(
-        folder,
-        algorithm="cma-neural",
-        task=env.task.task_id(),
-        env_overrides=overrides,
-        encoder_spec=encoder.spec(),
-        nvec=env.control_nvec,
-        agent_steps=0,
-        seed=5,
-        extra=mlp_meta("move", [16]),
-    )
+    folder = _network_checkpoint(tmp_path / "net", env, overrides, 5, control="move")
     seen = {"rows": 0, "modules": 0}
     sample = evaluator._Actors._sample
 
