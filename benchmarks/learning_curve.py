@@ -35,6 +35,7 @@ import numpy as np
 
 from training.judging.protocol import load_protocol
 from training.judging.statistics import paired_difference
+from training.machinery.checkpoints import read_meta
 from training.machinery.evaluator import Controller, evaluate
 
 FIELDS = ("run", "agent_steps", "seconds", "successes", "worlds", "mean_cycles", "won")
@@ -42,9 +43,14 @@ STEP = re.compile(r"step_(\d+)$")
 
 
 def checkpoints(run: Path, every: int) -> list[tuple[int, Path]]:
-    """``(agent_steps, folder)`` of the run's checkpoints, oldest first: those at multiples of
-    ``every`` (the first past each multiple) and the last."""
+    """``(agent_steps, folder)`` of the run's checkpoints (``checkpoints/step_<N>/``, and ``final/``
+    where it is later), oldest first: those at multiples of ``every`` (the first past each
+    multiple) and the last."""
     found = sorted((int(m.group(1)), p) for p in (run / "checkpoints").glob("step_*") if (m := STEP.search(p.name)))
+    if (run / "final").is_dir() and (steps := int(read_meta(run / "final")["agent_steps"])) > max(
+        (s for s, _ in found), default=-1
+    ):
+        found.append((steps, run / "final"))  # a run stopped by its time limit ends between checkpoints
     if not found:
         raise SystemExit(f"run={str(run)!r} has no checkpoints/step_<N>/ folders; allowed: a trainer's --run-dir")
     if every <= 0:
