@@ -407,30 +407,29 @@ def load_trainer_state(meta: dict, net, optimiser, *, learning_rate: float, devi
     return state
 
 
-def save_worlds_state(folder: Path, fingerprint: dict, objects: dict) -> None:
-    """Keep ``objects`` (the training worlds in the middle of their episodes, and what reads them)
-    in checkpoint ``folder``, with the ``fingerprint`` of the settings that built them, so that a
-    run resumed from it goes on as the uninterrupted run would (:func:`load_worlds_state`).
-    Written whole or not at all."""
+def save_worlds_state(folder: Path, fingerprint: dict, worlds) -> None:
+    """Keep the training ``worlds`` in the middle of their episodes in checkpoint ``folder``, with
+    the ``fingerprint`` of the settings that built them, so that a run resumed from it goes on as
+    the uninterrupted run would (:func:`load_worlds_state`). Written whole or not at all."""
     tmp = folder / f"{WORLDS_STATE}.tmp"
     with gzip.open(tmp, "wb", compresslevel=1) as f:
-        pickle.dump({"fingerprint": fingerprint, **objects}, f, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.dump({"fingerprint": fingerprint, "worlds": worlds}, f, protocol=pickle.HIGHEST_PROTOCOL)
     os.replace(tmp, folder / WORLDS_STATE)
 
 
-def load_worlds_state(meta: dict, fingerprint: dict) -> dict | None:
-    """What :func:`save_worlds_state` kept in the checkpoint of ``meta`` (:func:`read_resume`), or
-    ``None`` where it kept nothing or the settings differ from ``fingerprint`` (then the run goes
+def load_worlds_state(meta: dict, fingerprint: dict):
+    """The worlds :func:`save_worlds_state` kept in the checkpoint of ``meta`` (:func:`read_resume`),
+    or ``None`` where it kept none or the settings differ from ``fingerprint`` (then the run goes
     on from fresh worlds, which is said on stdout)."""
     path = Path(meta["dir"]) / WORLDS_STATE
     if not path.exists():
         return None
     with gzip.open(path, "rb") as f:
         kept = pickle.load(f)
-    if kept.pop("fingerprint") != fingerprint:
+    if kept["fingerprint"] != fingerprint:
         print(f"{path}: the worlds were built with other settings; the run goes on from fresh worlds")
         return None
-    return kept
+    return kept["worlds"]
 
 
 def finish_run(run_dir: Path, save, log: ProgressLog, agent_steps: int) -> Path:

@@ -372,7 +372,7 @@ def train(args: Args) -> Path:
     env = args.env if curriculum is None else curriculum.overrides(args.env)
     fingerprint = {k: v for k, v in run_settings(args, env, 0).items() if k != "env_seed"}
     kept = load_worlds_state(resume, fingerprint) if resume is not None and keeps_worlds(args) else None
-    worlds = kept["worlds"] if kept else TrainingEnvs.for_run(args, env, agent_steps)
+    worlds = kept if kept is not None else TrainingEnvs.for_run(args, env, agent_steps)
     net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory, args.activation)
     if args.init and resume is None:
         weights = network_weights(
@@ -398,7 +398,7 @@ def train(args: Args) -> Path:
     def save(folder: Path) -> None:
         if keeps_worlds(args):  # before proteo.json, which records every file's digest
             folder.mkdir(parents=True, exist_ok=True)
-            save_worlds_state(folder, fingerprint, {"worlds": worlds})
+            save_worlds_state(folder, fingerprint, worlds)
         save_network_checkpoint(
             folder,
             net,
@@ -440,9 +440,8 @@ def train(args: Args) -> Path:
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)
         learning_rate = args.learning_rate_at(agent_steps)
-        if args.learning_rate_final is not None:
-            for group in optimiser.param_groups:
-                group["lr"] = learning_rate
+        for group in optimiser.param_groups:
+            group["lr"] = learning_rate
         with torch_threads(args.update_threads):
             stats = update(net, optimiser, rollout.samples(advantages, returns), scale, distill, args)
         updated = time.perf_counter()
