@@ -36,6 +36,7 @@ import numpy as np
 
 from proteo_env.core import cycle as engine
 from proteo_env.core.jit import generated_kernel
+from proteo_env.core.paged import copy_grid
 from proteo_env.core.records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 from proteo_env.env import ProteoEnv
 from proteo_env.spaces import ObservationBuffers
@@ -225,8 +226,9 @@ class CompiledRollout:
         self.rule_params = policy.rule_params
         self.rng = copy.deepcopy(policy.rng)
         self.memory = policy.memory_rows(env.possible_agents).arrays()
-        self.state = world.state._replace(**{name: getattr(world, name).copy() for name in CHANGED_FIELDS})
-        self.scratch = Scratch.allocate(world.n_modules, len(world.grid))
+        copies = {name: getattr(world, name).copy() for name in CHANGED_FIELDS if name != "grid"}
+        self.state = world.state._replace(grid=copy_grid(world.grid, copies["cell"]), **copies)
+        self.scratch = Scratch.allocate(world.n_modules, self.state.grid)
         observation = ObservationBuffers(world.n_agents, len(world.neighbourhood_delta), world.n_channels)
         observation.hint[:] = task.hint(world)
         self.seen = Observed(*(getattr(observation, name) for name in Observed._fields))

@@ -7,7 +7,10 @@ first (so compile time and its memory are apart), notes its peak resident memory
 It reports the peak resident memory of the process (``ru_maxrss``), the grid window the world
 ended on against the box, and module-cycles per second. Part 2: every task's grid at reset,
 at its default size and a larger one, in cells per module (linear in the modules when the
-ratio does not grow with them).
+ratio does not grow with them). Part 3, one fresh process per storage: a chain of ``--built``
+modules built to the end by the rule (its window grows to the chain's bounding box, which lies
+along the box's diagonal), on a dense grid and on a paged one (:mod:`proteo_env.core.paged`): the
+peak memory beyond compiling, the time, and a digest of the final positions (the same trajectory).
 
 Usage::
 
@@ -83,6 +86,42 @@ def one(n: int, cycles: int) -> dict:
     }
 
 
+def built(n: int, storage: str) -> dict:
+    """Part 3 for one storage (``dense`` or ``paged``), in this process: the chain rule on
+    ``chain-v1`` with ``n`` modules, world seed 1000, until the chain is complete."""
+    import hashlib
+
+    import proteo_env
+    from baselines import make_policy
+    from baselines.compiled import CompiledRollout
+    from proteo_env.core import world
+
+    world.PAGED_ABOVE_CELLS = 0 if storage == "paged" else 2**62  # compile for this storage first
+    warm = proteo_env.make("chain-v1", n_modules=50, max_cycles=10**6)
+    warm.reset(seed=0)
+    CompiledRollout(warm, make_policy("chain", warm, seed=0)).run(300)
+    compiled = peak_mib()
+    if storage == "paged":
+        world.PAGED_ABOVE_CELLS = 2**22  # the default: a window of more cells is paged
+    env = proteo_env.make("chain-v1", n_modules=n, max_cycles=10**6)
+    started = time.perf_counter()
+    env.reset(seed=1000)
+    rollout = CompiledRollout(env, make_policy("chain", env, seed=0))
+    result = rollout.run(100 * n)
+    return {
+        "n": n,
+        "storage": storage,
+        "success": result.success,
+        "cycles": result.cycles,
+        "seconds": time.perf_counter() - started,
+        "compiled_mib": compiled,
+        "peak_mib": peak_mib(),
+        "window": rollout.world.shape.extent,
+        "paged": rollout.world.shape.paged,
+        "digest": hashlib.sha256(result.positions.tobytes()).hexdigest()[:12],
+    }
+
+
 def at_reset() -> list[dict]:
     """Part 2: every task's grid cells at reset per module, at two sizes."""
     import proteo_env
@@ -110,11 +149,16 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
     parser.add_argument("--cycles", type=int, default=200)
+    parser.add_argument("--built", type=int, default=1200, help="modules of part 3's chain (0: skip part 3)")
     parser.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--one-built", choices=("dense", "paged"), default=None, help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
     if args.one is not None:
         print(json.dumps(one(args.one, args.cycles)))
+        return 0
+    if args.one_built is not None:
+        print(json.dumps(built(args.built, args.one_built)))
         return 0
 
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
@@ -129,6 +173,17 @@ def main(argv=None) -> int:
         )
         runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
         print(runs[-1], flush=True)
+    grown = []
+    for storage in ("dense", "paged") if args.built else ():
+        out = subprocess.run(
+            [sys.executable, __file__, "--one-built", storage, "--built", str(args.built)],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        grown.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        print(grown[-1], flush=True)
     resets = at_reset()
     load = os.getloadavg()
 
@@ -172,6 +227,24 @@ def main(argv=None) -> int:
             f"| {r['task']} | {r['setting']} | {r['modules']:,} | {r['cells']:,} | {r['per_module']:,.0f} | "
             f"{'a window that grows' if r['windowed'] else 'the whole box'} |"
         )
+    if grown:
+        lines += [
+            "",
+            f"## A chain of {args.built:,} modules built to the end: dense grid against paged",
+            "",
+            "One fresh process per storage, the rule compiled for it first; the chain rule on world seed "
+            "1000 until the chain is complete. *beyond compiling*: the peak resident memory less the "
+            "peak after compiling; *digest*: of the final positions (the same on both: the same "
+            "trajectory).",
+            "",
+            "| storage | success | cycles | seconds | peak | beyond compiling | window at the end | digest |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in grown:
+            lines.append(
+                f"| {r['storage']} | {r['success']} | {r['cycles']:,} | {r['seconds']:.1f} | {r['peak_mib']:.0f} MiB | "
+                f"{r['peak_mib'] - r['compiled_mib']:.0f} MiB | {' x '.join(map(str, r['window']))} | {r['digest']} |"
+            )
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

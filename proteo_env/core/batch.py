@@ -51,6 +51,8 @@ class WorldBatch:
 
     Attributes:
         worlds: the ``World`` objects; ``worlds[b]`` works on row ``b``.
+        paged: the worlds' grids are paged (:mod:`~.paged`): they are not stacked but stepped
+            one after another, and ``state`` and ``scratch`` are None.
         state: the worlds' :class:`~.records.WorldState` arrays, stacked (``(B, ...)`` each).
         scratch: the worlds' :class:`~.records.Scratch` arrays, stacked.
     """
@@ -76,14 +78,19 @@ class WorldBatch:
         self.worlds = list(worlds)
         self.n_worlds = len(worlds)
         self.n_agents = first.n_agents
-        self.state = WorldState(*(np.stack(arrays) for arrays in zip(*(w.state for w in worlds))))
-        self.scratch = Scratch(*(np.stack(arrays) for arrays in zip(*(w.scratch for w in worlds))))
+        self.paged = first.shape.paged
+        self.state = self.scratch = None
+        if not self.paged:
+            self.state = WorldState(*(np.stack(arrays) for arrays in zip(*(w.state for w in worlds))))
+            self.scratch = Scratch(*(np.stack(arrays) for arrays in zip(*(w.scratch for w in worlds))))
         self._guards = np.stack([w.shape.guard() for w in worlds])
         self._whole = np.array([w.shape.whole for w in worlds])
         self._rehome()
 
     def _rehome(self, rows=None) -> None:
         """Point every world's arrays (or those of ``rows``) at its row of the stacked arrays."""
+        if self.paged:
+            return
         for b in range(self.n_worlds) if rows is None else rows:
             w = self.worlds[b]
             w.state = WorldState(*row(self.state, b))
@@ -98,9 +105,10 @@ class WorldBatch:
             or world.n_agents != first.n_agents
         ):
             raise ValueError("a world replacing one of a batch must share its grid extent, module and agent counts")
-        for record, into in ((world.state, self.state), (world.scratch, self.scratch)):
-            for arrays, rows in zip(record, into):
-                rows[b] = arrays
+        if not self.paged:
+            for record, into in ((world.state, self.state), (world.scratch, self.scratch)):
+                for arrays, rows in zip(record, into):
+                    rows[b] = arrays
         self.worlds[b] = world
         self._guards[b] = world.shape.guard()
         self._whole[b] = world.shape.whole
@@ -117,23 +125,30 @@ class WorldBatch:
         covers its whole box."""
         out = np.zeros(self.n_worlds, dtype=np.bool_)
         if not self._whole.all():
-            _out_of_room(self.state.cell, self.worlds[0].shape.strides, self._guards, out)
+            cell = self.state.cell if not self.paged else np.stack([w.cell for w in self.worlds])
+            _out_of_room(cell, self.worlds[0].shape.strides, self._guards, out)
         return out
 
     def step(self, *, move, mode, scent_role, message_target, message_value) -> np.ndarray:
         """One cycle of every world; arguments as :meth:`World.step` with a leading ``B`` axis.
 
         Returns ``(B, A)`` bool, who moved. A batch of one world runs the serial kernels (a
-        parallel region costs a thread wake-up, which on a busy machine can cost milliseconds).
+        parallel region costs a thread wake-up, which on a busy machine can cost milliseconds),
+        as does a batch of paged worlds (large ones), world by world.
         """
-        if self.n_worlds == 1:
-            return self.worlds[0].step(
-                move=move[0],
-                mode=mode[0],
-                scent_role=scent_role[0],
-                message_target=message_target[0],
-                message_value=message_value[0],
-            )[None]
+        if self.n_worlds == 1 or self.paged:
+            return np.stack(
+                [
+                    w.step(
+                        move=move[b],
+                        mode=mode[b],
+                        scent_role=scent_role[b],
+                        message_target=message_target[b],
+                        message_value=message_value[b],
+                    )
+                    for b, w in enumerate(self.worlds)
+                ]
+            )
         moved = np.zeros((self.n_worlds, self.n_agents), dtype=np.bool_)
         actions = Actions.of(
             move=move, mode=mode, scent_role=scent_role, message_target=message_target, message_value=message_value
@@ -144,8 +159,10 @@ class WorldBatch:
 
     def observe(self, out) -> None:
         """Fill ``out`` (:class:`~proteo_env.spaces.ObservationBuffers` for ``B * A`` agents, world-major)."""
-        if self.n_worlds == 1:
-            self.worlds[0].observe(out)
+        if self.n_worlds == 1 or self.paged:
+            a = self.n_agents
+            for b, w in enumerate(self.worlds):
+                w.observe(out.rows(b * a, (b + 1) * a) if self.n_worlds > 1 else out)
             return
         w = self.worlds[0]
         shape = (self.n_worlds, self.n_agents)

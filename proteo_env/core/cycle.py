@@ -190,7 +190,7 @@ def detach_keeps_connected(grid, cell, m, geometry, scratch):
         return True
 
     if search[0] >= LAST_EPOCH:  # once in about 134 million searches
-        mark[:] = -1
+        mark.fill(-1)
         search[0] = 0
     search[0] += 1
     base = search[0] * LABEL_BITS

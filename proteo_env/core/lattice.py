@@ -5,10 +5,12 @@ neighbours of a site are the permutations of ``(+-1, +-1, 0)``; :data:`DIRECTION
 their order, which is also the order of the move actions (action ``k + 1`` rolls towards
 ``DIRECTIONS[k]``; action 0 stays).
 
-The engine keeps occupancy in a dense, flat ``int32`` grid covering the box plus a margin
-of :data:`PAD` cells on every side, so that every cell a kernel looks at (neighbours,
-cells swept by a roll, a radius-2 neighbourhood) has a valid index without bounds checks.
-A grid cell holds a module index (``>= 0``) or one of the negative codes below.
+The engine keeps occupancy in a flat ``int32`` grid covering the box plus a margin of
+:data:`PAD` cells on every side, so that every cell a kernel looks at (neighbours, cells
+swept by a roll, a radius-2 neighbourhood) has a valid index without bounds checks. A grid
+cell holds a module index (``>= 0``) or one of the negative codes below. The grid is a dense
+array, or for a large window a paged one that stores only the pages near the modules
+(:mod:`~proteo_env.core.paged`); both are read as ``grid[cell]``.
 """
 
 from __future__ import annotations
@@ -28,6 +30,22 @@ OBJECT = -4
 
 PAD = 2
 """Margin of grid cells around the box; covers sweeps and radius-2 neighbourhoods."""
+
+
+PAGE_BITS = 9
+PAGE_CELLS = 1 << PAGE_BITS
+"""Cells a page of a paged grid holds (whole columns of its aligned layout; :mod:`~proteo_env.core.paged`)."""
+
+
+def page_aligned(padded) -> tuple[int, int, int]:
+    """Padded extents ``(sx, sy, sz)`` rounded up for pages of whole columns: ``sz`` to a power of
+    two (at most :data:`PAGE_CELLS`) and ``sy`` to a multiple of the columns a page holds."""
+    sx, sy, sz = (int(v) for v in padded)
+    if sz > PAGE_CELLS:
+        raise ValueError(f"a paged grid's padded height {sz} is not allowed; allowed: at most {PAGE_CELLS} cells")
+    sz = 1 << max(sz - 1, 0).bit_length()
+    columns = PAGE_CELLS // sz
+    return sx, -(-sy // columns) * columns, sz
 
 
 def _face_directions() -> np.ndarray:
@@ -78,14 +96,19 @@ class GridShape:
     (:meth:`~proteo_env.core.world.World.regrid`). Cells outside the box are walls.
     ``index(p) = ((x - ox + PAD) * sy + (y - oy + PAD)) * sz + (z - oz + PAD)`` with
     ``(sx, sy, sz)`` the padded extents and ``(ox, oy, oz)`` the origin; :attr:`strides` turns
-    an offset into a flat index delta.
+    an offset into a flat index delta. A ``paged`` grid's padded extents are rounded up so that
+    its pages hold whole columns (:func:`page_aligned`); the cells past
+    ``extent + PAD`` are read as the box has them there and never reached.
     """
 
-    def __init__(self, size, extent=None, origin=None):
+    def __init__(self, size, extent=None, origin=None, *, paged=False):
         self.size = tuple(int(s) for s in size)
         self.extent = self.size if extent is None else tuple(int(e) for e in extent)
         self.origin = (0, 0, 0) if origin is None else tuple(int(o) for o in origin)
+        self.paged = bool(paged)
         self.padded = tuple(s + 2 * PAD for s in self.extent)
+        if paged:
+            self.padded = page_aligned(self.padded)
         sx, sy, sz = self.padded
         self.strides = np.array([sy * sz, sz, 1], dtype=np.int64)
         self.n_cells = sx * sy * sz

@@ -35,12 +35,15 @@ from typing import NamedTuple
 import numpy as np
 from numba.extending import overload
 
+from .paged import marks_of
+
 
 class WorldState(NamedTuple):
     """One world's state (N modules, C channels, a padded grid of ``cells`` cells).
 
     Attributes:
-        grid: ``(cells,)`` int32 occupancy: module index, or EMPTY/WALL/SOLID/OBJECT.
+        grid: ``(cells,)`` int32 occupancy: module index, or EMPTY/WALL/SOLID/OBJECT (or a
+            :class:`~proteo_env.core.paged.PagedCells` indexed alike).
         cell: ``(N,)`` int64 flat grid index of each module.
         anchored: ``(N,)`` bool, modules that never move.
         mode: ``(N,)`` int32 each module's mode as its neighbours see it.
@@ -108,7 +111,7 @@ class Scratch(NamedTuple):
     """Work arrays of one world's kernels, for N modules on a grid of ``cells`` cells.
 
     Attributes:
-        mark: ``(cells,)`` int32 labels of the connectivity search.
+        mark: ``(cells,)`` int32 labels of the connectivity search (paged with a paged grid).
         queue: ``(N,)`` int64 breadth-first queue.
         movers: ``(N,)`` int64 the agents that asked to move, in trial order.
         stacks: ``(12, N)`` int64 the connectivity search's stacks, one per neighbour group.
@@ -133,10 +136,11 @@ class Scratch(NamedTuple):
     is_cut: np.ndarray
 
     @classmethod
-    def allocate(cls, n: int, cells: int) -> Scratch:
-        """Fresh work arrays for ``n`` modules on a grid of ``cells`` cells."""
+    def allocate(cls, n: int, grid) -> Scratch:
+        """Fresh work arrays for ``n`` modules on ``grid`` (dense, or paged: its marks are kept
+        with its pages, :class:`~proteo_env.core.paged.PagedMarks`)."""
         return cls(
-            mark=np.full(cells, -1, dtype=np.int32),
+            mark=np.full(len(grid), -1, dtype=np.int32) if isinstance(grid, np.ndarray) else marks_of(grid),
             queue=np.zeros(n, dtype=np.int64),
             movers=np.zeros(n, dtype=np.int64),
             stacks=np.zeros((12, n), dtype=np.int64),

@@ -15,6 +15,10 @@ array          shape        meaning
 ``inbox``      (N, 12)      message received from each direction last cycle (0: none)
 ============== ============ ==================================================================
 
+A window of more than :data:`PAGED_ABOVE_CELLS` cells keeps ``grid`` by pages
+(:class:`~proteo_env.core.paged.PagedCells`, indexed like the array; its batch steps its worlds one
+by one instead of stacking them).
+
 Modules ``0 .. n_agents - 1`` are agents; the rest are passive board modules that keep their
 mode and play a fixed scent role (``passive_role``).
 
@@ -35,8 +39,29 @@ from operator import attrgetter
 import numpy as np
 
 from . import cycle
-from .lattice import DIRECTIONS, EMPTY, OBJECT, OPPOSITE, PAD, SOLID, WALL, GridShape, neighbourhood_offsets
+from .lattice import (
+    DIRECTIONS,
+    EMPTY,
+    OBJECT,
+    OPPOSITE,
+    PAD,
+    PAGE_CELLS,
+    SOLID,
+    WALL,
+    GridShape,
+    neighbourhood_offsets,
+)
 from .motion import LOCAL_ADJACENCY_BITS, LOCAL_OFFSETS, check_motion_model, common_neighbours, motion_bits
+from .paged import (
+    PAGE_TABLE_BYTES,
+    cells_at,
+    marks_of,
+    paged_bytes,
+    paged_cells,
+    paged_from_state,
+    paged_state,
+    write_cells,
+)
 from .records import Actions, Geometry, Observation, Scratch, Settings, WorldState
 
 SCENT_ROLES = ("silent", "relay", "emit")
@@ -54,6 +79,11 @@ GRID_BYTES_PER_CELL = 20
 """Bytes a world holds per cell of its padded grid at reset, measured: ``chain-v1`` with 1,000
 modules (a 2,036 x 2,026 x 33 box, 1.4e8 cells) peaks at 2.5 GiB (the grid and the
 connectivity search's marks, ``int32`` each, and their copies while the batch stacks them)."""
+
+
+PAGED_ABOVE_CELLS = 2**22
+"""A world's grid is stored by pages (:mod:`~proteo_env.core.paged`) when its window has more
+cells than this (dense, 16 MiB for the grid and as much for the connectivity search's marks)."""
 
 
 MODULE_BYTES = 4096
@@ -96,26 +126,36 @@ def gib(n_bytes: float) -> str:
 
 def world_bytes(size, extent, n_modules: int, cycles: int) -> int:
     """Bytes a world can come to hold in ``cycles`` cycles, from a grid window of ``extent`` in a box
-    of ``size`` sites with ``n_modules`` modules: its grid over the window it can grow to
-    (:data:`GRID_BYTES_PER_CELL` a cell) and its modules (:data:`MODULE_BYTES` each). A module moves
-    at most one site a cycle and a window grows by at least half of itself, so per axis the window
-    stays within twice its extent at reset plus four sites a cycle, and within the box. An upper
-    bound that a long structure nears: a chain of 1,200 modules spans its box's diagonal (3.4 GiB
-    measured, 4.4 GiB bound)."""
+    of ``size`` sites with ``n_modules`` modules: its grid over the window it can grow to and its
+    modules (:data:`MODULE_BYTES` each). A module moves at most one site a cycle and a window grows
+    by at least half of itself, so per axis the window stays within twice its extent at reset plus
+    four sites a cycle, and within the box. A window of up to :data:`PAGED_ABOVE_CELLS` cells costs
+    :data:`GRID_BYTES_PER_CELL` a cell; a larger one is paged: its page table, and its pages
+    (:func:`~proteo_env.core.paged.paged_bytes`), twice (the old grid and the new one while a
+    window grows). An upper bound that a long structure nears: a chain of 1,200 modules spans its
+    box's diagonal."""
     reach = np.minimum(np.asarray(size, dtype=np.int64), 2 * (np.asarray(extent, dtype=np.int64) + 2 * int(cycles)))
-    return GridShape(tuple(int(v) for v in reach)).n_cells * GRID_BYTES_PER_CELL + int(n_modules) * MODULE_BYTES
+    cells = GridShape(tuple(int(v) for v in reach)).n_cells
+    grid = cells * GRID_BYTES_PER_CELL
+    if cells > PAGED_ABOVE_CELLS:
+        paged = 2 * (cells // PAGE_CELLS * PAGE_TABLE_BYTES + paged_bytes(n_modules))
+        grid = max(PAGED_ABOVE_CELLS * GRID_BYTES_PER_CELL, paged)
+    return grid + int(n_modules) * MODULE_BYTES
 
 
-def grid_memory(shape: GridShape) -> tuple[int, int]:
-    """``(bytes the grid of shape needs, bytes available)``."""
+def grid_memory(shape: GridShape, n_modules: int) -> tuple[int, int]:
+    """``(bytes the grid of shape needs, bytes available)``: :data:`GRID_BYTES_PER_CELL` a cell, or
+    paged its page table and pages (:func:`~proteo_env.core.paged.paged_bytes`)."""
+    if shape.paged:
+        return shape.n_cells // PAGE_CELLS * PAGE_TABLE_BYTES + paged_bytes(n_modules), machine_memory()
     return shape.n_cells * GRID_BYTES_PER_CELL, machine_memory()
 
 
-def check_grid_fits(shape: GridShape) -> None:
-    """A :class:`LayoutError` when the grid of ``shape`` would not fit in this machine's
-    memory, naming the box, the memory it needs and what is allowed (before anything is
-    allocated)."""
-    need, have = grid_memory(shape)
+def check_grid_fits(shape: GridShape, n_modules: int) -> None:
+    """A :class:`LayoutError` when the grid of ``shape`` with ``n_modules`` modules would not fit
+    in this machine's memory, naming the box, the memory it needs and what is allowed (before
+    anything is allocated)."""
+    need, have = grid_memory(shape, n_modules)
     if need > have:
         raise LayoutError(
             f"a box of {' x '.join(map(str, shape.size))} sites needs {gib(need)} for its grid "
@@ -184,6 +224,8 @@ class World:
             window of the box (:class:`~proteo_env.core.lattice.GridShape`); default ``size``.
         origin: box coordinates of the window's first site (default: the box's, 0); every
             module must lie inside the window's :meth:`~.lattice.GridShape.guard`.
+        paged: store the grid by pages (:mod:`~proteo_env.core.paged`); default: when the window
+            has more than :data:`PAGED_ABOVE_CELLS` cells. The trajectory is the same either way.
     """
 
     grid, cell, anchored, mode, scent, inbox, rng_state = (
@@ -208,11 +250,15 @@ class World:
         obs_radius=1,
         extent=None,
         origin=None,
+        paged=None,
     ):
         self.shape = GridShape(size, extent, origin)
-        check_grid_fits(self.shape)
+        self._paged = paged
+        if paged or (paged is None and self.shape.n_cells > PAGED_ABOVE_CELLS):
+            self.shape = GridShape(size, extent, origin, paged=True)
         self.physics = physics
         positions = np.asarray(positions, dtype=np.int64).reshape(-1, 3)
+        check_grid_fits(self.shape, len(positions))
         self.n_modules = n = len(positions)
         if not 0 <= n_agents <= n:
             raise LayoutError(f"n_agents={n_agents} is not allowed; allowed: 0..{n} (the number of modules)")
@@ -242,10 +288,11 @@ class World:
         self.solid_sites = _sites(solid)
         self.object_sites = _sites(object_sites)
 
-        grid = self._static_grid()
-        self._check_sites(grid, positions)
+        self._check_sites(positions)
         cell = self.shape.index(positions)
-        grid[cell] = np.arange(n, dtype=np.int32)
+        grid = self._static_grid(cell)
+        self._check_occupancy(grid, positions, cell)
+        write_cells(grid, cell, np.arange(n, dtype=np.int32))
         self.state = WorldState(
             grid=grid,
             cell=cell,
@@ -276,7 +323,7 @@ class World:
             passive_role=self.passive_role,
             surface_channels=self.surface_channels,
         )
-        self.scratch = Scratch.allocate(n, len(self.grid))
+        self.scratch = Scratch.allocate(n, self.grid)
 
         if physics.keep_connected and n > 0 and self.n_components() != 1:
             raise LayoutError(
@@ -285,10 +332,22 @@ class World:
             )
 
     # ------------------------------------------------------------------ building
-    def _static_grid(self) -> np.ndarray:
+    def _static_grid(self, cell: np.ndarray):
         """The grid without modules: walls outside the box, the ground (every site with
-        ``z < 0`` when ``floor``), solid and object sites, over the window and its padding."""
+        ``z < 0`` when ``floor``), solid and object sites, over the window and its padding; paged
+        when the shape is (its pages keep ``cell``, the modules' cells, for collections)."""
         shape = self.shape
+        low = np.array(shape.origin) - PAD
+        high = np.array(shape.origin) + np.array(shape.extent) + PAD
+        static = []
+        for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
+            inside = shape.inside(sites)
+            if not inside.all():
+                bad = tuple(sites[~inside][0].tolist())
+                raise LayoutError(f"{field} site {bad} is outside the box {shape.size}; allowed: 0 <= site < size")
+            static.append((shape.index(sites[((sites >= low) & (sites < high)).all(axis=1)]), code))
+        if shape.paged:
+            return paged_cells(shape, self.floor, static, cell)
         axes = [np.arange(o - PAD, o + e + PAD) for o, e in zip(shape.origin, shape.extent)]
         in_box = [(a >= 0) & (a < s) for a, s in zip(axes, shape.size)]
         grid = np.full(shape.padded, WALL, dtype=np.int32)
@@ -296,18 +355,12 @@ class World:
         if self.floor:
             grid[:, :, axes[2] < 0] = SOLID
         grid = grid.reshape(-1)
-        low = np.array(shape.origin) - PAD
-        high = np.array(shape.origin) + np.array(shape.extent) + PAD
-        for sites, code, field in ((self.solid_sites, SOLID, "solid"), (self.object_sites, OBJECT, "object_sites")):
-            inside = shape.inside(sites)
-            if not inside.all():
-                bad = tuple(sites[~inside][0].tolist())
-                raise LayoutError(f"{field} site {bad} is outside the box {shape.size}; allowed: 0 <= site < size")
-            here = sites[((sites >= low) & (sites < high)).all(axis=1)]
-            grid[shape.index(here)] = code
+        for cells, code in static:
+            grid[cells] = code
         return grid
 
-    def _check_sites(self, grid: np.ndarray, positions: np.ndarray) -> None:
+    def _check_sites(self, positions: np.ndarray) -> None:
+        """Every module site an FCC site of the box, inside the window's guard."""
         shape = self.shape
         odd = positions.sum(axis=1) % 2 != 0
         if odd.any():
@@ -321,17 +374,19 @@ class World:
                 f"module site {tuple(positions[~inside][0].tolist())} is outside the box "
                 f"{shape.size}; allowed: 0 <= site < size"
             )
-        index = shape.index(positions)
-        if not shape.whole and cycle.out_of_room(index, shape.strides, shape.guard()):
+        if not shape.whole and cycle.out_of_room(shape.index(positions), shape.strides, shape.guard()):
             raise ValueError(f"a module lies outside the guard of the window {shape.origin} + {shape.extent}")
-        occupied = grid[index]
+
+    def _check_occupancy(self, grid, positions: np.ndarray, index: np.ndarray) -> None:
+        """Every module site empty in the static ``grid``, one module a site."""
+        occupied = cells_at(grid, index)
         if (occupied != EMPTY).any():
             p = tuple(positions[occupied != EMPTY][0].tolist())
             what = {SOLID: "a solid site", OBJECT: "an object site"}[int(occupied[occupied != EMPTY][0])]
             raise LayoutError(f"module site {p} is {what}; allowed: empty sites only")
         unique, counts = np.unique(index, return_counts=True)
         if (counts > 1).any():
-            p = tuple(shape.point(unique[counts > 1][0]).tolist())
+            p = tuple(self.shape.point(unique[counts > 1][0]).tolist())
             raise LayoutError(f"two modules at site {p}; allowed: at most one module per site")
 
     # ------------------------------------------------------------------ reading
@@ -446,11 +501,27 @@ class World:
             obs_radius=self.obs_radius,
             extent=extent,
             origin=origin,
+            paged=self._paged,
         )
         world.scent[:] = self.scent
         world.inbox[:] = self.inbox
         world.rng_state[:] = self.rng_state
         return world
+
+    def __getstate__(self):
+        # a paged grid pickles as its arrays (numba's compiled classes do not pickle)
+        state = self.__dict__.copy()
+        if self.shape.paged:
+            state["state"] = self.state._replace(grid=paged_state(self.grid))
+            state["scratch"] = self.scratch._replace(mark=None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        if self.shape.paged:
+            grid = paged_from_state(self.state.grid, self.state.cell)
+            self.state = self.state._replace(grid=grid)
+            self.scratch = self.scratch._replace(mark=marks_of(grid))
 
     # ------------------------------------------------------------------ snapshots
     def snapshot(self) -> dict:

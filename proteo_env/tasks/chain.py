@@ -162,7 +162,10 @@ class Chain(Task):
     @classmethod
     def score_cycle(cls, tasks, worlds, moved, cycles):
         """Every world's graph measured in one kernel call (:func:`~proteo_env.core.structure.graph_shapes`);
-        the same bookkeeping, terms, rewards and success as the per-world hooks, bit for bit."""
+        the same bookkeeping, terms, rewards and success as the per-world hooks, bit for bit
+        (paged worlds, which a batch does not stack: the per-world hooks)."""
+        if worlds.paged:
+            return super().score_cycle(tasks, worlds, moved, cycles)
         first = worlds.worlds[0]
         n, state = first.n_modules, worlds.state
         scratch = np.empty((3, len(tasks), n), dtype=np.int64)

@@ -19,6 +19,7 @@ import numpy as np
 from ..core.cycle import EMIT, RELAY
 from ..core.jit import kernel
 from ..core.lattice import DIRECTIONS, EMPTY
+from ..core.paged import cells_at
 from ..core.world import check_module_memory
 from ..layouts import Layout, ball_sites, blob_sites
 from .base import Task, TaskKernels, no_sensor
@@ -411,7 +412,7 @@ class Grasp(Task):
         cand = np.unique(cand, axis=0)
         cand = cand[shape.inside(cand)]
         idx = shape.index(cand)
-        keep = grid[idx] >= EMPTY  # empty or a module (not object, solid or wall)
+        keep = cells_at(grid, idx) >= EMPTY  # empty or a module (not object, solid or wall)
         self._surface_sites = cand[keep]
         self._surface_cell = idx[keep]
         centroid = obj.mean(axis=0)
