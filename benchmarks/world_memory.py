@@ -162,28 +162,16 @@ def main(argv=None) -> int:
         return 0
 
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    runs = []
-    for n in args.sizes:
-        out = subprocess.run(
-            [sys.executable, __file__, "--one", str(n), "--cycles", str(args.cycles)],
-            env=env,
-            check=True,
-            capture_output=True,
-            text=True,
-        )
-        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
-        print(runs[-1], flush=True)
-    grown = []
-    for storage in ("dense", "paged") if args.built else ():
-        out = subprocess.run(
-            [sys.executable, __file__, "--one-built", storage, "--built", str(args.built)],
-            env=env,
-            check=True,
-            capture_output=True,
-            text=True,
-        )
-        grown.append(json.loads(out.stdout.strip().splitlines()[-1]))
-        print(grown[-1], flush=True)
+
+    def fresh_process(*flags) -> dict:
+        """This script with ``flags`` in a fresh process: its one JSON line."""
+        out = subprocess.run([sys.executable, __file__, *flags], env=env, check=True, capture_output=True, text=True)
+        print(out.stdout.strip().splitlines()[-1], flush=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    runs = [fresh_process("--one", str(n), "--cycles", str(args.cycles)) for n in args.sizes]
+    storages = ("dense", "paged") if args.built else ()
+    grown = [fresh_process("--one-built", storage, "--built", str(args.built)) for storage in storages]
     resets = at_reset()
     load = os.getloadavg()
 

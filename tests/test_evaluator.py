@@ -107,6 +107,24 @@ def test_results_do_not_depend_on_batch_size_workers_or_order():
     assert [row[::-1] for row in reversed_seeds[::-1]] == reference
 
 
+def test_few_long_episodes_are_split_over_every_worker_and_many_fill_their_batches(monkeypatch):
+    """Fifty episodes that one batch could hold go to two batches on two workers (a scale split's
+    episodes are long: one batch would leave a worker idle); a thousand fill batches of 64; and the
+    results do not depend on the split."""
+    from training.machinery import evaluator
+
+    assert evaluator.chunk_count(50, 64, 2) == 2 and evaluator.chunk_count(50, 64, 1) == 1
+    assert evaluator.chunk_count(1000, 64, 2) == 16 and evaluator.chunk_count(1, 64, 4) == 1
+    overrides = small_overrides("chain-v1", max_cycles=30)
+    reference = evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1)
+    sizes = []
+    run_chunk = evaluator._run_chunk
+    monkeypatch.setattr(evaluator, "_run_chunk", lambda chunk: sizes.append(len(chunk[0])) or run_chunk(chunk))
+    monkeypatch.setattr(evaluator, "chunk_count", lambda n, per_chunk, workers: 3)  # as three workers would
+    assert evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1) == reference
+    assert len(sizes) == 3 and sum(sizes) == len(SEEDS)
+
+
 def test_a_batch_holds_as_many_worlds_as_each_worker_s_memory_share_and_a_world_too_large_is_refused(monkeypatch):
     """Batches shrink to what each worker's share of the memory holds (the results do not change);
     a world larger than that share is one error naming its task, settings and size, before any
@@ -274,3 +292,36 @@ def test_at_move_a_network_sees_only_the_modules_with_a_choice_and_the_episodes_
     for seed, batched in zip(SEEDS, row):
         assert _same(run_episode(env, load_policy(folder, env, seed=seed), seed=seed), batched)
     assert 0 < seen["rows"] < seen["modules"]
+
+
+def test_a_local_pool_s_workers_end_with_the_process_that_started_them():
+    """A judge killed mid-run leaves no worker playing its batch on (it would run for an hour at scale)."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    script = (
+        "import os, time\n"
+        "from training.machinery.distributed import local_pool\n"
+        "pool = local_pool(2)\n"
+        "print(pool.submit(os.getpid).result(), flush=True)\n"
+        "pool.submit(time.sleep, 120)\n"
+        "time.sleep(120)\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, cwd=root)
+    worker = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+
+    def running(pid: int) -> bool:
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+        except (FileNotFoundError, IndexError):
+            return False
+
+    deadline = time.monotonic() + 30
+    while running(worker) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not running(worker)

@@ -1,7 +1,8 @@
 """Worlds whose grid covers a window of the box around the modules and grows with them
 (``Task.window_room``; chain and branch): the trajectories are those of a grid over the whole
 box, bit for bit (serial, batched with restarts, and inside compiled code), the window really
-grows, and memory follows the modules rather than the box."""
+grows, and memory follows the modules rather than the box (a large window's grid stored by pages:
+tests/test_paged_grid.py)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 import proteo_env
 from baselines import make_policy
 from baselines.compiled import CompiledRollout
+from proteo_env.core import world as world_module
 from proteo_env.tasks.branch import BranchV1
 from proteo_env.tasks.chain import ChainV1
 
@@ -56,9 +58,15 @@ def test_branch_in_3d_grows_its_window_in_every_direction(monkeypatch):
         return env.engine.positions, env.engine.shape
 
     positions, shape = run()
+    default = world_module.PAGED_ABOVE_CELLS
+    monkeypatch.setattr(world_module, "PAGED_ABOVE_CELLS", 0)  # the same window, stored by pages
+    paged, paged_shape = run()
+    monkeypatch.setattr(world_module, "PAGED_ABOVE_CELLS", default)
     monkeypatch.setattr(BranchV1, "window_room", None)
     whole, whole_shape = run()
     np.testing.assert_array_equal(positions, whole)
+    np.testing.assert_array_equal(paged, whole)
+    assert paged_shape.paged and not shape.paged
     assert np.prod(shape.padded) < np.prod(whole_shape.padded) / 4
 
 

@@ -92,26 +92,10 @@ def test_a_module_cannot_enter_a_solid_site_of_a_paged_grid():
 
 @pytest.mark.parametrize("n_envs, restart", [(1, ()), (3, (60, 150))])
 def test_a_paged_growing_window_follows_the_dense_one(n_envs, restart, monkeypatch):
-    dense, dense_grids = chain_run(n_envs, restart=restart)
+    dense, _ = chain_run(n_envs, restart=restart)
     monkeypatch.setattr(world_module, "PAGED_ABOVE_CELLS", 0)
     paged, _ = chain_run(n_envs, restart=restart)
     np.testing.assert_array_equal(paged, dense)
-
-
-def test_branch_in_3d_on_a_paged_grid_follows_the_dense_one(monkeypatch):
-    def run():
-        env = proteo_env.make("branch-v1", n_modules=150, target_levels=99, max_cycles=120)
-        env.reset(seed=2)
-        policy = make_policy("branch", env, seed=2)
-        for _ in range(120):
-            env.step_arrays(policy.act_arrays(env.observe_arrays()))
-        return env.engine.positions, env.engine.shape.paged
-
-    dense, was_paged = run()
-    monkeypatch.setattr(world_module, "PAGED_ABOVE_CELLS", 0)
-    paged, is_paged = run()
-    np.testing.assert_array_equal(paged, dense)
-    assert is_paged and not was_paged
 
 
 def test_compiled_rollout_on_a_paged_grid_matches_the_dense_one(monkeypatch):

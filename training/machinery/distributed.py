@@ -28,6 +28,8 @@ import multiprocessing
 import os
 import socket
 import sys
+import threading
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -238,10 +240,29 @@ _POOLS: dict[int, ProcessPoolExecutor] = {}
 def local_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of ``workers`` processes, started once per process and kept (its workers keep
     their imports and compiled kernels from one call to the next). Workers are spawned, not
-    forked: a fork would copy this process's thread pools (numba's, torch's) mid-state."""
+    forked: a fork would copy this process's thread pools (numba's, torch's) mid-state. A worker
+    exits when this process does, however it ends (:func:`_exit_with_parent`)."""
     if workers not in _POOLS:
-        _POOLS[workers] = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        _POOLS[workers] = ProcessPoolExecutor(
+            workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_exit_with_parent,
+            initargs=(os.getpid(),),
+        )
     return _POOLS[workers]
+
+
+def _exit_with_parent(parent: int, every_s: float = 1.0) -> None:
+    """In a pool worker: a daemon thread that ends the worker once ``parent`` is gone (killed, it
+    leaves no one to collect a result, and a judge's batch of long episodes would run on for an
+    hour)."""
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(every_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
 
 
 def _attempt(fn, job, key: str, ledger):

@@ -476,7 +476,7 @@ def run_episodes(
     chunks, members = [], []
     for indices in groups.values():
         per_chunk = worlds_per_batch(episodes[indices[0]], batch_size, workers)
-        for part in np.array_split(np.array(indices), math.ceil(len(indices) / per_chunk)):
+        for part in np.array_split(np.array(indices), chunk_count(len(indices), per_chunk, workers)):
             members.append(part.tolist())
             chunks.append((tuple(episodes[i] for i in part), per_chunk, plugins))
 
@@ -505,6 +505,13 @@ def run_episodes(
             else:
                 out[i] = out[first_of[k]]
     return out
+
+
+def chunk_count(n_episodes: int, per_chunk: int, workers: int | None) -> int:
+    """Batches to split ``n_episodes`` of one kind into: as few as hold them ``per_chunk`` a batch, but
+    no fewer than the workers (or the episodes), so that a few long episodes (a scale split's) keep
+    every worker busy rather than filling one batch."""
+    return max(math.ceil(n_episodes / per_chunk), min(workers or 1, n_episodes))
 
 
 BATCH_MEMORY_SHARE = 0.5
