@@ -98,6 +98,22 @@ def test_a_paged_growing_window_follows_the_dense_one(n_envs, restart, monkeypat
     np.testing.assert_array_equal(paged, dense)
 
 
+def test_grasp_on_a_paged_grid_scores_as_on_the_dense_one(monkeypatch):
+    def run():
+        env = proteo_env.make("grasp-v0", n_modules=60, max_cycles=80)
+        env.reset(seed=3)
+        policy = make_policy("grasp", env, seed=3)
+        rewards = [env.step_arrays(policy.act_arrays(env.observe_arrays())).reward for _ in range(80)]
+        return env.engine.positions, np.array(rewards), env.engine.shape.paged
+
+    dense, dense_rewards, was_paged = run()
+    monkeypatch.setattr(world_module, "PAGED_ABOVE_CELLS", 0)
+    paged, paged_rewards, is_paged = run()
+    assert is_paged and not was_paged
+    np.testing.assert_array_equal(paged, dense)
+    np.testing.assert_array_equal(paged_rewards, dense_rewards)
+
+
 def test_compiled_rollout_on_a_paged_grid_matches_the_dense_one(monkeypatch):
     def run():
         env = proteo_env.make("chain-v1", n_modules=30, max_cycles=400)

@@ -91,12 +91,12 @@ FAR = np.iinfo(np.int32).max
 
 
 @kernel
-def hop_distances(grid, sources, dir_delta):
-    """``(cells,)`` int32: the fewest face steps from any cell of ``sources`` to each cell of
-    ``grid``, through cells that are empty or hold a module; :data:`FAR` where no path leads
-    (breadth-first, one queue)."""
-    out = np.full(grid.shape[0], FAR, dtype=np.int32)
-    queue = np.empty(grid.shape[0], dtype=np.int64)
+def hop_distances(grid, n_cells, sources, dir_delta):
+    """``(n_cells,)`` int32: the fewest face steps from any cell of ``sources`` to each of the
+    ``n_cells`` cells of ``grid`` (dense or paged), through cells that are empty or hold a module;
+    :data:`FAR` where no path leads (breadth-first, one queue)."""
+    out = np.full(n_cells, FAR, dtype=np.int32)
+    queue = np.empty(n_cells, dtype=np.int64)
     tail = 0
     for c in sources:
         if out[c] != 0:
@@ -435,7 +435,7 @@ class Grasp(Task):
 
     def _hop_field(self, world) -> np.ndarray:
         """Hop distance of every grid cell to the nearest surface site through non-object cells."""
-        return hop_distances(world.grid, self._surface_cell, world.dir_delta)
+        return hop_distances(world.grid, world.shape.n_cells, self._surface_cell, world.dir_delta)
 
     def _measure(self, world) -> HoldMeasure:
         return HoldMeasure(*hold_measure(world.grid, world.cell, world.n_agents, self._gap_field, self.surface))
