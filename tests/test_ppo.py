@@ -393,24 +393,6 @@ def test_a_learning_curve_plays_every_checkpoint_on_the_protocols_worlds_and_res
         curve.main(["--runs", str(tmp_path), "--out", str(out)])
 
 
-def test_the_learning_rate_falls_linearly_to_its_final_value_and_a_bad_one_is_refused(tmp_path):
-    """``learning_rate_final``: each update's learning rate, logged, falls linearly over the run
-    from ``learning_rate`` (the optimiser gets it); above ``learning_rate`` it is refused."""
-    final = tiny_run(tmp_path / "lr", "--learning-rate", "0.002", "--learning-rate-final", "0", steps=6000)
-    with open(final.parent / "progress.csv") as f:
-        rows = list(csv.DictReader(f))
-    rates = [float(r["loss/learning_rate"]) for r in rows]
-    steps = [0] + [int(r["agent_steps"]) for r in rows[:-1]]
-    assert rates[0] == 0.002 and all(b < a for a, b in zip(rates, rates[1:]))
-    assert np.allclose(rates, [0.002 * (1 - s / 6000) for s in steps])
-    trainer = torch.load(final / "trainer.pt", weights_only=False)
-    assert math.isclose(trainer["optimiser"]["param_groups"][0]["lr"], rates[-1])
-    with pytest.raises(
-        ValueError, match=r"learning_rate_final=0.01 is not allowed; allowed: a number in \[0.0, 0.001\]"
-    ):
-        tiny_run(tmp_path / "bad", "--learning-rate", "0.001", "--learning-rate-final", "0.01")
-
-
 def test_a_run_resumed_from_a_checkpoint_ends_as_the_uninterrupted_run_bit_for_bit(tmp_path):
     """A checkpoint keeps the training worlds in the middle of their episodes (``worlds.pkl.gz``),
     so a run stopped after it and resumed from it (into another folder here) gives the same

@@ -80,7 +80,7 @@ from training.trainers.worlds import JOIN_FROM, TrainingEnvs, check_workers, run
 
 ALGORITHM = "ppo"
 
-RETIRED = {"n_groups": 1, "recurrent": 0, "ent_coef_final": None}
+RETIRED = {"n_groups": 1, "recurrent": 0, "ent_coef_final": None, "learning_rate_final": None}
 """Options of earlier versions, with the value at which they did nothing (checkpoints saved before
 they went still resume; see :func:`training.machinery.runs.parse_args`)."""
 
@@ -139,9 +139,6 @@ class Args(PPOArgs):
     """The distillation weight after distill_steps (at most distill_coef)."""
     curriculum: dict = field(default_factory=dict)
     """Stages of env overrides promoted by success (training/trainers/curriculum.py): {stages: [...], promote_at, window}."""
-    learning_rate_final: float | None = None
-    """The learning rate at total_steps: it falls linearly from learning_rate over the run, counted
-    from agent-step 0 also when the run resumes (None: it stays learning_rate)."""
     join_bonus: float = 0.0
     """Module credit: reward of a module on the cycle its mode leaves the join_from modes (0: off)."""
     join_from: tuple[str, ...] = JOIN_FROM
@@ -164,16 +161,6 @@ class Args(PPOArgs):
         bounds = {"learning_rate": (0.0, None), "gamma": (0.0, 1.0), "gae_lambda": (0.0, 1.0)}
         loss_terms = ("clip_range", "ent_coef", "vf_coef", "max_grad_norm", "distill_coef")
         check_numbers(self, {**bounds, **dict.fromkeys((*loss_terms, "time_limit_minutes", "join_bonus"), (0.0, None))})
-        if self.learning_rate_final is not None:
-            check_numbers(self, {"learning_rate_final": (0.0, self.learning_rate)})
-
-    def learning_rate_at(self, agent_steps: int) -> float:
-        """The learning rate of the update after ``agent_steps`` agent-steps: linear from
-        ``learning_rate`` at 0 to ``learning_rate_final`` at ``total_steps`` (or constant)."""
-        if self.learning_rate_final is None:
-            return self.learning_rate
-        done = min(1.0, agent_steps / self.total_steps) if self.total_steps else 1.0
-        return self.learning_rate + (self.learning_rate_final - self.learning_rate) * done
 
     def distill_weight(self, agent_steps: int) -> float:
         """The distillation weight after ``agent_steps`` agent-steps: linear from ``distill_coef``
@@ -439,9 +426,6 @@ def train(args: Args) -> Path:
         collected = time.perf_counter()
         advantages, returns = advantages_and_returns(rollout, last_value, worlds.n_agents, args)
         scale.update(returns)
-        learning_rate = args.learning_rate_at(agent_steps)
-        for group in optimiser.param_groups:
-            group["lr"] = learning_rate
         with torch_threads(args.update_threads):
             stats = update(net, optimiser, rollout.samples(advantages, returns), scale, distill, args)
         updated = time.perf_counter()
@@ -455,7 +439,6 @@ def train(args: Args) -> Path:
                 **episode_stats(finished),
                 **{k: float(np.mean(x)) for k, x in stats.items() if x},
                 "loss/distill_weight": distill,
-                **({"loss/learning_rate": learning_rate} if args.learning_rate_final is not None else {}),
                 **({"curriculum/stage": curriculum.stage} if curriculum else {}),
                 "loss/explained_variance": float(1 - (r - v).var() / (r.var() + 1e-8)),
                 "time/env_seconds": env_time,
