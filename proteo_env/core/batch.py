@@ -137,18 +137,17 @@ class WorldBatch:
         as does a batch of paged worlds (large ones), world by world.
         """
         if self.n_worlds == 1 or self.paged:
-            return np.stack(
-                [
-                    w.step(
-                        move=move[b],
-                        mode=mode[b],
-                        scent_role=scent_role[b],
-                        message_target=message_target[b],
-                        message_value=message_value[b],
-                    )
-                    for b, w in enumerate(self.worlds)
-                ]
-            )
+            moved = [
+                w.step(
+                    move=move[b],
+                    mode=mode[b],
+                    scent_role=scent_role[b],
+                    message_target=message_target[b],
+                    message_value=message_value[b],
+                )
+                for b, w in enumerate(self.worlds)
+            ]
+            return moved[0][None] if self.n_worlds == 1 else np.stack(moved)
         moved = np.zeros((self.n_worlds, self.n_agents), dtype=np.bool_)
         actions = Actions.of(
             move=move, mode=mode, scent_role=scent_role, message_target=message_target, message_value=message_value

@@ -253,8 +253,3 @@ def paged_from_state(state: dict, cell: np.ndarray) -> PagedCells:
 def marks_of(grid: PagedCells) -> PagedMarks:
     """The connectivity search's marks over ``grid``'s pages."""
     return PagedMarks(grid.table, grid.marks)
-
-
-def is_paged(grid) -> bool:
-    """Whether ``grid`` is stored by pages (else a dense array)."""
-    return not isinstance(grid, np.ndarray)
