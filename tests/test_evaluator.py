@@ -278,12 +278,12 @@ def test_at_move_a_network_sees_only_the_modules_with_a_choice_and_the_episodes_
     seen = {"rows": 0, "modules": 0}
     sample = evaluator._Actors._sample
 
-    def counting(actors, buffers):
+    def counting(actors, buffers, playing):
         seen["modules"] += len(buffers.action_mask)
         fn = actors.policies[0].logits_fn
         actors.policies[0].logits_fn = lambda x: (seen.__setitem__("rows", seen["rows"] + len(x)), fn(x))[1]
         try:
-            return sample(actors, buffers)
+            return sample(actors, buffers, playing)
         finally:
             actors.policies[0].logits_fn = fn
 
@@ -292,6 +292,58 @@ def test_at_move_a_network_sees_only_the_modules_with_a_choice_and_the_episodes_
     for seed, batched in zip(SEEDS, row):
         assert _same(run_episode(env, load_policy(folder, env, seed=seed), seed=seed), batched)
     assert 0 < seen["rows"] < seen["modules"]
+
+
+def test_a_network_does_not_act_for_a_world_whose_episode_has_ended(tmp_path, monkeypatch):
+    """A batch steps until its slowest episode ends; the worlds that finished before it wait, and
+    the network's forward pass leaves their rows out: it sees each world's modules for exactly the
+    cycles of its episode, and the episodes are the ones ``run_episode`` plays."""
+    from training.machinery import evaluator
+    from training.machinery.checkpoints import load_policy
+
+    overrides = small_overrides("chain-v1", max_cycles=60, n_modules=5)  # episodes of 1 to 49 cycles
+    env = proteo_env.make("chain-v1", **overrides)
+    folder = _network_checkpoint(tmp_path / "net", env, overrides, 0)
+    seen = []
+    sample = evaluator._Actors._sample
+
+    def counting(actors, buffers, playing):
+        fns = [p.logits_fn for p in actors.policies]
+        for p, fn in zip(actors.policies, fns):
+            p.logits_fn = lambda x, fn=fn: (seen.append(len(x)), fn(x))[1]
+        try:
+            return sample(actors, buffers, playing)
+        finally:
+            for p, fn in zip(actors.policies, fns):
+                p.logits_fn = fn
+
+    monkeypatch.setattr(evaluator._Actors, "_sample", counting)
+    (row,) = evaluate("chain-v1", [Controller.from_checkpoint(folder)], SEEDS, env=overrides, workers=1)
+    for seed, batched in zip(SEEDS, row):
+        assert _same(run_episode(env, load_policy(folder, env, seed=seed), seed=seed), batched)
+    cycles = [r.cycles for r in row]
+    assert len(set(cycles)) > 2
+    assert sum(seen) == 5 * sum(cycles)
+
+
+def test_a_long_episode_is_a_batch_of_its_own(monkeypatch):
+    """An episode of at least ``LONG_EPISODE_MODULE_CYCLES`` modules times cycles (a scale split's)
+    runs in a batch of its own, landing when it ends; the results do not change."""
+    from training.machinery import evaluator
+
+    overrides = small_overrides("chain-v1", max_cycles=30)
+    episode = Episode("chain-v1", settings_json(overrides), "full", Controller.rules("chain"), 3)
+    reference = evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1)
+    assert evaluator.worlds_per_batch(episode, 64, 1) == 64
+    monkeypatch.setattr(evaluator, "LONG_EPISODE_MODULE_CYCLES", 12 * 30)
+    assert evaluator.worlds_per_batch(episode, 64, 1) == 1
+    sizes = []
+    run_chunk = evaluator._run_chunk
+    monkeypatch.setattr(
+        evaluator, "_run_chunk", lambda chunk: sizes.append((len(chunk[0]), chunk[1])) or run_chunk(chunk)
+    )
+    assert evaluate("chain-v1", [Controller.rules("chain")], SEEDS, env=overrides, workers=1) == reference
+    assert sizes == [(1, 1)] * len(SEEDS)
 
 
 def test_a_local_pool_s_workers_end_with_the_process_that_started_them():

@@ -251,8 +251,10 @@ class _Actors:
         if self.kind.startswith("entrant:"):
             policy.entrant.reset(b, policy.seed)
 
-    def act(self, buffers, cycles) -> np.ndarray:
-        """``(B * A, F)`` actions of every row's agents (``cycles``: each row's cycle)."""
+    def act(self, buffers, cycles, playing) -> np.ndarray:
+        """``(B * A, F)`` actions of every row's agents (``cycles``: each row's cycle; ``playing``:
+        ``(B,)`` bool, False for a row whose last episode has ended: its actions are legal but no
+        network's choice)."""
         a = self.n_agents
         if self.kind.startswith("entrant:"):
             rows = len(self.policies)
@@ -267,7 +269,7 @@ class _Actors:
             _KERNEL_WORLD_CYCLES[self.kind] = _KERNEL_WORLD_CYCLES.get(self.kind, 0) + len(self.policies)
             return np.concatenate([p.act_arrays(buffers.rows(b * a, (b + 1) * a)) for b, p in enumerate(self.policies)])
         if self.kind == "network":
-            return self._sample(buffers)
+            return self._sample(buffers, playing)
         names = [f"module_{i}" for i in range(a)]
         out = []
         for b, p in enumerate(self.policies):
@@ -275,7 +277,7 @@ class _Actors:
             out.append(np.stack([np.asarray(actions[name]).reshape(-1) for name in names]))
         return np.concatenate(out)
 
-    def _sample(self, buffers) -> np.ndarray:
+    def _sample(self, buffers, playing) -> np.ndarray:
         """Each network's forward pass over the rows of the worlds it plays, then every world's
         actions drawn with its own generator (Gumbel-max, as :func:`~training.machinery.policies.sample_actions`
         draws them for one world).
@@ -284,7 +286,8 @@ class _Actors:
         it whatever its logits, so the networks see only the rows with a choice (many modules have
         none: four in five over a 120-module chain's episode, a third in the first 1,500 cycles at
         1,200 modules). The draws are made for every row as before, and a network's rows do not
-        depend on which others it sees (one thread), so every episode is the same, draw for draw."""
+        depend on which others it sees (one thread), so every episode is the same, draw for draw.
+        Nor do the rows of a world whose last episode has ended (it waits for the batch's slowest)."""
         a, first = self.n_agents, self.policies[0]
         features = first.encoder.encode_buffers(buffers)
         networks: dict = {}
@@ -292,6 +295,7 @@ class _Actors:
             networks.setdefault(id(p.logits_fn), (p.logits_fn, []))[1].append(b)
         mask = np.asarray(buffers.action_mask, dtype=bool)
         choosing = mask.sum(axis=1) > 1 if len(first.nvec) == 1 else np.ones(len(features), dtype=bool)
+        choosing &= np.repeat(playing, a)
         logits = np.zeros((len(features), int(np.sum(first.nvec))), dtype=np.float32)
         for logits_fn, worlds in networks.values():
             rows = (np.asarray(worlds)[:, None] * a + np.arange(a)).reshape(-1)
@@ -327,7 +331,7 @@ def run_batch(episodes: list[Episode], batch_size: int = DEFAULT_BATCH) -> list[
     out: list = [None] * len(episodes)
     following = rows
     while any(i >= 0 for i in playing):
-        actions = actors.act(buffers, batch.cycles)
+        actions = actors.act(buffers, batch.cycles, np.asarray(playing) >= 0)
         result = batch.step_arrays(actions.reshape(rows, a, -1))
         returns += result.reward
         ended = np.flatnonzero(result.terminated | result.truncated)
@@ -519,11 +523,19 @@ BATCH_MEMORY_SHARE = 0.5
 rest: the policy, observations, the process itself and whatever else runs on the machine)."""
 
 
+LONG_EPISODE_MODULE_CYCLES = 10**7
+"""Modules times cycle limit from which an episode is a batch of its own (chain's ``x100``: 1,200
+modules and 21,000 cycles): its cycle is work enough for a process (the engine steps so large a
+world alone even in a batch), its result lands, in the journal and the progress bar, when it ends,
+and no world waits in a batch for a slower one."""
+
+
 def worlds_per_batch(episode: Episode, batch_size: int, workers: int) -> int:
     """How many worlds of ``episode``'s task and settings one batch steps together: ``batch_size``,
     or fewer where :data:`BATCH_MEMORY_SHARE` of each of ``workers`` processes' share of the memory
     available holds fewer (:func:`proteo_env.core.world.world_bytes` of its world, drawn once, over
-    its cycle limit); a world larger than that is one :class:`ConfigError` before any episode runs."""
+    its cycle limit), or one for a long episode (:data:`LONG_EPISODE_MODULE_CYCLES`); a world larger
+    than that share is one :class:`ConfigError` before any episode runs."""
     need, size, n_modules, cycles = _world_need(episode.task, episode.overrides, int(episode.seed))
     share = int(machine_memory() * BATCH_MEMORY_SHARE) // max(1, workers)
     if need > share:
@@ -533,6 +545,8 @@ def worlds_per_batch(episode: Episode, batch_size: int, workers: int) -> int:
             f"that fit in each worker's share of the memory available ({gib(share)} for {workers} worker(s)): "
             "fewer workers, or a split of fewer modules or cycles"
         )
+    if n_modules * cycles >= LONG_EPISODE_MODULE_CYCLES:
+        return 1
     return int(max(1, min(batch_size, share // need)))
 
 
