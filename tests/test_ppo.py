@@ -429,6 +429,34 @@ def test_a_run_resumed_from_a_checkpoint_ends_as_the_uninterrupted_run_bit_for_b
     )
 
 
+def test_worlds_kept_in_two_processes_resume_bit_for_bit_and_a_run_with_other_workers_starts_fresh(tmp_path, capsys):
+    """With the worlds split over two processes, a checkpoint keeps each process's share, and the
+    run resumed from it on two workers ends as the run that never stopped (which is also the run
+    of one process); resumed on one worker it says so and goes on from fresh worlds."""
+    straight = tiny_run(tmp_path / "straight", "--workers", "2", steps=6000)
+    middle = sorted((straight.parent / "checkpoints").iterdir())[1]
+    resumed = ppo.main(
+        ["--resume", str(middle), "--run-dir", str(tmp_path / "resumed"), "--tensorboard", "false"]
+        + ["--progress-bar", "false"]
+    )
+    one_process = tiny_run(tmp_path / "one", steps=6000)
+    for other in (resumed, one_process):
+        assert all(
+            torch.equal(a, b)
+            for a, b in zip(torch.load(other / "policy.pt").values(), torch.load(straight / "policy.pt").values())
+        )
+    capsys.readouterr()
+    fresh = ppo.main(
+        ["--resume", str(middle), "--run-dir", str(tmp_path / "fresh"), "--workers", "1", "--tensorboard", "false"]
+        + ["--progress-bar", "false"]
+    )
+    assert "kept in 2 process(es), the run has 1: it goes on from fresh worlds" in capsys.readouterr().out
+    assert not all(
+        torch.equal(a, b)
+        for a, b in zip(torch.load(fresh / "policy.pt").values(), torch.load(straight / "policy.pt").values())
+    )
+
+
 def test_training_worlds_kept_while_the_rules_act_in_one_call_go_on_as_the_originals(monkeypatch):
     """The autopilot's one call over every world (after ``ONE_CALL_AFTER`` world-cycles) holds
     typed lists that do not pickle; the kept worlds rebuild them from the rules' own state and

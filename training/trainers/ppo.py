@@ -331,10 +331,10 @@ def make_teachers(args: Args, worlds: TrainingEnvs, agent_steps: int):
 
 def keeps_worlds(args: Args) -> bool:
     """Whether the run's checkpoints keep its worlds (:func:`~training.machinery.runs.save_worlds_state`),
-    so that a run resumed from one goes on bit for bit as if never stopped: with the worlds in
-    this process (``workers`` 1), without a curriculum (which rebuilds them) and without a
-    teacher (the rules' compiled state does not pickle)."""
-    return args.workers == 1 and not args.curriculum and args.distill_coef <= 0
+    so that a run resumed from one goes on bit for bit as if never stopped (with as many
+    ``workers``): without a curriculum (which rebuilds them) and without a teacher (the rules'
+    compiled state does not pickle)."""
+    return not args.curriculum and args.distill_coef <= 0
 
 
 def main(argv=None) -> Path:
@@ -359,7 +359,7 @@ def train(args: Args) -> Path:
     env = args.env if curriculum is None else curriculum.overrides(args.env)
     fingerprint = {k: v for k, v in run_settings(args, env, 0).items() if k != "env_seed"}
     kept = load_worlds_state(resume, fingerprint) if resume is not None and keeps_worlds(args) else None
-    worlds = kept if kept is not None else TrainingEnvs.for_run(args, env, agent_steps)
+    worlds = TrainingEnvs.for_run(args, env, agent_steps, kept)
     net = ActorCritic(worlds.encoder, worlds.nvec, args.arch, args.hidden, args.memory, args.activation)
     if args.init and resume is None:
         weights = network_weights(
@@ -385,7 +385,7 @@ def train(args: Args) -> Path:
     def save(folder: Path) -> None:
         if keeps_worlds(args):  # before proteo.json, which records every file's digest
             folder.mkdir(parents=True, exist_ok=True)
-            save_worlds_state(folder, fingerprint, worlds)
+            save_worlds_state(folder, fingerprint, worlds.shares())
         save_network_checkpoint(
             folder,
             net,
@@ -457,8 +457,9 @@ def train(args: Args) -> Path:
             saved_interval = agent_steps // args.checkpoint_every
             save(checkpoint_folder(run_dir, agent_steps))
     bar.close()
+    final = finish_run(run_dir, save, log, agent_steps)
     worlds.close()
-    return finish_run(run_dir, save, log, agent_steps)
+    return final
 
 
 if __name__ == "__main__":

@@ -112,14 +112,30 @@ class TrainingEnvs:
         self.encode_seconds = 0.0
 
     @classmethod
-    def for_run(cls, args, env: dict, agent_steps: int = 0) -> TrainingEnvs | WorkerEnvs:
+    def for_run(cls, args, env: dict, agent_steps: int = 0, kept=None) -> TrainingEnvs | WorkerEnvs:
         """The worlds of a run with arguments ``args`` (task, control, n_envs, seed, message_encoding,
         memory, and join_bonus, join_from and workers where it has them) and env overrides ``env``,
         built after ``agent_steps`` (seeded by :func:`training_worlds_seed`); split over
-        ``args.workers`` processes (:class:`WorkerEnvs`) when that is above 1."""
+        ``args.workers`` processes (:class:`WorkerEnvs`) when that is above 1.
+
+        ``kept``: the worlds a checkpoint kept (:meth:`shares`, one :class:`TrainingEnvs` per
+        process; a checkpoint of before workers kept theirs holds the one), which go on in the
+        middle of their episodes instead, each share in a process of its own, where they were
+        kept in as many processes as ``args.workers``; otherwise fresh worlds, said on stdout."""
         settings = run_settings(args, env, agent_steps)
         workers = getattr(args, "workers", 1)
+        if kept is not None:
+            shares = [kept] if isinstance(kept, TrainingEnvs) else list(kept)
+            if len(shares) == workers:
+                return WorkerEnvs(settings, workers, shares) if workers > 1 else shares[0]
+            print(
+                f"the worlds were kept in {len(shares)} process(es), the run has {workers}: it goes on from fresh worlds"
+            )
         return WorkerEnvs(settings, workers) if workers > 1 else cls(**settings)
+
+    def shares(self) -> list[TrainingEnvs]:
+        """The worlds as a checkpoint keeps them: one :class:`TrainingEnvs` per process (here, this one)."""
+        return [self]
 
     def encode(self, features: np.ndarray, move_mask: np.ndarray) -> None:
         """Write every module's features ``(N, size)`` (with the memory's inputs) and legal moves
@@ -249,16 +265,21 @@ class WorkerEnvs:
     Args:
         settings: :class:`TrainingEnvs`'s keyword arguments for all the worlds (:func:`run_settings`).
         workers: processes, 1 to ``n_envs``.
+        kept: ``workers`` :class:`TrainingEnvs` that :meth:`shares` gave (a checkpoint's), each
+            process's share in the middle of its episodes, instead of fresh worlds.
     """
 
-    def __init__(self, settings: dict, workers: int):
+    def __init__(self, settings: dict, workers: int, kept: list[TrainingEnvs] | None = None):
         n_envs = settings["n_envs"]
         check_workers(workers, n_envs)
         seeds = world_seeds(settings["env_seed"], n_envs)
-        self.shares = [(int(s[0]), int(s[-1]) + 1) for s in np.array_split(np.arange(n_envs), workers)]
+        self.ranges = [(int(s[0]), int(s[-1]) + 1) for s in np.array_split(np.arange(n_envs), workers)]
         """``(first, end)`` world of each process, this one's first."""
-        first, end = self.shares[0]
-        self.local = TrainingEnvs(**{**settings, "n_envs": end - first, "env_seed": seeds[first:end]})
+        shares = [{**settings, "n_envs": end - first, "env_seed": seeds[first:end]} for first, end in self.ranges]
+        if kept is not None:
+            shares = list(kept)
+        first, end = self.ranges[0]
+        self.local = shares[0] if kept is not None else TrainingEnvs(**shares[0])
         """This process's share of the worlds."""
         self.task_id, self.n_agents, self.nvec = self.local.task_id, self.local.n_agents, self.local.nvec
         self.control_fields = self.local.control_fields
@@ -269,9 +290,8 @@ class WorkerEnvs:
         self._views = _shared_views(self._memory.buf, *layout)
         context = multiprocessing.get_context("spawn")  # no fork of a process that runs torch's threads
         self._pipes, self._processes = [], []
-        for first, end in self.shares[1:]:
+        for (first, _), share in zip(self.ranges[1:], shares[1:]):
             mine, theirs = context.Pipe()
-            share = {**settings, "n_envs": end - first, "env_seed": seeds[first:end]}
             process = context.Process(
                 target=_serve, args=(theirs, share, self._memory.name, layout, first), daemon=True
             )
@@ -290,7 +310,7 @@ class WorkerEnvs:
     def make_teachers(self, name: str, seed: int, n_fields: int) -> WorkerTeachers:
         """The rules as teachers of every world, each process teaching its own share
         (:class:`training.trainers.teachers.Teachers` with its first world; arguments as there)."""
-        check_workers(len(self.shares), self.n_envs, teacher=name)
+        check_workers(len(self.ranges), self.n_envs, teacher=name)
         self._teacher_fields = n_fields
         self._command(("teachers", (name, seed, n_fields)))
         self._local_teachers = self.local.make_teachers(name, seed, n_fields)
@@ -325,7 +345,7 @@ class WorkerEnvs:
         self._command(("step", None))
         answers = [_step_share(self.local, self._views, 0), *self._gather()]
         rows, features = [], []
-        for (first, _), (ended, final_rows, final_features) in zip(self.shares, answers):
+        for (first, _), (ended, final_rows, final_features) in zip(self.ranges, answers):
             finished.extend(ended)
             rows.append(final_rows + first * self.n_agents)
             features.append(final_features)
@@ -334,6 +354,11 @@ class WorkerEnvs:
         self.joined = views["joined"].copy()
         self.env_seconds += time.perf_counter() - started
         return views["reward"].copy(), views["terminal"].copy(), views["truncated"].copy()
+
+    def shares(self) -> list[TrainingEnvs]:
+        """The worlds as a checkpoint keeps them: each process's :class:`TrainingEnvs`, in order."""
+        self._command(("share", None))
+        return [self.local, *self._gather()]
 
     def _gather(self) -> list:
         """Every worker's answer, in order; a worker's error is raised here with its traceback."""
@@ -445,14 +470,16 @@ def _label_share(worlds: TrainingEnvs, teachers, views: dict, first: int, restar
     views["labels"][first * worlds.n_agents : end * worlds.n_agents, : labels.shape[1]] = labels
 
 
-def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) -> None:
-    """A worker of :class:`WorkerEnvs`: the worlds ``first .. first + settings["n_envs"]``; on each
-    command ``("step", None)``, ``("teachers", (name, seed, n_fields))`` or ``("label", restart)``
-    it answers ``("ok", ...)`` or ``("error", ...)``, until ``("close", None)``."""
+def _serve(pipe, share, memory_name: str, layout: tuple, first: int) -> None:
+    """A worker of :class:`WorkerEnvs`: the worlds ``first ..``, built from ``share`` (the keyword
+    arguments of :class:`TrainingEnvs`) or ``share`` itself (kept worlds); on each command
+    ``("step", None)``, ``("teachers", (name, seed, n_fields))``, ``("label", restart)`` or
+    ``("share", None)`` (the worlds themselves, pickled through the pipe) it answers ``("ok", ...)``
+    or ``("error", ...)``, until ``("close", None)``."""
     limit_threads(1)
     memory = None
     try:
-        worlds = TrainingEnvs(**settings)
+        worlds = share if isinstance(share, TrainingEnvs) else TrainingEnvs(**share)
         memory = shared_memory.SharedMemory(name=memory_name)
         views = _shared_views(memory.buf, *layout)
         _encode_share(worlds, views, first)
@@ -469,6 +496,8 @@ def _serve(pipe, settings: dict, memory_name: str, layout: tuple, first: int) ->
             elif command == "label":
                 _label_share(worlds, teachers, views, first, arguments)
                 pipe.send(("ok", None))
+            elif command == "share":
+                pipe.send(("ok", worlds))
             else:
                 break
     except ConfigError as error:
