@@ -19,7 +19,8 @@ so the batch stays full. Each cycle the controllers of every row act together:
   sampled action: ``docs/guides/evaluator.md`` gives the agreement measured);
 - anything else (random, networks with memory) world by world, with the policy's own ``act``.
 
-The batches are spread over ``workers`` processes (default: every core), or over a Ray cluster
+A long episode (:data:`LONG_EPISODE_MODULE_CYCLES`: a scale split's) is a batch of its own. The
+batches are spread over ``workers`` processes (default: every core), or over a Ray cluster
 (``ray``); each episode depends only on its own record, so the results do not depend on the
 number of workers, the batch size or the order of the records.
 
