@@ -276,9 +276,7 @@ class WorkerEnvs:
         self.ranges = [(int(s[0]), int(s[-1]) + 1) for s in np.array_split(np.arange(n_envs), workers)]
         """``(first, end)`` world of each process, this one's first."""
         shares = [{**settings, "n_envs": end - first, "env_seed": seeds[first:end]} for first, end in self.ranges]
-        if kept is not None:
-            shares = list(kept)
-        first, end = self.ranges[0]
+        shares = list(kept) if kept is not None else shares
         self.local = shares[0] if kept is not None else TrainingEnvs(**shares[0])
         """This process's share of the worlds."""
         self.task_id, self.n_agents, self.nvec = self.local.task_id, self.local.n_agents, self.local.nvec
